@@ -1,0 +1,53 @@
+# The two commands of the README:  make demo   and   make test
+# Everything is installed into .venv through pyproject.toml; nothing is installed by hand.
+
+PYTHON ?= $(shell command -v python3.11 2>/dev/null || command -v python3)
+VENV   ?= .venv
+BIN    := $(VENV)/bin
+PIP    := $(BIN)/python -m pip --disable-pip-version-check -q
+OUT    ?= out
+
+.PHONY: help venv demo test bench lint samples clean
+
+help:
+	@echo "make demo    create .venv, install ffd (with the 3D viewer), run the paper's cases into $(OUT)/"
+	@echo "make test    create .venv, install ffd with test tools, run the test suite"
+	@echo "make bench   print the speed/memory table (embedding, deform, I/O, volume follow, Jacobian)"
+	@echo "make lint    ruff"
+	@echo "make samples regenerate samples/ with gmsh (needs the [samples] extra)"
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+
+$(VENV)/.stamp-core: pyproject.toml | $(BIN)/python
+	$(PIP) install -e .
+	@touch $@
+
+$(VENV)/.stamp-test: $(VENV)/.stamp-core
+	$(PIP) install -e '.[test]'
+	@touch $@
+
+$(VENV)/.stamp-viz: $(VENV)/.stamp-core
+	$(PIP) install -e '.[viz]' || echo "pyvista could not be installed: pictures use matplotlib only"
+	@touch $@
+
+venv: $(VENV)/.stamp-test
+
+demo: $(VENV)/.stamp-viz
+	$(BIN)/python -m ffdcli.demo --out $(OUT)
+
+test: $(VENV)/.stamp-test
+	$(BIN)/python -m pytest -q
+
+bench: $(VENV)/.stamp-core
+	$(BIN)/python -m benchmarks
+
+lint: $(VENV)/.stamp-core
+	$(PIP) install ruff && $(BIN)/ruff check ffdcli tests benchmarks
+
+samples: $(VENV)/.stamp-core
+	$(PIP) install -e '.[samples]'
+	$(BIN)/python samples/make_samples.py
+
+clean:
+	rm -rf $(VENV) $(OUT) .pytest_cache

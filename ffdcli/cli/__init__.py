@@ -1,0 +1,118 @@
+"""The ``ffd`` command line: a thin layer over the library.
+
+Each command lives in its own module of this package and imports the library lazily, so that
+``ffd --help`` stays fast. Errors: :class:`ffdcli.errors.FfdError` subclasses become a one-line
+message and their exit code (2 bad input, 3 quality check); anything else is reported in one
+line with exit code 1 (``-v`` shows the traceback).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import sys
+import traceback
+
+import click
+
+from ffdcli import __version__
+from ffdcli.cli.console import Console
+from ffdcli.errors import FfdError
+
+CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
+
+
+def common_options(func):
+    """Adds -q/--quiet, -v/--verbose and --json to a command and passes ``console``."""
+
+    @click.option("-q", "--quiet", is_flag=True, help="Print nothing but errors.")
+    @click.option("-v", "--verbose", is_flag=True, help="Print more detail (and tracebacks of bugs).")
+    @click.option("--json", "as_json", is_flag=True,
+                  help="Print one JSON object as the summary instead of text (for scripts).")
+    @functools.wraps(func)
+    def wrapper(*args, quiet, verbose, as_json, **kwargs):
+        console = Console(quiet=quiet, verbose=verbose, json=as_json)
+        click.get_current_context().meta["ffd.console"] = console
+        return func(*args, console=console, **kwargs)
+
+    return wrapper
+
+
+class _Group(click.Group):
+    """Lists commands in the order they were added (the order a user meets them)."""
+
+    def list_commands(self, ctx):
+        return list(self.commands)
+
+
+@click.group(cls=_Group, context_settings=CONTEXT)
+@click.version_option(__version__, "-V", "--version", prog_name="ffd")
+def cli():
+    """Automatic free-form deformation (FFD) of wing meshes for aerodynamic design.
+
+    \b
+    Typical use:
+      ffd inspect wing.su2              what is in the mesh: markers, bounds, axes
+      ffd box wing.su2 --points 6,8,2   fit a lattice to the wing and embed it (cached)
+      ffd deform design.yaml            apply twist/span/sweep/dihedral/chord/shape, write the mesh
+      ffd grad design.yaml --sens surface_sens.csv    dJ/d(design variables) for an optimiser
+
+    Every command has --help, -q/--quiet, -v/--verbose and --json. Exit status: 0 success,
+    2 bad input, 3 the deformed mesh failed the quality check (nothing written), 1 other errors.
+    """
+
+
+def _register():
+    from ffdcli.cli import commands  # noqa: F401  (each module adds its command to ``cli``)
+
+
+def main(argv=None):
+    """Entry point of the ``ffd`` console script."""
+    _register()
+    argv = list(sys.argv[1:] if argv is None else argv)
+    as_json = "--json" in argv
+    verbose = "-v" in argv or "--verbose" in argv
+    try:
+        cli.main(args=argv, prog_name="ffd", standalone_mode=False)
+    except click.exceptions.Exit as e:
+        sys.exit(e.exit_code)
+    except click.ClickException as e:        # usage errors: exit 2 (click's own convention)
+        e.show()
+        sys.exit(e.exit_code)
+    except (click.Abort, KeyboardInterrupt):
+        _fail("interrupted; nothing was written", 130, as_json)
+    except FfdError as e:
+        _fail(str(e), e.exit_code, as_json, extra=getattr(e, "report", None))
+    except BrokenPipeError:
+        sys.exit(1)
+    except MemoryError:
+        _fail("out of memory", 1, as_json)
+    except Exception as e:  # a bug: one line unless -v
+        if verbose:
+            traceback.print_exc()
+        _fail(f"internal error: {type(e).__name__}: {e} (this is a bug in ffd; -v shows where)",
+              1, as_json)
+    sys.exit(0)
+
+
+def _fail(message: str, code: int, as_json: bool, extra: dict | None = None):
+    click.echo(f"ffd: error: {message}", err=True)
+    if as_json:
+        obj = {"ok": False, "exit_code": code, "error": message}
+        if extra:
+            obj["report"] = extra
+        click.echo(json.dumps(obj, default=_jsonable))
+    sys.exit(code)
+
+
+def _jsonable(o):
+    try:
+        import numpy as np
+
+        if isinstance(o, np.generic):
+            return o.item()
+        if isinstance(o, np.ndarray):
+            return o.tolist()
+    except ImportError:
+        pass
+    return str(o)

@@ -1,0 +1,52 @@
+"""What a command prints: text for people, one JSON object with ``--json``, nothing with ``-q``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import dataclass
+
+from ffdcli.progress import ProgressFactory, terminal_progress
+
+
+@dataclass
+class Console:
+    quiet: bool = False
+    verbose: bool = False
+    json: bool = False
+
+    def say(self, text: str) -> None:
+        """Normal output (stdout); silent with --quiet or --json."""
+        if not (self.quiet or self.json):
+            print(text, file=sys.stdout, flush=True)
+
+    def detail(self, text: str) -> None:
+        """Extra output with --verbose (stderr, so --json stays parseable)."""
+        if self.verbose and not self.quiet:
+            print(text, file=sys.stderr, flush=True)
+
+    def warn(self, text: str) -> None:
+        """A warning on stderr (shown unless --quiet)."""
+        if not self.quiet:
+            print(f"ffd: warning: {text}", file=sys.stderr, flush=True)
+
+    def result(self, summary: dict, text: str) -> None:
+        """The command's summary: JSON with --json, else ``text``."""
+        if self.json:
+            print(json.dumps(summary, default=_jsonable), file=sys.stdout, flush=True)
+        else:
+            self.say(text)
+
+    @property
+    def progress(self) -> ProgressFactory:
+        return terminal_progress(enabled=not (self.quiet or self.json))
+
+
+def _jsonable(o):
+    import numpy as np
+
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    return str(o)

@@ -1,0 +1,21 @@
+"""``ffd inspect MESH``: what is in a mesh (markers, counts, bounds, detected axes, root side)."""
+
+from __future__ import annotations
+
+import click
+
+from ffdcli.cli import cli, common_options
+
+
+@cli.command("inspect")
+@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.option("--surface", "surfaces", multiple=True, metavar="NAME",
+              help="Marker(s) of the wing used to detect the axes (default: guessed, see below).")
+@common_options
+def inspect_cmd(mesh, surfaces, console):
+    """Markers (element and point counts), bounds, dimension, detected axes and root side.
+
+    The axes are detected from the wing surface: span = largest extent, thickness = smallest.
+    Without --surface the wing is the only marker, or the marker named like a wing/airfoil.
+    """
+    raise NotImplementedError("ffd inspect: foundation issue")

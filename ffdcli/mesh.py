@@ -1,0 +1,123 @@
+"""The in-memory mesh that every reader returns and every writer takes.
+
+A :class:`Mesh` holds points, interior cells and named boundary markers. Readers keep whatever
+they need to write a deformed copy of the *same* file in ``source`` (byte offsets of the SU2
+point block, the CGNS node paths of the coordinates, ...), so that writing patches only the
+coordinates and everything else survives byte for byte.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ffdcli.errors import InputError
+
+#: Cell types use meshio's names. Nodes per cell and topological dimension of each type.
+CELL_NODES = {"vertex": 1, "line": 2, "triangle": 3, "quad": 4, "tetra": 4, "pyramid": 5,
+              "wedge": 6, "hexahedron": 8}
+CELL_DIM = {"vertex": 0, "line": 1, "triangle": 2, "quad": 2, "tetra": 3, "pyramid": 3,
+            "wedge": 3, "hexahedron": 3}
+#: VTK (and SU2) element type ids.
+VTK_ID = {"vertex": 1, "line": 3, "triangle": 5, "quad": 9, "tetra": 10, "hexahedron": 12,
+          "wedge": 13, "pyramid": 14}
+VTK_TYPE = {v: k for k, v in VTK_ID.items()}
+
+
+@dataclass
+class CellBlock:
+    """Cells of one type: ``data[c]`` lists the 0-based point ids of cell ``c`` (VTK node order)."""
+
+    type: str
+    data: np.ndarray
+
+    def __post_init__(self):
+        self.data = np.asarray(self.data, dtype=np.int64)
+        if self.data.ndim != 2 or self.data.shape[1] != CELL_NODES[self.type]:
+            raise ValueError(f"{self.type} cells need {CELL_NODES[self.type]} nodes, "
+                             f"got array of shape {self.data.shape}")
+
+    def __len__(self) -> int:
+        return len(self.data)
+
+
+@dataclass
+class Mesh:
+    """A mesh as read from a file.
+
+    points
+        (N, 3) float64. 2D meshes have a third coordinate too (0 for SU2 ``NDIME= 2``).
+    dim
+        Topological dimension of the interior cells: 2 (an airfoil mesh) or 3.
+    cells
+        Interior cells (``dim``-dimensional). May be empty for a surface-only mesh.
+    markers
+        Boundary markers by name, exactly as named in the file, in file order. Each is a list of
+        cell blocks (faces in 3D, lines in 2D; a marker given only as nodes is one ``vertex`` block).
+    path, format
+        Where it was read from and the format name (``su2``, ``cgns``, ``vtu``, ``vtk``).
+    source
+        Reader-private information used by the writer of the same format to patch a copy of the
+        input file. ``None`` for meshes built in memory.
+    """
+
+    points: np.ndarray
+    dim: int
+    cells: list[CellBlock] = field(default_factory=list)
+    markers: dict[str, list[CellBlock]] = field(default_factory=dict)
+    path: Path | None = None
+    format: str = ""
+    source: Any = None
+
+    def __post_init__(self):
+        self.points = np.asarray(self.points, dtype=np.float64)
+        if self.points.ndim != 2 or self.points.shape[1] != 3:
+            raise ValueError(f"points must be (N, 3), got {self.points.shape}")
+
+    @property
+    def n_points(self) -> int:
+        return len(self.points)
+
+    @property
+    def n_cells(self) -> int:
+        return sum(len(b) for b in self.cells)
+
+    def marker_names(self) -> list[str]:
+        return list(self.markers)
+
+    def marker_point_ids(self, names: str | list[str] | tuple[str, ...]) -> np.ndarray:
+        """Sorted unique point ids of one or more markers. Unknown names raise InputError."""
+        if isinstance(names, str):
+            names = [names]
+        ids = []
+        for name in names:
+            if name not in self.markers:
+                have = ", ".join(self.markers) or "(none)"
+                raise InputError(f"no marker named {name!r}; the markers are: {have}",
+                                 path=self.path)
+            ids.extend(b.data.ravel() for b in self.markers[name])
+        if not ids:
+            return np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate(ids))
+
+    def marker_faces(self, names: str | list[str] | tuple[str, ...]) -> list[CellBlock]:
+        """The boundary cell blocks of one or more markers (vertex blocks left out)."""
+        if isinstance(names, str):
+            names = [names]
+        out = []
+        for name in names:
+            if name not in self.markers:
+                have = ", ".join(self.markers) or "(none)"
+                raise InputError(f"no marker named {name!r}; the markers are: {have}",
+                                 path=self.path)
+            out.extend(b for b in self.markers[name] if b.type != "vertex")
+        return out
+
+    def with_points(self, points: np.ndarray) -> Mesh:
+        """A copy sharing cells and markers, with new point coordinates."""
+        return Mesh(points=np.asarray(points, dtype=np.float64).reshape(self.points.shape),
+                    dim=self.dim, cells=self.cells, markers=self.markers, path=self.path,
+                    format=self.format, source=self.source)

@@ -1,0 +1,65 @@
+"""Shared test helpers: where the real data is, and how to run the command line."""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SAMPLES = REPO / "samples"
+
+
+def _find_shared_data() -> Path | None:
+    env = os.environ.get("FFD_SHARED_DATA")
+    candidates = [Path(env)] if env else []
+    candidates += [REPO.parent / "shared" / "data", Path("/work/shared/data")]
+    for c in candidates:
+        if c.is_dir():
+            return c
+    return None
+
+
+SHARED_DATA = _find_shared_data()
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """../shared/data (real meshes from public projects); the test is skipped when it is absent."""
+    if SHARED_DATA is None:
+        pytest.skip("../shared/data is not present (set FFD_SHARED_DATA to point at it)")
+    return SHARED_DATA
+
+
+def shared_file(rel: str) -> Path:
+    """A file of ../shared/data, or skip the calling test."""
+    if SHARED_DATA is None or not (SHARED_DATA / rel).exists():
+        pytest.skip(f"shared data file {rel} is not present")
+    return SHARED_DATA / rel
+
+
+def run_ffd(*args, cwd=None, input=None, env=None, timeout=600) -> subprocess.CompletedProcess:
+    """Run ``ffd ARGS`` in a fresh interpreter; returns the CompletedProcess (text mode)."""
+    e = dict(os.environ)
+    e["PYTHONPATH"] = str(REPO) + os.pathsep + e.get("PYTHONPATH", "")
+    if env:
+        e.update(env)
+    return subprocess.run([sys.executable, "-m", "ffdcli", *map(str, args)], cwd=cwd, input=input,
+                          capture_output=True, text=True, env=e, timeout=timeout)
+
+
+def file_hash(path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def assert_clean_failure(proc: subprocess.CompletedProcess, code: int = 2, *must_contain: str):
+    """A bad-input failure: the exit code, one message line naming the problem, no traceback."""
+    assert proc.returncode == code, (proc.returncode, proc.stdout, proc.stderr)
+    assert "Traceback" not in proc.stderr, proc.stderr
+    assert "ffd: error:" in proc.stderr, proc.stderr
+    for text in must_contain:
+        assert text in proc.stderr, (text, proc.stderr)
