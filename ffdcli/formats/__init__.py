@@ -1,0 +1,65 @@
+"""Mesh input and output: one reader/writer API, one module per format.
+
+``read_mesh(path)`` picks the reader from the extension; ``write_mesh(mesh, path, points)`` writes a
+mesh with new point coordinates. When ``path`` has the format the mesh was read from, the writer
+patches a copy of the input file (only coordinates change, everything else byte for byte);
+otherwise it writes the mesh from scratch in the new format, markers included.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli.errors import InputError
+from ffdcli.mesh import Mesh
+
+#: extension -> format name
+FORMATS = {".su2": "su2", ".cgns": "cgns", ".vtu": "vtu", ".vtk": "vtk"}
+
+
+def format_of(path: str | Path, *, key: str | None = None) -> str:
+    """The format name of a mesh path, from its extension; InputError if unsupported."""
+    ext = Path(path).suffix.lower()
+    if ext not in FORMATS:
+        raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
+                         f"{', '.join(FORMATS)}", path=path, key=key)
+    return FORMATS[ext]
+
+
+def _module(fmt: str):
+    if fmt == "su2":
+        from ffdcli.formats import su2 as mod
+    elif fmt == "cgns":
+        from ffdcli.formats import cgns as mod
+    else:
+        from ffdcli.formats import vtk as mod
+    return mod
+
+
+def read_mesh(path: str | Path, *, progress=None) -> Mesh:
+    """Read a mesh (.su2, .cgns, .vtu, .vtk). Raises InputError naming the file on any problem."""
+    p = Path(path)
+    fmt = format_of(p)
+    if not p.exists():
+        raise InputError("no such file", path=p)
+    if p.is_dir():
+        raise InputError("is a folder, expected a mesh file", path=p)
+    return _module(fmt).read(p, progress=progress)
+
+
+def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *,
+               progress=None) -> None:
+    """Write ``mesh`` with coordinates ``points`` (default: its own) to ``path``, atomically.
+
+    Never overwrites the file the mesh was read from.
+    """
+    from ffdcli.atomic import check_writable
+
+    p = check_writable(path, inputs=(mesh.path,) if mesh.path else ())
+    fmt = format_of(p)
+    pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
+    if pts.shape != mesh.points.shape:
+        raise ValueError(f"points {pts.shape} do not match the mesh {mesh.points.shape}")
+    _module(fmt).write(mesh, p, pts, progress=progress)
