@@ -1,0 +1,615 @@
+"""Embedding points in a lattice (point inversion) and the sparse basis that moves them.
+
+:func:`embed` finds, for every point ``X``, the parameters ``u`` in [0, 1]^pdim that minimise
+``|V(u) - X|`` for the lattice map ``V`` (see :mod:`ffdcli.lattice`). The lattice is not a
+parallelepiped (it follows a swept, tapered, twisted wing), so the map is inverted numerically:
+
+1. a grid of samples (a few per knot span and direction) is evaluated and put in a k-d tree; each
+   point starts from the parameters of its nearest sample;
+2. a projected Gauss-Newton iteration with backtracking line search runs per point inside a
+   parallel compiled loop (numba ``prange``; no Python loop over points). Parameters are clipped
+   to [0, 1] at every step and the variables held at a bound by the gradient are frozen, so the
+   iteration converges to the nearest point of the lattice also for points outside it;
+3. parameters within ``snap`` (1e-10) of 0 or 1 are set exactly to 0 or 1 when the point stays
+   within tolerance, so points on a lattice face (a wing root) get exact face parameters;
+4. points whose residual is above the tolerance are retried from their next-nearest samples,
+   keeping the best result.
+
+A point is *inside* when its residual ``|V(u) - X|`` is at most ``tol * lattice.size``. Points
+outside are reported and never snapped onto the lattice: :meth:`Embedding.displace` gives them a
+zero displacement, so they keep their position when the lattice moves.
+
+The :class:`Embedding` stores, per direction, the first non-zero basis index and the ``p + 1``
+basis values of each point: the tensor-product form of the sparse basis matrix ``B`` (points x
+control points) with ``X = B @ P``. :meth:`Embedding.displace` (``B @ dP``) and
+:meth:`Embedding.rmatvec` (``B.T @ g``) are parallel compiled loops over that form;
+:meth:`Embedding.basis_matrix` builds the explicit CSR matrix. The ``*_reference`` functions are
+NumPy versions the tests compare the kernels with.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from numba import njit, prange
+from scipy import sparse
+from scipy.spatial import cKDTree
+
+from ffdcli.errors import InputError
+from ffdcli.lattice import Lattice, eval_point_nb, evaluate, kernel_args
+from ffdcli.progress import chunks, no_progress
+from ffdcli.spline import basis, basis_compiled
+
+#: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
+DEFAULT_TOL = 1e-10
+#: Parameters closer than this to 0 or 1 are snapped onto the bound (when the residual allows it).
+SNAP = 1e-10
+#: Points per Python-level chunk of :func:`embed` (bounds the k-d tree query memory, paces progress).
+CHUNK = 1 << 18
+
+
+@dataclass
+class Embedding:
+    """Points embedded in a lattice: their parameters and the basis that maps control points to them.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        Control points per direction of the lattice, e.g. ``(8, 6, 2)``.
+    degree : tuple of int
+        Degree per direction.
+    knots : tuple of ndarray
+        Knot vector per direction.
+    params : ndarray, shape (N, pdim)
+        Parameters in [0, 1]^pdim of the nearest lattice point to each embedded point.
+    inside : ndarray of bool, shape (N,)
+        ``residual <= tolerance``: the point is inside the lattice and moves with it.
+    residual : ndarray, shape (N,)
+        ``|V(params) - X|`` in mesh units (for a point outside: its distance to the lattice).
+    tolerance : float
+        The absolute inside tolerance (mesh units) used.
+    first : tuple of ndarray of int32, shape (N,)
+        Per direction: index of the first non-zero basis function at ``params``.
+    values : tuple of ndarray, shape (N, p + 1)
+        Per direction: the non-zero basis values at ``params``.
+    """
+
+    shape: tuple[int, ...]
+    degree: tuple[int, ...]
+    knots: tuple[np.ndarray, ...]
+    params: np.ndarray
+    inside: np.ndarray
+    residual: np.ndarray
+    tolerance: float
+    first: tuple[np.ndarray, ...]
+    values: tuple[np.ndarray, ...]
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_params(cls, lattice: Lattice, params, inside, residual, *, tolerance: float | None = None
+                    ) -> Embedding:
+        """Rebuild an embedding from what a cache stores: ``params``, ``inside`` and ``residual``.
+
+        The per-direction basis indices and values are recomputed from ``params`` and the
+        lattice's degrees and knots. ``tolerance`` defaults to ``DEFAULT_TOL * lattice.size``.
+        """
+        params = np.ascontiguousarray(params, dtype=np.float64)
+        npts = params.shape[0] if params.ndim == 2 else -1
+        if params.ndim != 2 or params.shape[1] != lattice.pdim:
+            raise ValueError(f"params must have shape (N, {lattice.pdim}), got {params.shape}")
+        inside = np.asarray(inside, dtype=bool)
+        residual = np.asarray(residual, dtype=np.float64)
+        if inside.shape != (npts,) or residual.shape != (npts,):
+            raise ValueError(f"inside and residual must have shape ({npts},), got {inside.shape} "
+                             f"and {residual.shape}")
+        if npts and not (np.all(params >= 0.0) and np.all(params <= 1.0)):
+            raise ValueError("params must lie in [0, 1]")
+        first, values = [], []
+        for axis in range(lattice.pdim):
+            f, v = basis_compiled(lattice.knots[axis], lattice.degree[axis],
+                                  np.ascontiguousarray(params[:, axis]))
+            first.append(f)
+            values.append(v)
+        if tolerance is None:
+            tolerance = DEFAULT_TOL * lattice.size
+        return cls(shape=tuple(lattice.shape), degree=tuple(lattice.degree), knots=tuple(lattice.knots),
+                   params=params, inside=inside, residual=residual, tolerance=float(tolerance),
+                   first=tuple(first), values=tuple(values))
+
+    # ------------------------------------------------------------------ sizes
+    @property
+    def n_points(self) -> int:
+        return int(self.params.shape[0])
+
+    @property
+    def pdim(self) -> int:
+        return len(self.shape)
+
+    @property
+    def n_ctrl(self) -> int:
+        return int(np.prod(self.shape))
+
+    def _control_array(self, control_points, name: str) -> tuple[np.ndarray, int]:
+        """Control points (or their change) as a C-contiguous (n_ctrl, 3) array, and gdim."""
+        cp = np.asarray(control_points, dtype=np.float64)
+        if cp.ndim == self.pdim + 1 and cp.shape[:-1] == tuple(self.shape):
+            cp = cp.reshape(self.n_ctrl, cp.shape[-1])
+        if cp.ndim != 2 or cp.shape[0] != self.n_ctrl or not 1 <= cp.shape[1] <= 3:
+            raise ValueError(f"{name} must have shape {(*self.shape, 'gdim')} or ({self.n_ctrl}, gdim), "
+                             f"got {np.shape(control_points)}")
+        gdim = cp.shape[1]
+        if gdim < 3:
+            cp = np.concatenate([cp, np.zeros((cp.shape[0], 3 - gdim))], axis=1)
+        return np.ascontiguousarray(cp), gdim
+
+    def _kernel_axes(self):
+        """Per-axis (first, values) for the kernels, with a dummy third axis in 2D."""
+        if self.pdim == 3:
+            return (self.first[0], self.values[0], self.first[1], self.values[1], self.first[2],
+                    self.values[2], True, np.int64(self.shape[1]), np.int64(self.shape[2]))
+        return (self.first[0], self.values[0], self.first[1], self.values[1], _DUMMY_FIRST,
+                _DUMMY_VALUES, False, np.int64(self.shape[1]), np.int64(1))
+
+    # ------------------------------------------------------------------ products with B
+    def evaluate(self, control_points) -> np.ndarray:
+        """``B @ P`` for every point (outside points get their nearest lattice point).
+
+        Parameters
+        ----------
+        control_points : array_like, shape (*shape, gdim) or (n_ctrl, gdim)
+
+        Returns
+        -------
+        points : ndarray, shape (N, gdim)
+        """
+        cp, gdim = self._control_array(control_points, "control_points")
+        out = np.empty((self.n_points, gdim))
+        if self.n_points:
+            _apply_nb(*self._kernel_axes(), cp, self.inside, False, out)
+        return out
+
+    def displace(self, delta_control_points) -> np.ndarray:
+        """``B @ dP`` with zero rows for outside points: the displacement of every point.
+
+        The deformed points are ``X0 + displace(P' - P0)``; a zero change gives exact zeros.
+
+        Parameters
+        ----------
+        delta_control_points : array_like, shape (*shape, gdim) or (n_ctrl, gdim)
+
+        Returns
+        -------
+        displacement : ndarray, shape (N, gdim)
+        """
+        cp, gdim = self._control_array(delta_control_points, "delta_control_points")
+        out = np.empty((self.n_points, gdim))
+        if self.n_points:
+            _apply_nb(*self._kernel_axes(), cp, self.inside, True, out)
+        return out
+
+    def rmatvec(self, g) -> np.ndarray:
+        """``B.T @ g``: pull a per-point vector back to the control points (adjoint of ``displace``).
+
+        Parameters
+        ----------
+        g : array_like, shape (N, gdim)
+            E.g. dJ/dX per point. Rows of outside points do not contribute.
+
+        Returns
+        -------
+        ndarray, shape (n_ctrl, gdim)
+            Control points in the C order of ``control_points.reshape(-1, gdim)``.
+        """
+        g = np.ascontiguousarray(g, dtype=np.float64)
+        if g.ndim != 2 or g.shape[0] != self.n_points or not 1 <= g.shape[1] <= 3:
+            raise ValueError(f"g must have shape ({self.n_points}, gdim), got {g.shape}")
+        nchunk = max(1, min(self.n_points, 4 * numba.get_num_threads()))
+        acc = np.zeros((nchunk, self.n_ctrl, g.shape[1]))
+        if self.n_points:
+            _rmatvec_nb(*self._kernel_axes(), g, self.inside, acc)
+        return acc.sum(axis=0)
+
+    def basis_matrix(self) -> sparse.csr_matrix:
+        """The sparse basis ``B`` (N x n_ctrl, CSR) with zero rows for outside points.
+
+        Columns follow the C order of ``control_points.reshape(-1, gdim)``; column indices are
+        sorted within each row.
+        """
+        rows = np.flatnonzero(self.inside)
+        cols = np.zeros((rows.size, 1), dtype=np.int64)
+        data = np.ones((rows.size, 1))
+        for axis in range(self.pdim):
+            p1 = self.degree[axis] + 1
+            idx = self.first[axis][rows, None].astype(np.int64) + np.arange(p1)[None, :]
+            cols = (cols[:, :, None] * self.shape[axis] + idx[:, None, :]).reshape(rows.size, -1)
+            data = (data[:, :, None] * self.values[axis][rows, None, :]).reshape(rows.size, -1)
+        nnz_row = cols.shape[1]
+        indptr = np.zeros(self.n_points + 1, dtype=np.int64)
+        indptr[1:] = np.cumsum(self.inside.astype(np.int64) * nnz_row)
+        return sparse.csr_matrix((data.ravel(), cols.ravel(), indptr), shape=(self.n_points, self.n_ctrl))
+
+    # ------------------------------------------------------------------ report
+    def outside_report(self, max_indices: int = 10) -> dict:
+        """Points not inside the lattice: ``count``, ``indices`` (the first ``max_indices``),
+        ``worst_distance`` (largest residual among them, mesh units; 0.0 if none), ``worst_index``
+        (``None`` if none) and the ``tolerance`` used."""
+        out = np.flatnonzero(~self.inside)
+        if out.size:
+            k = int(out[np.argmax(self.residual[out])])
+            worst, worst_index = float(self.residual[k]), k
+        else:
+            worst, worst_index = 0.0, None
+        return {"count": int(out.size), "indices": [int(i) for i in out[:max_indices]],
+                "worst_distance": worst, "worst_index": worst_index, "tolerance": self.tolerance}
+
+
+_DUMMY_FIRST = np.zeros(1, dtype=np.int32)
+_DUMMY_VALUES = np.ones((1, 1))
+
+
+# ----------------------------------------------------------------------------------------------
+# B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
+# ----------------------------------------------------------------------------------------------
+
+@njit(cache=True, parallel=True)
+def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
+    npts = f0.shape[0]
+    gdim = out.shape[1]
+    a1 = V0.shape[1]
+    b1 = V1.shape[1]
+    c1 = V2.shape[1] if has_w else 1
+    for i in prange(npts):
+        if use_mask and not inside[i]:
+            for d in range(gdim):
+                out[i, d] = 0.0
+            continue
+        i0 = f0[i]
+        i1 = f1[i]
+        i2 = f2[i] if has_w else 0
+        x0 = x1 = x2 = 0.0
+        for a in range(a1):
+            r0 = r1 = r2 = 0.0
+            for b in range(b1):
+                base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
+                if has_w:
+                    q0 = q1 = q2 = 0.0
+                    for c in range(c1):
+                        w = V2[i, c]
+                        q0 += w * P[base + c, 0]
+                        q1 += w * P[base + c, 1]
+                        q2 += w * P[base + c, 2]
+                else:
+                    q0 = P[base, 0]
+                    q1 = P[base, 1]
+                    q2 = P[base, 2]
+                w = V1[i, b]
+                r0 += w * q0
+                r1 += w * q1
+                r2 += w * q2
+            w = V0[i, a]
+            x0 += w * r0
+            x1 += w * r1
+            x2 += w * r2
+        out[i, 0] = x0
+        if gdim > 1:
+            out[i, 1] = x1
+        if gdim > 2:
+            out[i, 2] = x2
+
+
+@njit(cache=True, parallel=True)
+def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
+    npts = f0.shape[0]
+    gdim = g.shape[1]
+    nchunk = acc.shape[0]
+    a1 = V0.shape[1]
+    b1 = V1.shape[1]
+    c1 = V2.shape[1] if has_w else 1
+    for ch in prange(nchunk):
+        lo = ch * npts // nchunk
+        hi = (ch + 1) * npts // nchunk
+        out = acc[ch]
+        for i in range(lo, hi):
+            if not inside[i]:
+                continue
+            i0 = f0[i]
+            i1 = f1[i]
+            i2 = f2[i] if has_w else 0
+            for a in range(a1):
+                wa = V0[i, a]
+                for b in range(b1):
+                    wab = wa * V1[i, b]
+                    base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
+                    for c in range(c1):
+                        w = wab * V2[i, c] if has_w else wab
+                        for d in range(gdim):
+                            out[base + c, d] += w * g[i, d]
+
+
+def dense_basis_reference(lattice: Lattice, params) -> np.ndarray:
+    """NumPy reference of the basis matrix: dense (N, n_ctrl) from :func:`ffdcli.spline.basis`.
+
+    For tests and small N only (memory N x n_ctrl).
+    """
+    params = np.asarray(params, dtype=np.float64)
+    npts = params.shape[0]
+    rows = np.arange(npts)[:, None]
+    B = np.ones((npts, 1))
+    for axis in range(lattice.pdim):
+        first, vals = basis(lattice.knots[axis], lattice.degree[axis], params[:, axis])
+        dense = np.zeros((npts, lattice.shape[axis]))
+        dense[rows, first[:, None] + np.arange(vals.shape[1])[None, :]] = vals
+        B = (B[:, :, None] * dense[:, None, :]).reshape(npts, -1)
+    return B
+
+
+# ----------------------------------------------------------------------------------------------
+# Newton point inversion (compiled)
+# ----------------------------------------------------------------------------------------------
+
+@njit(cache=True, nogil=True)
+def _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, gdim, out, scratch):
+    eval_point_nb(P, k0, k1, k2, p0, p1, p2, u[0], u[1], u[2], out, scratch)
+    s = 0.0
+    for d in range(gdim):
+        r = out[d] - X[d]
+        s += r * r
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _solve_small(H, rhs, n, x):
+    """Solve the n x n (n <= 3) system H x = rhs by Gaussian elimination with partial pivoting.
+
+    ``H`` and ``rhs`` are overwritten. Returns False when a pivot is negligible (singular H).
+    """
+    scale = 0.0
+    for e in range(n):
+        scale = max(scale, abs(H[e, e]))
+    if scale == 0.0:
+        return False
+    for k in range(n):
+        piv = k
+        for r in range(k + 1, n):
+            if abs(H[r, k]) > abs(H[piv, k]):
+                piv = r
+        if abs(H[piv, k]) <= 1e-13 * scale:
+            return False
+        if piv != k:
+            for c in range(n):
+                t = H[k, c]
+                H[k, c] = H[piv, c]
+                H[piv, c] = t
+            t = rhs[k]
+            rhs[k] = rhs[piv]
+            rhs[piv] = t
+        for r in range(k + 1, n):
+            m = H[r, k] / H[k, k]
+            for c in range(k, n):
+                H[r, c] -= m * H[k, c]
+            rhs[r] -= m * rhs[k]
+    for k in range(n - 1, -1, -1):
+        s = rhs[k]
+        for c in range(k + 1, n):
+            s -= H[k, c] * x[c]
+        x[k] = s / H[k, k]
+    return True
+
+
+@njit(cache=True, nogil=True)
+def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap, max_iter,
+                  cur, trial, ut, step, grad, H, rhs, fixed, scratch):
+    """Projected Gauss-Newton for one point; ``u`` (3,) is the start and receives the result.
+
+    Returns the squared residual at the result.
+    """
+    f = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, gdim, cur, scratch)
+    for _ in range(max_iter):
+        if f <= stop2:
+            break
+        # gradient J^T r and Gauss-Newton matrix J^T J (J columns are cur[3 + 3e: 6 + 3e])
+        for e in range(pdim):
+            s = 0.0
+            for d in range(gdim):
+                s += cur[3 + 3 * e + d] * (cur[d] - X[d])
+            grad[e] = s
+            for e2 in range(pdim):
+                s = 0.0
+                for d in range(gdim):
+                    s += cur[3 + 3 * e + d] * cur[3 + 3 * e2 + d]
+                H[e, e2] = s
+        # variables held at a bound by the gradient stay there (active set)
+        nfree = 0
+        for e in range(pdim):
+            fixed[e] = (u[e] <= 0.0 and grad[e] > 0.0) or (u[e] >= 1.0 and grad[e] < 0.0)
+            if not fixed[e]:
+                nfree += 1
+        if nfree == 0:
+            break
+        trace = 0.0
+        for e in range(pdim):
+            if fixed[e]:
+                for e2 in range(pdim):
+                    H[e, e2] = 0.0
+                    H[e2, e] = 0.0
+                H[e, e] = 1.0
+                rhs[e] = 0.0
+            else:
+                rhs[e] = -grad[e]
+                trace += H[e, e]
+        ok = _solve_small(H, rhs, pdim, step)
+        if not ok:
+            # singular Jacobian (degenerate lattice cell): scaled steepest descent
+            for e in range(pdim):
+                step[e] = 0.0 if fixed[e] else -grad[e] / max(trace, 1e-300)
+        # backtracking along the projected path u(alpha) = clip(u + alpha * step)
+        alpha = 1.0
+        accepted = False
+        max_halvings = 4 if f <= tol2 else 40
+        for _ls in range(max_halvings):
+            for e in range(pdim):
+                v = u[e] + alpha * step[e]
+                ut[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
+            ft = _sqdist(P, k0, k1, k2, p0, p1, p2, ut, X, gdim, trial, scratch)
+            if ft < f:
+                accepted = True
+                break
+            alpha *= 0.5
+        if not accepted:
+            break
+        moved = 0.0
+        for e in range(pdim):
+            moved = max(moved, abs(ut[e] - u[e]))
+            u[e] = ut[e]
+        for k in range(12):
+            cur[k] = trial[k]
+        f = ft
+        if moved <= 1e-15:
+            break
+    # exact face parameters for points on (or within 1e-10 of) a face of the lattice
+    if f <= tol2:
+        for e in range(pdim):
+            target = -1.0
+            if 0.0 < u[e] <= snap:
+                target = 0.0
+            elif 1.0 - snap <= u[e] < 1.0:
+                target = 1.0
+            if target >= 0.0:
+                keep = u[e]
+                u[e] = target
+                fs = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, gdim, trial, scratch)
+                if fs <= tol2:
+                    f = fs
+                else:
+                    u[e] = keep
+    return f
+
+
+@njit(cache=True, parallel=True)
+def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, residual):
+    npts = X.shape[0]
+    gdim = X.shape[1]
+    pdim = params.shape[1]
+    tol2 = tol * tol
+    stop2 = stop * stop
+    nchunk = min(npts, 1024)
+    for ch in prange(nchunk):
+        scratch = np.zeros((8, 6))
+        cur = np.zeros(12)
+        trial = np.zeros(12)
+        u = np.zeros(3)
+        ut = np.zeros(3)
+        step = np.zeros(3)
+        grad = np.zeros(3)
+        H = np.zeros((3, 3))
+        rhs = np.zeros(3)
+        fixed = np.zeros(3, dtype=np.bool_)
+        lo = ch * npts // nchunk
+        hi = (ch + 1) * npts // nchunk
+        for i in range(lo, hi):
+            for e in range(pdim):
+                u[e] = params[i, e]
+            f = _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X[i], u, tol2, stop2, snap, max_iter,
+                              cur, trial, ut, step, grad, H, rhs, fixed, scratch)
+            for e in range(pdim):
+                params[i, e] = u[e]
+            residual[i] = np.sqrt(f)
+
+
+# ----------------------------------------------------------------------------------------------
+# embed()
+# ----------------------------------------------------------------------------------------------
+
+def sample_grid(lattice: Lattice, per_span: int = 4) -> np.ndarray:
+    """Parameters of the start grid: ``per_span`` intervals in every non-empty knot span of every
+    direction (ends included). Returns (S, pdim)."""
+    axes = []
+    for k in lattice.knots:
+        breaks = np.unique(k)
+        fine = (breaks[:-1, None] + (breaks[1:] - breaks[:-1])[:, None]
+                * (np.arange(per_span) / per_span)[None, :]).ravel()
+        axes.append(np.append(fine, 1.0))
+    mesh = np.meshgrid(*axes, indexing="ij")
+    return np.ascontiguousarray(np.stack([m.ravel() for m in mesh], axis=1))
+
+
+def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_iter):
+    _newton_nb(*args, points, params, float(tol_abs), float(stop_abs), float(snap), int(max_iter), residual)
+
+
+def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, samples_per_span: int = 4,
+          retries: int = 4, max_iter: int = 50, snap: float = SNAP) -> Embedding:
+    """Embed points in a lattice: parameters of the nearest lattice point, residual, inside flag.
+
+    Parameters
+    ----------
+    lattice : Lattice
+    points : array_like, shape (N, gdim)
+        Points in mesh units (``gdim`` = the lattice's).
+    tol : float
+        Inside tolerance relative to ``lattice.size``: a point is inside when its residual is at most
+        ``tol * lattice.size``.
+    progress : callable, optional
+        A progress factory (``ffdcli.progress``); called once with ("embedding", N).
+    samples_per_span : int
+        Start-grid density: sample intervals per knot span and direction.
+    retries : int
+        Further starts (the next-nearest samples) for points whose first Newton ends outside.
+    max_iter : int
+        Gauss-Newton iterations per start.
+    snap : float
+        Parameters within ``snap`` of 0 or 1 become exactly 0 or 1 when the residual stays within
+        the tolerance.
+
+    Returns
+    -------
+    Embedding
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] != lattice.gdim:
+        raise ValueError(f"points must have shape (N, {lattice.gdim}), got {pts.shape}")
+    if not np.all(np.isfinite(pts)):
+        raise InputError("points to embed contain NaN or infinite coordinates")
+    if not tol > 0:
+        raise ValueError(f"tol must be positive, got {tol}")
+    pts = np.ascontiguousarray(pts)
+    npts = pts.shape[0]
+    tol_abs = tol * lattice.size
+    stop_abs = 1e-3 * tol_abs
+    args = kernel_args(lattice)
+
+    samples = sample_grid(lattice, samples_per_span)
+    tree = cKDTree(evaluate(lattice, samples))
+    params = np.empty((npts, lattice.pdim))
+    residual = np.empty(npts)
+    factory = progress or no_progress
+    with factory("embedding", npts) as bar:
+        for lo, hi in chunks(npts, CHUNK):
+            _, nearest = tree.query(pts[lo:hi], k=1, workers=-1)
+            params[lo:hi] = samples[nearest]
+            _run_newton(args, pts[lo:hi], params[lo:hi], residual[lo:hi], tol_abs, stop_abs, snap, max_iter)
+            bar.update(hi - lo)
+
+    # Retry the points left outside from their next-nearest samples, keeping the best result.
+    fail = np.flatnonzero(residual > tol_abs)
+    kmax = min(retries + 1, samples.shape[0])
+    if fail.size and kmax > 1:
+        _, nearest = tree.query(pts[fail], k=kmax, workers=-1)
+        for kth in range(1, kmax):
+            if not fail.size:
+                break
+            sub_pts = np.ascontiguousarray(pts[fail])
+            sub_params = np.ascontiguousarray(samples[nearest[:, kth]])
+            sub_res = np.empty(fail.size)
+            _run_newton(args, sub_pts, sub_params, sub_res, tol_abs, stop_abs, snap, max_iter)
+            better = sub_res < residual[fail]
+            params[fail[better]] = sub_params[better]
+            residual[fail[better]] = sub_res[better]
+            still = residual[fail] > tol_abs
+            fail = fail[still]
+            nearest = nearest[still]
+
+    inside = residual <= tol_abs
+    return Embedding.from_params(lattice, params, inside, residual, tolerance=tol_abs)
