@@ -320,7 +320,7 @@ def analyse_section(q2: np.ndarray) -> Section | None:
         return None
     aft = c >= c.max() - 0.005 * extent
     lo, hi = np.argmin(np.where(aft, t, np.inf)), np.argmax(np.where(aft, t, -np.inf))
-    te = 0.5 * (q2[lo] + q2[hi])
+    te = np.array([c.max(), 0.5 * (t[lo] + t[hi])])  # aft-most point; mid-base if blunt
     le = q2[np.argmax(np.hypot(c - te[0], t - te[1]))]
     chord = np.hypot(*(te - le))
     if not chord > 0:

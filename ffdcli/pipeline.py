@@ -132,3 +132,166 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
             path = None
     return PreparedBox(mesh=mesh, surface=surf, box=box, embedding=emb, report=report, cache=path,
                        from_cache=False, seconds=time.perf_counter() - t0, warnings=warnings)
+
+
+# ----------------------------------------------------------------------------------------------
+# One design: the deformed lattice, surface and volume
+# ----------------------------------------------------------------------------------------------
+
+@dataclass
+class DesignRun:
+    """A design file with its box prepared and its changes built: everything ``deform`` needs."""
+
+    design: object               # ffdcli.design.Design
+    prep: PreparedBox
+    changes: list                # ffdcli.changes change objects, in pipeline order
+
+    @property
+    def box(self) -> Box:
+        return self.prep.box
+
+    @property
+    def P0(self) -> np.ndarray:
+        """Original control points (n, m, l, 3)."""
+        return self.prep.box.control_points
+
+    def lattice_after(self, changes=None) -> np.ndarray:
+        """Control points after the design's changes (or ``changes``)."""
+        from ffdcli.changes import apply_changes
+
+        return apply_changes(self.P0, self.box.frame, self.changes if changes is None else changes)
+
+    def surface_displacement(self, P: np.ndarray) -> np.ndarray:
+        """(S, 3) displacement of the surface points for control points ``P``: B @ (P - P0).
+
+        Points outside the lattice do not move (zero rows)."""
+        box = self.box
+        dP = box.core_control_points(P) - box.core_control_points(self.P0)
+        return box.mesh_vectors(self.prep.embedding.displace(dP))
+
+    def surface_rotations(self, P: np.ndarray) -> np.ndarray:
+        """(S, 3, 3) local rotation of the FFD map at each surface point (for the volume warp).
+
+        The deformation gradient F = J(P) J(P0)^-1, with J the parametric Jacobian of the lattice
+        at the point's (u, v, w), is split by polar decomposition; the rotation part is returned.
+        Outside points get the identity."""
+        from ffdcli.lattice import derivatives
+        from ffdcli.warp import rotations_from_deformation_gradient
+
+        box, emb = self.box, self.prep.embedding
+        S = len(emb.inside)
+        R = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+        ins = np.flatnonzero(emb.inside)
+        if not len(ins):
+            return R
+        J0 = derivatives(box.lattice(self.P0), emb.params[ins])
+        J1 = derivatives(box.lattice(P), emb.params[ins])
+        F = J1 @ np.linalg.inv(J0)
+        if box.dim == 2:
+            F3 = np.broadcast_to(np.eye(3), (len(ins), 3, 3)).copy()
+            ax = box.plane_axes
+            F3[np.ix_(np.arange(len(ins)), ax, ax)] = F
+            F = F3
+        R[ins] = rotations_from_deformation_gradient(F)
+        return R
+
+
+def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = False,
+             progress=None) -> DesignRun:
+    """Prepare the box of a loaded design (cached) and build its changes against the lattice."""
+    from ffdcli.design import build_changes
+
+    prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
+                       use_cache=use_cache, rebuild=rebuild, progress=progress)
+    n, m, l = prep.box.shape
+    changes = build_changes(design, n, m, l, prep.box.dim)
+    return DesignRun(design=design, prep=prep, changes=changes)
+
+
+@dataclass
+class Deformation:
+    """The result of one design: new coordinates of every mesh node, and what was checked."""
+
+    points: np.ndarray           # (N, 3) all mesh nodes
+    lattice: np.ndarray          # (n, m, l, 3) deformed control points
+    surface_displacement: np.ndarray   # (S, 3)
+    volume_method: str
+    quality: object | None       # ffdcli.quality.QualityReport
+    seconds: dict
+
+    @property
+    def max_displacement(self) -> float:
+        return float(np.linalg.norm(self.surface_displacement, axis=1).max(initial=0.0))
+
+
+def volume_method(run: DesignRun) -> str:
+    """``idw`` or ``none``: the design's ``volume.method``, default idw when the mesh has cells."""
+    mesh = run.prep.mesh
+    method = (run.design.volume or {}).get("method")
+    if method is None:
+        return "idw" if mesh.n_cells else "none"
+    return method
+
+
+def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None) -> Deformation:
+    """Apply the design's changes and move the mesh: the surface exactly, the volume by IDW.
+
+    Returns a :class:`Deformation`; nothing is written. The quality report is computed when the
+    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides).
+    """
+    progress = progress or no_progress
+    t = {}
+    t0 = time.perf_counter()
+    mesh, surf = run.prep.mesh, run.prep.surface
+    P1 = run.lattice_after() if P is None else P
+    disp = run.surface_displacement(P1)
+    t["changes"] = time.perf_counter() - t0
+    points = mesh.points.copy()
+    method = volume_method(run)
+    t1 = time.perf_counter()
+    if method == "idw" and mesh.n_cells:
+        from ffdcli.warp import WarpSettings, prepare_warp_for_mesh, warp
+
+        settings = WarpSettings.from_dict(run.design.volume or {}, path=run.design.path)
+        model = prepare_warp_for_mesh(mesh, surf, settings, progress=progress)
+        rot = run.surface_rotations(P1)
+        points += warp(model, disp, rot, progress=progress)
+    else:
+        points[surf.ids] += disp
+    # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
+    points[surf.ids] = mesh.points[surf.ids] + disp
+    t["volume"] = time.perf_counter() - t1
+    quality = None
+    if mesh.n_cells:
+        from ffdcli.quality import check_quality
+
+        t2 = time.perf_counter()
+        threshold = (run.design.volume or {}).get("threshold")
+        kw = {} if threshold is None else {"threshold": float(threshold)}
+        quality = check_quality(mesh, points, points_before=mesh.points, **kw)
+        t["quality"] = time.perf_counter() - t2
+    return Deformation(points=points, lattice=P1, surface_displacement=disp, volume_method=method,
+                       quality=quality, seconds=t)
+
+
+def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattice_path=None,
+                  progress=None) -> dict:
+    """Write the deformed mesh and the lattice VTK (atomically). Returns {what: path}."""
+    from ffdcli.atomic import check_writable
+    from ffdcli.formats import write_mesh
+    from ffdcli.formats.lattice_vtk import write_lattice_vtk
+
+    mesh = run.prep.mesh
+    out = run.design.output
+    mesh_path = Path(mesh_path or out["mesh"])
+    lattice_path = Path(lattice_path or out["lattice"]) if (lattice_path or out.get("lattice")) else None
+    check_writable(mesh_path, inputs=(mesh.path,))
+    if lattice_path is not None:
+        check_writable(lattice_path, inputs=(mesh.path, mesh_path))
+    written = {}
+    write_mesh(mesh, mesh_path, result.points, progress=progress)
+    written["mesh"] = str(mesh_path)
+    if lattice_path is not None:
+        write_lattice_vtk(lattice_path, result.lattice, original=run.P0)
+        written["lattice"] = str(lattice_path)
+    return written

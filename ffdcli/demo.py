@@ -1,0 +1,123 @@
+"""``python -m ffdcli.demo``: the paper's cases on the bundled samples, written to ``out/``.
+
+Runs every design file of ``configs/`` (deform, lattice VTK, PNG), the NACA0012 -> S1223 fit, and
+writes ``out/index.md`` listing each case with its one-line summary and picture. This is what
+``make demo`` runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+def run_case(config: Path, out: Path, progress) -> dict:
+    """Deform one design into ``out`` (mesh, lattice, PNG); return its summary row."""
+    from ffdcli.design import load_design
+    from ffdcli.pipeline import deform, load_run, write_outputs
+    from ffdcli.plot import plot_design
+
+    t0 = time.perf_counter()
+    design = load_design(config)
+    stem = config.stem
+    ext = Path(design.output["mesh"]).suffix or design.mesh.suffix
+    run = load_run(design, progress=progress)
+    result = deform(run, progress=progress)
+    q = result.quality
+    mesh_out = out / f"{stem}{ext}"
+    lattice_out = out / f"{stem}_lattice.vtk"
+    png = out / f"{stem}.png"
+    ok = q is None or q.ok
+    if ok:
+        write_outputs(run, result, mesh_path=mesh_out, lattice_path=lattice_out)
+    plot_design(run, result, png)
+    return {
+        "case": stem, "config": str(config.relative_to(REPO)) if config.is_relative_to(REPO) else str(config),
+        "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None, "png": png.name,
+        "changes": ", ".join(next(iter(c)) for c in design.changes_spec),
+        "max_displacement": result.max_displacement,
+        "quality": q.message() if q is not None else "surface only",
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def run_fit(out: Path, progress) -> dict | None:
+    """NACA0012 -> S1223 by least squares (the paper's first case), if the fit module is present."""
+    config = REPO / "configs" / "naca0012_s1223.yaml"
+    target = REPO / "samples" / "s1223.dat"
+    try:
+        from ffdcli.fit import fit_design
+    except ImportError:
+        return None
+    t0 = time.perf_counter()
+    fitted_yaml = out / "naca0012_s1223_fitted.yaml"
+    rep = fit_design(config, target, fitted_yaml, progress=progress)
+    row = run_case(fitted_yaml, out, progress)
+    row["case"] = "naca0012_s1223_fit"
+    row["changes"] = (f"shape fitted to S1223: max deviation {rep['before']['max']:.4f} -> "
+                      f"{rep['after']['max']:.4f} chords")
+    row["seconds"] = time.perf_counter() - t0
+    return row
+
+
+def write_index(rows: list[dict], out: Path) -> Path:
+    from ffdcli.atomic import atomic_write
+
+    lines = ["# ffd demo: the paper's cases on the bundled samples", "",
+             "Original surface black, deformed red; lattice points grey (original) and red (deformed).", "",
+             "| case | changes | max displacement | quality | mesh | lattice | seconds |",
+             "|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['case']} | {r['changes']} | {r['max_displacement']:.4g} | {r['quality']} | "
+                     f"{r['mesh'] or '(refused)'} | {r['lattice'] or ''} | {r['seconds']:.1f} |")
+    lines.append("")
+    for r in rows:
+        lines += [f"## {r['case']}", "", f"`{r['config']}`: {r['changes']}", "", f"![{r['case']}]({r['png']})", ""]
+    path = out / "index.md"
+    with atomic_write(path, "w") as fh:
+        fh.write("\n".join(lines))
+    return path
+
+
+def main(argv=None) -> int:
+    from ffdcli.errors import FfdError
+
+    ap = argparse.ArgumentParser(prog="python -m ffdcli.demo", description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="out", help="output folder (default: out)")
+    ap.add_argument("--configs", default=str(REPO / "configs"), help="folder of design files")
+    ap.add_argument("--only", nargs="*", help="case names (file stems) to run")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    configs = sorted(Path(args.configs).glob("*.yaml"))
+    if args.only:
+        configs = [c for c in configs if c.stem in args.only]
+    from ffdcli.progress import no_progress
+
+    rows = []
+    t0 = time.perf_counter()
+    for i, config in enumerate(configs, 1):
+        try:
+            row = run_case(config, out, no_progress)
+        except FfdError as e:
+            print(f"[{i}/{len(configs)}] {config.stem}: error: {e}", file=sys.stderr, flush=True)
+            return 2
+        rows.append(row)
+        print(f"[{i}/{len(configs)}] {row['case']:<24} {row['changes']:<28} max disp {row['max_displacement']:.3g}"
+              f"  {row['quality']}  ({row['seconds']:.1f} s)", flush=True)
+    if not args.only or "naca0012_s1223_fit" in args.only:
+        row = run_fit(out, no_progress)
+        if row:
+            rows.append(row)
+            print(f"[fit] {row['changes']} ({row['seconds']:.1f} s)", flush=True)
+    index = write_index(rows, out)
+    print(f"wrote {len(rows)} cases to {out}/ in {time.perf_counter() - t0:.1f} s; see {index}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
