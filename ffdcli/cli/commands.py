@@ -4,3 +4,7 @@ Order here is the order in ``ffd --help``.
 """
 
 from ffdcli.cli import inspect  # noqa: F401
+from ffdcli.cli import box  # noqa: F401
+from ffdcli.cli import deform  # noqa: F401
+from ffdcli.cli import plot  # noqa: F401
+from ffdcli.cli import fit  # noqa: F401
