@@ -28,8 +28,8 @@ All derivatives are analytic. :func:`apply_changes`, :func:`design_variables` an
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from typing import Sequence
 
 import numpy as np
 
@@ -321,7 +321,7 @@ class Twist(Change):
         return apply_homogeneous(self.maps(P, frame), P)
 
     def variables(self):
-        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params)]
+        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params, strict=True)]
 
     def with_values(self, values):
         return replace(self, law=self.law.with_params(values))
@@ -368,7 +368,7 @@ class Chord(Change):
         return apply_homogeneous(self.maps(P, frame), P)
 
     def variables(self):
-        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params)]
+        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params, strict=True)]
 
     def with_values(self, values):
         return replace(self, law=self.law.with_params(values))
@@ -479,7 +479,7 @@ class _Shear(Change):
     def variables(self):
         if self.offsets is not None:
             return [(f"{self.kind}.offsets{s}", float(v))
-                    for s, v in zip(self.offsets.suffixes, self.offsets.params)]
+                    for s, v in zip(self.offsets.suffixes, self.offsets.params, strict=True)]
         return [(self.kind, float(self.delta))]
 
     def with_values(self, values):
@@ -674,7 +674,7 @@ def set_design_variables(changes: Sequence[Change], values) -> list[Change]:
     if vals.size != sum(sizes):
         raise ValueError(f"expected {sum(sizes)} design-variable values, got {vals.size}")
     out, at = [], 0
-    for change, size in zip(changes, sizes):
+    for change, size in zip(changes, sizes, strict=True):
         out.append(change.with_values(vals[at:at + size]))
         at += size
     return out

@@ -12,7 +12,7 @@ basis matrix of the embedding whose columns are the control points in C order of
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
