@@ -4,3 +4,4 @@ Order here is the order in ``ffd --help``.
 """
 
 from ffdcli.cli import inspect  # noqa: F401
+from ffdcli.cli import schema  # noqa: F401
