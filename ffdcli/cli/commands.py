@@ -3,5 +3,5 @@
 Order here is the order in ``ffd --help``.
 """
 
-from ffdcli.cli import inspect  # noqa: F401
-from ffdcli.cli import schema  # noqa: F401
+from ffdcli.cli import inspect  # noqa: F401, I001
+from ffdcli.cli import schema  # noqa: F401, I001
