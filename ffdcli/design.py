@@ -298,7 +298,7 @@ def _describe(error) -> tuple[tuple, str]:
         inner = [e for e in (error.context or []) if not (e.validator == "type" and not e.relative_path)]
         inner = [e for e in inner if e.validator not in ("required",) or isinstance(inst, dict)]
         if inner and isinstance(inst, (dict, list)):
-            return _describe(max(inner, key=lambda e: len(e.absolute_path)))
+            return max((_describe(e) for e in inner), key=lambda d: len(d[0]))
         what = schema.get("description")
         if what is None and schema.get("anyOf", [{}])[0].get("required"):
             what = "one of: " + ", ".join(b["required"][0] for b in schema["anyOf"])
@@ -472,7 +472,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
               "lattice": resolve(out.get("lattice", f"out/{stem}_lattice.vtk")),
               "plot": resolve(out.get("plot", f"out/{stem}.png"))}
     if output["mesh"] == mesh:
-        raise InputError("output.mesh is the input mesh; the input is never overwritten", path=path,
+        raise InputError("is the input mesh; the input is never overwritten (choose another file)", path=path,
                          key="output.mesh", line=_line(lines, ("output", "mesh")))
     return Design(path=path, mesh=mesh, surface=surface, box=box, volume=volume,
                   changes_spec=list(data.get("changes") or []), output=output, data=data,
