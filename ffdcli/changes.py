@@ -37,6 +37,8 @@ from ffdcli.errors import InputError
 
 #: Radians per degree: angles are given and differentiated in degrees.
 DEG = math.pi / 180.0
+#: Largest leading-edge sweep/dihedral angle a change may produce (tan grows without bound at 90).
+MAX_SHEAR_ANGLE = 85.0
 
 
 # --------------------------------------------------------------------------------------------------
@@ -461,6 +463,10 @@ class _Shear(Change):
 
     def _k(self, P, frame):
         lam = self.angle(P, frame)
+        if abs(lam + self.delta * DEG) >= MAX_SHEAR_ANGLE * DEG:
+            raise InputError(f"{self.kind} {self.delta:g}: the leading-edge angle would become "
+                             f"{math.degrees(lam) + self.delta:.1f} degrees; it must stay within "
+                             f"+-{MAX_SHEAR_ANGLE:g}")
         return lam, math.tan(lam + self.delta * DEG) - math.tan(lam)
 
     def maps(self, P, frame):

@@ -156,6 +156,12 @@ def test_dihedral_makes_the_leading_edge_angle_exactly_gamma_plus_delta_tip_up(a
     assert (tip_rise > 0) == (delta > 0)                           # positive raises the tip
 
 
+def test_sweep_beyond_85_degrees_is_an_input_error():
+    P, frame = wing_lattice(sweep_deg=30.0)
+    with pytest.raises(InputError, match="within"):
+        Sweep(60.0).apply(P, frame)
+
+
 def test_sweep_and_dihedral_offsets_move_whole_sections():
     P, frame = wing_lattice(m=4)
     off = np.array([0.0, 0.01, 0.03, 0.06])
