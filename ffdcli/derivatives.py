@@ -16,6 +16,7 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator
 
 from ffdcli.changes import Change, LatticeFrame
 
@@ -64,3 +65,19 @@ def vjp(B, g: np.ndarray, lattice_jac: np.ndarray) -> np.ndarray:
         raise ValueError(f"g must have shape ({B.shape[0]}, 3), got {g.shape}")
     gP = np.asarray(B.T @ g)                                    # (n_ctrl, 3)
     return gP.reshape(-1) @ lattice_jac
+
+
+def surface_operator(B, lattice_jac: np.ndarray) -> LinearOperator:
+    """dX/dv as a (N*3, n_vars) LinearOperator that never forms the dense product.
+
+    ``op @ dv`` is the surface motion (flattened point-major) and ``op.T @ g`` (``g`` flattened
+    (N*3,)) the vector-Jacobian product; the dense matrix of 1M points x 100 variables is 2.4 GB,
+    the factors ``B`` and ``lattice_jac`` a few hundred MB at most.
+    """
+    n_points = B.shape[0]
+    n_vars = lattice_jac.shape[1]
+    return LinearOperator(
+        (3 * n_points, n_vars), dtype=float,
+        matvec=lambda dv: surface_jvp(B, lattice_jac, np.ravel(dv)).reshape(-1),
+        rmatvec=lambda g: vjp(B, np.reshape(g, (n_points, 3)), lattice_jac),
+    )

@@ -28,7 +28,7 @@ from ffdcli.changes import (
     design_variables,
     set_design_variables,
 )
-from ffdcli.derivatives import lattice_jacobian, surface_jacobian, surface_jvp, vjp
+from ffdcli.derivatives import lattice_jacobian, surface_jacobian, surface_jvp, surface_operator, vjp
 
 REL = 1e-6
 
@@ -152,3 +152,7 @@ def test_surface_jacobian_and_vjp_are_b_times_the_lattice_jacobian():
     np.testing.assert_allclose(vjp(B, g, J), g.reshape(-1) @ dX, rtol=1e-12, atol=1e-10)
     with pytest.raises(ValueError):
         vjp(B, g[:10], J)
+    op = surface_operator(B, J)
+    assert op.shape == dX.shape
+    np.testing.assert_allclose(op @ dv, dX @ dv, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(op.T @ g.reshape(-1), g.reshape(-1) @ dX, rtol=1e-12, atol=1e-10)
