@@ -343,3 +343,18 @@ def test_design_variable_names_values_and_setting_them():
     U = np.zeros((2, 3))
     assert [n for n, _ in Shape(U).variables()][:4] == ["shape.upper[0,0]", "shape.upper[0,1]",
                                                           "shape.upper[0,2]", "shape.upper[1,0]"]
+
+
+def test_nose_up_and_tip_up_follow_the_frame_directions_not_the_mesh_axes():
+    """Chord along -x, thickness along -z, span along -y (a mirrored wing): the meaning holds."""
+    P, frame = wing_lattice(axes="crm")
+    P = -P
+    fr = LatticeFrame.from_lattice(P.shape[:3], -frame.chord_dir, -frame.thickness_dir, -frame.span_dir)
+    Q = Twist(np.full(8, 10.0)).apply(P, fr)
+    rise = (Q - P)[0, 1:] @ fr.thickness_dir                   # leading-edge row, all but the root
+    assert np.all(rise > 0)
+    Q = Dihedral(5.0).apply(P, fr)
+    assert le_angle(Q, fr, fr.thickness_dir) == pytest.approx(math.radians(5.0), abs=TOL)
+    assert ((Q - P)[0, -1, 0] @ fr.thickness_dir) > 0
+    Q = Span(1.1).apply(P, fr)
+    np.testing.assert_allclose(Q @ fr.span_dir, 1.1 * (P @ fr.span_dir), atol=TOL)
