@@ -3,8 +3,9 @@
 Order here is the order in ``ffd --help``.
 """
 
-from ffdcli.cli import inspect  # noqa: F401
-from ffdcli.cli import box  # noqa: F401
-from ffdcli.cli import deform  # noqa: F401
-from ffdcli.cli import plot  # noqa: F401
-from ffdcli.cli import fit  # noqa: F401
+from ffdcli.cli import inspect  # noqa: F401, I001
+from ffdcli.cli import box  # noqa: F401, I001
+from ffdcli.cli import deform  # noqa: F401, I001
+from ffdcli.cli import plot  # noqa: F401, I001
+from ffdcli.cli import fit  # noqa: F401, I001
+from ffdcli.cli import schema  # noqa: F401, I001

@@ -1,0 +1,686 @@
+"""The design changes: twist, span, sweep, dihedral, chord and shape as maps of lattice sections.
+
+A lattice ``P`` has shape ``(n, m, l, 3)``: ``i`` chordwise (0 = leading-edge side), ``j`` spanwise
+(0 = root section), ``k`` thickness (0 = lower side), in mesh coordinates. A 2D lattice has
+``m = 1``. The directions and reference points the changes need are held by a :class:`LatticeFrame`.
+
+Each change is a frozen dataclass with
+
+``apply(P, frame) -> P'``
+    the change itself, as affine maps in homogeneous coordinates (4 x 4 ``T(p) R T(-p)`` per
+    section for twist and chord, one 4 x 4 scale or shear for span, sweep and dihedral) plus
+    translations for sweep/dihedral offsets and shape;
+``variables() -> [(name, value), ...]``
+    its design variables, named relative to the change as written in the design file
+    (``twist[7]`` for a list, ``twist.tip`` for ``{tip: }``, ``span`` for a scalar);
+``with_values(values) -> change``
+    the same change with new values of its variables;
+``jacobian_own(P, frame) -> (k, n, m, l, 3)``, ``jvp(P, frame, dvalues) -> dP'``
+    the derivative of ``apply`` with respect to its own variables (per degree for angles);
+``jvp_P(P, frame, dP) -> dP'``
+    the derivative with respect to the input lattice (the trailing-edge points and the sweep and
+    dihedral angles depend on ``P``); ``dP`` may carry leading batch axes ``(..., n, m, l, 3)``.
+
+All derivatives are analytic. :func:`apply_changes`, :func:`design_variables` and
+:func:`set_design_variables` work on a whole pipeline (a list of changes applied in order).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ffdcli.errors import InputError
+
+#: Radians per degree: angles are given and differentiated in degrees.
+DEG = math.pi / 180.0
+#: Largest leading-edge sweep/dihedral angle a change may produce (tan grows without bound at 90).
+MAX_SHEAR_ANGLE = 85.0
+
+
+# --------------------------------------------------------------------------------------------------
+# The frame of a lattice
+# --------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class LatticeFrame:
+    """What the changes need to know about a lattice besides its points.
+
+    chord_dir, thickness_dir, span_dir
+        (3,) unit vectors: chord from leading to trailing edge, thickness "up", span root -> tip.
+        Chord and thickness must be orthogonal (they are normalised here).
+    ref_weights
+        (m, n, l): section ``j``'s trailing-edge reference point is
+        ``p_j = sum_ik ref_weights[j, i, k] * P[i, j, k]`` (linear in ``P``).
+    le_rows
+        (2, n*m*l) or None (2D): ``le_rows @ P.reshape(-1, 3)`` are the surface's leading-edge
+        points at the root (row 0) and the tip (row 1); they define the sweep and dihedral angles.
+    dim
+        2 or 3.
+    le_offset
+        (2, 3) or None: added to ``le_rows @ P`` (``X0 - B P0`` of those two surface points, so
+        that the angle is that of the surface even where the embedding residual is not zero).
+    """
+
+    chord_dir: np.ndarray
+    thickness_dir: np.ndarray
+    span_dir: np.ndarray
+    ref_weights: np.ndarray
+    le_rows: np.ndarray | None = None
+    dim: int = 3
+    le_offset: np.ndarray | None = None
+
+    def __post_init__(self):
+        for name in ("chord_dir", "thickness_dir", "span_dir"):
+            v = np.asarray(getattr(self, name), dtype=float).reshape(3)
+            norm = np.linalg.norm(v)
+            if not norm > 0:
+                raise ValueError(f"LatticeFrame.{name} must be a non-zero vector")
+            object.__setattr__(self, name, v / norm)
+        if abs(self.chord_dir @ self.thickness_dir) > 1e-9:
+            raise ValueError("LatticeFrame: chord_dir and thickness_dir must be orthogonal")
+        object.__setattr__(self, "ref_weights", np.asarray(self.ref_weights, dtype=float))
+        if self.ref_weights.ndim != 3:
+            raise ValueError("LatticeFrame.ref_weights must have shape (m, n, l)")
+        if self.le_rows is not None:
+            object.__setattr__(self, "le_rows", np.asarray(self.le_rows, dtype=float))
+        if self.le_offset is not None:
+            object.__setattr__(self, "le_offset", np.asarray(self.le_offset, dtype=float).reshape(2, 3))
+        if self.dim not in (2, 3):
+            raise ValueError(f"LatticeFrame.dim must be 2 or 3, got {self.dim}")
+
+    @classmethod
+    def from_lattice(cls, shape: Sequence[int], chord_dir, thickness_dir, span_dir,
+                     dim: int = 3) -> LatticeFrame:
+        """A frame read off the lattice alone (no surface): for tests and user-given lattices.
+
+        The trailing-edge point of section ``j`` is the midpoint of ``P[n-1, j, 0]`` and
+        ``P[n-1, j, l-1]``; the leading-edge points are the midpoints of ``P[0, j, 0]`` and
+        ``P[0, j, l-1]`` at ``j = 0`` (root) and ``j = m-1`` (tip).
+        """
+        n, m, l = (int(s) for s in shape)
+        w = np.zeros((m, n, l))
+        w[:, n - 1, 0] += 0.5
+        w[:, n - 1, l - 1] += 0.5
+        le = None
+        if dim == 3:
+            rows = np.zeros((2, n, m, l))
+            for r, j in ((0, 0), (1, m - 1)):
+                rows[r, 0, j, 0] += 0.5
+                rows[r, 0, j, l - 1] += 0.5
+            le = rows.reshape(2, -1)
+        return cls(chord_dir, thickness_dir, span_dir, w, le, dim)
+
+    def ref_points(self, P: np.ndarray) -> np.ndarray:
+        """(..., m, 3) trailing-edge reference points of the sections of ``P`` (..., n, m, l, 3)."""
+        return np.einsum("jik,...ijkd->...jd", self.ref_weights, P)
+
+    def le_lin(self, P: np.ndarray) -> np.ndarray:
+        """(..., 2, 3) ``le_rows @ P``: the linear part of the leading-edge points."""
+        if self.le_rows is None:
+            raise InputError("sweep and dihedral need a 3D lattice with leading-edge points")
+        flat = P.reshape(*P.shape[:-4], -1, 3)
+        return np.einsum("rq,...qd->...rd", self.le_rows, flat)
+
+    def le_points(self, P: np.ndarray) -> np.ndarray:
+        """(2, 3) leading-edge points of the surface at the root and the tip."""
+        le = self.le_lin(P)
+        return le if self.le_offset is None else le + self.le_offset
+
+    def plane(self) -> np.ndarray:
+        """(3, 3) projector onto the chord-thickness plane: c c^T + t t^T."""
+        c, t = self.chord_dir, self.thickness_dir
+        return np.outer(c, c) + np.outer(t, t)
+
+
+# --------------------------------------------------------------------------------------------------
+# Homogeneous coordinates
+# --------------------------------------------------------------------------------------------------
+
+def homogeneous(A: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) matrices of the affine maps x -> A x + b (A (..., 3, 3), b (..., 3))."""
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(b, dtype=float)
+    M = np.zeros(A.shape[:-2] + (4, 4))
+    M[..., :3, :3] = A
+    M[..., :3, 3] = b
+    M[..., 3, 3] = 1.0
+    return M
+
+
+def translation(p: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) T(p)."""
+    p = np.asarray(p, dtype=float)
+    return homogeneous(np.broadcast_to(np.eye(3), p.shape[:-1] + (3, 3)), p)
+
+
+def about(p: np.ndarray, A: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) ``T(p) A T(-p)``: the linear map ``A`` about the point ``p``."""
+    return translation(p) @ homogeneous(A, np.zeros(np.shape(p))) @ translation(-np.asarray(p))
+
+
+def apply_homogeneous(M: np.ndarray, P: np.ndarray) -> np.ndarray:
+    """Apply one (4, 4) map to every point, or (m, 4, 4) maps section by section, to P (n, m, l, 3)."""
+    Ph = np.concatenate([P, np.ones(P.shape[:-1] + (1,))], axis=-1)
+    if M.ndim == 2:
+        out = Ph @ M.T
+    else:
+        out = np.einsum("jab,ijkb->ijka", M, Ph)
+    return out[..., :3]
+
+
+def rotation(frame: LatticeFrame, theta: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) rotations about the span axis by ``theta`` (radians), positive = nose up.
+
+    In the (chord, thickness) components: c' = c cos + t sin, t' = -c sin + t cos, so a point
+    ahead of the axis (c < 0, the leading edge) moves in +thickness for theta > 0.
+    """
+    c, t = frame.chord_dir, frame.thickness_dir
+    C = frame.plane()
+    K = np.outer(c, t) - np.outer(t, c)
+    cos = np.cos(theta)[:, None, None]
+    sin = np.sin(theta)[:, None, None]
+    return np.eye(3) + (cos - 1.0) * C + sin * K
+
+
+def rotation_derivative(frame: LatticeFrame, theta: np.ndarray) -> np.ndarray:
+    """(m, 3, 3) d rotation / d theta (per radian)."""
+    c, t = frame.chord_dir, frame.thickness_dir
+    C = frame.plane()
+    K = np.outer(c, t) - np.outer(t, c)
+    return -np.sin(theta)[:, None, None] * C + np.cos(theta)[:, None, None] * K
+
+
+def _section(a: np.ndarray) -> np.ndarray:
+    """(..., m, 3) -> (..., 1, m, 1, 3): broadcast a per-section vector over a lattice."""
+    return a[..., None, :, None, :]
+
+
+# --------------------------------------------------------------------------------------------------
+# Per-section values as written
+# --------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class SectionLaw:
+    """Per-section values as an affine function of the numbers the user wrote.
+
+    ``values = base + basis @ params``; ``suffixes[q]`` names ``params[q]`` relative to the change
+    (``"[3]"`` for a list item, ``".tip"``/``".root"`` for ``{root, tip}``, ``""`` for a scalar).
+    """
+
+    suffixes: tuple[str, ...]
+    params: np.ndarray
+    base: np.ndarray
+    basis: np.ndarray
+
+    @classmethod
+    def listed(cls, values) -> SectionLaw:
+        """One value per section, root first (``twist: [0, 5, 10]``)."""
+        v = np.array(values, dtype=float).reshape(-1)
+        m = v.size
+        return cls(tuple(f"[{j}]" for j in range(m)), v, np.zeros(m), np.eye(m))
+
+    @classmethod
+    def root_tip(cls, m: int, tip: float, root: float | None = None,
+                 default_root: float = 0.0) -> SectionLaw:
+        """Linear in the section index from ``root`` (or ``default_root``) at j = 0 to ``tip``."""
+        s = np.arange(m) / max(m - 1, 1)
+        if root is None:
+            return cls((".tip",), np.array([float(tip)]), default_root * (1.0 - s), s[:, None].copy())
+        return cls((".root", ".tip"), np.array([float(root), float(tip)]), np.zeros(m),
+                   np.stack([1.0 - s, s], axis=1))
+
+    @classmethod
+    def scalar(cls, value: float, m: int = 1) -> SectionLaw:
+        """One number for every section (2D: the whole airfoil)."""
+        return cls(("",), np.array([float(value)]), np.zeros(m), np.ones((m, 1)))
+
+    @property
+    def values(self) -> np.ndarray:
+        """(m,) the value of every section."""
+        return self.base + self.basis @ self.params
+
+    def with_params(self, params) -> SectionLaw:
+        p = np.array(params, dtype=float).reshape(-1)
+        if p.shape != self.params.shape:
+            raise ValueError(f"expected {self.params.size} values, got {p.size}")
+        return replace(self, params=p)
+
+
+def _law(value) -> SectionLaw:
+    return value if isinstance(value, SectionLaw) else SectionLaw.listed(value)
+
+
+# --------------------------------------------------------------------------------------------------
+# The changes
+# --------------------------------------------------------------------------------------------------
+
+class Change:
+    """Common interface (see the module docstring). Subclasses are frozen dataclasses."""
+
+    kind: str = ""
+
+    def apply(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def variables(self) -> list[tuple[str, float]]:  # pragma: no cover
+        raise NotImplementedError
+
+    def with_values(self, values) -> Change:  # pragma: no cover
+        raise NotImplementedError
+
+    def jacobian_own(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def jvp_P(self, P: np.ndarray, frame: LatticeFrame, dP: np.ndarray) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def jvp(self, P: np.ndarray, frame: LatticeFrame, dvalues) -> np.ndarray:
+        """dP' for a change ``dvalues`` (k,) of this change's variables (angles in degrees)."""
+        d = np.asarray(dvalues, dtype=float).reshape(-1)
+        return np.tensordot(d, self.jacobian_own(P, frame), axes=1)
+
+    @property
+    def size(self) -> int:
+        """Number of design variables."""
+        return len(self.variables())
+
+
+def _check_sections(P: np.ndarray, m: int, what: str):
+    if P.ndim != 4 or P.shape[-1] != 3:
+        raise ValueError(f"a lattice must have shape (n, m, l, 3), got {P.shape}")
+    if P.shape[1] != m:
+        raise InputError(f"{what} has {m} values but the lattice has {P.shape[1]} sections")
+
+
+@dataclass(frozen=True, eq=False)
+class Twist(Change):
+    """Rotate section j by ``values[j]`` degrees about the span axis through its trailing-edge point.
+
+    ``law`` is a :class:`SectionLaw` or a sequence of degrees per section (root first).
+    P' = T(p_j) R(theta_j) T(-p_j) P; positive = nose up (the leading edge moves in +thickness).
+    """
+
+    law: SectionLaw
+    kind = "twist"
+
+    def __post_init__(self):
+        object.__setattr__(self, "law", _law(self.law))
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.law.values
+
+    def maps(self, P, frame) -> np.ndarray:
+        """(m, 4, 4) homogeneous maps of the sections."""
+        _check_sections(P, self.law.base.size, "twist")
+        return about(frame.ref_points(P), rotation(frame, self.values * DEG))
+
+    def apply(self, P, frame):
+        return apply_homogeneous(self.maps(P, frame), P)
+
+    def variables(self):
+        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params, strict=True)]
+
+    def with_values(self, values):
+        return replace(self, law=self.law.with_params(values))
+
+    def jacobian_own(self, P, frame):
+        _check_sections(P, self.law.base.size, "twist")
+        p = frame.ref_points(P)
+        dR = rotation_derivative(frame, self.values * DEG)
+        Y = np.einsum("jab,ijkb->ijka", dR, P - _section(p))
+        return np.einsum("jq,ijkd->qijkd", self.law.basis * DEG, Y)
+
+    def jvp_P(self, P, frame, dP):
+        R = rotation(frame, self.values * DEG)
+        dp = _section(frame.ref_points(dP))
+        return np.einsum("jab,...ijkb->...ijka", R, dP - dp) + dp
+
+
+@dataclass(frozen=True, eq=False)
+class Chord(Change):
+    """Scale section j by ``values[j]`` in its own plane (chord and thickness) about its TE point.
+
+    ``law`` is a :class:`SectionLaw` or a sequence of factors per section (root first).
+    Thickness-to-chord is kept; the span coordinate does not change.
+    """
+
+    law: SectionLaw
+    kind = "chord"
+
+    def __post_init__(self):
+        object.__setattr__(self, "law", _law(self.law))
+
+    @property
+    def values(self) -> np.ndarray:
+        return self.law.values
+
+    def _scales(self, frame):
+        return np.eye(3) + (self.values - 1.0)[:, None, None] * frame.plane()
+
+    def maps(self, P, frame):
+        _check_sections(P, self.law.base.size, "chord")
+        return about(frame.ref_points(P), self._scales(frame))
+
+    def apply(self, P, frame):
+        return apply_homogeneous(self.maps(P, frame), P)
+
+    def variables(self):
+        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params, strict=True)]
+
+    def with_values(self, values):
+        return replace(self, law=self.law.with_params(values))
+
+    def jacobian_own(self, P, frame):
+        _check_sections(P, self.law.base.size, "chord")
+        Y = (P - _section(frame.ref_points(P))) @ frame.plane()
+        return np.einsum("jq,ijkd->qijkd", self.law.basis, Y)
+
+    def jvp_P(self, P, frame, dP):
+        S = self._scales(frame)
+        dp = _section(frame.ref_points(dP))
+        return np.einsum("jab,...ijkb->...ijka", S, dP - dp) + dp
+
+
+def _no_2d(frame: LatticeFrame, kind: str):
+    if frame.dim == 2:
+        raise InputError(f"{kind} is not defined for a 2D (airfoil) mesh; use twist, chord or shape")
+
+
+@dataclass(frozen=True, eq=False)
+class Span(Change):
+    """Multiply every point's span coordinate, measured from the root section, by ``scale``.
+
+    The root plane is the span coordinate of the root's trailing-edge point p_0:
+    x' = x + (s - 1) ((x - p_0) . e_span) e_span, i.e. T(p_0) (I + (s-1) e e^T) T(-p_0).
+    """
+
+    scale: float
+    kind = "span"
+
+    def maps(self, P, frame):
+        _no_2d(frame, "span")
+        e = frame.span_dir
+        return about(frame.ref_points(P)[0], np.eye(3) + (self.scale - 1.0) * np.outer(e, e))
+
+    def apply(self, P, frame):
+        return apply_homogeneous(self.maps(P, frame), P)
+
+    def variables(self):
+        return [(self.kind, float(self.scale))]
+
+    def with_values(self, values):
+        (v,) = np.asarray(values, dtype=float).reshape(-1)
+        return replace(self, scale=float(v))
+
+    def jacobian_own(self, P, frame):
+        _no_2d(frame, "span")
+        e = frame.span_dir
+        d = (P - frame.ref_points(P)[0]) @ e
+        return (d[..., None] * e)[None]
+
+    def jvp_P(self, P, frame, dP):
+        e = frame.span_dir
+        dp0 = frame.ref_points(dP)[..., 0, :]
+        dd = (dP - dp0[..., None, None, None, :]) @ e
+        return dP + (self.scale - 1.0) * dd[..., None] * e
+
+
+@dataclass(frozen=True, eq=False)
+class _Shear(Change):
+    """Sweep (shift along chord) and dihedral (shift along thickness): an angle or offsets.
+
+    ``delta`` (degrees): a shear x' = x + k d e, d = (x - p_0) . e_span the span distance from the
+    root section, k = tan(L + delta) - tan(L), L the angle of the leading-edge line (root -> tip
+    leading-edge points of the surface) towards e in the plane of e and the span axis. The
+    leading-edge line's angle becomes exactly L + delta.
+    ``offsets`` (a :class:`SectionLaw` or a list per section, mesh units): section j moves by
+    offsets[j] along e.
+    Exactly one of the two is given.
+    """
+
+    delta: float | None = None
+    offsets: SectionLaw | None = None
+
+    def __post_init__(self):
+        if (self.delta is None) == (self.offsets is None):
+            raise ValueError(f"{self.kind}: give exactly one of delta and offsets")
+        if self.offsets is not None:
+            object.__setattr__(self, "offsets", _law(self.offsets))
+
+    def _dir(self, frame) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def angle(self, P, frame) -> float:
+        """The current angle of the leading-edge line, radians."""
+        le = frame.le_points(P)
+        v = le[1] - le[0]
+        return math.atan2(float(v @ self._dir(frame)), float(v @ frame.span_dir))
+
+    def _k(self, P, frame):
+        lam = self.angle(P, frame)
+        if abs(lam + self.delta * DEG) >= MAX_SHEAR_ANGLE * DEG:
+            raise InputError(f"{self.kind} {self.delta:g}: the leading-edge angle would become "
+                             f"{math.degrees(lam) + self.delta:.1f} degrees; it must stay within "
+                             f"+-{MAX_SHEAR_ANGLE:g}")
+        return lam, math.tan(lam + self.delta * DEG) - math.tan(lam)
+
+    def maps(self, P, frame):
+        """(4, 4) for an angle, (m, 4, 4) translations for offsets."""
+        _no_2d(frame, self.kind)
+        e = self._dir(frame)
+        if self.offsets is not None:
+            _check_sections(P, self.offsets.base.size, f"{self.kind} offsets")
+            return translation(self.offsets.values[:, None] * e)
+        _, k = self._k(P, frame)
+        return about(frame.ref_points(P)[0], np.eye(3) + k * np.outer(e, frame.span_dir))
+
+    def apply(self, P, frame):
+        return apply_homogeneous(self.maps(P, frame), P)
+
+    def variables(self):
+        if self.offsets is not None:
+            return [(f"{self.kind}.offsets{s}", float(v))
+                    for s, v in zip(self.offsets.suffixes, self.offsets.params, strict=True)]
+        return [(self.kind, float(self.delta))]
+
+    def with_values(self, values):
+        if self.offsets is not None:
+            return replace(self, offsets=self.offsets.with_params(values))
+        (v,) = np.asarray(values, dtype=float).reshape(-1)
+        return replace(self, delta=float(v))
+
+    def jacobian_own(self, P, frame):
+        _no_2d(frame, self.kind)
+        e = self._dir(frame)
+        if self.offsets is not None:
+            _check_sections(P, self.offsets.base.size, f"{self.kind} offsets")
+            n, m, l, _ = P.shape
+            per = self.offsets.basis.T[:, None, :, None, None] * e        # (q, 1, m, 1, 3)
+            return np.broadcast_to(per, (per.shape[0], n, m, l, 3)).copy()
+        lam, _ = self._k(P, frame)
+        d = (P - frame.ref_points(P)[0]) @ frame.span_dir
+        sec2 = 1.0 / math.cos(lam + self.delta * DEG) ** 2
+        return (sec2 * DEG * d[..., None] * e)[None]
+
+    def jvp_P(self, P, frame, dP):
+        if self.offsets is not None:
+            return np.array(dP, dtype=float, copy=True)
+        e, s = self._dir(frame), frame.span_dir
+        lam, k = self._k(P, frame)
+        le = frame.le_points(P)
+        v = le[1] - le[0]
+        ve, vs = float(v @ e), float(v @ s)
+        dle = frame.le_lin(dP)
+        dv = dle[..., 1, :] - dle[..., 0, :]
+        dlam = (vs * (dv @ e) - ve * (dv @ s)) / (vs * vs + ve * ve)              # (...)
+        dk = (1.0 / math.cos(lam + self.delta * DEG) ** 2 - 1.0 / math.cos(lam) ** 2) * dlam
+        p0 = frame.ref_points(P)[0]
+        d = (P - p0) @ s                                                           # (n, m, l)
+        dp0 = frame.ref_points(dP)[..., 0, :]
+        dd = (dP - dp0[..., None, None, None, :]) @ s                              # (..., n, m, l)
+        dk = np.asarray(dk)[..., None, None, None]
+        return dP + (dd * k + d * dk)[..., None] * e
+
+
+@dataclass(frozen=True, eq=False)
+class Sweep(_Shear):
+    """Sweep: ``delta`` degrees added to the leading-edge sweep angle, or chordwise ``offsets``."""
+
+    kind = "sweep"
+
+    def _dir(self, frame):
+        return frame.chord_dir
+
+
+@dataclass(frozen=True, eq=False)
+class Dihedral(_Shear):
+    """Dihedral: ``delta`` degrees added to the dihedral angle (tip up is positive), or ``offsets``
+    along the thickness axis."""
+
+    kind = "dihedral"
+
+    def _dir(self, frame):
+        return frame.thickness_dir
+
+
+@dataclass(frozen=True, eq=False)
+class Shape(Change):
+    """Move control points along the thickness axis (mesh units).
+
+    upper, lower
+        (n,) one value per chordwise index for the upper (k = l-1) / lower (k = 0) row of every
+        section in ``sections``; or (n, m) one value per point and section (a random shape
+        expanded at load time; ``sections`` is then ignored). ``None``: that side does not move.
+    sections
+        Section indices, or None for all sections.
+    Variables: ``shape.upper[i]`` / ``shape.lower[i]``; for (n, m) arrays ``shape.upper[i,j]``.
+    """
+
+    upper: np.ndarray | None = None
+    lower: np.ndarray | None = None
+    sections: tuple[int, ...] | None = None
+    kind = "shape"
+
+    def __post_init__(self):
+        for side in ("upper", "lower"):
+            v = getattr(self, side)
+            if v is not None:
+                v = np.array(v, dtype=float)
+                if v.ndim not in (1, 2):
+                    raise ValueError(f"shape.{side} must have shape (n,) or (n, m)")
+                object.__setattr__(self, side, v)
+        if self.upper is None and self.lower is None:
+            raise ValueError("shape: give upper, lower or both")
+        if self.sections is not None:
+            object.__setattr__(self, "sections", tuple(int(j) for j in self.sections))
+
+    def _sides(self):
+        return [(side, k, getattr(self, side)) for side, k in (("upper", -1), ("lower", 0))
+                if getattr(self, side) is not None]
+
+    def _check(self, P):
+        n, m = P.shape[0], P.shape[1]
+        for side, _, v in self._sides():
+            if v.shape[0] != n or (v.ndim == 2 and v.shape[1] != m):
+                raise InputError(f"shape.{side} has shape {v.shape} but the lattice has n={n}, m={m}")
+        if self.sections is not None and any(not 0 <= j < m for j in self.sections):
+            raise InputError(f"shape.sections {list(self.sections)}: section indices run from 0 to {m - 1}")
+
+    def _cols(self, m):
+        return list(range(m)) if self.sections is None else list(self.sections)
+
+    def amounts(self, P) -> np.ndarray:
+        """(n, m, l) displacement of every control point along the thickness axis."""
+        self._check(P)
+        n, m, l, _ = P.shape
+        a = np.zeros((n, m, l))
+        for _, k, v in self._sides():
+            if v.ndim == 2:
+                a[:, :, k] += v
+            else:
+                a[:, self._cols(m), k] += v[:, None]
+        return a
+
+    def apply(self, P, frame):
+        return P + self.amounts(P)[..., None] * frame.thickness_dir
+
+    def variables(self):
+        out = []
+        for side, _, v in self._sides():
+            if v.ndim == 2:
+                out += [(f"shape.{side}[{i},{j}]", float(v[i, j]))
+                        for i in range(v.shape[0]) for j in range(v.shape[1])]
+            else:
+                out += [(f"shape.{side}[{i}]", float(x)) for i, x in enumerate(v)]
+        return out
+
+    def with_values(self, values):
+        vals = np.asarray(values, dtype=float).reshape(-1)
+        if vals.size != self.size:
+            raise ValueError(f"shape: expected {self.size} values, got {vals.size}")
+        new, at = {}, 0
+        for side, _, v in self._sides():
+            new[side] = vals[at:at + v.size].reshape(v.shape)
+            at += v.size
+        return replace(self, **new)
+
+    def jacobian_own(self, P, frame):
+        self._check(P)
+        n, m, l, _ = P.shape
+        J = np.zeros((self.size, n, m, l, 3))
+        q = 0
+        for _, k, v in self._sides():
+            if v.ndim == 2:
+                for i in range(v.shape[0]):
+                    for j in range(v.shape[1]):
+                        J[q, i, j, k] = frame.thickness_dir
+                        q += 1
+            else:
+                cols = self._cols(m)
+                for i in range(v.shape[0]):
+                    J[q, i, cols, k] = frame.thickness_dir
+                    q += 1
+        return J
+
+    def jvp_P(self, P, frame, dP):
+        return np.array(dP, dtype=float, copy=True)
+
+
+# --------------------------------------------------------------------------------------------------
+# A pipeline
+# --------------------------------------------------------------------------------------------------
+
+def apply_changes(P0: np.ndarray, frame: LatticeFrame, changes: Sequence[Change]) -> np.ndarray:
+    """The lattice after ``changes`` applied in order to ``P0`` (n, m, l, 3); ``P0`` is not modified."""
+    P = np.array(P0, dtype=float, copy=True)
+    for change in changes:
+        P = change.apply(P, frame)
+    return P
+
+
+def design_variables(changes: Sequence[Change]) -> tuple[list[str], np.ndarray]:
+    """Names (``c<index>.<name>``, e.g. ``c0.twist[7]``) and values of every design variable."""
+    names, values = [], []
+    for index, change in enumerate(changes):
+        for name, value in change.variables():
+            names.append(f"c{index}.{name}")
+            values.append(value)
+    return names, np.array(values, dtype=float)
+
+
+def set_design_variables(changes: Sequence[Change], values) -> list[Change]:
+    """The changes with new values of all design variables (in the order of :func:`design_variables`)."""
+    vals = np.asarray(values, dtype=float).reshape(-1)
+    sizes = [c.size for c in changes]
+    if vals.size != sum(sizes):
+        raise ValueError(f"expected {sum(sizes)} design-variable values, got {vals.size}")
+    out, at = [], 0
+    for change, size in zip(changes, sizes, strict=True):
+        out.append(change.with_values(vals[at:at + size]))
+        at += size
+    return out

@@ -1,0 +1,83 @@
+"""Analytic derivatives of the deformed lattice and surface with respect to the design variables.
+
+The pipeline is P_0 -> P_1 = c_0(P_0) -> ... -> P' = c_{K-1}(P_{K-1}). The forward chain rule:
+a variable of change ``c`` moves P_{c+1} by ``c.jacobian_own(P_c)``, and that motion is carried
+through every later change ``d`` by its derivative with respect to its input lattice,
+``d.jvp_P(P_d, dP)``. All directions are carried together (``jvp_P`` takes leading batch axes).
+
+The surface follows the lattice linearly, ``X = X0 + B (P' - P0)`` with ``B`` the (N, n_ctrl)
+basis matrix of the embedding whose columns are the control points in C order of ``(n, m, l)``
+(``P.reshape(-1, 3)``), so ``dX/dv = B @ dP'/dv``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import LinearOperator
+
+from ffdcli.changes import Change, LatticeFrame
+
+
+def lattice_jacobian(P0: np.ndarray, frame: LatticeFrame, changes: Sequence[Change]) -> np.ndarray:
+    """dP'/dv: (n*m*l*3, n_vars), rows in the order of ``P'.reshape(-1)`` (point-major, x y z),
+    columns in the order of :func:`ffdcli.changes.design_variables` (angles per degree)."""
+    P = np.array(P0, dtype=float, copy=True)
+    J = np.zeros((0,) + P.shape)
+    for change in changes:
+        own = change.jacobian_own(P, frame)                    # (k, n, m, l, 3) at P_c
+        if J.shape[0]:
+            J = change.jvp_P(P, frame, J)
+        J = np.concatenate([J, own], axis=0)
+        P = change.apply(P, frame)
+    return J.reshape(J.shape[0], -1).T.copy()
+
+
+def surface_jacobian(B: sp.spmatrix | np.ndarray, lattice_jac: np.ndarray) -> np.ndarray:
+    """dX/dv: (N*3, n_vars) for the N surface points, rows point-major (x0, y0, z0, x1, ...).
+
+    B
+        (N, n_ctrl) basis matrix (sparse CSR from ``Embedding.basis_matrix()``, or dense).
+    lattice_jac
+        (n_ctrl*3, n_vars) from :func:`lattice_jacobian`.
+    """
+    n_ctrl = B.shape[1]
+    n_vars = lattice_jac.shape[1]
+    if lattice_jac.shape[0] != 3 * n_ctrl:
+        raise ValueError(f"lattice Jacobian has {lattice_jac.shape[0]} rows, expected 3 * {n_ctrl}")
+    by_point = lattice_jac.reshape(n_ctrl, 3 * n_vars)        # row = control point, cols = (xyz, var)
+    out = B @ by_point
+    return np.asarray(out).reshape(B.shape[0] * 3, n_vars)
+
+
+def surface_jvp(B, lattice_jac: np.ndarray, dv) -> np.ndarray:
+    """(N, 3) surface motion for a change ``dv`` (n_vars,) of the design variables."""
+    dP = (lattice_jac @ np.asarray(dv, dtype=float)).reshape(-1, 3)
+    return np.asarray(B @ dP)
+
+
+def vjp(B, g: np.ndarray, lattice_jac: np.ndarray) -> np.ndarray:
+    """dJ/dv (n_vars,) = sum over points of g . dX/dv, for g = dJ/dX (N, 3); never forms dX/dv."""
+    g = np.asarray(g, dtype=float)
+    if g.shape != (B.shape[0], 3):
+        raise ValueError(f"g must have shape ({B.shape[0]}, 3), got {g.shape}")
+    gP = np.asarray(B.T @ g)                                    # (n_ctrl, 3)
+    return gP.reshape(-1) @ lattice_jac
+
+
+def surface_operator(B, lattice_jac: np.ndarray) -> LinearOperator:
+    """dX/dv as a (N*3, n_vars) LinearOperator that never forms the dense product.
+
+    ``op @ dv`` is the surface motion (flattened point-major) and ``op.T @ g`` (``g`` flattened
+    (N*3,)) the vector-Jacobian product; the dense matrix of 1M points x 100 variables is 2.4 GB,
+    the factors ``B`` and ``lattice_jac`` a few hundred MB at most.
+    """
+    n_points = B.shape[0]
+    n_vars = lattice_jac.shape[1]
+    return LinearOperator(
+        (3 * n_points, n_vars), dtype=float,
+        matvec=lambda dv: surface_jvp(B, lattice_jac, np.ravel(dv)).reshape(-1),
+        rmatvec=lambda g: vjp(B, np.reshape(g, (n_points, 3)), lattice_jac),
+    )
