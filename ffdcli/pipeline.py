@@ -189,10 +189,11 @@ class DesignRun:
         F = J1 @ np.linalg.inv(J0)
         if box.dim == 2:
             F3 = np.broadcast_to(np.eye(3), (len(ins), 3, 3)).copy()
-            ax = box.plane_axes
-            F3[np.ix_(np.arange(len(ins)), ax, ax)] = F
-            F = F3
-        R[ins] = rotations_from_deformation_gradient(F)
+            a, b = box.plane_axes
+            F3[:, a, a], F3[:, a, b], F3[:, b, a], F3[:, b, b] = F[:, 0, 0], F[:, 0, 1], F[:, 1, 0], F[:, 1, 1]
+            R[ins] = rotations_from_deformation_gradient(F3, axis=box.axes.span)
+        else:
+            R[ins] = rotations_from_deformation_gradient(F)
         return R
 
 
@@ -233,7 +234,7 @@ def volume_method(run: DesignRun) -> str:
     return method
 
 
-def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None) -> Deformation:
+def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check: bool = True) -> Deformation:
     """Apply the design's changes and move the mesh: the surface exactly, the volume by IDW.
 
     Returns a :class:`Deformation`; nothing is written. The quality report is computed when the
@@ -250,10 +251,13 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None) -> Def
     method = volume_method(run)
     t1 = time.perf_counter()
     if method == "idw" and mesh.n_cells:
-        from ffdcli.warp import WarpSettings, prepare_warp_for_mesh, warp
+        from ffdcli.warp import WarpSettings, prepare_mesh_warp, warp
 
-        settings = WarpSettings.from_dict(run.design.volume or {}, path=run.design.path)
-        model = prepare_warp_for_mesh(mesh, surf, settings, progress=progress)
+        vol = {k: v for k, v in (run.design.volume or {}).items() if k != "threshold"}
+        settings = WarpSettings.from_dict(vol, path=run.design.path)
+        model, _ = prepare_mesh_warp(mesh, list(surf.names), settings, progress=progress)
+        if not np.array_equal(model.surface_ids, surf.ids):
+            raise RuntimeError("the warp's surface nodes differ from the box's")
         rot = run.surface_rotations(P1)
         points += warp(model, disp, rot, progress=progress)
     else:
@@ -262,7 +266,7 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None) -> Def
     points[surf.ids] = mesh.points[surf.ids] + disp
     t["volume"] = time.perf_counter() - t1
     quality = None
-    if mesh.n_cells:
+    if mesh.n_cells and check:
         from ffdcli.quality import check_quality
 
         t2 = time.perf_counter()

@@ -1,0 +1,264 @@
+"""The Python API for optimisation loops: load a design once, then set values and get products.
+
+>>> from ffdcli.api import DesignModel
+>>> model = DesignModel.from_file("configs/rect_twist_linear.yaml")
+>>> model.names[:2], model.values[:2]
+>>> model.set_values(model.values + 0.1)
+>>> X = model.surface_points()                 # (S, 3), ordered as model.surface_ids
+>>> dJdv = model.surface_vjp(dJdX)             # (n_vars,), never forms the Jacobian
+>>> dJdv = model.mesh_vjp(dJdX_all_nodes)      # through the volume-mesh motion as well
+
+Nothing is re-embedded: the box and embedding are loaded (or built and cached) once.
+
+Derivatives are exact (no finite differences):
+
+* surface: ``dX/dv = B dP'/dv`` (:mod:`ffdcli.derivatives`);
+* volume (``volume.method: idw``): the warp is linear in the surface translations ``b`` and rotation
+  parts ``M = R - I`` (:func:`ffdcli.warp.warp_vjp` is its transpose), and the rotation ``R`` of a
+  surface point is the polar factor of ``F = J(P') J(P0)^-1``. Its derivative is ``dR = R Omega``
+  with ``Omega`` skew solving ``Omega U + U Omega = R^T dF - dF^T R`` (``U = R^T F``), i.e. in 3D
+  ``(tr(U) I - U) omega = axial(R^T dF - dF^T R)``; in 2D the angle's derivative in closed form.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli.changes import apply_changes, design_variables, set_design_variables
+from ffdcli.errors import InputError
+
+
+def _axial(W: np.ndarray) -> np.ndarray:
+    """Axial vectors (..., 3) of skew matrices (..., 3, 3): W = [w]x."""
+    return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    z = np.zeros(w.shape[:-1])
+    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1),
+                     np.stack([w[..., 2], z, -w[..., 0]], -1),
+                     np.stack([-w[..., 1], w[..., 0], z], -1)], axis=-2)
+
+
+def polar_rotation_derivative(F: np.ndarray, R: np.ndarray, dF: np.ndarray) -> np.ndarray:
+    """dR (..., 3, 3) of the polar rotation R of F (..., 3, 3) in direction dF (3D)."""
+    U = np.swapaxes(R, -1, -2) @ F
+    U = 0.5 * (U + np.swapaxes(U, -1, -2))
+    A = np.swapaxes(R, -1, -2) @ dF
+    rhs = _axial(A - np.swapaxes(A, -1, -2))
+    K = np.trace(U, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - U
+    omega = np.linalg.solve(K, rhs[..., None])[..., 0]
+    return R @ _skew(omega)
+
+
+def planar_rotation_derivative(F: np.ndarray, dF: np.ndarray, axis: int) -> np.ndarray:
+    """dR (..., 3, 3) of :func:`ffdcli.warp.rotations_from_deformation_gradient` with ``axis`` (2D)."""
+    i, j = [k for k in range(3) if k != axis]
+    a = F[..., j, i] - F[..., i, j]
+    c = F[..., i, i] + F[..., j, j]
+    da = dF[..., j, i] - dF[..., i, j]
+    dc = dF[..., i, i] + dF[..., j, j]
+    dphi = (da * c - a * dc) / (a * a + c * c)
+    phi = np.arctan2(a, c)
+    out = np.zeros(F.shape)
+    s, co = np.sin(phi), np.cos(phi)
+    out[..., i, i] = -s * dphi
+    out[..., j, j] = -s * dphi
+    out[..., j, i] = co * dphi
+    out[..., i, j] = -co * dphi
+    return out
+
+
+class DesignModel:
+    """A design prepared for repeated evaluation: values in, points and derivatives out."""
+
+    def __init__(self, run):
+        self.run = run
+        self.names, self.values = design_variables(run.changes)
+        self._B = None
+        self._warp = None
+        self._cache = {}
+
+    @classmethod
+    def from_file(cls, path, overrides=(), *, cache_dir=None, use_cache: bool = True,
+                  progress=None) -> DesignModel:
+        from ffdcli.design import load_design
+        from ffdcli.pipeline import load_run
+
+        design = load_design(path, overrides=overrides)
+        return cls(load_run(design, cache_dir=cache_dir, use_cache=use_cache, progress=progress))
+
+    # -- values ------------------------------------------------------------------------------
+    @property
+    def n_vars(self) -> int:
+        return len(self.names)
+
+    def set_values(self, values) -> None:
+        """New values of the design variables: an array in ``names`` order, or {name: value}."""
+        if isinstance(values, dict):
+            unknown = [k for k in values if k not in self.names]
+            if unknown:
+                raise InputError(f"unknown design variable(s) {', '.join(unknown)}; the variables are "
+                                 f"{', '.join(self.names)}")
+            v = self.values.copy()
+            for k, x in values.items():
+                v[self.names.index(k)] = float(x)
+            values = v
+        values = np.asarray(values, dtype=float).reshape(-1)
+        if values.shape != self.values.shape:
+            raise ValueError(f"expected {self.n_vars} values, got {values.size}")
+        self.run.changes = set_design_variables(self.run.changes, values)
+        self.values = values.copy()
+        self._cache.clear()
+
+    # -- evaluation --------------------------------------------------------------------------
+    @property
+    def surface_ids(self) -> np.ndarray:
+        return self.run.prep.surface.ids
+
+    @property
+    def basis(self):
+        """B (S, n_ctrl) CSR: surface displacement = B @ (P' - P0).reshape(-1, 3)."""
+        if self._B is None:
+            self._B = self.run.prep.embedding.basis_matrix().tocsr()
+        return self._B
+
+    def lattice(self) -> np.ndarray:
+        if "P" not in self._cache:
+            self._cache["P"] = apply_changes(self.run.P0, self.run.box.frame, self.run.changes)
+        return self._cache["P"]
+
+    def surface_points(self) -> np.ndarray:
+        """(S, 3) deformed surface points (the rows of ``surface_ids``)."""
+        return self.run.prep.surface.points + self.run.surface_displacement(self.lattice())
+
+    def lattice_jacobian(self) -> np.ndarray:
+        """dP'/dv (n_ctrl*3, n_vars)."""
+        if "J" not in self._cache:
+            from ffdcli.derivatives import lattice_jacobian
+
+            self._cache["J"] = lattice_jacobian(self.run.P0, self.run.box.frame, self.run.changes)
+        return self._cache["J"]
+
+    def jacobian_factors(self):
+        """(B, D): dX/dv = B @ D reshaped, B (S, n_ctrl) sparse, D (n_ctrl*3, n_vars) dense.
+
+        The product for point s, coordinate c, variable v is ``(B @ D.reshape(n_ctrl, 3*n_vars))
+        [s, c*n_vars + v]``; :func:`ffdcli.derivatives.surface_jacobian` forms it."""
+        return self.basis, self.lattice_jacobian()
+
+    def surface_jvp(self, dv) -> np.ndarray:
+        from ffdcli.derivatives import surface_jvp
+
+        return surface_jvp(self.basis, self.lattice_jacobian(), dv)
+
+    def surface_vjp(self, g) -> np.ndarray:
+        """dJ/dv for g = dJ/dX at the surface points (S, 3)."""
+        from ffdcli.derivatives import vjp
+
+        return vjp(self.basis, np.asarray(g, dtype=float), self.lattice_jacobian())
+
+    # -- whole mesh ---------------------------------------------------------------------------
+    def _warp_model(self, progress=None):
+        if self._warp is None:
+            from ffdcli.warp import WarpSettings, prepare_mesh_warp
+
+            vol = {k: v for k, v in (self.run.design.volume or {}).items() if k != "threshold"}
+            settings = WarpSettings.from_dict(vol, path=self.run.design.path)
+            self._warp, _ = prepare_mesh_warp(self.run.prep.mesh, list(self.run.prep.surface.names),
+                                              settings, progress=progress)
+        return self._warp
+
+    def uses_volume(self) -> bool:
+        from ffdcli.pipeline import volume_method
+
+        return volume_method(self.run) == "idw" and self.run.prep.mesh.n_cells > 0
+
+    def mesh_points(self, progress=None) -> np.ndarray:
+        """(N, 3) every mesh node as ``ffd deform`` places it."""
+        from ffdcli.pipeline import deform
+
+        return deform(self.run, P=self.lattice(), progress=progress, check=False).points
+
+    def _rotation_jacobian(self):
+        """dR/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice)."""
+        from ffdcli.lattice import derivatives
+
+        run, box, emb = self.run, self.run.box, self.run.prep.embedding
+        S = len(emb.inside)
+        ins = np.flatnonzero(emb.inside)
+        out = np.zeros((self.n_vars, S, 3, 3))
+        if not len(ins) or not self.n_vars:
+            return out
+        P1 = self.lattice()
+        J0inv = np.linalg.inv(derivatives(box.lattice(run.P0), emb.params[ins]))
+        J1 = derivatives(box.lattice(P1), emb.params[ins])
+        D = self.lattice_jacobian().reshape(*P1.shape, self.n_vars)
+        ax = box.plane_axes
+
+        def full(Fc):
+            if box.dim == 3:
+                return Fc
+            F3 = np.zeros((Fc.shape[0], 3, 3))
+            F3[:, ax[0], ax[0]] = Fc[:, 0, 0]
+            F3[:, ax[0], ax[1]] = Fc[:, 0, 1]
+            F3[:, ax[1], ax[0]] = Fc[:, 1, 0]
+            F3[:, ax[1], ax[1]] = Fc[:, 1, 1]
+            return F3
+
+        F = full(J1 @ J0inv)
+        if box.dim == 3:
+            from ffdcli.warp import rotations_from_deformation_gradient
+
+            R = rotations_from_deformation_gradient(F)
+            for v in range(self.n_vars):
+                dF = derivatives(box.lattice(D[..., v]), emb.params[ins]) @ J0inv
+                out[v, ins] = polar_rotation_derivative(F, R, dF)
+        else:
+            F[:, box.axes.span, box.axes.span] = 1.0
+            for v in range(self.n_vars):
+                dF = full(derivatives(box.lattice(D[..., v]), emb.params[ins]) @ J0inv)
+                out[v, ins] = planar_rotation_derivative(F, dF, box.axes.span)
+        return out
+
+    def mesh_vjp(self, g, progress=None) -> np.ndarray:
+        """dJ/dv for g = dJ/dX at every mesh node (N, 3), through the volume motion when it is IDW.
+
+        dJ/dv = (dX_s/dv)^T [g_s + (dX_v/db)^T g_v] + sum_s <(dX_v/dM_s)^T g_v, dR_s/dv>."""
+        g = np.asarray(g, dtype=float)
+        mesh = self.run.prep.mesh
+        if g.shape != (mesh.n_points, 3):
+            raise ValueError(f"g must be ({mesh.n_points}, 3), got {g.shape}")
+        ids = self.surface_ids
+        if not self.uses_volume():
+            return self.surface_vjp(g[ids])
+        from ffdcli.warp import warp_vjp
+
+        P1 = self.lattice()
+        disp = self.run.surface_displacement(P1)
+        rot = self.run.surface_rotations(P1)
+        gs = g.copy()
+        gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
+        g_b, g_M = warp_vjp(self._warp_model(progress), gs, disp, rot, progress=progress)
+        g_b = g_b + g[ids] - gs[ids]
+        out = self.surface_vjp(g_b)
+        dR = self._rotation_jacobian()
+        out += np.einsum("sij,vsij->v", g_M, dR)
+        return out
+
+
+def read_sensitivity_for(model: DesignModel, path, *, points=None):
+    """Read a sensitivity file against the deformed mesh of ``model`` (SPEC: coordinates of the
+    design being differentiated). Returns (g (N, 3) dense, Sensitivity)."""
+    from ffdcli.formats.sensitivity import read_sensitivity
+
+    mesh = model.run.prep.mesh
+    pts = model.mesh_points() if points is None else points
+    sens = read_sensitivity(path, pts, mesh.dim)
+    return sens.to_dense(mesh.n_points), sens
+
+
+__all__ = ["DesignModel", "read_sensitivity_for", "polar_rotation_derivative", "planar_rotation_derivative",
+           "Path"]
