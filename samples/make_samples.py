@@ -106,8 +106,9 @@ def mesh_wing(planform: wings.Planform, *, etas, box_lo, box_hi, h_wing: float, 
         tol = 1e-6 * float(np.max(hi - lo))
         for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
             bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
-            on_box = [ax for ax in range(3) if (abs(bb[0, ax] - bb[1, ax]) < tol
-                                                and (abs(bb[0, ax] - lo[ax]) < tol or abs(bb[0, ax] - hi[ax]) < tol))]
+            flat = np.abs(bb[0] - bb[1]) < tol
+            on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
+            on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
             if on_box and on_box[0] == span_axis and abs(bb[0, span_axis] - root_plane) < tol:
                 groups["symmetry"].append(tag)
             elif on_box:
@@ -254,7 +255,8 @@ def write_dat(out: Path, name: str, coords: np.ndarray) -> None:
 
 def make_airfoils() -> list[dict]:
     naca = wings.naca4("0012", 133, closed_te=True)
-    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.wings.naca4)", naca)
+    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.wings.naca4)",
+              naca)
     src = Path("/work/shared/data/airfoils/s1223.dat")
     if src.exists():
         (HERE / "s1223.dat").write_bytes(src.read_bytes())
