@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from ffdcli.axes import parse_sections
+from ffdcli.axes import SECTION_CHOICES, parse_sections
 from ffdcli.mesh import CellBlock, Mesh
 
 # ----------------------------------------------------------------------------------------------
@@ -296,7 +296,8 @@ class Planform:
         parse_naca4(self.root_airfoil)
         if self.tip_airfoil is not None:
             parse_naca4(self.tip_airfoil)
-        parse_sections(self.sections)
+        if str(self.sections).strip().lower() not in SECTION_CHOICES:
+            raise ValueError(f"sections must be one of {', '.join(SECTION_CHOICES)}, got {self.sections!r}")
         if len(self.root_offset) != 3:
             raise ValueError("root_offset must have 3 coordinates")
 
