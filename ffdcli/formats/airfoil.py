@@ -148,7 +148,7 @@ def _check_order(coords: np.ndarray, path, line_of) -> np.ndarray:
     if len(signs) == 0 or signs[0] > 0 or len(turns) != 1:
         where = None
         if len(turns) > 1 and line_of is not None:
-            where = line_of[int(turns[1])]
+            where = line_of[int(turns[1]) + 1]                     # the row where x turns back again
         what = ("x must first decrease from the trailing edge to the leading edge, then increase "
                 "back to the trailing edge")
         found = (f"found {len(turns)} turns of x" if len(signs) else "all x are equal")
@@ -165,7 +165,7 @@ def write_airfoil(path: str | Path, name: str, coords: np.ndarray) -> None:
     """Write ``coords`` (K, 2) in Selig format under a name line, atomically.
 
     ``coords`` should be in Selig order (as :func:`read_airfoil` returns them); they are written as
-    given, 10 significant digits (``%.10g``), so that reading the file back gives them to 1e-10.
+    given, 15 significant digits (``%.15g``), so that reading the file back gives them to 1e-14.
     """
     c = np.asarray(coords, dtype=np.float64)
     if c.ndim != 2 or c.shape[1] != 2:
@@ -173,6 +173,6 @@ def write_airfoil(path: str | Path, name: str, coords: np.ndarray) -> None:
     if "\n" in name:
         raise ValueError("the airfoil name must be one line")
     p = check_writable(path)
-    text = (name.strip() or p.stem) + "\n" + "".join(f"{x: .10g} {y: .10g}\n" for x, y in c)
+    text = (name.strip() or p.stem) + "\n" + "".join(f"{x: .15g} {y: .15g}\n" for x, y in c)
     with atomic_write(p, "w") as fh:
         fh.write(text)
