@@ -5,7 +5,7 @@ A tiny vectorised SU2 reader lives here so that these checks do not depend on ff
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 import pytest
@@ -16,7 +16,7 @@ from tests.conftest import SAMPLES, shared_file
 NODES = {3: 2, 5: 3, 9: 4, 10: 4, 12: 8, 13: 6, 14: 5}
 
 
-@lru_cache(maxsize=None)
+@cache
 def read_su2(name: str) -> dict:
     """NDIME, points, elements by VTK id and markers (VTK id -> faces) of a single-zone ASCII SU2 file
     whose element and marker blocks each hold one element type."""
