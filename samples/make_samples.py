@@ -23,6 +23,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
 from ffdcli import wings  # noqa: E402
+from ffdcli.atomic import atomic_write  # noqa: E402
 from ffdcli.mesh import VTK_ID  # noqa: E402
 
 # ----------------------------------------------------------------------------------------------
@@ -51,7 +52,8 @@ def write_su2(path: Path, ndime: int, points: np.ndarray, cells: list[tuple[str,
         for kind, conn in blocks:
             for row in conn:
                 lines.append(f"{VTK_ID[kind]} " + " ".join(map(str, row)))
-    path.write_text("\n".join(lines) + "\n")
+    with atomic_write(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
 
 
 def tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
