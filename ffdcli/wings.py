@@ -707,6 +707,14 @@ def airfoil_ogrid(code_or_coords, n_around: int = 129, n_radial: int = 33, farfi
     dist = _stretched_heights(first_cell * chord, radius - 0.5 * chord, n_radial - 1)
 
     # 1. layers marched along the normals of the previous layer
+    # corners of the airfoil (sharp trailing edge, the two corners of a blunt base): sliding them
+    # along the first layers would pull them round the corner and fold the wall cells there, so
+    # their smoothing along the layer starts only at corner_free (in distance from the wall)
+    fwd0 = np.roll(ring0, -1, axis=0) - ring0
+    bwd0 = np.roll(ring0, 1, axis=0) - ring0
+    cosang = np.sum(fwd0 * bwd0, axis=1) / (np.linalg.norm(fwd0, axis=1) * np.linalg.norm(bwd0, axis=1))
+    corner = (cosang > -0.5)[:, None]                                 # turn of more than 60 degrees
+    corner_free = 0.05 * chord
     layers = [ring0]
     cur = ring0
     for k in range(1, n_radial):
@@ -723,6 +731,7 @@ def airfoil_ogrid(code_or_coords, n_around: int = 129, n_radial: int = 33, farfi
             # the outer ones even out); across it only outwards, which fills concave corners and
             # never pulls a convex front (leading edge, sharp trailing edge) back onto its layer
             w = 0.5 * np.clip(step / h, 0.0, 1.0) ** 2
+            w = np.where(corner, w * min(1.0, dist[k] / corner_free) ** 2, w)
             nxt = nxt + w * (lap - lap_n * nrm) + 0.5 * np.maximum(lap_n, 0.0) * nrm
         layers.append(nxt)
         cur = nxt

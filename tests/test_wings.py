@@ -237,3 +237,17 @@ def test_extruded_wing_surface_is_the_wing():
     eta = pf.stations(5)
     expected = pf.section_points(eta, wings.naca4("0012", 41)[:-1]).reshape(-1, 3)
     np.testing.assert_allclose(np.sort(m.points[ids], axis=0), np.sort(expected, axis=0), atol=TOL)
+
+
+@pytest.mark.parametrize("name", ["s1223.dat", "sc20714.dat", "rae2822.dat"])
+def test_airfoil_ogrid_real_sections(name):
+    # cusped (S1223) and blunt, aft-loaded (SC(2)-0714) trailing edges: the corner points must not
+    # slide round the corner in the first layers (these folded the wall cells before)
+    from ffdcli.formats.airfoil import read_airfoil
+    from tests.conftest import shared_file
+
+    coords = read_airfoil(shared_file(f"airfoils/{name}")).coords
+    for n in (65, 97, 161):
+        xy, quads, foil, far = wings.airfoil_ogrid(coords, n, 33, 10.0)
+        assert wings.quad_areas(xy, quads).min() > 0
+        np.testing.assert_array_equal(xy[0], coords[0])                   # the TE point is kept
