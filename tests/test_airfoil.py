@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import SAMPLES, shared_file
 
 from ffdcli import wings
 from ffdcli.errors import InputError
 from ffdcli.formats.airfoil import Airfoil, read_airfoil, write_airfoil
-from tests.conftest import SAMPLES, shared_file
 
 
 def _write(tmp_path, text, name="foil.dat"):

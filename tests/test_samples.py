@@ -9,9 +9,9 @@ from functools import cache
 
 import numpy as np
 import pytest
+from conftest import SAMPLES, shared_file
 
 from ffdcli import wings
-from tests.conftest import SAMPLES, shared_file
 
 NODES = {3: 2, 5: 3, 9: 4, 10: 4, 12: 8, 13: 6, 14: 5}
 

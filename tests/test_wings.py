@@ -243,8 +243,9 @@ def test_extruded_wing_surface_is_the_wing():
 def test_airfoil_ogrid_real_sections(name):
     # cusped (S1223) and blunt, aft-loaded (SC(2)-0714) trailing edges: the corner points must not
     # slide round the corner in the first layers (these folded the wall cells before)
+    from conftest import shared_file
+
     from ffdcli.formats.airfoil import read_airfoil
-    from tests.conftest import shared_file
 
     coords = read_airfoil(shared_file(f"airfoils/{name}")).coords
     for n in (65, 97, 161):
