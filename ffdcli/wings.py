@@ -648,7 +648,7 @@ def _ring_normals(ring: np.ndarray) -> np.ndarray:
 
 def airfoil_ogrid(code_or_coords, n_around: int = 129, n_radial: int = 33, farfield_radius: float = 15.0,
                   first_cell: float = 2e-3, *, closed_te: bool = True, smoothing: int = 20,
-                  blend: float = 2.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  blend: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Structured 2D O-grid of quads around an airfoil (chord units of the input).
 
     Parameters
@@ -668,11 +668,18 @@ def airfoil_ogrid(code_or_coords, n_around: int = 129, n_radial: int = 33, farfi
         Height of the wall cells, in chords; the heights grow geometrically.
     smoothing
         Laplacian smoothing passes per layer of the normal marching.
+    blend
+        Distance from the wall (in chords) beyond which the grid is the elliptic one alone.
 
     Construction: the layers are marched from the airfoil along the (smoothed) normals of the
     previous layer, each layer then smoothed along its length, which spreads the cells evenly as
-    the front becomes round; the layers are then blended, increasingly with distance, towards
-    concentric circles so that the last one is exactly the far-field circle.
+    the front becomes round; the layers are then blended (smoothstep of the squared distance over
+    ``blend`` chords) into confocal ellipses that become the far-field circle.
+
+    Limits: the marching is not guaranteed to be fold-free. NACA 4-digit sections from 33 to 257
+    points around and the five airfoils of ``shared/data/airfoils`` up to 161 points work (tested);
+    many more points around than the input has (e.g. 401 from S1223's 300) can fold the cells
+    behind a cusped or blunt trailing edge, which raises ValueError.
 
     Returns
     -------
