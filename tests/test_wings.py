@@ -252,3 +252,20 @@ def test_airfoil_ogrid_real_sections(name):
         xy, quads, foil, far = wings.airfoil_ogrid(coords, n, 33, 10.0)
         assert wings.quad_areas(xy, quads).min() > 0
         np.testing.assert_array_equal(xy[0], coords[0])                   # the TE point is kept
+
+
+def test_twist_about_trailing_edge_is_the_spec_rotation():
+    # SPEC: twist rotates a section about its trailing-edge point, nose up positive; a planform with
+    # twist_axis=1 is that rotation applied to the untwisted wing, exactly (one rotation matrix)
+    flat = wings.rect_wing_planform()
+    twisted = wings.rect_wing_planform(twist_root_deg=0.0, twist_tip_deg=12.0, twist_axis=1.0)
+    eta = np.linspace(0, 1, 5)
+    coords = wings.naca4("0012", 41)
+    p0, p1 = flat.section_points(eta, coords), twisted.section_points(eta, coords)
+    np.testing.assert_allclose(twisted.trailing_edge(eta), flat.trailing_edge(eta), atol=TOL)
+    for j, th in enumerate(np.radians(12.0 * eta)):
+        te = flat.trailing_edge(eta[j:j + 1])[0]
+        rot = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])   # x' = x cos + y sin
+        d = (p0[j, :, :2] - te[:2]) @ rot.T + te[:2]
+        np.testing.assert_allclose(p1[j, :, :2], d, atol=TOL)
+        assert p1[j, 20, 1] >= te[1]                                         # LE up: nose up
