@@ -1,0 +1,278 @@
+"""Regenerate the bundled sample meshes and airfoil files of ``samples/``.
+
+Usage (from the repository root; needs the optional extra ``samples``, i.e. gmsh)::
+
+    PYTHONPATH=$PWD python samples/make_samples.py            # all samples
+    PYTHONPATH=$PWD python samples/make_samples.py rect_wing  # one of them
+
+The outputs are committed, so neither the tests nor CI need gmsh. The 3D wings are lofted with the
+OpenCASCADE kernel through NACA sections from :mod:`ffdcli.wings` (same planform parameters as
+``rect_wing_planform`` / ``crm_planform``), cut from a box far field and meshed with tetrahedra; the 2D
+O-grid is :func:`ffdcli.wings.airfoil_ogrid` (pure NumPy). The SU2 files are written by the small
+writer below (``ffdcli.formats.su2`` is not used so that this script stays independent of it).
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+
+from ffdcli import wings  # noqa: E402
+from ffdcli.atomic import atomic_write  # noqa: E402
+from ffdcli.mesh import VTK_ID  # noqa: E402
+
+# ----------------------------------------------------------------------------------------------
+# A minimal SU2 writer and checks
+# ----------------------------------------------------------------------------------------------
+
+
+def write_su2(path: Path, ndime: int, points: np.ndarray, cells: list[tuple[str, np.ndarray]],
+              markers: dict[str, list[tuple[str, np.ndarray]]]) -> None:
+    """Write an SU2 ASCII mesh: NDIME, NELEM (VTK ids, 0-based nodes, element index), NPOIN, NMARK."""
+    lines = [f"NDIME= {ndime}"]
+    n_elem = sum(len(c) for _, c in cells)
+    lines.append(f"NELEM= {n_elem}")
+    k = 0
+    for kind, conn in cells:
+        for row in conn:
+            lines.append(f"{VTK_ID[kind]} " + " ".join(map(str, row)) + f" {k}")
+            k += 1
+    lines.append(f"NPOIN= {len(points)}")
+    for i, p in enumerate(points[:, :ndime]):
+        lines.append(" ".join(f"{v:.15g}" for v in p) + f" {i}")
+    lines.append(f"NMARK= {len(markers)}")
+    for name, blocks in markers.items():
+        lines.append(f"MARKER_TAG= {name}")
+        lines.append(f"MARKER_ELEMS= {sum(len(c) for _, c in blocks)}")
+        for kind, conn in blocks:
+            for row in conn:
+                lines.append(f"{VTK_ID[kind]} " + " ".join(map(str, row)))
+    with atomic_write(path, "w") as fh:
+        fh.write("\n".join(lines) + "\n")
+
+
+def tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
+    """Signed volumes of VTK-ordered tetrahedra (positive: p3 on the side of the normal of p0 p1 p2)."""
+    p = points[tets]
+    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
+
+
+# ----------------------------------------------------------------------------------------------
+# 3D wings with gmsh
+# ----------------------------------------------------------------------------------------------
+
+
+def mesh_wing(planform: wings.Planform, *, etas, box_lo, box_hi, h_wing: float, h_edge: float,
+              h_far: float, n_chord: int = 81, ruled: bool = True):
+    """Tetrahedral mesh of the fluid between a lofted wing and a box; returns points, tets, markers.
+
+    The wing is a loft (``ruled``: straight between consecutive sections) through the planform's
+    sections at ``etas``, closed by a flat tip cap; its root section lies in the box face at span 0
+    (the symmetry plane). Sizes: ``h_wing`` on the wing, ``h_edge`` near the leading and trailing
+    edges and the tip, growing to ``h_far`` at the box.
+    """
+    import gmsh
+
+    gmsh.initialize(["-nt", "1"])
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("wing")
+        occ = gmsh.model.occ
+        etas = np.asarray(etas, dtype=float)
+        coords = planform.airfoil_coords(etas, 2 * n_chord - 1)
+        wires = []
+        for j, eta in enumerate(etas):
+            xyz = planform.section_points(np.array([eta]), coords[j])[0]
+            le = n_chord - 1
+            tags = [occ.addPoint(*p) for p in xyz[:-1]]        # sharp TE: last point == first
+            tags.append(tags[0])
+            upper = occ.addSpline(tags[: le + 1])
+            lower = occ.addSpline(tags[le:])
+            wires.append(occ.addWire([upper, lower]))
+        wing = occ.addThruSections(wires, makeSolid=True, makeRuled=ruled)
+        lo, hi = np.asarray(box_lo, float), np.asarray(box_hi, float)
+        box = occ.addBox(*lo, *(hi - lo))
+        fluid, _ = occ.cut([(3, box)], wing)
+        occ.synchronize()
+        vols = gmsh.model.getEntities(3)
+        assert len(vols) == 1, vols
+        span_axis = planform.axes[2]
+        root_plane = planform.root_offset[span_axis]
+        groups = {"wing": [], "symmetry": [], "farfield": []}
+        tol = 1e-6 * float(np.max(hi - lo))
+        for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
+            bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
+            flat = np.abs(bb[0] - bb[1]) < tol
+            on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
+            on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
+            if on_box and on_box[0] == span_axis and abs(bb[0, span_axis] - root_plane) < tol:
+                groups["symmetry"].append(tag)
+            elif on_box:
+                groups["farfield"].append(tag)
+            else:
+                groups["wing"].append(tag)
+        for name, tags in groups.items():
+            assert tags, f"no surface classified as {name}"
+            gmsh.model.addPhysicalGroup(2, tags, name=name)
+        gmsh.model.addPhysicalGroup(3, [vols[0][1]], name="fluid")
+
+        # sizes: fine on the wing, finer at its edges (curves of the wing), growing to the box
+        wing_curves = sorted({abs(c[1]) for s in groups["wing"]
+                              for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
+        f = gmsh.model.mesh.field
+        d_s = f.add("Distance")
+        f.setNumbers(d_s, "SurfacesList", groups["wing"])
+        f.setNumber(d_s, "Sampling", 60)
+        t_s = f.add("Threshold")
+        f.setNumber(t_s, "InField", d_s)
+        f.setNumber(t_s, "SizeMin", h_wing)
+        f.setNumber(t_s, "SizeMax", h_far)
+        f.setNumber(t_s, "DistMin", 0.5 * h_wing)
+        f.setNumber(t_s, "DistMax", 0.6 * float(np.min(hi - lo)))
+        d_c = f.add("Distance")
+        f.setNumbers(d_c, "CurvesList", wing_curves)
+        f.setNumber(d_c, "Sampling", 200)
+        t_c = f.add("Threshold")
+        f.setNumber(t_c, "InField", d_c)
+        f.setNumber(t_c, "SizeMin", h_edge)
+        f.setNumber(t_c, "SizeMax", h_far)
+        f.setNumber(t_c, "DistMin", 0.5 * h_edge)
+        f.setNumber(t_c, "DistMax", 20 * h_wing)
+        m = f.add("Min")
+        f.setNumbers(m, "FieldsList", [t_s, t_c])
+        f.setAsBackgroundMesh(m)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        gmsh.model.mesh.generate(3)
+
+        node_tags, xyz, _ = gmsh.model.mesh.getNodes()
+        xyz = xyz.reshape(-1, 3)
+        etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
+        assert list(etypes) == [4], etypes                    # linear tetrahedra only
+        tets_tags = enodes[0].reshape(-1, 4).astype(np.int64)
+        marker_tags = {}
+        for name, tags in groups.items():
+            tris = []
+            for s in tags:
+                et, _, en = gmsh.model.mesh.getElements(2, s)
+                assert list(et) == [2], et
+                tris.append(en[0].reshape(-1, 3).astype(np.int64))
+            marker_tags[name] = np.concatenate(tris)
+    finally:
+        gmsh.finalize()
+
+    # compact 0-based numbering of the nodes the tetrahedra use
+    used = np.unique(tets_tags)
+    lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
+    lookup[used] = np.arange(len(used))
+    pos = np.full(len(lookup), -1, dtype=np.int64)
+    pos[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+    points = xyz[pos[used]]
+    tets = lookup[tets_tags]
+    vol = tet_volumes(points, tets)
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]              # VTK/SU2 orientation: all positive
+    markers = {}
+    for name, tris in marker_tags.items():
+        t = lookup[tris]
+        if np.any(t < 0):
+            raise RuntimeError(f"marker {name} references a node that no tetrahedron uses")
+        markers[name] = t
+    markers = _orient_boundary(points, tets, markers)
+    return points, tets, markers
+
+
+def _orient_boundary(points, tets, markers):
+    """Orient each boundary triangle with its normal out of the fluid (away from its tetrahedron)."""
+    faces = np.sort(np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]],
+                                    tets[:, [1, 2, 3]]]), axis=1)
+    opposite = np.concatenate([tets[:, 3], tets[:, 2], tets[:, 1], tets[:, 0]])
+    key = (faces[:, 0] * len(points) + faces[:, 1]) * len(points) + faces[:, 2]
+    order = np.argsort(key)
+    key_sorted = key[order]
+    out = {}
+    for name, tris in markers.items():
+        s = np.sort(tris, axis=1)
+        k = (s[:, 0] * len(points) + s[:, 1]) * len(points) + s[:, 2]
+        i = np.searchsorted(key_sorted, k)
+        if np.any(i >= len(key_sorted)) or np.any(key_sorted[np.minimum(i, len(key_sorted) - 1)] != k):
+            raise RuntimeError(f"marker {name} has a triangle that is not a tetrahedron face")
+        opp = points[opposite[order[i]]]
+        p = points[tris]
+        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        inward = np.einsum("ij,ij->i", n, opp - p[:, 0]) > 0
+        t = tris.copy()
+        t[inward] = t[inward][:, [0, 2, 1]]
+        out[name] = t
+    return out
+
+
+def make_rect_wing(out: Path) -> dict:
+    pf = wings.rect_wing_planform()                    # NACA 0012, chord 1 x, thickness y, span z 0..3
+    pts, tets, markers = mesh_wing(pf, etas=[0.0, 1.0], box_lo=(-10.0, -10.0, 0.0), box_hi=(11.0, 10.0, 13.0),
+                                   h_wing=0.035, h_edge=0.015, h_far=2.0)
+    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
+    return summary(out, pts, tets, markers)
+
+
+def make_crm_wing(out: Path) -> dict:
+    pf = wings.crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.37)
+    etas = [0.0, pf.kink_eta, 1.0]
+    c = pf.root_chord
+    pts, tets, markers = mesh_wing(pf, etas=etas, box_lo=(-10 * c, 0.0, -10 * c),
+                                   box_hi=(13 * c, 3.0 + 10 * c, 10 * c),
+                                   h_wing=0.03, h_edge=0.01, h_far=2.0)
+    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
+    return summary(out, pts, tets, markers)
+
+
+def make_naca0012_2d(out: Path) -> dict:
+    m = wings.airfoil_ogrid_mesh("0012", n_around=161, n_radial=41, farfield_radius=15.0)
+    write_su2(out, 2, m.points, [("quad", m.cells[0].data)],
+              {k: [("line", b[0].data)] for k, b in m.markers.items()})
+    q = m.cells[0].data
+    return {"file": out.name, "points": m.n_points, "quad": len(q),
+            "markers": {k: len(b[0]) for k, b in m.markers.items()},
+            "min_area": float(wings.quad_areas(m.points, q).min())}
+
+
+def summary(out, pts, tets, markers) -> dict:
+    return {"file": out.name, "points": len(pts), "tetra": len(tets),
+            "markers": {k: len(v) for k, v in markers.items()},
+            "min_volume": float(tet_volumes(pts, tets).min()), "bytes": out.stat().st_size}
+
+
+def write_dat(out: Path, name: str, coords: np.ndarray) -> None:
+    out.write_text(name + "\n" + "".join(f"{x:10.7f} {y:10.7f}\n" for x, y in coords))
+
+
+def make_airfoils() -> list[dict]:
+    naca = wings.naca4("0012", 133, closed_te=True)
+    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.wings.naca4)",
+              naca)
+    src = Path("/work/shared/data/airfoils/s1223.dat")
+    if src.exists():
+        (HERE / "s1223.dat").write_bytes(src.read_bytes())
+    return [{"file": "naca0012.dat", "points": len(naca)}]
+
+
+MAKERS = {
+    "naca0012_2d": lambda: make_naca0012_2d(HERE / "naca0012_2d.su2"),
+    "rect_wing": lambda: make_rect_wing(HERE / "rect_wing.su2"),
+    "crm_wing": lambda: make_crm_wing(HERE / "crm_wing.su2"),
+    "airfoils": make_airfoils,
+}
+
+
+if __name__ == "__main__":
+    for name in sys.argv[1:] or list(MAKERS):
+        print(name, MAKERS[name](), flush=True)
