@@ -40,7 +40,7 @@ def run_case(config: Path, out: Path, progress) -> dict:
         "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None, "png": png.name,
         "changes": ", ".join(next(iter(c)) for c in design.changes_spec),
         "max_displacement": result.max_displacement,
-        "quality": q.message() if q is not None else "surface only",
+        "quality": q.summary() if q is not None else "surface only",
         "seconds": time.perf_counter() - t0,
     }
 

@@ -62,10 +62,13 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     q = result.quality
     qd = q.to_dict() if q is not None else None
     if q is not None and not q.ok and not force:
-        raise QualityError(f"the deformed mesh fails the quality check: {q.message()}; nothing was "
-                           "written (use --force to write it anyway)", path=design.path, report=qd)
+        worst = q.describe_worst(3).strip().splitlines()
+        where = f"; worst: {worst[0].strip()}" if worst else ""
+        raise QualityError(f"the deformed mesh fails the quality check: {q.n_inverted} inverted and "
+                           f"{q.n_below} poor cells of {q.count}{where}; nothing was written (--force "
+                           "writes it anyway)", path=design.path, report=qd)
     if q is not None and not q.ok:
-        console.warn(f"quality check failed but --force given: {q.message()}")
+        console.warn(f"quality check failed but --force given: {q.summary()}")
     written = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
                             progress=console.progress)
     if plot or design.output.get("plot"):
@@ -99,7 +102,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
         f"  moved     max surface displacement {result.max_displacement:.4g}; volume: {result.volume_method}",
     ]
     if q is not None:
-        lines.append(f"  quality   {q.message()}")
+        lines.append(f"  quality   {q.summary()}")
     lines += [f"  wrote     {p}" for p in written.values()]
     lines.append(f"  time      {secs:.2f} s")
     console.result(summary, "\n".join(lines))
