@@ -147,7 +147,7 @@ class Box:
     chord_sign
         +1 when the leading edge is at the low end of the chord axis.
     stations
-        (m,) span coordinate of each section (mesh units, along the span axis; 2D: the plane's).
+        (m,) mesh coordinate of each section along the span axis (2D: the plane's).
     le_points, te_points
         (m, 3) leading- and trailing-edge points of each section's airfoil (te = reference point).
     margins
@@ -601,7 +601,8 @@ def _assemble(P, degree, axes, dim, chord_sign, stations, sections, margins, set
         ref[j, 0, -1] = (1 - fa) * fb
         ref[j, -1, -1] = fa * fb
     return Box(control_points=P, degree=tuple(degree), knots=knots, axes=axes, dim=dim,
-               chord_sign=chord_sign, stations=np.asarray(stations, dtype=np.float64),
+               chord_sign=chord_sign,
+               stations=np.asarray(stations, dtype=np.float64) * (axes.span_sign if dim == 3 else 1.0),
                le_points=le_pts, te_points=te_pts, margins=margins.copy(), ref_weights=ref,
                le_rows=None, settings=settings)
 
@@ -766,7 +767,8 @@ def import_box(file, points: np.ndarray, faces=(), settings: BoxSettings | None 
     sizes = (n, m, l) if dim == 3 else (n, l)
     knots = tuple(clamped_knots(s_, d) for s_, d in zip(sizes, degree))
     box = Box(control_points=P, degree=tuple(degree), knots=knots, axes=axes, dim=dim,
-              chord_sign=chord_sign, stations=np.asarray(stations, float), le_points=le_pts,
+              chord_sign=chord_sign, stations=np.asarray(stations, float) * (axes.span_sign if dim == 3 else 1.0),
+              le_points=le_pts,
               te_points=te_pts, margins=np.zeros((m, 4)), ref_weights=ref, le_rows=None,
               settings=settings, imported=True)
     core = embed(box.lattice(), box.core_points(pts), progress=progress)
