@@ -80,6 +80,9 @@ MIXED, NGON_N, NFACE_N = 20, 22, 23
 CGNS_CODE = {"vertex": 2, "line": 3, "triangle": 5, "quad": 7, "tetra": 10, "pyramid": 12,
              "wedge": 14, "hexahedron": 17}
 _TYPE_ORDER = ["vertex", "line", "triangle", "quad", "tetra", "pyramid", "wedge", "hexahedron"]
+#: CGNS PENTA_6 lists the bottom triangle with its normal towards the top one, VTK (and SU2) the
+#: other way round: reverse both triangles (the permutation is its own inverse, for writing too).
+WEDGE_CGNS_TO_VTK = np.array([0, 2, 1, 3, 5, 4])
 #: family names that mean "no family" (defaults written by meshers)
 PLACEHOLDER_FAMILIES = frozenset({"", "unspecified", "unspecifiedbc", "null"})
 
@@ -137,16 +140,21 @@ def convert_adf(src: Path, dest: Path) -> None:
     exe = shutil.which("adf2hdf")
     if exe is None:
         raise InputError(_adf_message(), path=src)
-    # adf2hdf copies its input before converting it; give it a copy in a private folder so a
-    # read-only input folder is never written to.
-    try:
-        proc = subprocess.run([exe, str(src), str(dest)], capture_output=True, text=True, timeout=3600)
-    except (OSError, subprocess.TimeoutExpired) as exc:
-        raise InputError(f"adf2hdf failed: {exc}", path=src) from None
-    if proc.returncode != 0 or not dest.exists() or not h5py.is_hdf5(str(dest)):
-        why = (proc.stderr or proc.stdout).strip().splitlines()
-        raise InputError("adf2hdf could not convert this ADF CGNS file"
-                         + (f": {why[-1]}" if why else ""), path=src)
+    # adf2hdf is a shell script that passes its arguments unquoted to cgnsconvert: work on a link
+    # and an output with plain names in a private folder, so paths with spaces are safe.
+    with tempfile.TemporaryDirectory(prefix="ffd-adf2hdf-") as tmp:
+        link, out = Path(tmp) / "input.cgns", Path(tmp) / "output.cgns"
+        link.symlink_to(src.resolve())
+        try:
+            proc = subprocess.run([exe, str(link), str(out)], capture_output=True, text=True,
+                                  timeout=3600, cwd=tmp)
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            raise InputError(f"adf2hdf failed: {exc}", path=src) from None
+        if proc.returncode != 0 or not out.exists() or not h5py.is_hdf5(str(out)):
+            why = (proc.stderr or proc.stdout).strip().splitlines()
+            raise InputError("adf2hdf could not convert this ADF CGNS file"
+                             + (f": {why[-1]}" if why else ""), path=src)
+        shutil.move(str(out), str(dest))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -330,6 +338,8 @@ def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str
         else:
             ids = conn[(offsets[which] + 1)[:, None] + np.arange(k)]
         ids = ids - 1
+        if t == "wedge":
+            ids = ids[:, WEDGE_CGNS_TO_VTK]
         if len(ids) and (ids.min() < 0 or ids.max() >= n_points):
             raise InputError(f"element connectivity refers to point ids outside 1..{n_points}",
                              path=file, key=sec.name)
@@ -389,12 +399,16 @@ def _structured_cells(shape: tuple[int, ...], offset: int) -> CellBlock | None:
     return CellBlock("line", np.stack([ids[:-1], ids[1:]], axis=1))
 
 
-def _range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.ndarray) -> CellBlock:
+def _range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.ndarray,
+                 axis: int | None = None) -> CellBlock:
     """The boundary faces (quads in 3D, lines in 2D) of the vertex range lo..hi (0-based, inclusive)
-    of a structured block; a range that is not a face is returned as its points (``vertex``)."""
+    of a structured block, ``axis`` being the constant index (found when None); a range that is not
+    a face is returned as its points (``vertex``)."""
     ids = _structured_ids(shape, offset)
     sub = ids[tuple(slice(a, b + 1) for a, b in zip(lo, hi, strict=True))]
     flat = [a for a in range(len(shape)) if lo[a] == hi[a]]
+    if axis is not None and axis in flat:
+        flat = [axis]
     if len(flat) == 1:
         face = np.squeeze(sub, axis=flat[0])
         if face.ndim == 2 and min(face.shape) >= 2:
@@ -403,6 +417,32 @@ def _range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.nda
         if face.ndim == 1 and len(face) >= 2:
             return CellBlock("line", np.stack([face[:-1], face[1:]], axis=1))
     return CellBlock("vertex", sub.ravel(order="F")[:, None])
+
+
+def _orient_structured(block: CellBlock, pts: np.ndarray, offset: int) -> CellBlock:
+    """Mirror the cells of a left-handed block so that they have positive volume (VTK order).
+
+    Hexahedra: by the sign of the corner triple product (p1-p0, p3-p0, p4-p0), majority vote.
+    Quads of a planar 2D mesh: by the sign of their area about the plane's normal axis (the axis
+    along which the mesh is flat). Quads of a surface in space are left as the file numbers them.
+    """
+    p = pts[block.data - offset]
+    if block.type == "hexahedron":
+        s = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 3] - p[:, 0]), p[:, 4] - p[:, 0])
+        flip = [1, 0, 3, 2, 5, 4, 7, 6]
+    elif block.type == "quad":
+        flat = np.flatnonzero(np.ptp(pts, axis=0) == 0)
+        if len(flat) == 0:
+            return block
+        a, b = (flat[-1] + 1) % 3, (flat[-1] + 2) % 3
+        u, v = p[:, 1] - p[:, 0], p[:, 3] - p[:, 0]
+        s = u[:, a] * v[:, b] - u[:, b] * v[:, a]
+        flip = [1, 0, 3, 2]
+    else:
+        return block
+    if np.count_nonzero(s < 0) > np.count_nonzero(s > 0):
+        return CellBlock(block.type, block.data[:, flip])
+    return block
 
 
 # ----------------------------------------------------------------------------------------------
@@ -469,15 +509,15 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
                          path=file, key=bc.name)
     gids = np.unique(pts - 1 + zone.offset)
     # faces of the boundary sections whose nodes all belong to the BC's points
-    inside = np.zeros(zone.offset + zone.n_points, dtype=bool)
-    inside[gids] = True
+    inside = np.zeros(zone.n_points, dtype=bool)
+    inside[gids - zone.offset] = True
     faces: dict[str, list[np.ndarray]] = {}
     hit = set()
     for si, s in enumerate(sections):
         if s.dim < 0 or s.dim >= cell_dim:
             continue
         for t, c in s.blocks.items():
-            keep = inside[c].all(axis=1)
+            keep = inside[c - zone.offset].all(axis=1)
             if keep.any():
                 faces.setdefault(t, []).append(c[keep])
                 if keep.all():
@@ -499,14 +539,24 @@ def _structured_bc(bc, zone: CgnsZone, file: Path) -> list[CellBlock]:
     if prange is not None:
         pr = prange.reshape(2, idim)
         lo, hi = np.minimum(pr[0], pr[1]) - 1, np.maximum(pr[0], pr[1]) - 1
+        axis = None
         if loc != "Vertex":
-            # face-centred range: the faces' vertex range reaches one further on the free axes
-            flat = lo == hi
-            hi = np.where(flat, hi, hi + 1)
+            # a face-centred range counts faces: constant (vertex) index on the face's axis, cell
+            # indices on the others, so its vertex range reaches one further on the free axes
+            flats = [a for a in range(idim) if lo[a] == hi[a]]
+            if len(loc) == 11 and loc[0] in "IJK" and loc.endswith("FaceCenter"):
+                axis = "IJK".index(loc[0])
+            elif loc in ("FaceCenter", "EdgeCenter") and flats:
+                on_side = [a for a in flats if lo[a] == 0 or lo[a] == shape[a] - 1]
+                axis = (on_side or flats)[0]
+            else:
+                raise InputError(f"a structured BC located at {loc} is not supported (expected Vertex "
+                                 "or a face centre)", path=file, key=bc.name)
+            hi = hi + (np.arange(idim) != axis)
         if lo.min() < 0 or np.any(hi >= shape):
             raise InputError(f"PointRange {pr.tolist()} is outside the zone's {shape.tolist()} vertices",
                              path=file, key=bc.name)
-        return [_range_faces(tuple(shape), zone.offset, lo, hi)]
+        return [_range_faces(tuple(shape), zone.offset, lo, hi, axis)]
     if plist is not None:
         ijk = plist.reshape(-1, idim) - 1
         if loc != "Vertex":
@@ -527,6 +577,10 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
         raise InputError("zone has no GridCoordinates_t node (no point coordinates)", path=file,
                          key=zone_node.name)
     grid = next((g for g in grids if g.name.rsplit("/", 1)[-1] == "GridCoordinates"), grids[0])
+    rind = _children(grid, "Rind_t")
+    if rind and np.any(np.asarray(_data(rind[0])) != 0):
+        raise InputError("grid coordinates with rind (ghost) planes are not supported", path=file,
+                         key=rind[0].name)
     arrays = {c.name.rsplit("/", 1)[-1]: c for c in _children(grid, "DataArray_t")}
     names = ["CoordinateX", "CoordinateY", "CoordinateZ"]
     need = names[:max(phys_dim, 2)]
@@ -590,7 +644,7 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
         if structured:
             blk = _structured_cells(vshape, offset)
             if blk is not None:
-                zone_blocks.append(blk)
+                zone_blocks.append(_orient_structured(blk, pts, offset))
             for zbc in _children(zn, "ZoneBC_t"):
                 for bc in _children(zbc, "BC_t"):
                     bc_name, name = _bc_marker_name(bc)
@@ -668,9 +722,8 @@ def _read_file(h5path: Path, file: Path, container: str, progress) -> Mesh:
     with h5:
         try:
             return _read_tree(h5, file, container, progress)
-        except (KeyError, OSError, ValueError, TypeError) as exc:
-            if isinstance(exc, InputError):
-                raise
+        except (KeyError, OSError, ValueError, TypeError, IndexError) as exc:
+            # h5py/NumPy errors on damaged nodes (truncated file, wrong shapes): one line, no traceback
             raise InputError(f"corrupt or unsupported CGNS file: {exc}", path=file) from None
 
 
@@ -754,7 +807,17 @@ def _chars(text: str) -> np.ndarray:
     return np.frombuffer(text.encode("ascii"), dtype=np.int8)
 
 
+def _check_names(mesh: Mesh, path: Path) -> None:
+    for name in mesh.markers:
+        if not name or len(name.encode("ascii", "replace")) > 32 or "/" in name or name in (".", ".."):
+            raise InputError("this marker name cannot be a CGNS node name (1 to 32 characters, no '/')",
+                             path=path, key=name)
+        if not name.isascii():
+            raise InputError("CGNS node names must be ASCII", path=path, key=name)
+
+
 def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
+    _check_names(mesh, path)
     n = len(pts)
     flat2d = mesh.dim == 2 and np.all(pts[:, 2] == 0.0)
     phys = 2 if flat2d else 3
@@ -778,18 +841,27 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
         for a, name in enumerate(["CoordinateX", "CoordinateY", "CoordinateZ"][:phys]):
             _node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(pts[:, a]))
         next_id = 1
-        used_names = set()
+        used_names = {"ZoneType", "GridCoordinates", "ZoneBC"}
+
+        def unique(name: str) -> str:
+            out, k = name, 1
+            while out in used_names:
+                k += 1
+                out = f"{name[:28]}_{k}"
+            return out
 
         def section(name: str, blocks: list[CellBlock]) -> tuple[int, int]:
             nonlocal next_id
             count = sum(len(b) for b in blocks)
+            datas = [b.data[:, WEDGE_CGNS_TO_VTK] if b.type == "wedge" else b.data for b in blocks]
             if len(blocks) == 1:
                 code = CGNS_CODE[blocks[0].type]
-                conn = blocks[0].data.ravel() + 1
+                conn = datas[0].ravel() + 1
             else:
                 code = MIXED
-                conn = np.concatenate([np.hstack([np.full((len(b), 1), CGNS_CODE[b.type]), b.data + 1])
-                                       .ravel() for b in blocks])
+                conn = np.concatenate([np.hstack([np.full((len(b), 1), CGNS_CODE[b.type]), d + 1]).ravel()
+                                       for b, d in zip(blocks, datas, strict=True)])
+            name = unique(name)
             sec = _node(zone, name, "Elements_t", "I4", np.array([code, 0], dtype=np.int32))
             start, end = next_id, next_id + count - 1
             _node(sec, "ElementRange", "IndexRange_t", itype, np.array([start, end], dtype=idt))
@@ -810,8 +882,7 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
             faces = [b for b in blocks if b.type != "vertex" and len(b)]
             verts = [b for b in blocks if b.type == "vertex"]
             if faces:
-                sname = mname if mname not in used_names else f"{mname}_elements"
-                start, end = section(sname, faces)
+                start, end = section(mname, faces)
                 bcs.append((mname, "FaceCenter" if cell_dim == 3 else "EdgeCenter",
                             np.arange(start, end + 1)))
             elif verts:
