@@ -414,3 +414,116 @@ def test_every_real_file_reads_without_warnings():
             mesh = read_mesh(shared_file(rel))
         assert mesh.n_points > 0 and mesh.n_cells > 0
         assert all(c.data.max() < mesh.n_points for c in mesh.cells)
+
+
+# ---------------------------------------------------------------------------------------------
+# element orientation and structured zones written by hand
+
+def _vtk_signs(points: np.ndarray, block: CellBlock) -> np.ndarray:
+    """Sign of a corner triple product that is positive for a valid cell in VTK (= SU2) node order.
+
+    VTK's wedge lists its first triangle with the normal pointing away from the second one, hence
+    the minus sign (checked on SU2's deformation/brick_prism mesh: all 29640 prisms negative).
+    """
+    p = points[block.data]
+    d = {"tetra": (1, 2, 3, 1), "pyramid": (1, 3, 4, 1), "wedge": (1, 2, 3, -1),
+         "hexahedron": (1, 3, 4, 1)}[block.type]
+    t = np.einsum("ij,ij->i", np.cross(p[:, d[0]] - p[:, 0], p[:, d[1]] - p[:, 0]), p[:, d[2]] - p[:, 0])
+    return np.sign(t * d[3])
+
+
+def test_real_volume_cells_have_positive_vtk_volume():
+    for rel in ("cgns/incomp_navierstokes__bend__mesh_bend_coarse.cgns",
+                "cgns/airfoil__analysis__n0012.cgns",
+                "cgns/disc_adj_euler__cylinder3D__cylinder3D.cgns"):
+        mesh = read_mesh(shared_file(rel))
+        for b in mesh.cells:
+            assert np.all(_vtk_signs(mesh.points, b) > 0), (rel, b.type)
+
+
+def test_wedge_written_in_cgns_order_and_read_back(tmp_path):
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]], float)
+    vtk_wedge = CellBlock("wedge", [[0, 2, 1, 3, 5, 4]])       # VTK order: first normal points down
+    assert _vtk_signs(pts, vtk_wedge)[0] > 0
+    bottom = CellBlock("triangle", [[0, 2, 1]])
+    mesh = Mesh(points=pts, dim=3, cells=[vtk_wedge], markers={"bottom": [bottom]})
+    out = tmp_path / "wedge.cgns"
+    write_mesh(mesh, out)
+    with h5py.File(out, "r") as h5:
+        conn = h5["Base/Zone/WedgeElements/ElementConnectivity/ data"][()]
+    assert conn.tolist() == [1, 2, 3, 4, 5, 6]                  # CGNS PENTA_6: bottom normal points up
+    back = read_mesh(out)
+    np.testing.assert_array_equal(back.cells[0].data, vtk_wedge.data)
+
+
+def _structured_file(path, x_sign: float, bcs: dict[str, tuple[str, list[list[int]]]]):
+    """A 4x3x2-vertex structured zone (x mirrored when x_sign < 0) with the given BCs."""
+    shape = (4, 3, 2)
+    g = np.meshgrid(*[np.arange(s, dtype=float) for s in shape], indexing="ij")
+    with h5py.File(path, "w", track_order=True) as h5:
+        for k, v in (("label", "Root Node of HDF5 File"), ("name", "HDF5 MotherNode"), ("type", "MT")):
+            cgns._str_attr(h5, k, v, 33 if k != "type" else 3)
+        base = cgns._node(h5, "B", "CGNSBase_t", "I4", np.array([3, 3], np.int32))
+        zone = cgns._node(base, "blk", "Zone_t", "I4", np.array([shape, [3, 2, 1], [0, 0, 0]], np.int32))
+        cgns._node(zone, "ZoneType", "ZoneType_t", "C1", cgns._chars("Structured"))
+        grid = cgns._node(zone, "GridCoordinates", "GridCoordinates_t")
+        for a, name in enumerate(("CoordinateX", "CoordinateY", "CoordinateZ")):
+            vals = g[a] * (x_sign if a == 0 else 1.0)
+            cgns._node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(vals.T))  # HDF5: reversed
+        zbc = cgns._node(zone, "ZoneBC", "ZoneBC_t")
+        for name, (loc, rng) in bcs.items():
+            bc = cgns._node(zbc, name, "BC_t", "C1", cgns._chars("BCWall"))
+            cgns._node(bc, "GridLocation", "GridLocation_t", "C1", cgns._chars(loc))
+            cgns._node(bc, "PointRange", "IndexRange_t", "I4", np.array(rng, np.int32))
+    return path
+
+
+@pytest.mark.parametrize("x_sign", [1.0, -1.0])
+def test_structured_block_cells_are_right_handed(tmp_path, x_sign):
+    p = _structured_file(tmp_path / "s.cgns", x_sign, {"kmin": ("Vertex", [[1, 1, 1], [4, 3, 1]])})
+    mesh = read_mesh(p)
+    assert mesh.n_points == 24 and mesh.n_cells == 3 * 2 * 1
+    np.testing.assert_array_equal(mesh.points[:4, 0], x_sign * np.arange(4.0))   # i fastest
+    assert np.all(_vtk_signs(mesh.points, mesh.cells[0]) > 0)
+    assert {b.type: len(b) for b in mesh.markers["kmin"]} == {"quad": 6}
+    assert np.all(mesh.points[mesh.marker_point_ids("kmin"), 2] == 0)
+
+
+def test_structured_face_centred_bcs(tmp_path):
+    bcs = {"imax": ("IFaceCenter", [[4, 1, 1], [4, 2, 1]]),       # face index 4, cells j 1..2, k 1
+           "jmin": ("FaceCenter", [[1, 1, 1], [3, 1, 1]]),        # j = 1 on the side; k has 1 cell
+           "verts": ("Vertex", [[2, 2, 1], [2, 2, 2]])}           # a line of points: vertex marker
+    mesh = read_mesh(_structured_file(tmp_path / "s.cgns", 1.0, bcs))
+    imax = mesh.marker_point_ids("imax")
+    assert len(imax) == 3 * 2 and np.all(mesh.points[imax, 0] == 3)
+    jmin = mesh.marker_point_ids("jmin")
+    assert len(jmin) == 4 * 2 and np.all(mesh.points[jmin, 1] == 0)
+    assert [b.type for b in mesh.markers["verts"]] == ["vertex"]
+    np.testing.assert_array_equal(mesh.points[mesh.marker_point_ids("verts")], [[1, 1, 0], [1, 1, 1]])
+
+
+def test_structured_range_outside_zone(tmp_path):
+    p = _structured_file(tmp_path / "s.cgns", 1.0, {"bad": ("Vertex", [[1, 1, 1], [5, 3, 1]])})
+    with pytest.raises(InputError, match="outside the zone") as exc:
+        read_mesh(p)
+    assert "ZoneBC/bad" in str(exc.value)
+
+
+def test_marker_names_that_cgns_cannot_hold(tmp_path):
+    mesh = _box_mesh()
+    mesh.markers = {"x" * 33: mesh.markers["wing"]}
+    with pytest.raises(InputError, match="32 characters"):
+        write_mesh(mesh, tmp_path / "long.cgns")
+    assert not (tmp_path / "long.cgns").exists()
+
+
+def test_marker_names_colliding_with_zone_children(tmp_path):
+    mesh = _box_mesh()
+    mesh.markers = {"ZoneBC": mesh.markers["wing"], "HexahedronElements": mesh.markers["farfield"]}
+    out = tmp_path / "names.cgns"
+    write_mesh(mesh, out)
+    back = read_mesh(out)
+    assert list(back.markers) == ["ZoneBC", "HexahedronElements"]
+    for name in mesh.markers:
+        assert _same_blocks(back.markers[name], mesh.markers[name])
+    np.testing.assert_array_equal(back.cells[0].data, mesh.cells[0].data)
