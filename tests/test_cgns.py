@@ -527,3 +527,21 @@ def test_marker_names_colliding_with_zone_children(tmp_path):
     for name in mesh.markers:
         assert _same_blocks(back.markers[name], mesh.markers[name])
     np.testing.assert_array_equal(back.cells[0].data, mesh.cells[0].data)
+
+
+def test_unreferenced_boundary_sections_are_markers_by_section_name(tmp_path):
+    p = _broken(tmp_path, lambda h5: h5["Base/Zone"].__delitem__("ZoneBC"))
+    mesh = read_mesh(p)
+    # without BCs, the 2D sections of this 3D zone are the markers, under their section names
+    assert list(mesh.markers) == ["wing", "farfield"]
+    assert _same_blocks(mesh.markers["farfield"], _box_mesh().markers["farfield"])
+
+
+def test_truncated_file(tmp_path):
+    src = tmp_path / "box.cgns"
+    write_mesh(_box_mesh(), src)
+    cut = tmp_path / "cut.cgns"
+    cut.write_bytes(src.read_bytes()[: src.stat().st_size // 2])
+    with pytest.raises(InputError) as exc:
+        read_mesh(cut)
+    assert str(cut) in str(exc.value)
