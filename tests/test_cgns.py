@@ -545,3 +545,23 @@ def test_truncated_file(tmp_path):
     with pytest.raises(InputError) as exc:
         read_mesh(cut)
     assert str(cut) in str(exc.value)
+
+
+def test_mixed_section_with_cells_and_faces(tmp_path):
+    box = _box_mesh()
+    hexa, quads = box.cells[0].data, box.markers["wing"][0].data
+
+    def edit(h5):
+        zone = h5["Base/Zone"]
+        for name in ("HexahedronElements", "wing", "farfield", "ZoneBC"):
+            del zone[name]
+        conn = np.concatenate([np.hstack([np.full((len(hexa), 1), 17), hexa + 1]).ravel(),
+                               np.hstack([np.full((len(quads), 1), 7), quads + 1]).ravel()])
+        sec = cgns._node(zone, "All", "Elements_t", "I4", np.array([cgns.MIXED, 0], np.int32))
+        cgns._node(sec, "ElementRange", "IndexRange_t", "I4", np.array([1, 12], np.int32))
+        cgns._node(sec, "ElementConnectivity", "DataArray_t", "I4", conn.astype(np.int32))
+    mesh = read_mesh(_broken(tmp_path, edit))     # no ElementStartOffset: the offsets are scanned
+    assert [b.type for b in mesh.cells] == ["hexahedron"]
+    np.testing.assert_array_equal(mesh.cells[0].data, hexa)
+    assert list(mesh.markers) == ["All"]
+    np.testing.assert_array_equal(mesh.markers["All"][0].data, quads)

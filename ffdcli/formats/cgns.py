@@ -514,14 +514,16 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
     faces: dict[str, list[np.ndarray]] = {}
     hit = set()
     for si, s in enumerate(sections):
-        if s.dim < 0 or s.dim >= cell_dim:
-            continue
+        whole = True
         for t, c in s.blocks.items():
+            if CELL_DIM[t] >= cell_dim:
+                continue
             keep = inside[c - zone.offset].all(axis=1)
+            whole &= bool(keep.all())
             if keep.any():
                 faces.setdefault(t, []).append(c[keep])
-                if keep.all():
-                    hit.add(si)
+        if whole and any(CELL_DIM[t] < cell_dim for t in s.blocks):
+            hit.add(si)
     if faces:
         covered = np.unique(np.concatenate([np.vstack(v).ravel() for v in faces.values()]))
         if len(covered) == len(gids):
@@ -658,11 +660,14 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
                     bc_name, name = _bc_marker_name(bc)
                     ms.add_bc(bc_name, name, _unstructured_bc(bc, zone, sections, cell_dim, file, used))
             for si, s in enumerate(sections):
-                blocks = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER if t in s.blocks]
-                if s.dim >= cell_dim:
-                    zone_blocks.extend(blocks)
-                elif si not in used and blocks:
-                    section_markers.append((s.name, blocks))
+                # a MIXED section may hold both volume cells and boundary faces: split by dimension
+                inner = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
+                         if t in s.blocks and CELL_DIM[t] >= cell_dim]
+                outer = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
+                         if t in s.blocks and CELL_DIM[t] < cell_dim]
+                zone_blocks.extend(inner)
+                if outer and si not in used:
+                    section_markers.append((s.name, outer))
         for b in zone_blocks:
             cells.setdefault(b.type, []).append(b.data)
         if cell_dim < phys_dim and zone_blocks:
