@@ -578,3 +578,34 @@ def test_mixed_section_with_cells_and_faces(tmp_path):
     np.testing.assert_array_equal(mesh.cells[0].data, hexa)
     assert list(mesh.markers) == ["All"]
     np.testing.assert_array_equal(mesh.markers["All"][0].data, quads)
+
+
+def _outward_dots(mesh: Mesh, faces: np.ndarray) -> np.ndarray:
+    """(face normal) . (centre of the hexahedron behind the face - face centre): < 0 when outward."""
+    hexa = mesh.cells[0].data
+    sides = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+    owner = {}
+    for s in sides:
+        for c, key in enumerate(np.sort(hexa[:, s], axis=1)):
+            owner[key.tobytes()] = c
+    cells = np.array([owner[k.tobytes()] for k in np.sort(faces, axis=1)])
+    p = mesh.points[faces]
+    normal = np.cross(p[:, 1] - p[:, 0], p[:, 3] - p[:, 0])
+    inward = mesh.points[hexa[cells]].mean(axis=1) - p.mean(axis=1)
+    return np.einsum("ij,ij->i", normal, inward)
+
+
+@pytest.mark.parametrize("x_sign", [1.0, -1.0])
+def test_structured_bc_faces_point_out_of_the_block(tmp_path, x_sign):
+    bcs = {"kmin": ("Vertex", [[1, 1, 1], [4, 3, 1]]), "kmax": ("Vertex", [[4, 3, 2], [1, 1, 2]]),
+           "imax": ("Vertex", [[4, 1, 1], [4, 3, 2]]), "jmin": ("Vertex", [[1, 1, 1], [4, 1, 2]]),
+           "jmax": ("Vertex", [[1, 3, 1], [4, 3, 2]])}
+    mesh = read_mesh(_structured_file(tmp_path / "s.cgns", x_sign, bcs))
+    for name in bcs:
+        assert np.all(_outward_dots(mesh, mesh.markers[name][0].data) < 0), name
+
+
+def test_real_structured_bc_faces_point_out_of_the_domain():
+    mesh = read_mesh(shared_file("cgns/airfoil__analysis__n0012.cgns"))
+    for name in mesh.markers:
+        assert np.all(_outward_dots(mesh, mesh.markers[name][0].data) < 0), name

@@ -419,6 +419,38 @@ def _range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.nda
     return CellBlock("vertex", sub.ravel(order="F")[:, None])
 
 
+def _outward_faces(faces: CellBlock, shape: tuple[int, ...], lo: np.ndarray, axis: int | None,
+                   handed: int) -> CellBlock:
+    """Make the quads of a structured 3D block's side face point out of the block.
+
+    :func:`_range_faces` numbers a quad on the constant-``axis`` face along the two other index
+    axes in increasing order, so its normal points along +i, -j, +k in index space for axis i, j, k;
+    ``handed`` (+1 or -1) carries index space to physical space. Faces on an interior plane are
+    left as they are.
+    """
+    if faces.type != "quad" or len(shape) != 3 or axis is None or handed == 0:
+        return faces
+    if lo[axis] == 0:
+        want = -1
+    elif lo[axis] == shape[axis] - 1:
+        want = 1
+    else:
+        return faces
+    if (1, -1, 1)[axis] * handed != want:
+        return CellBlock("quad", faces.data[:, ::-1])
+    return faces
+
+
+def _handedness(block: CellBlock, pts: np.ndarray, offset: int) -> int:
+    """+1 if most hexahedra of a structured block are right-handed in index order, -1 if left, 0 else."""
+    if block.type != "hexahedron":
+        return 0
+    p = pts[block.data - offset]
+    s = np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 3] - p[:, 0]), p[:, 4] - p[:, 0])
+    pos, neg = np.count_nonzero(s > 0), np.count_nonzero(s < 0)
+    return 1 if pos > neg else -1 if neg > pos else 0
+
+
 def _orient_structured(block: CellBlock, pts: np.ndarray, offset: int) -> CellBlock:
     """Mirror the cells of a left-handed block so that they have positive volume (VTK order).
 
@@ -532,7 +564,7 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
     return [CellBlock("vertex", gids[:, None])]
 
 
-def _structured_bc(bc, zone: CgnsZone, file: Path) -> list[CellBlock]:
+def _structured_bc(bc, zone: CgnsZone, file: Path, handed: int = 0) -> list[CellBlock]:
     loc = _bc_location(bc)
     shape = np.asarray(zone.vertex_shape)
     idim = len(shape)
@@ -558,7 +590,10 @@ def _structured_bc(bc, zone: CgnsZone, file: Path) -> list[CellBlock]:
         if lo.min() < 0 or np.any(hi >= shape):
             raise InputError(f"PointRange {pr.tolist()} is outside the zone's {shape.tolist()} vertices",
                              path=file, key=bc.name)
-        return [_range_faces(tuple(shape), zone.offset, lo, hi, axis)]
+        faces = _range_faces(tuple(shape), zone.offset, lo, hi, axis)
+        if faces.type == "quad" and axis is None:
+            axis = int(np.flatnonzero(lo == hi)[0])
+        return [_outward_faces(faces, tuple(shape), lo, axis, handed)]
     if plist is not None:
         ijk = plist.reshape(-1, idim) - 1
         if loc != "Vertex":
@@ -645,12 +680,14 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
         zone_blocks: list[CellBlock] = []
         if structured:
             blk = _structured_cells(vshape, offset)
+            handed = 0
             if blk is not None:
+                handed = _handedness(blk, pts, offset)
                 zone_blocks.append(_orient_structured(blk, pts, offset))
             for zbc in _children(zn, "ZoneBC_t"):
                 for bc in _children(zbc, "BC_t"):
                     bc_name, name = _bc_marker_name(bc)
-                    ms.add_bc(bc_name, name, _structured_bc(bc, zone, file))
+                    ms.add_bc(bc_name, name, _structured_bc(bc, zone, file, handed))
         else:
             sections = [s for s in (_read_section(sec, offset, n_points, file, skipped)
                                     for sec in _children(zn, "Elements_t")) if s is not None]
