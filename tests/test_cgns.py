@@ -609,3 +609,19 @@ def test_real_structured_bc_faces_point_out_of_the_domain():
     mesh = read_mesh(shared_file("cgns/airfoil__analysis__n0012.cgns"))
     for name in mesh.markers:
         assert np.all(_outward_dots(mesh, mesh.markers[name][0].data) < 0), name
+
+
+@pytest.mark.parametrize("rel", ["cgns/aero__meshing__volume__wing_surf_L1.cgns",
+                                 "cgns/overset__mesh__near_tip.cgns"])
+def test_multiblock_surface_quads_are_consistently_oriented(rel):
+    """Across all blocks, every edge shared by two quads is walked once each way (points on block
+    interfaces merged by coordinates), so vertex normals from these quads do not cancel."""
+    mesh = read_mesh(shared_file(rel))
+    _, merged = np.unique(np.round(mesh.points, 9), axis=0, return_inverse=True)
+    q = merged.ravel()[mesh.marker_faces("Base")[0].data]
+    edges = np.concatenate([q[:, [0, 1]], q[:, [1, 2]], q[:, [2, 3]], q[:, [3, 0]]])
+    edges = edges[edges[:, 0] != edges[:, 1]]                  # collapsed edges at poles/tips
+    _, shared = np.unique(np.sort(edges, axis=1), axis=0, return_counts=True)
+    _, directed = np.unique(edges, axis=0, return_counts=True)
+    assert np.count_nonzero(shared == 2) > len(edges) // 3     # the blocks do connect
+    assert directed.max() == 1

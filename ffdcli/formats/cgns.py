@@ -272,7 +272,6 @@ class _Section:
     kinds: np.ndarray               # (n,) index into _TYPE_ORDER, -1 for skipped elements
     rows: np.ndarray                # (n,) row of the element in blocks[type]
     blocks: dict[str, np.ndarray]   # type -> (m, nodes) global 0-based point ids
-    dim: int                        # topological dimension (max over its elements), -1 if none
 
     def select(self, local: np.ndarray) -> dict[str, np.ndarray]:
         """Cells of the elements at local indices ``local``, by type."""
@@ -324,7 +323,6 @@ def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str
     kinds = np.full(n, -1, dtype=np.int64)
     rows = np.zeros(n, dtype=np.int64)
     blocks: dict[str, np.ndarray] = {}
-    dim = -1
     for c in np.unique(codes):
         c = int(c)
         if c not in ELEMENT_TYPES:
@@ -349,8 +347,7 @@ def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str
         blocks[t] = (ids + offset) if prev is None else np.vstack([prev, ids + offset])
         kinds[which] = ti
         rows[which] = base + np.arange(len(which))
-        dim = max(dim, CELL_DIM[t])
-    return _Section(sec.name.rsplit("/", 1)[-1], sec.name, start, end, kinds, rows, blocks, dim)
+    return _Section(sec.name.rsplit("/", 1)[-1], sec.name, start, end, kinds, rows, blocks)
 
 
 def _sections_cells(sections: list[_Section], ids: np.ndarray, file: Path, key: str
