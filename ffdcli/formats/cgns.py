@@ -14,10 +14,14 @@ Conventions of the :class:`~ffdcli.mesh.Mesh` returned by :func:`read`:
   ``i`` fastest (CGNS/Fortran order): id = offset + i + ni*(j + nj*k), 0-based.
 - **One-to-one interfaces are not merged**: a point on a block interface appears once per zone.
   Moving all copies with the same deformation keeps the interface conforming.
-- **Cells.** Unstructured sections of the base's cell dimension become interior cells, in VTK node
-  order (CGNS and VTK agree for the linear types); higher-order elements keep their corner nodes.
-  ``MIXED`` sections are split by type. ``NGON_n``/``NFACE_n`` sections are skipped (listed in
-  ``source.skipped`` and reported with a warning). Structured zones become hexahedra (3D) or quads.
+- **Cells.** Unstructured elements of the base's cell dimension become interior cells, in VTK node
+  order: CGNS and VTK agree for the linear types except the prism (``PENTA_6``), whose two triangles
+  are reversed (:data:`WEDGE_CGNS_TO_VTK`, both ways). Higher-order elements keep their corner nodes.
+  ``MIXED`` sections are split by type and by dimension (their faces are boundary elements).
+  ``NGON_n``/``NFACE_n`` sections are skipped (listed in ``source.skipped``, with a warning).
+  Structured zones become hexahedra (3D) or quads, mirrored for a left-handed block so that cell
+  volumes (areas of a planar 2D mesh) are positive; quads of a surface in space keep the file's
+  orientation.
 - **Markers** come from the ``BC_t`` nodes. A BC is named by its ``FamilyName`` when it has one (that
   is the name CFD solvers group boundary conditions by, e.g. ``WALL`` for ``BC1_on_WALL``) unless the
   family is a placeholder (``Unspecified``, ``UnspecifiedBC``, ``Null``, empty); otherwise by the BC
@@ -26,7 +30,9 @@ Conventions of the :class:`~ffdcli.mesh.Mesh` returned by :func:`read`:
   (``GridLocation`` Vertex) of an unstructured zone becomes the boundary faces whose nodes are
   exactly its points when such faces exist, else one ``vertex`` block; a BC given by elements
   (``ElementList``/``ElementRange``, or a point list/range with a face/edge ``GridLocation``) takes
-  those boundary elements. Structured BCs (``PointRange``) become the quads (lines in 2D) of the range.
+  those boundary elements. Structured BCs (``PointRange``) become the quads (lines in 2D) of the
+  range, quads on a block side pointing out of the block; a range that is not a face (an edge, a
+  ``PointList``) is a ``vertex`` block.
   Boundary sections (elements of a lower dimension than the base) that no BC refers to are markers
   named by the section. A surface mesh (base cell dimension 2 in 3D space) also gets one marker named
   after its base holding all its cells, so that the whole surface can be selected.
@@ -36,7 +42,9 @@ Writing a mesh read from CGNS copies the input file and replaces only the coordi
 else is unchanged. An ADF input is written as CGNS/HDF5 (the container every current CGNS reader
 accepts; ``hdf2adf`` converts it back if needed). A mesh from another format is written from
 scratch as an unstructured CGNS/HDF5 file: one base, one zone, one section per cell block and per
-marker, one ``BC_t`` per marker (``PointList`` of its elements, or of its points for vertex markers).
+marker, one ``BC_t`` per marker (``PointList`` of its elements, or of its points for a marker that
+has only ``vertex`` blocks; the vertex blocks of a marker that also has faces are not written).
+The coordinates are R8, a 2D mesh whose z is 0 is written with PhysicalDimension 2 (x, y only).
 """
 
 from __future__ import annotations
