@@ -72,11 +72,16 @@ def _same_blocks(a: list[CellBlock], b: list[CellBlock]) -> bool:
 
 
 def _cgnscheck_errors(path) -> list[str] | None:
+    """ERROR lines of the CGNS library's checker (None when it is not installed)."""
     exe = shutil.which("cgnscheck")
     if exe is None:
         return None
-    out = subprocess.run([exe, str(path)], capture_output=True, text=True, timeout=60)
-    return [line for line in (out.stdout + out.stderr).splitlines() if "ERROR" in line]
+    # cgnscheck 3.4 aborts ("buffer overflow detected") on long paths: run it on the bare name
+    out = subprocess.run([exe, path.name], capture_output=True, text=True, timeout=60, cwd=path.parent)
+    errors = [line for line in (out.stdout + out.stderr).splitlines() if "ERROR" in line]
+    if out.returncode != 0 and not errors:
+        errors = [f"cgnscheck exit status {out.returncode}: {out.stdout[-300:]}"]
+    return errors
 
 
 def _tree(path) -> dict[str, tuple]:

@@ -880,7 +880,9 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
         h5.create_dataset(" hdf5version", data=np.frombuffer(
             f"HDF5 Version {'.'.join(map(str, h5py.version.hdf5_version_tuple))}".encode().ljust(33, b"\0"),
             dtype=np.int8))
-        _node(h5, "CGNSLibraryVersion", "CGNSLibraryVersion_t", "R4", np.array([4.2], dtype=np.float32))
+        # version 3.4: what Debian's CGNS (cgnscheck, cgnsview) still reads; CGNS 4 reads it too. So
+        # MIXED sections carry no ElementStartOffset (a CGNS 4 node): readers scan the type codes.
+        _node(h5, "CGNSLibraryVersion", "CGNSLibraryVersion_t", "R4", np.array([3.4], dtype=np.float32))
         base = _node(h5, "Base", "CGNSBase_t", "I4", np.array([cell_dim, phys], dtype=np.int32))
         zone = _node(base, "Zone", "Zone_t", itype, np.array([[n], [mesh.n_cells], [0]], dtype=idt))
         _node(zone, "ZoneType", "ZoneType_t", "C1", _chars("Unstructured"))
@@ -912,10 +914,6 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
             sec = _node(zone, name, "Elements_t", "I4", np.array([code, 0], dtype=np.int32))
             start, end = next_id, next_id + count - 1
             _node(sec, "ElementRange", "IndexRange_t", itype, np.array([start, end], dtype=idt))
-            if code == MIXED:
-                sizes = np.concatenate([np.full(len(b), CELL_NODES[b.type] + 1) for b in blocks])
-                _node(sec, "ElementStartOffset", "DataArray_t", itype,
-                      np.concatenate([[0], np.cumsum(sizes)]).astype(idt))
             _node(sec, "ElementConnectivity", "DataArray_t", itype, conn.astype(idt))
             next_id = end + 1
             used_names.add(name)
@@ -938,6 +936,6 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
         if bcs:
             zbc = _node(zone, "ZoneBC", "ZoneBC_t")
             for mname, loc, ids in bcs:
-                bc = _node(zbc, mname, "BC_t", "C1", _chars("BCTypeUserDefined"))
+                bc = _node(zbc, mname, "BC_t", "C1", _chars("UserDefined"))
                 _node(bc, "GridLocation", "GridLocation_t", "C1", _chars(loc))
                 _node(bc, "PointList", "IndexArray_t", itype, ids.astype(idt)[:, None])
