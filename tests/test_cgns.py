@@ -368,6 +368,11 @@ def test_write_patch_of_real_file(rel, tmp_path):
     assert list(back.markers) == list(mesh.markers)
     for name in mesh.markers:
         assert _same_blocks(back.markers[name], mesh.markers[name])
+    # the CGNS library's checker says of the output exactly what it says of the input
+    original = tmp_path / "in" / src.name
+    original.parent.mkdir()
+    shutil.copyfile(src, original)
+    assert _cgnscheck_errors(out) == _cgnscheck_errors(original)
 
 
 def test_structured_airfoil_markers_by_family():
