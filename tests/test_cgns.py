@@ -635,3 +635,38 @@ def test_multiblock_surface_quads_are_consistently_oriented(rel):
     _, directed = np.unique(edges, axis=0, return_counts=True)
     assert np.count_nonzero(shared == 2) > len(edges) // 3     # the blocks do connect
     assert directed.max() == 1
+
+
+def test_cgns_link_nodes_are_refused(tmp_path):
+    def edit(h5):
+        zone = h5["Base/Zone"]
+        del zone["GridCoordinates"]
+        link = zone.create_group("GridCoordinates")
+        for k, v, n in (("name", "GridCoordinates", 33), ("label", "", 33), ("type", "LK", 3)):
+            cgns._str_attr(link, k, v, n)
+        link.create_dataset(" file", data=cgns._chars("grid.cgns"))
+        link.create_dataset(" path", data=cgns._chars("/Base/Zone/GridCoordinates"))
+        link[" link"] = h5py.ExternalLink("grid.cgns", "/Base/Zone/GridCoordinates")
+    with pytest.raises(InputError, match="CGNS link .grid.cgns /Base/Zone/GridCoordinates") as exc:
+        read_mesh(_broken(tmp_path, edit))
+    assert "/Base/Zone/GridCoordinates" in str(exc.value)
+
+
+def test_patch_never_writes_through_an_hdf5_external_link(tmp_path):
+    other = tmp_path / "other.h5"
+    box = _box_mesh()
+    with h5py.File(other, "w") as h5:
+        h5["x"] = box.points[:, 0]
+
+    def edit(h5):
+        node = h5["Base/Zone/GridCoordinates/CoordinateX"]
+        del node[" data"]
+        node[" data"] = h5py.ExternalLink(str(other), "/x")
+    src = _broken(tmp_path, edit)
+    mesh = read_mesh(src)                     # h5py follows the link when reading
+    np.testing.assert_array_equal(mesh.points, box.points)
+    before = other.read_bytes()
+    with pytest.raises(InputError, match="in another file"):
+        write_mesh(mesh, tmp_path / "out.cgns", mesh.points + 1.0)
+    assert other.read_bytes() == before
+    assert not (tmp_path / "out.cgns").exists()

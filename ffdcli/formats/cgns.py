@@ -197,6 +197,17 @@ def _child_text(node, label: str) -> str | None:
     return _text(kids[0]) if kids else None
 
 
+def _check_no_links(node, file: Path) -> None:
+    """InputError if a child of ``node`` is a CGNS link (node type LK) to another file or node."""
+    for child in node.values():
+        if isinstance(child, h5py.Group) and bytes(child.attrs.get("type", b"")).startswith(b"LK"):
+            target = " ".join(np.asarray(child[k][()], dtype=np.int8).tobytes().split(b"\0")[0].decode(
+                "ascii", "replace") for k in (" file", " path") if isinstance(child.get(k), h5py.Dataset))
+            raise InputError(f"this node is a CGNS link ({target.strip() or 'unknown target'}); "
+                             "linked CGNS files are not supported: merge them into one file first",
+                             path=file, key=child.name)
+
+
 def _index_data(node, name: str):
     """The integer array of a standard-named child (PointList, ElementRange, ...), or None."""
     child = node.get(name)
@@ -641,7 +652,7 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
             raise InputError(f"{name} has {ds.size} values, the zone has {n_points} points", path=file,
                              key=ds.name)
         pts[:, a] = np.asarray(ds[()], dtype=np.float64).ravel()
-        paths.append(ds.name)
+        paths.append(f"{arrays[name].name}/ data")   # ds.name would be the path inside a linked file
     zone = CgnsZone(zone_node.name, tuple(paths), offset, n_points, structured,
                     tuple(int(s) for s in vertex_shape))
     return pts, zone
@@ -681,6 +692,9 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
         else:
             n_points = int(zsize.ravel()[0])
             vshape = (n_points,)
+        _check_no_links(zn, file)
+        for grid in _children(zn, "GridCoordinates_t"):
+            _check_no_links(grid, file)
         pts, zone = _read_coordinates(zn, n_points, vshape, phys_dim, file, offset, structured)
         zone_blocks: list[CellBlock] = []
         if structured:
@@ -816,6 +830,9 @@ def _write_patched(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
                 for dpath in zone.coordinates:
                     axis = "XYZ".index(dpath.rsplit("/", 2)[-2][-1])
                     ds = h5.get(dpath)
+                    if ds is not None and Path(ds.file.filename).resolve() != Path(tmp).resolve():
+                        raise InputError("the coordinates are in another file (an HDF5 link); writing "
+                                         "them would change that file", path=inp, key=dpath)
                     if ds is None or ds.size != zone.n_points:
                         raise InputError("the input file changed since it was read (coordinates "
                                          "differ)", path=inp, key=dpath)
