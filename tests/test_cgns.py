@@ -670,3 +670,15 @@ def test_patch_never_writes_through_an_hdf5_external_link(tmp_path):
         write_mesh(mesh, tmp_path / "out.cgns", mesh.points + 1.0)
     assert other.read_bytes() == before
     assert not (tmp_path / "out.cgns").exists()
+
+
+def test_structured_coordinates_in_the_wrong_order(tmp_path):
+    p = _structured_file(tmp_path / "s.cgns", 1.0, {})
+    with h5py.File(p, "r+") as h5:
+        node = h5["B/blk/GridCoordinates/CoordinateX"]
+        vals = node[" data"][()]
+        del node[" data"]
+        node.create_dataset(" data", data=np.ascontiguousarray(vals.T))   # C order: (ni, nj, nk)
+    with pytest.raises(InputError, match=r"shape \(2, 3, 4\), the zone has \(4, 3, 2\)") as exc:
+        read_mesh(p)
+    assert "CoordinateX/ data" in str(exc.value)

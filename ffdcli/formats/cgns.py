@@ -650,7 +650,11 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
         ds = arrays[name][" data"]
         if ds.size != n_points:
             raise InputError(f"{name} has {ds.size} values, the zone has {n_points} points", path=file,
-                             key=ds.name)
+                             key=f"{arrays[name].name}/ data")
+        if structured and ds.shape != tuple(vertex_shape)[::-1]:
+            # HDF5 holds the Fortran-ordered CGNS array with its dimensions reversed: (nk, nj, ni)
+            raise InputError(f"{name} has shape {tuple(ds.shape)[::-1]}, the zone has "
+                             f"{tuple(vertex_shape)} vertices", path=file, key=f"{arrays[name].name}/ data")
         pts[:, a] = np.asarray(ds[()], dtype=np.float64).ravel()
         paths.append(f"{arrays[name].name}/ data")   # ds.name would be the path inside a linked file
     zone = CgnsZone(zone_node.name, tuple(paths), offset, n_points, structured,
