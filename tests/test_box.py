@@ -12,6 +12,7 @@ from ffdcli.cache import load
 from ffdcli.pipeline import prepare_box
 from ffdcli.wings import Planform, wing_surface
 from ffdcli.mesh import CellBlock
+from conftest import run_ffd
 from wingcase import write_surface_wing
 
 # Residual bound of the embedding: 1e-10 x lattice size (issue 3); the Newton stops far below it.
@@ -106,7 +107,7 @@ def test_corrupt_or_foreign_cache_is_rebuilt(tmp_path):
     assert load(b.cache, "0" * 16, BoxSettings(points=(6, 8, 2))) is None
 
 
-def test_ffd_box_cli_json(tmp_path, run_ffd):
+def test_ffd_box_cli_json(tmp_path):
     mesh = write_surface_wing(tmp_path, le_sweep_deg=25, taper=0.4)
     proc = run_ffd("box", str(mesh), "--json", "--points", "6,8,2")
     assert proc.returncode == 0, proc.stderr

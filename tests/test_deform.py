@@ -11,6 +11,7 @@ from ffdcli.design import load_design
 from ffdcli.formats import read_mesh
 from ffdcli.pipeline import deform, load_run, write_outputs
 from ffdcli.wings import Planform
+from conftest import run_ffd
 from wingcase import write_design, write_surface_wing
 
 # Global changes (span, sweep, dihedral, uniform twist) are affine maps of the whole lattice, so by
@@ -135,32 +136,36 @@ def test_shape_moves_only_along_thickness(tmp_path):
 
 
 def test_composition_order_matters_and_matches_direct(tmp_path):
-    """Uniform twist (root named) is a rigid rotation about the straight trailing edge line;
-    sweep is a shear: both orders are exact affine maps, and they differ."""
+    """Tip twist then sweep differs from sweep then tip twist: the twist moves the tip leading edge,
+    so the sweep angle the shear starts from differs. Both orders match the direct computation at
+    the root and tip planes (lattice ends, where per-section maps act exactly)."""
     mesh = write_surface_wing(tmp_path)
-    tw = {"twist": {"root": 8, "tip": 8}}
+    tw = {"twist": {"tip": 20}}
     sw = {"sweep": 10}
     runA, resA = run_design(tmp_path, [tw, sw], mesh=mesh)
     runB, resB = run_design(tmp_path, [sw, tw], mesh=mesh)
     X0, XA = points_of(runA, resA)
     _, XB = points_of(runB, resB)
-    te = runA.box.te_points[0]
-    shear = np.tan(np.radians(10.0))
-    # A: rotate, then shear along chord by tan(10deg) x span distance (the LE line stays straight).
-    A = rotate_about(X0, te, 0, 1, 8.0)
-    A[:, 0] += shear * A[:, 2]
-    np.testing.assert_allclose(XA, A, atol=1e-11)
-    # B: shear, then rotate each section about its (sheared) trailing-edge point.
-    B = X0.copy()
-    B[:, 0] += shear * B[:, 2]
-    te_b = np.array([te[0], te[1], 0.0])[None, :] + np.c_[shear * B[:, 2], np.zeros(len(B)), B[:, 2]]
-    th = np.radians(8.0)
-    dc, dt = B[:, 0] - te_b[:, 0], B[:, 1] - te_b[:, 1]
-    B2 = B.copy()
-    B2[:, 0] = te_b[:, 0] + np.cos(th) * dc + np.sin(th) * dt
-    B2[:, 1] = te_b[:, 1] - np.sin(th) * dc + np.cos(th) * dt
-    np.testing.assert_allclose(XB, B2, atol=1e-11)
-    assert np.abs(XA - XB).max() > 1e-2
+    z = X0[:, 2]
+    root, tip = z == z.min(), z == z.max()
+    np.testing.assert_array_equal(XA[root], X0[root])
+    np.testing.assert_array_equal(XB[root], X0[root])
+    te = runA.box.te_points[-1]                      # (1, 0, 3)
+    le_root = np.array([0.0, 0.0, 0.0])
+    le_tip = np.array([0.0, 0.0, 3.0])
+    # A: rotate the tip about its trailing edge, then shear along chord.
+    A = rotate_about(X0[tip], te, 0, 1, 20.0)
+    le_tip_a = rotate_about(le_tip[None], te, 0, 1, 20.0)[0]
+    lam = np.arctan2(le_tip_a[0] - le_root[0], le_tip_a[2] - le_root[2])
+    A[:, 0] += (np.tan(lam + np.radians(10)) - np.tan(lam)) * 3.0
+    np.testing.assert_allclose(XA[tip], A, atol=EXACT)
+    # B: shear (from sweep 0), then rotate the tip about its moved trailing edge.
+    shift = np.tan(np.radians(10)) * 3.0
+    B = X0[tip].copy()
+    B[:, 0] += shift
+    B = rotate_about(B, te + np.array([shift, 0, 0]), 0, 1, 20.0)
+    np.testing.assert_allclose(XB[tip], B, atol=EXACT)
+    assert np.abs(XA[tip] - XB[tip]).max() > 1e-2
 
 
 def test_written_mesh_keeps_markers_and_lattice_vtk(tmp_path):
@@ -177,7 +182,7 @@ def test_written_mesh_keeps_markers_and_lattice_vtk(tmp_path):
     np.testing.assert_allclose(lat["displacement"], res.lattice - run.P0, atol=1e-15)
 
 
-def test_cli_deform_json_and_set(tmp_path, run_ffd):
+def test_cli_deform_json_and_set(tmp_path):
     mesh = write_surface_wing(tmp_path)
     design = write_design(tmp_path, mesh, [{"twist": {"tip": 5}}])
     before = mesh.read_bytes()
