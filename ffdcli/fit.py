@@ -123,7 +123,8 @@ def fitted_design_data(design, upper, lower, out_path: Path) -> dict:
     data = copy.deepcopy(design.data)
     base = Path(out_path).resolve().parent
     data["mesh"] = os.path.relpath(Path(design.mesh).resolve(), base)
-    shape = {"shape": {"upper": [float(v) for v in upper], "lower": [float(v) for v in lower]}}
+    shape = {"shape": {"upper": [float(v) for v in upper], "lower": [float(v) for v in lower],
+                       "sections": "all"}}
     changes = [c for c in data.get("changes") or [] if "shape" not in c]
     data["changes"] = changes + [shape]
     output = data.get("output") or {}
@@ -135,7 +136,7 @@ def fitted_design_data(design, upper, lower, out_path: Path) -> dict:
     return data
 
 
-def fit_design(config, target_file, out_yaml=None, *, progress=None, reg: float = REG) -> dict:
+def fit_design(config, target_file, out_yaml=None, *, overrides=(), progress=None, reg: float = REG) -> dict:
     """Fit the shape of 2D design ``config`` to ``target_file``; write ``out_yaml`` if given."""
     import yaml
 
@@ -144,7 +145,13 @@ def fit_design(config, target_file, out_yaml=None, *, progress=None, reg: float 
     from ffdcli.formats.airfoil import read_airfoil
     from ffdcli.pipeline import load_run
 
-    design = load_design(config)
+    design = load_design(config, overrides=overrides)
+    other = [next(iter(c)) for c in design.changes_spec if "shape" not in c]
+    if other:
+        raise InputError(f"ffd fit fits shape values to the original airfoil; remove the other changes "
+                         f"({', '.join(other)}) or fit a design that has only shape changes",
+                         path=design.path, key="changes")
+    design.changes_spec = []          # the fit replaces any shape change; its lengths need not match
     if out_yaml is not None:
         check_writable(out_yaml, inputs=(design.mesh, design.path))
     target = read_airfoil(target_file)
