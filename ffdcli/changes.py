@@ -558,12 +558,17 @@ class Shape(Change):
         expanded at load time; ``sections`` is then ignored). ``None``: that side does not move.
     sections
         Section indices, or None for all sections.
-    Variables: ``shape.upper[i]`` / ``shape.lower[i]``; for (n, m) arrays ``shape.upper[i,j]``.
+    rows
+        (l, n) one value per thickness row k (0 = lower ... l-1 = upper) and chordwise index i, for
+        every section in ``sections`` (an extension: ``ffd fit --rows all`` moves every row).
+    Variables: ``shape.upper[i]`` / ``shape.lower[i]``; for (n, m) arrays ``shape.upper[i,j]``;
+    ``shape.rows[k][i]``.
     """
 
     upper: np.ndarray | None = None
     lower: np.ndarray | None = None
     sections: tuple[int, ...] | None = None
+    rows: np.ndarray | None = None
     kind = "shape"
 
     def __post_init__(self):
@@ -574,17 +579,27 @@ class Shape(Change):
                 if v.ndim not in (1, 2):
                     raise ValueError(f"shape.{side} must have shape (n,) or (n, m)")
                 object.__setattr__(self, side, v)
-        if self.upper is None and self.lower is None:
-            raise ValueError("shape: give upper, lower or both")
+        if self.rows is not None:
+            r = np.array(self.rows, dtype=float)
+            if r.ndim != 2:
+                raise ValueError("shape.rows must have shape (l, n)")
+            object.__setattr__(self, "rows", r)
+        if self.upper is None and self.lower is None and self.rows is None:
+            raise ValueError("shape: give upper, lower or both (or rows)")
         if self.sections is not None:
             object.__setattr__(self, "sections", tuple(int(j) for j in self.sections))
 
     def _sides(self):
-        return [(side, k, getattr(self, side)) for side, k in (("upper", -1), ("lower", 0))
-                if getattr(self, side) is not None]
+        out = [(side, k, getattr(self, side)) for side, k in (("upper", -1), ("lower", 0))
+               if getattr(self, side) is not None]
+        if self.rows is not None:
+            out += [(f"rows[{k}]", k, row) for k, row in enumerate(self.rows)]
+        return out
 
     def _check(self, P):
         n, m = P.shape[0], P.shape[1]
+        if self.rows is not None and self.rows.shape != (P.shape[2], n):
+            raise InputError(f"shape.rows has shape {self.rows.shape} but the lattice has l={P.shape[2]}, n={n}")
         for side, _, v in self._sides():
             if v.shape[0] != n or (v.ndim == 2 and v.shape[1] != m):
                 raise InputError(f"shape.{side} has shape {v.shape} but the lattice has n={n}, m={m}")
@@ -624,9 +639,15 @@ class Shape(Change):
         if vals.size != self.size:
             raise ValueError(f"shape: expected {self.size} values, got {vals.size}")
         new, at = {}, 0
-        for side, _, v in self._sides():
-            new[side] = vals[at:at + v.size].reshape(v.shape)
+        rows = None if self.rows is None else self.rows.copy()
+        for side, k, v in self._sides():
+            if side.startswith("rows["):
+                rows[k] = vals[at:at + v.size]
+            else:
+                new[side] = vals[at:at + v.size].reshape(v.shape)
             at += v.size
+        if rows is not None:
+            new["rows"] = rows
         return replace(self, **new)
 
     def jacobian_own(self, P, frame):

@@ -76,6 +76,9 @@ def design_schema() -> dict:
                   "type": "object",
                   "properties": {
                       "upper": numlist, "lower": numlist,
+                      "rows": {"description": "extension: one list per thickness row (lower first, "
+                                              "l lists of n values), instead of upper/lower",
+                               "type": "array", "items": numlist, "minItems": 2},
                       "sections": {"description": "all, or a list of section indices",
                                    "anyOf": [{"const": "all"},
                                              {"type": "array", "items": {"type": "integer", "minimum": 0},
@@ -83,7 +86,8 @@ def design_schema() -> dict:
                       "random": {"type": "number", "minimum": 0},
                       "seed": {"type": "integer", "minimum": 0}},
                   "additionalProperties": False,
-                  "anyOf": [{"required": ["upper"]}, {"required": ["lower"]}, {"required": ["random"]}]},
+                  "anyOf": [{"required": ["upper"]}, {"required": ["lower"]}, {"required": ["random"]},
+                            {"required": ["rows"]}]},
     }
     return {
         "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -382,6 +386,11 @@ def validate(data, path=None, lines: dict | None = None) -> None:
                      "a random shape takes only random and seed; write explicit shapes as another change")
         elif isinstance(spec, dict) and "seed" in spec:
             fail(("changes", i, "shape", "seed"), "seed goes with random")
+        if isinstance(spec, dict) and "rows" in spec:
+            clash = [k for k in ("upper", "lower", "random") if k in spec]
+            if clash:
+                fail(("changes", i, "shape", clash[0]), "rows gives every thickness row; write upper/lower "
+                                                        "or random as another change")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -556,5 +565,14 @@ def _build_one(kind, spec, key, n, m, l, dim, error) -> Change:
                 if not 0 <= j < m:
                     raise error(f"section {j} does not exist: sections run from 0 (root) to {m - 1}",
                                 f"{key}.sections[{q}]")
-        return Shape(spec.get("upper"), spec.get("lower"), sections)
+        rows = spec.get("rows")
+        if rows is not None:
+            if len(rows) != l:
+                raise error(f"has {len(rows)} rows but the box has {l} thickness points (box.points[-1])",
+                            f"{key}.rows")
+            for k, row in enumerate(rows):
+                if len(row) != n:
+                    raise error(f"has {len(row)} values but the box has {n} chordwise points "
+                                "(box.points[0])", f"{key}.rows[{k}]")
+        return Shape(spec.get("upper"), spec.get("lower"), sections, rows=rows)
     raise error(f"unknown change '{kind}'", key)  # pragma: no cover (the schema rejects it)

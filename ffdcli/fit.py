@@ -6,16 +6,23 @@ coordinate is linear in the shape values ``a`` while its chordwise coordinate st
 
     eta_s(a) = eta0_s + sum_v B[s, row(v)] a_v.
 
+(``--rows all`` moves every thickness row, not only the upper and lower ones: with l = 5 and a
+cubic in thickness, the outer rows have no influence on points half-way up the box, such as the
+leading and trailing edges, so the edge-rows-only fit is poor there.)
+
 The target airfoil (Selig or Lednicer file) is placed on the mesh airfoil's chord line (same
 leading and trailing edge), split at its leading edge into an upper and a lower branch, and
 interpolated at each surface point's chordwise position on the point's own side. The fit solves
 the Tikhonov-regularised linear least-squares problem
 
-    min_a |A a - (eta_T - eta0)|^2 + lam |a|^2,   lam = 1e-8 * |A|_F^2 / n_vars,
+    min_a |W (A a - (eta_T - eta0))|^2 + lam |a|^2,   lam = 1e-8 * |W A|_F^2 / n_vars,
+
+with W the thickness component of the target's unit normal at each point (so that the residual is
+the linearised normal distance, not the vertical one that blows up at the leading edge),
 
 whose small ``lam`` only pins down control points that the surface barely sees (it changes the
 residual by far less than the mesh resolution). Deviations are reported in chord units, as the
-thickness-wise distance between the deformed surface and the target at the same chordwise position.
+distance of each deformed surface point to the target polyline.
 """
 
 from __future__ import annotations
@@ -35,17 +42,22 @@ REG = 1e-8
 class FitProblem:
     """The linear model of one airfoil fit, in chord units."""
 
-    A: np.ndarray          # (S, 2n) d eta / d (upper[0..n-1], lower[0..n-1])
-    rhs: np.ndarray        # (S,) target minus original thickness coordinate
+    A: np.ndarray          # (S, n_cols) d eta / d (value of each moved control point), weighted
+    rhs: np.ndarray        # (S,) weighted target minus original thickness coordinate
+    weight: np.ndarray     # (S,) |n_eta| of the target at each point: vertical -> normal distance
+    columns: list          # (i, k) control point of each column
     chord: float
     n: int
+    l: int
+    xi: np.ndarray         # (S,) chordwise position of each surface point (chords)
+    eta: np.ndarray        # (S,) original thickness position (chords)
+    target: np.ndarray     # (K, 2) the placed target polyline (xi, eta), Selig order
 
 
-def place_target(coords: np.ndarray, le: np.ndarray, te: np.ndarray, thickness_dir2: np.ndarray):
-    """Put a unit-chord-ish airfoil (K, 2) on the chord line from ``le`` to ``te`` (2D points).
+def place_target(coords: np.ndarray):
+    """(xi, eta) in chord units of an airfoil (K, 2), leading edge at 0, trailing edge at (1, 0).
 
-    Returns the target's (upper, lower) branches as (xi, eta) arrays in chord units with xi from
-    0 (leading edge) to 1 (trailing edge), eta along the mesh thickness direction."""
+    Returns the placed polyline (K, 2) and its upper and lower branches, each (xi, eta) sorted by xi."""
     c = np.asarray(coords, dtype=np.float64)
     te_t = 0.5 * (c[0] + c[-1])
     i_le = int(np.argmax(np.hypot(*(c - te_t).T)))
@@ -60,7 +72,8 @@ def place_target(coords: np.ndarray, le: np.ndarray, te: np.ndarray, thickness_d
     lower = (xi[i_le:], eta[i_le:])
     if np.mean(upper[1]) < np.mean(lower[1]):      # a file running the other way round
         upper, lower = lower, upper
-    return _monotone(*upper), _monotone(*lower)
+        eta = -eta
+    return np.c_[xi, eta], _monotone(*upper), _monotone(*lower)
 
 
 def _monotone(xi: np.ndarray, eta: np.ndarray):
@@ -70,8 +83,25 @@ def _monotone(xi: np.ndarray, eta: np.ndarray):
     return xi[keep], eta[keep]
 
 
-def build_problem(run, target: np.ndarray) -> FitProblem:
-    """The linear least-squares model for the 2D design ``run`` (``ffdcli.pipeline.DesignRun``)."""
+def distance_to_polyline(p: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Distance (S,) from points (S, 2) to the polyline (K, 2) (vectorised over all segments)."""
+    a, b = poly[:-1], poly[1:]
+    ab = b - a
+    L2 = np.maximum(np.einsum("kd,kd->k", ab, ab), 1e-300)
+    out = np.full(len(p), np.inf)
+    for lo in range(0, len(p), 2048):          # bounded memory: 2048 x K pairs at a time
+        q = p[lo:lo + 2048, None, :]
+        t = np.clip(np.einsum("skd,kd->sk", q - a, ab) / L2, 0.0, 1.0)
+        d = np.linalg.norm(q - (a + t[..., None] * ab), axis=2)
+        out[lo:lo + 2048] = d.min(axis=1)
+    return out
+
+
+def build_problem(run, target: np.ndarray, rows: str = "edge") -> FitProblem:
+    """The linear least-squares model for the 2D design ``run`` (``ffdcli.pipeline.DesignRun``).
+
+    ``rows="edge"``: the upper (k = l-1) and lower (k = 0) rows move, as the design file's
+    ``shape: {upper, lower}``; ``rows="all"``: every thickness row (``shape: {rows}``)."""
     box, emb, surf = run.box, run.prep.embedding, run.prep.surface
     if box.dim != 2:
         raise InputError("ffd fit works on 2D airfoil meshes; this design's mesh is 3D",
@@ -88,43 +118,58 @@ def build_problem(run, target: np.ndarray) -> FitProblem:
     X = surf.points[:, [ca, ta]]
     xi = (X - le) @ e1 / chord
     eta = (X - le) @ e2 / chord
-    (xu, yu), (xl, yl) = place_target(target, le, te, e2)
+    poly, (xu, yu), (xl, yl) = place_target(target)
     upper_side = eta >= 0
     eta_t = np.where(upper_side, np.interp(xi, xu, yu), np.interp(xi, xl, yl))
-    # Columns: unit thickness move of control point (i, 0, k) -> surface thickness moves.
-    A = np.zeros((len(X), 2 * n))
-    t_dir = np.zeros(2)
-    t_dir[1] = 1.0            # the core's 2D coordinates are (chord axis, thickness axis)
-    for col, (i, k) in enumerate([(i, l - 1) for i in range(n)] + [(i, 0) for i in range(n)]):
+    slope = np.where(upper_side, np.interp(xi, xu, np.gradient(yu, xu)), np.interp(xi, xl, np.gradient(yl, xl)))
+    weight = 1.0 / np.sqrt(1.0 + slope ** 2)
+    cols = [(i, l - 1) for i in range(n)] + [(i, 0) for i in range(n)] if rows == "edge" else \
+        [(i, k) for k in range(l) for i in range(n)]
+    A = np.zeros((len(X), len(cols)))
+    for c, (i, k) in enumerate(cols):
         dP = np.zeros((n, l, 2))
-        dP[i, k] = t_dir
-        d = emb.displace(dP)                      # (S, 2) in (chord, thickness) mesh coordinates
-        A[:, col] = (d @ e2) / chord
-    return FitProblem(A=A, rhs=eta_t - eta, chord=chord, n=n)
+        dP[i, k, 1] = 1.0       # the core's 2D coordinates are (chord axis, thickness axis)
+        d = emb.displace(dP)
+        A[:, c] = (d @ e2) / chord
+    return FitProblem(A=A * weight[:, None], rhs=(eta_t - eta) * weight, weight=weight, columns=cols,
+                      chord=chord, n=n, l=l, xi=xi, eta=eta, target=poly)
 
 
 def solve(problem: FitProblem, reg: float = REG):
-    """Shape values (upper (n,), lower (n,)) in mesh units, and the residual before/after."""
+    """Values (one per column, mesh units) and the deviation before/after in chord units.
+
+    The deviation is the distance of each surface point to the target polyline."""
     A, r = problem.A, problem.rhs
     lam = reg * float(np.sum(A * A)) / A.shape[1]
     M = A.T @ A + lam * np.eye(A.shape[1])
     a = np.linalg.solve(M, A.T @ r)
-    after = A @ a - r
-    stats = {"before": {"rms": float(np.sqrt(np.mean(r ** 2))), "max": float(np.abs(r).max())},
-             "after": {"rms": float(np.sqrt(np.mean(after ** 2))), "max": float(np.abs(after).max())}}
-    vals = a * problem.chord
-    return vals[: problem.n], vals[problem.n:], stats
+    moved = (A / problem.weight[:, None]) @ a
+    d0 = distance_to_polyline(np.c_[problem.xi, problem.eta], problem.target)
+    d1 = distance_to_polyline(np.c_[problem.xi, problem.eta + moved], problem.target)
+    stats = {"before": {"rms": float(np.sqrt(np.mean(d0 ** 2))), "max": float(d0.max())},
+             "after": {"rms": float(np.sqrt(np.mean(d1 ** 2))), "max": float(d1.max())}}
+    return a * problem.chord, stats
 
 
-def fitted_design_data(design, upper, lower, out_path: Path) -> dict:
+def shape_spec(problem: FitProblem, values: np.ndarray) -> dict:
+    """The ``shape`` change of the fitted values."""
+    n, l = problem.n, problem.l
+    grid = np.zeros((l, n))
+    for (i, k), v in zip(problem.columns, values):
+        grid[k, i] = v
+    if len(problem.columns) == 2 * n:
+        return {"upper": grid[l - 1].tolist(), "lower": grid[0].tolist(), "sections": "all"}
+    return {"rows": grid.tolist(), "sections": "all"}
+
+
+def fitted_design_data(design, shape: dict, out_path: Path) -> dict:
     """The design file's data with its shape change replaced by the fitted values (paths rebased)."""
     import copy
 
     data = copy.deepcopy(design.data)
     base = Path(out_path).resolve().parent
     data["mesh"] = os.path.relpath(Path(design.mesh).resolve(), base)
-    shape = {"shape": {"upper": [float(v) for v in upper], "lower": [float(v) for v in lower],
-                       "sections": "all"}}
+    shape = {"shape": shape}
     changes = [c for c in data.get("changes") or [] if "shape" not in c]
     data["changes"] = changes + [shape]
     output = data.get("output") or {}
@@ -136,7 +181,8 @@ def fitted_design_data(design, upper, lower, out_path: Path) -> dict:
     return data
 
 
-def fit_design(config, target_file, out_yaml=None, *, overrides=(), progress=None, reg: float = REG) -> dict:
+def fit_design(config, target_file, out_yaml=None, *, overrides=(), rows: str = "edge", progress=None,
+               reg: float = REG) -> dict:
     """Fit the shape of 2D design ``config`` to ``target_file``; write ``out_yaml`` if given."""
     import yaml
 
@@ -156,14 +202,15 @@ def fit_design(config, target_file, out_yaml=None, *, overrides=(), progress=Non
         check_writable(out_yaml, inputs=(design.mesh, design.path))
     target = read_airfoil(target_file)
     run = load_run(design, progress=progress)
-    problem = build_problem(run, target.coords)
-    upper, lower, stats = solve(problem, reg)
+    problem = build_problem(run, target.coords, rows)
+    values, stats = solve(problem, reg)
+    shape = shape_spec(problem, values)
     report = {"design": str(design.path), "target": str(target_file), "name": target.name,
               "lattice": list(run.box.lattice_shape), "chord": problem.chord,
               "points": int(len(problem.rhs)), **stats,
-              "upper": upper.tolist(), "lower": lower.tolist()}
+              "rows": rows, "shape": shape}
     if out_yaml is not None:
-        data = fitted_design_data(design, upper, lower, Path(out_yaml))
+        data = fitted_design_data(design, shape, Path(out_yaml))
         with atomic_write(out_yaml, "w") as fh:
             fh.write(f"# fitted by ffd fit to {Path(target_file).name} ({target.name}): max deviation "
                      f"{stats['before']['max']:.5f} -> {stats['after']['max']:.5f} chords\n")

@@ -17,8 +17,11 @@ from ffdcli.cli import cli, common_options
               help="Write the design file with the fitted shape (default: <design>_fitted.yaml).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a value of the design file, e.g. --set box.points=[12,5].")
+@click.option("--rows", type=click.Choice(["edge", "all"]), default="edge", show_default=True,
+              help="edge: move the upper and lower lattice rows (shape: {upper, lower}); all: every "
+                   "thickness row (shape: {rows}), a much closer fit when l > 2.")
 @common_options
-def fit_cmd(design_file, target, output, overrides, console):
+def fit_cmd(design_file, target, output, overrides, rows, console):
     """Find the `shape` values (upper and lower lattice rows) of a 2D design that make its airfoil
     best match TARGET, by linear least squares, and write them as a design file.
 
@@ -35,7 +38,7 @@ def fit_cmd(design_file, target, output, overrides, console):
     from ffdcli.fit import fit_design
 
     out = Path(output) if output else Path(design_file).with_name(Path(design_file).stem + "_fitted.yaml")
-    rep = fit_design(design_file, target, out, overrides=overrides, progress=console.progress)
+    rep = fit_design(design_file, target, out, overrides=overrides, rows=rows, progress=console.progress)
     b, a = rep["before"], rep["after"]
     console.result(rep, "\n".join([
         f"ffd fit: {Path(design_file).name} -> {Path(target).name} ({rep['name']}), lattice "
