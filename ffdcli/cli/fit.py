@@ -17,9 +17,9 @@ from ffdcli.cli import cli, common_options
               help="Write the design file with the fitted shape (default: <design>_fitted.yaml).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override a value of the design file, e.g. --set box.points=[12,5].")
-@click.option("--rows", type=click.Choice(["edge", "all"]), default="edge", show_default=True,
-              help="edge: move the upper and lower lattice rows (shape: {upper, lower}); all: every "
-                   "thickness row (shape: {rows}), a much closer fit when l > 2.")
+@click.option("--rows", type=click.Choice(["all", "edge"]), default="all", show_default=True,
+              help="all: move every thickness row of the lattice (shape: {rows: ...}); edge: only the "
+                   "upper and lower rows (shape: {upper, lower}), as in the paper, a much looser fit.")
 @common_options
 def fit_cmd(design_file, target, output, overrides, rows, console):
     """Find the `shape` values (upper and lower lattice rows) of a 2D design that make its airfoil
