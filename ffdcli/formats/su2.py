@@ -420,7 +420,8 @@ class _Parser:
                 where = "an interior element (NELEM=)" if interior else "a boundary element (marker)"
                 raise self.error(f"a {VTK_TYPE[t]} (type {t}) cannot be {where} of a {self.ndim}D mesh",
                                  line + i)
-            for t in np.unique(types).tolist():
+            uniq, first_at = np.unique(types, return_index=True)
+            for t in uniq[np.argsort(first_at)].tolist():      # order of first appearance
                 rows = np.flatnonzero(types == t)
                 ids = values[first[rows, None] + 1 + np.arange(_NODES_BY_ID[t])]
                 if len(ids):
