@@ -70,7 +70,8 @@ def test_vtk_reads_names_and_tags(tmp_path):
 
 def test_plain_vtu_gives_volume_cells_and_no_markers(tmp_path):
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
-    meshio.write(tmp_path / "plain.vtu", meshio.Mesh(pts, [("triangle", [[0, 1, 2]]), ("tetra", [[0, 1, 2, 3]])]))
+    cells = [("triangle", [[0, 1, 2]]), ("tetra", [[0, 1, 2, 3]])]
+    meshio.write(tmp_path / "plain.vtu", meshio.Mesh(pts, cells))
     m = read_mesh(tmp_path / "plain.vtu")
     assert m.dim == 3 and m.markers == {}
     assert [(b.type, len(b)) for b in m.cells] == [("tetra", 1)]
@@ -79,7 +80,8 @@ def test_plain_vtu_gives_volume_cells_and_no_markers(tmp_path):
 def test_2d_mesh_round_trip(tmp_path):
     pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
     m = Mesh(points=pts, dim=2, cells=[CellBlock("triangle", [[0, 1, 2], [0, 2, 3]])],
-             markers={"airfoil": [CellBlock("line", [[0, 1]])], "farfield": [CellBlock("line", [[2, 3], [3, 0]])]})
+             markers={"airfoil": [CellBlock("line", [[0, 1]])],
+                      "farfield": [CellBlock("line", [[2, 3], [3, 0]])]})
     for ext in ("vtu", "vtk"):
         write_mesh(m, tmp_path / f"m.{ext}")
         same(m, read_mesh(tmp_path / f"m.{ext}"))
