@@ -295,3 +295,33 @@ def test_real_file_counts():
     assert list(m.markers) == ["x_m", "x_p", "y_m", "y_p", "z_m", "z_p"]
     m2 = su2.read(shared_file("oneram6/mesh_ONERAM6_gmsh_coarse.su2"))
     assert list(m2.markers) == ["WING", "FARFIELD", "SYMMETRY"]
+
+
+def test_crlf_file_patch_keeps_line_endings(tmp_path):
+    src = tmp_path / "crlf.su2"
+    src.write_bytes((HEX2 + FFD_TAIL).replace("\n", "\r\n").encode())
+    m = su2.read(src)
+    assert list(m.markers) == ["Wing Lower-1", "far", "tip_tri"]         # no stray '\r' in names
+    write_mesh(m, tmp_path / "same.su2")
+    assert (tmp_path / "same.su2").read_bytes() == src.read_bytes()
+    pts = m.points.copy()
+    pts[0] = [0.25, -0.5, 1e-300]
+    write_mesh(m, tmp_path / "moved.su2", pts)
+    new = (tmp_path / "moved.su2").read_bytes()
+    assert new.count(b"\r\n") == src.read_bytes().count(b"\r\n") and new.count(b"\n") == new.count(b"\r\n")
+    np.testing.assert_array_equal(su2.read(tmp_path / "moved.su2").points, pts)
+
+
+def test_header_extras_are_ignored(tmp_path):
+    text = HEX2.replace("NDIME= 3\n", "NDIME= 3\nAOA_OFFSET= 1.5\n\n% comment\n")
+    m = su2.read(write_text(tmp_path, "x.su2", text))
+    assert m.n_points == 12 and len(m.markers) == 3
+
+
+def test_2d_write_needs_flat_z(tmp_path):
+    m = su2.read(write_text(tmp_path, "tri.su2", TRI2D))
+    pts = m.points.copy()
+    pts[1, 2] = 0.5
+    with pytest.raises(InputError, match="z = constant"):
+        su2.write(m, tmp_path / "out.su2", pts)
+    assert not (tmp_path / "out.su2").exists()

@@ -92,7 +92,11 @@ def read(path: str | Path, progress=None) -> Mesh:
 
     path = Path(path)
     progress = progress or no_progress
-    if path.stat().st_size == 0:
+    try:
+        size = path.stat().st_size
+    except OSError as e:
+        raise InputError(f"cannot open: {e.strerror or e}", path=path) from None
+    if size == 0:
         raise InputError(f"the file is empty; expected a {_format(path).upper()} unstructured grid",
                          path=path)
     with progress(f"reading {path.name}", 1) as bar, _quiet_meshio(path, "read"):
