@@ -325,3 +325,25 @@ def test_2d_write_needs_flat_z(tmp_path):
     with pytest.raises(InputError, match="z = constant"):
         su2.write(m, tmp_path / "out.su2", pts)
     assert not (tmp_path / "out.su2").exists()
+
+
+def test_compiled_int_parser_matches_numpy(tmp_path):
+    """The numba row parser gives what the NumPy path gives, and refuses what it cannot parse."""
+    kernels = pytest.importorskip("ffdcli.formats._su2_kernels")
+    rng = np.random.default_rng(2)
+    rows = [rng.integers(-10**12, 10**12, size=rng.integers(1, 9)) for _ in range(500)]
+    seps = [" ", "\t", "  ", " \t"]
+    text = "".join(" " * int(rng.integers(0, 3)) + seps[i % 4].join(map(str, r)) + ("\r\n" if i % 3 else "\n")
+                   for i, r in enumerate(rows)).encode()
+    values, first, count, ok = kernels.parse_int_rows(np.frombuffer(text, np.uint8), len(rows))
+    assert ok
+    np.testing.assert_array_equal(values, np.concatenate(rows))
+    np.testing.assert_array_equal(count, [len(r) for r in rows])
+    np.testing.assert_array_equal(first, np.cumsum([0] + [len(r) for r in rows[:-1]]))
+    for bad in (b"1 2 x\n", b"1 2.0\n", b"1 -\n", b"1 12345678901234567890\n"):
+        assert not kernels.parse_int_rows(np.frombuffer(bad, np.uint8), 1)[3]
+    for text in (HEX2, TRI2D, MIXED3D):
+        p = write_text(tmp_path, "m.su2", text)
+        _same_mesh(su2.read(p, fast_ints=True), su2.read(p, fast_ints=False))
+    real = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
+    _same_mesh(su2.read(real, fast_ints=True), su2.read(real, fast_ints=False))

@@ -89,13 +89,14 @@ class Su2Source:
 # reading
 
 
-def read(path: str | Path, progress=None) -> Mesh:
+def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
     """Read an SU2 ASCII mesh (2D or 3D, all element types, any number of markers).
 
     Returns a :class:`Mesh` with points (N, 3) float64 (z = 0 when ``NDIME= 2``), interior cells
     grouped by type (file order within a type), and markers by their exact names (the text after
     ``MARKER_TAG=`` without surrounding blanks), each a list of cell blocks with point ids as in
-    the file. ``mesh.source`` is a :class:`Su2Source` for :func:`write`.
+    the file. ``mesh.source`` is a :class:`Su2Source` for :func:`write`. ``fast_ints=False``
+    parses the element rows with NumPy only (the reference for the compiled parser).
 
     Raises InputError naming the file and line for a missing keyword, a truncated or non-numeric
     block, an unknown element type or a wrong number of point ids for its type, a point id outside
@@ -115,7 +116,7 @@ def read(path: str | Path, progress=None) -> Mesh:
         mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     try:
         with progress(f"reading {path.name}", st.st_size) as bar:
-            parser = _Parser(mm, path, bar)
+            parser = _Parser(mm, path, bar, fast_ints=fast_ints)
             parser.parse()
     finally:
         mm.close()
@@ -136,7 +137,7 @@ class _Block:
 class _Parser:
     """Walks the file once: header lines one by one, numeric blocks a chunk of lines at a time."""
 
-    def __init__(self, mm: mmap.mmap, path: Path, bar):
+    def __init__(self, mm: mmap.mmap, path: Path, bar, fast_ints: bool = True):
         self.mm, self.path, self.bar = mm, path, bar
         self.size = len(mm)
         self.pos = 0          # byte offset of the next line
@@ -153,6 +154,7 @@ class _Parser:
         self.marker_blocks: list[tuple[str, _Block, tuple[int, int]]] = []
         self.seen: dict[str, int] = {}
         self.last_block: _Block | None = None
+        self.fast_ints = fast_ints
 
     # -- small helpers -------------------------------------------------------------------------
     def error(self, message: str, line: int | None = None, hint: str | None = None) -> InputError:
@@ -384,6 +386,21 @@ class _Parser:
                        np.concatenate(cs).astype(np.int64) if cs else empty,
                        np.concatenate(ce).astype(np.int64) if ce else empty, sep)
 
+    def int_rows(self, buf: bytes, starts, ends, first_line: int, b: _Block):
+        """(values, first, count) of integer rows: the compiled parser when numba is available and
+        the rows are well formed, else the NumPy path (which also names a bad line)."""
+        if self.fast_ints:
+            try:
+                from ffdcli.formats._su2_kernels import parse_int_rows
+            except ImportError:                    # numba missing: NumPy only
+                parse_int_rows = None
+            if parse_int_rows is not None:
+                values, first, count, ok = parse_int_rows(np.frombuffer(buf, dtype=np.uint8), len(ends))
+                if ok:
+                    return values, first, count
+        values, _, _, first, count = self.tokens(buf, starts, ends, first_line, np.int64, b)
+        return values, first, count
+
     def read_elements(self, b: _Block, *, interior: bool, npoin: int | None = None):
         """Cell blocks of an element block (NELEM or a marker), grouped by type in order of first
         appearance, and the (min, max) point id seen. Checks types and node counts per row, and
@@ -391,7 +408,7 @@ class _Parser:
         parts: dict[int, list[np.ndarray]] = {}
         lo, hi = np.iinfo(np.int64).max, -1
         for _, buf, starts, ends, line in self.chunks(b, advance=npoin is None):
-            values, _, _, first, count = self.tokens(buf, starts, ends, line, np.int64, b)
+            values, first, count = self.int_rows(buf, starts, ends, line, b)
             if np.any(count == 0):
                 i = int(np.flatnonzero(count == 0)[0])
                 raise self.error(f"empty line inside the {b.rows} rows of {b.key}= (line {b.key_line})",
