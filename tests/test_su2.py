@@ -224,6 +224,21 @@ def test_bad_input_names_file_and_line(tmp_path, case):
     assert "\n" not in str(e)
 
 
+@pytest.mark.parametrize("case", sorted(BAD))
+def test_bad_input_through_cli_in_process(tmp_path, case, capsys):
+    """Every bad input through the command line's main(): exit 2, one line naming file and line."""
+    from ffdcli.cli import main
+
+    text, msg, line = BAD[case]
+    p = write_text(tmp_path, f"{case}.su2", text)
+    with pytest.raises(SystemExit) as ex:
+        main(["inspect", str(p)])
+    err = capsys.readouterr().err
+    assert ex.value.code == 2
+    assert err.count("\n") == 1 and err.startswith("ffd: error: ") and "Traceback" not in err
+    assert (f"{p}:{line}: " if line else f"{p}: ") in err and msg in err
+
+
 @pytest.mark.parametrize("case", ["empty", "truncated_elem", "duplicate_marker", "unknown_type"])
 def test_bad_input_through_cli(tmp_path, case):
     text, msg, _ = BAD[case]
