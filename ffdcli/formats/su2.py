@@ -15,7 +15,9 @@ The file is a sequence of ``KEY= value`` lines, each count followed by that many
 
 Reading is vectorised: the numeric blocks are cut into chunks of whole lines, every chunk is parsed
 by one ``np.fromstring`` call, and the rows are found from the whitespace/newline structure of the
-bytes (no Python loop over points or elements). Lines outside the blocks may be blank, ``%``
+bytes (no Python loop over points or elements). Element rows (integers) go through a compiled
+single-pass parser (:mod:`ffdcli.formats._su2_kernels`, numba) when numba is installed; the NumPy
+path is the reference and also produces the error messages. Lines outside the blocks may be blank, ``%``
 comments or other ``KEY= value`` lines (``AOA_OFFSET=``, ...); reading stops after the last marker,
 so an appended FFD section is ignored. Multi-zone files (``NZONE=`` > 1) are refused.
 
