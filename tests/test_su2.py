@@ -342,8 +342,9 @@ def test_2d_write_needs_flat_z(tmp_path):
     assert not (tmp_path / "out.su2").exists()
 
 
-def test_compiled_int_parser_matches_numpy(tmp_path):
+def test_compiled_int_parser_matches_numpy(tmp_path, monkeypatch):
     """The numba row parser gives what the NumPy path gives, and refuses what it cannot parse."""
+    monkeypatch.setattr(su2, "FAST_INT_ROWS", 0)          # use it for small blocks too
     kernels = pytest.importorskip("ffdcli.formats._su2_kernels")
     rng = np.random.default_rng(2)
     rows = [rng.integers(-10**12, 10**12, size=rng.integers(1, 9)) for _ in range(500)]

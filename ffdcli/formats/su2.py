@@ -46,6 +46,9 @@ from ffdcli.progress import no_progress
 
 #: Bytes of the file parsed at a time (whole lines): bounds the temporary arrays of a block.
 CHUNK_BYTES = 1 << 23
+#: Element blocks with at least this many rows use the compiled parser (importing numba costs ~0.5 s,
+#: more than NumPy needs for a block this size).
+FAST_INT_ROWS = 200_000
 #: Rows of points formatted at a time by the writer.
 WRITE_ROWS = 1 << 16
 #: Largest SU2 element type id; _NODES_BY_ID[t] is the node count of type t, -1 if t is unknown.
@@ -391,7 +394,7 @@ class _Parser:
     def int_rows(self, buf: bytes, starts, ends, first_line: int, b: _Block):
         """(values, first, count) of integer rows: the compiled parser when numba is available and
         the rows are well formed, else the NumPy path (which also names a bad line)."""
-        if self.fast_ints:
+        if self.fast_ints and b.rows >= FAST_INT_ROWS:
             try:
                 from ffdcli.formats._su2_kernels import parse_int_rows
             except ImportError:                    # numba missing: NumPy only
