@@ -363,3 +363,12 @@ def test_compiled_int_parser_matches_numpy(tmp_path, monkeypatch):
         _same_mesh(su2.read(p, fast_ints=True), su2.read(p, fast_ints=False))
     real = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
     _same_mesh(su2.read(real, fast_ints=True), su2.read(real, fast_ints=False))
+
+
+def test_non_finite_points_are_refused(tmp_path):
+    m = su2.read(write_text(tmp_path, "hex.su2", HEX2))
+    pts = m.points.copy()
+    pts[3, 1] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        su2.write(m, tmp_path / "out.su2", pts)
+    assert not (tmp_path / "out.su2").exists()

@@ -533,6 +533,8 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     points = np.asarray(points, dtype=np.float64)
     if points.shape != mesh.points.shape:
         raise ValueError(f"points {points.shape} do not match the mesh {mesh.points.shape}")
+    if not np.isfinite(points).all():
+        raise ValueError("cannot write non-finite point coordinates (NaN or inf)")
     src = mesh.source if mesh.format == "su2" and isinstance(mesh.source, Su2Source) else None
     ndim = src.ndim if src is not None else mesh.dim
     if ndim == 2 and len(points) and np.ptp(points[:, 2]) != 0:
