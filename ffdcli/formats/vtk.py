@@ -238,6 +238,8 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     points = np.asarray(points, dtype=np.float64)
     if points.shape != mesh.points.shape:
         raise ValueError(f"points {points.shape} do not match the mesh {mesh.points.shape}")
+    if not np.isfinite(points).all():
+        raise ValueError("cannot write non-finite point coordinates (NaN or inf)")
     cells, tags = [], []
     for b in mesh.cells:
         cells.append((b.type, b.data))
