@@ -361,6 +361,11 @@ def test_compiled_int_parser_matches_numpy(tmp_path, monkeypatch):
     for text in (HEX2, TRI2D, MIXED3D):
         p = write_text(tmp_path, "m.su2", text)
         _same_mesh(su2.read(p, fast_ints=True), su2.read(p, fast_ints=False))
+
+
+def test_compiled_int_parser_on_real_file(monkeypatch):
+    pytest.importorskip("ffdcli.formats._su2_kernels")
+    monkeypatch.setattr(su2, "FAST_INT_ROWS", 0)
     real = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
     _same_mesh(su2.read(real, fast_ints=True), su2.read(real, fast_ints=False))
 
