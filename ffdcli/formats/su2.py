@@ -311,6 +311,7 @@ class _Parser:
             starts[0] = 0
             starts[1:] = ends[:-1] + 1
             yield pos, buf, starts, ends, line
+            _release(self.mm, pos, len(buf))
             n = len(ends)
             if advance:
                 self.bar.update(len(buf))
@@ -511,6 +512,18 @@ class _Parser:
                     path=self.path, format="su2", source=source)
 
 
+def _release(mm: mmap.mmap, start: int, length: int) -> None:
+    """Drop parsed pages of the read-only map from this process's resident set (they stay in the
+    page cache and fault back in if read again), so peak memory does not include the whole file."""
+    page = mmap.PAGESIZE
+    a = (start // page) * page
+    if hasattr(mm, "madvise") and hasattr(mmap, "MADV_DONTNEED") and length > 0:
+        try:
+            mm.madvise(mmap.MADV_DONTNEED, a, start + length - a)
+        except (OSError, ValueError):
+            pass
+
+
 def _show(s: bytes, limit: int = 40) -> str:
     t = s.decode("utf-8", errors="replace")
     return repr(t if len(t) <= limit else t[:limit] + "...")
@@ -570,6 +583,7 @@ def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points: np.ndarray, p
             for a in range(0, n, WRITE_ROWS):
                 b = min(n, a + WRITE_ROWS)
                 out.write(_patch_rows(mm, src, points, a, b))
+                _release(mm, int(src.row_start[a]), int(src.row_start[b] - src.row_start[a]))
                 bar.update(b - a)
             _copy(mm, src.block_end, len(mm), out)
     finally:
@@ -579,6 +593,7 @@ def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points: np.ndarray, p
 def _copy(mm: mmap.mmap, start: int, stop: int, out, step: int = 1 << 26) -> None:
     for a in range(start, stop, step):
         out.write(mm[a:min(stop, a + step)])
+        _release(mm, a, min(stop, a + step) - a)
 
 
 def _patch_rows(mm: mmap.mmap, src: Su2Source, points: np.ndarray, a: int, b: int) -> bytes:
