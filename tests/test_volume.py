@@ -54,7 +54,6 @@ def runs(tmp_path_factory):
 @pytest.mark.parametrize("case", list(CASES))
 def test_volume_follows_without_inverting(runs, tmp_path, mesh, case):
     from ffdcli.design import build_changes
-    from ffdcli.warp import marker_roles, WarpSettings
 
     run = runs[mesh]
     design = load_design(design_for(tmp_path, mesh, CASES[case]))
@@ -71,11 +70,9 @@ def test_volume_follows_without_inverting(runs, tmp_path, mesh, case):
     far = np.setdiff1d(far, surf.ids)
     np.testing.assert_array_equal(res.points[far], mesh_obj.points[far])
     # symmetry nodes stay on their plane (span coordinate 0 exactly)
-    roles = marker_roles(mesh_obj.points, mesh_obj.markers, ["wing"], 3, WarpSettings(), path=mesh_obj.path)
     sym = np.setdiff1d(mesh_obj.marker_point_ids("symmetry"), surf.ids)
     span_axis = run.box.axes.span
     assert np.abs(res.points[sym, span_axis]).max() <= 1e-12
-    assert "symmetry" in [s.name for s in roles.sliding] if hasattr(roles.sliding[0], "name") else True
     # something did move in the volume
     vol = np.setdiff1d(np.arange(mesh_obj.n_points), np.r_[surf.ids, far, sym])
     assert np.abs(res.points[vol] - mesh_obj.points[vol]).max() > 1e-4
@@ -109,4 +106,4 @@ def test_ffd_check_on_a_good_mesh(tmp_path):
     proc = run_ffd("check", str(SAMPLES / "naca0012_2d.su2"), "--json")
     assert proc.returncode == 0, proc.stderr
     s = json.loads(proc.stdout)
-    assert s["inverted"] == 0 if "inverted" in s else s["quality"]["inverted"] == 0
+    assert s["inverted"] == 0 and s["cells"] == 6400
