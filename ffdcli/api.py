@@ -15,7 +15,8 @@ Derivatives are exact (no finite differences):
 * surface: ``dX/dv = B dP'/dv`` (:mod:`ffdcli.derivatives`);
 * volume (``volume.method: idw``): the warp is linear in the surface translations ``b`` and rotation
   parts ``M = R - I`` (:func:`ffdcli.warp.warp_vjp` is its transpose), and the rotation ``R`` of a
-  surface point is the polar factor of ``F = J(P') J(P0)^-1``. Its derivative is ``dR = R Omega``
+  surface point is the polar factor of the surface-frame gradient F_s of ``F = J(P') J(P0)^-1``
+  (:mod:`ffdcli.rotations`, with its derivative). The polar factor's derivative is ``dR = R Omega``
   with ``Omega`` skew solving ``Omega U + U Omega = R^T dF - dF^T R`` (``U = R^T F``), i.e. in 3D
   ``(tr(U) I - U) omega = axial(R^T dF - dF^T R)``; in 2D the angle's derivative in closed form.
 """
@@ -185,42 +186,32 @@ class DesignModel:
     def _rotation_jacobian(self):
         """dR/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice)."""
         from ffdcli.lattice import derivatives
+        from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
+        from ffdcli.warp import rotations_from_deformation_gradient
 
         run, box, emb = self.run, self.run.box, self.run.prep.embedding
         S = len(emb.inside)
-        ins = np.flatnonzero(emb.inside)
         out = np.zeros((self.n_vars, S, 3, 3))
+        P1 = self.lattice()
+        ins, F, n0 = run._frame_gradient_inputs(P1)
         if not len(ins) or not self.n_vars:
             return out
-        P1 = self.lattice()
         J0inv = np.linalg.inv(derivatives(box.lattice(run.P0), emb.params[ins]))
-        J1 = derivatives(box.lattice(P1), emb.params[ins])
         D = self.lattice_jacobian().reshape(*P1.shape, self.n_vars)
-        ax = box.plane_axes
-
-        def full(Fc):
-            if box.dim == 3:
-                return Fc
-            F3 = np.zeros((Fc.shape[0], 3, 3))
-            F3[:, ax[0], ax[0]] = Fc[:, 0, 0]
-            F3[:, ax[0], ax[1]] = Fc[:, 0, 1]
-            F3[:, ax[1], ax[0]] = Fc[:, 1, 0]
-            F3[:, ax[1], ax[1]] = Fc[:, 1, 1]
-            return F3
-
-        F = full(J1 @ J0inv)
+        Fs = surface_frame_gradient(F, n0)
         if box.dim == 3:
-            from ffdcli.warp import rotations_from_deformation_gradient
-
-            R = rotations_from_deformation_gradient(F)
-            for v in range(self.n_vars):
-                dF = derivatives(box.lattice(D[..., v]), emb.params[ins]) @ J0inv
-                out[v, ins] = polar_rotation_derivative(F, R, dF)
+            R = rotations_from_deformation_gradient(Fs)
         else:
-            F[:, box.axes.span, box.axes.span] = 1.0
-            for v in range(self.n_vars):
-                dF = full(derivatives(box.lattice(D[..., v]), emb.params[ins]) @ J0inv)
-                out[v, ins] = planar_rotation_derivative(F, dF, box.axes.span)
+            Fs3 = run.full3(Fs)
+        for v in range(self.n_vars):
+            dF = derivatives(box.lattice(D[..., v]), emb.params[ins]) @ J0inv
+            dFs = surface_frame_gradient_jvp(F, n0, dF)
+            if box.dim == 3:
+                out[v, ins] = polar_rotation_derivative(Fs, R, dFs)
+            else:
+                dFs3 = run.full3(dFs)
+                dFs3[:, box.axes.span, box.axes.span] = 0.0
+                out[v, ins] = planar_rotation_derivative(Fs3, dFs3, box.axes.span)
         return out
 
     def mesh_vjp(self, g, progress=None) -> np.ndarray:

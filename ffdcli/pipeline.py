@@ -170,31 +170,51 @@ class DesignRun:
         return box.mesh_vectors(self.prep.embedding.displace(dP))
 
     def surface_rotations(self, P: np.ndarray) -> np.ndarray:
-        """(S, 3, 3) local rotation of the FFD map at each surface point (for the volume warp).
+        """(S, 3, 3) local rotation of the wing surface at each surface point (for the volume warp).
 
-        The deformation gradient F = J(P) J(P0)^-1, with J the parametric Jacobian of the lattice
-        at the point's (u, v, w), is split by polar decomposition; the rotation part is returned.
-        Outside points get the identity."""
-        from ffdcli.lattice import derivatives
+        The rotation of the surface frame under the FFD map (see :mod:`ffdcli.rotations`): the polar
+        factor of F on the tangent plane completed by the deformed unit normal. Points outside the
+        lattice (which do not move) get the identity."""
         from ffdcli.warp import rotations_from_deformation_gradient
 
-        box, emb = self.box, self.prep.embedding
-        S = len(emb.inside)
+        box = self.box
+        ins, F, n0 = self._frame_gradient_inputs(P)
+        S = len(self.prep.embedding.inside)
         R = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
-        ins = np.flatnonzero(emb.inside)
         if not len(ins):
             return R
+        from ffdcli.rotations import surface_frame_gradient
+
+        Fs = surface_frame_gradient(F, n0)
+        if box.dim == 2:
+            R[ins] = rotations_from_deformation_gradient(self.full3(Fs), axis=box.axes.span)
+        else:
+            R[ins] = rotations_from_deformation_gradient(Fs)
+        return R
+
+    def _frame_gradient_inputs(self, P: np.ndarray):
+        """(inside point indices, F in core coordinates (k, d, d), unit normals n0 (k, d))."""
+        from ffdcli.lattice import derivatives
+
+        box, emb = self.box, self.prep.embedding
+        n_all = self.prep.surface.normals[:, box.plane_axes]
+        nn = np.linalg.norm(n_all, axis=1)
+        ins = np.flatnonzero(emb.inside & (nn > 0))
+        if not len(ins):
+            return ins, None, None
         J0 = derivatives(box.lattice(self.P0), emb.params[ins])
         J1 = derivatives(box.lattice(P), emb.params[ins])
         F = J1 @ np.linalg.inv(J0)
-        if box.dim == 2:
-            F3 = np.broadcast_to(np.eye(3), (len(ins), 3, 3)).copy()
-            a, b = box.plane_axes
-            F3[:, a, a], F3[:, a, b], F3[:, b, a], F3[:, b, b] = F[:, 0, 0], F[:, 0, 1], F[:, 1, 0], F[:, 1, 1]
-            R[ins] = rotations_from_deformation_gradient(F3, axis=box.axes.span)
-        else:
-            R[ins] = rotations_from_deformation_gradient(F)
-        return R
+        return ins, F, n_all[ins] / nn[ins, None]
+
+    def full3(self, Fc: np.ndarray) -> np.ndarray:
+        """(k, 3, 3) mesh-axis matrices from core-coordinate ones (2D: identity across the plane)."""
+        if self.box.dim == 3:
+            return Fc
+        a, b = self.box.plane_axes
+        F3 = np.broadcast_to(np.eye(3), (len(Fc), 3, 3)).copy()
+        F3[:, a, a], F3[:, a, b], F3[:, b, a], F3[:, b, b] = Fc[:, 0, 0], Fc[:, 0, 1], Fc[:, 1, 0], Fc[:, 1, 1]
+        return F3
 
 
 def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = False,
