@@ -74,6 +74,31 @@ def _draw_view(ax, X0, X1, edges, P0, P1, cols, labels, max_edges=60000):
     ax.autoscale_view()
 
 
+def section_curves(run, result, fractions=(("root", 0.0), ("mid-span", 0.5), ("tip", 0.97))) -> dict:
+    """The airfoil sections drawn: {label: (span coordinate, nearest lattice section j, original (K, 2),
+    deformed (K, 2))} in (chord, thickness) mesh coordinates; the same material points before/after."""
+    from ffdcli.box import surface_edges
+
+    box, surf = run.box, run.prep.surface
+    X0, X1 = surf.points, result.points[surf.ids]
+    edges = surface_edges(surf.faces)
+    c, t, s = box.axes.chord, box.axes.thickness, box.axes.span
+    lo, hi = X0[:, s].min(), X0[:, s].max()
+    out = {}
+    for label, frac in fractions:
+        value = lo + frac * (hi - lo) if box.axes.root == "min" else hi - frac * (hi - lo)
+        if len(edges):
+            a, b, w = _edge_cut(X0, edges, s, value)
+            q0 = (X0[a] + w[:, None] * (X0[b] - X0[a]))[:, [c, t]]
+            q1 = (X1[a] + w[:, None] * (X1[b] - X1[a]))[:, [c, t]]
+        else:
+            near = np.abs(X0[:, s] - value) <= 1e-9 * (hi - lo)
+            q0, q1 = X0[near][:, [c, t]], X1[near][:, [c, t]]
+        j = int(np.argmin(np.abs(box.stations - value)))
+        out[label] = (float(value), j, q0, q1)
+    return out
+
+
 def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110) -> Path:
     """Write a PNG of the design ``run`` deformed into ``result`` (``ffdcli.pipeline``). Returns the path."""
     import matplotlib
@@ -105,19 +130,14 @@ def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110) 
         ax_front = fig.add_subplot(grid[0, 2])
         _draw_view(ax_front, X0, X1, edges, P0, P1, [s, t], [names[2], names[1]])
         ax_front.set_title("front")
-        lo, hi = X0[:, s].min(), X0[:, s].max()
-        for col, (label, frac) in enumerate((("root", 0.01), ("mid-span", 0.5), ("tip", 0.97))):
+        curves = section_curves(run, result)
+        for col, (label, (value, j, q0, q1)) in enumerate(curves.items()):
             ax = fig.add_subplot(grid[1, col])
-            value = lo + frac * (hi - lo) if box.axes.root == "min" else hi - frac * (hi - lo)
-            a, b, w = _edge_cut(X0, edges, s, value) if len(edges) else (None, None, None)
-            if a is not None and len(a):
-                for X, color in ((X0, BLACK), (X1, RED)):
-                    q = X[a] + w[:, None] * (X[b] - X[a])
-                    q2 = q[:, [c, t]]
+            for q2, color in ((q0, BLACK), (q1, RED)):
+                if len(q2):
                     o = _order_loop(q2)
                     ax.plot(np.r_[q2[o, 0], q2[o[:1], 0]], np.r_[q2[o, 1], q2[o[:1], 1]], "-", lw=0.9,
                             color=color)
-            j = int(np.argmin(np.abs(box.stations - value)))
             for P, color in ((P0, GREY), (P1, RED)):
                 Q = P[:, j, :, :][..., [c, t]]
                 ax.plot(Q[..., 0].ravel(), Q[..., 1].ravel(), "o", ms=2.5, color=color, alpha=0.8)
