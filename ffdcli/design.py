@@ -123,7 +123,11 @@ def design_schema() -> dict:
                 "properties": {
                     "method": {"enum": ["idw", "none"]},
                     "a": num, "b": num, "alpha": num,
-                    "ldef": pos, "tolerance": pos, "threshold": num,
+                    "ldef": pos,
+                    "tolerance": {"type": "number", "minimum": 0,
+                                  "description": "tree approximation of the IDW sum (0 = exact)"},
+                    "threshold": {"type": "number",
+                                  "description": "quality gate: cells below it (and halved) fail; default 0.05"},
                     "fixed": names, "sliding": names,
                 }},
             "changes": {
