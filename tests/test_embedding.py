@@ -254,3 +254,17 @@ def test_2d_embedding_with_three_coordinates():
     assert not emb2.inside[0]
     assert emb2.residual[0] == pytest.approx(1e-3, rel=1e-3)
     assert not np.any(emb2.displace(np.ones(lat.control_points.shape)))
+
+
+def test_out_argument_is_filled_and_checked(embedded):
+    lat, u, X, emb = embedded
+    P = lat.control_points
+    buf = np.full((emb.n_points, lat.gdim), np.nan)
+    assert emb.evaluate(P, out=buf) is buf
+    np.testing.assert_array_equal(buf, emb.evaluate(P))
+    assert emb.displace(np.ones_like(P), out=buf) is buf
+    np.testing.assert_array_equal(buf, emb.displace(np.ones_like(P)))
+    for bad in (np.empty((emb.n_points, lat.gdim), dtype=np.float32), np.empty((emb.n_points + 1, lat.gdim)),
+                np.empty((lat.gdim, emb.n_points)).T):
+        with pytest.raises(ValueError, match="out must be"):
+            emb.evaluate(P, out=bad)
