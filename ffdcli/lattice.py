@@ -62,7 +62,8 @@ class Lattice:
         sizes = cp.shape[:-1]
         gdim = cp.shape[-1]
         if not pdim <= gdim <= 3:
-            raise InputError(f"a {pdim}D lattice needs {pdim} or 3 coordinates per control point, got {gdim}")
+            allowed = "3" if pdim == 3 else "2 or 3"
+            raise InputError(f"a {pdim}D lattice needs {allowed} coordinates per control point, got {gdim}")
         if not np.all(np.isfinite(cp)):
             raise InputError("lattice control points contain NaN or infinite coordinates")
         degree = np.atleast_1d(np.asarray(self.degree))

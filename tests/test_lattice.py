@@ -135,8 +135,9 @@ def test_lattice_properties_and_read_only():
 @pytest.mark.parametrize("cp,degree,msg", [
     (np.zeros((4, 3)), 1, "must have shape"),
     (np.zeros((2, 2, 2, 2, 3)), 1, "must have shape"),
-    (np.zeros((4, 4, 4, 2)), 1, "needs 3 or 3 coordinates|coordinates per control point"),
-    (np.zeros((4, 4, 4)), 1, "coordinates per control point"),
+    (np.zeros((4, 4, 4, 2)), 1, "3D lattice needs 3 coordinates per control point, got 2"),
+    (np.zeros((4, 4, 1)), 1, "2D lattice needs 2 or 3 coordinates per control point, got 1"),
+    (np.zeros((4, 4, 4)), 1, "2D lattice needs 2 or 3 coordinates per control point, got 4"),
     (np.full((4, 4, 4, 3), np.nan), 1, "NaN"),
     (wing_grid((4, 4, 4)), (3, 3), "degree needs 3 integers"),
     (wing_grid((4, 4, 4)), (3, 3, 1.5), "degree needs 3 integers"),

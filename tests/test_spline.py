@@ -80,7 +80,7 @@ def test_clamped_knots_rejects_degree_not_below_points(n_ctrl, degree):
     ([0, 0, 0.7, 0.3, 1, 1], 1, None, "non-decreasing"),
     ([0, 0, 0.5, np.nan, 1, 1], 1, None, "finite"),
     ([0, 0.1, 0.5, 1, 1], 1, None, "clamped"),
-    ([0, 0, 0.5, 0.5, 0.5, 1, 1], 2, None, "need at least|clamped|repeated"),
+    ([0, 0, 0.5, 0.5, 0.5, 1, 1], 2, None, "clamped on"),
     ([0, 0, 0, 0.5, 0.5, 0.5, 1, 1, 1], 2, None, "repeated more than the degree"),
 ])
 def test_check_knots_rejects(knots, degree, n_ctrl, msg):
