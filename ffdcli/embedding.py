@@ -144,6 +144,15 @@ class Embedding:
             cp = np.concatenate([cp, np.zeros((cp.shape[0], 3 - gdim))], axis=1)
         return np.ascontiguousarray(cp), gdim
 
+    def _out_array(self, out, gdim: int) -> np.ndarray:
+        if out is None:
+            return np.empty((self.n_points, gdim))
+        if (not isinstance(out, np.ndarray) or out.shape != (self.n_points, gdim) or out.dtype != np.float64
+                or not out.flags.c_contiguous or not out.flags.writeable):
+            raise ValueError(f"out must be a writeable C-contiguous float64 array of shape "
+                             f"({self.n_points}, {gdim})")
+        return out
+
     def _kernel_axes(self):
         """Per-axis (first, values) for the kernels, with a dummy third axis in 2D."""
         if self.pdim == 3:
@@ -153,24 +162,28 @@ class Embedding:
                 _DUMMY_VALUES, False, np.int64(self.shape[1]), np.int64(1))
 
     # ------------------------------------------------------------------ products with B
-    def evaluate(self, control_points) -> np.ndarray:
+    def evaluate(self, control_points, out: np.ndarray | None = None) -> np.ndarray:
         """``B @ P`` for every point (outside points get their nearest lattice point).
 
         Parameters
         ----------
         control_points : array_like, shape (*shape, gdim) or (n_ctrl, gdim)
+        out : ndarray, shape (N, gdim), optional
+            C-contiguous float64 array to write the result into (saves allocating N x gdim, and its
+            page faults, at every call of a deformation loop).
 
         Returns
         -------
         points : ndarray, shape (N, gdim)
+            ``out`` when given.
         """
         cp, gdim = self._control_array(control_points, "control_points")
-        out = np.empty((self.n_points, gdim))
+        out = self._out_array(out, gdim)
         if self.n_points:
             _apply_nb(*self._kernel_axes(), cp, self.inside, False, out)
         return out
 
-    def displace(self, delta_control_points) -> np.ndarray:
+    def displace(self, delta_control_points, out: np.ndarray | None = None) -> np.ndarray:
         """``B @ dP`` with zero rows for outside points: the displacement of every point.
 
         The deformed points are ``X0 + displace(P' - P0)``; a zero change gives exact zeros.
@@ -178,13 +191,16 @@ class Embedding:
         Parameters
         ----------
         delta_control_points : array_like, shape (*shape, gdim) or (n_ctrl, gdim)
+        out : ndarray, shape (N, gdim), optional
+            C-contiguous float64 array to write the result into.
 
         Returns
         -------
         displacement : ndarray, shape (N, gdim)
+            ``out`` when given.
         """
         cp, gdim = self._control_array(delta_control_points, "delta_control_points")
-        out = np.empty((self.n_points, gdim))
+        out = self._out_array(out, gdim)
         if self.n_points:
             _apply_nb(*self._kernel_axes(), cp, self.inside, True, out)
         return out
@@ -253,7 +269,9 @@ _DUMMY_VALUES = np.ones((1, 1))
 # B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
 # ----------------------------------------------------------------------------------------------
 
-@njit(cache=True, parallel=True)
+# "contract" (fused multiply-add) and "reassoc" (reordered sums) make the loop ~15 % faster; results
+# move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"), and a zero dP still gives 0.
+@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
 def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
     npts = f0.shape[0]
     gdim = out.shape[1]

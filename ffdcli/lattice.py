@@ -62,7 +62,8 @@ class Lattice:
         sizes = cp.shape[:-1]
         gdim = cp.shape[-1]
         if not pdim <= gdim <= 3:
-            raise InputError(f"a {pdim}D lattice needs {pdim} or 3 coordinates per control point, got {gdim}")
+            allowed = "3" if pdim == 3 else "2 or 3"
+            raise InputError(f"a {pdim}D lattice needs {allowed} coordinates per control point, got {gdim}")
         if not np.all(np.isfinite(cp)):
             raise InputError("lattice control points contain NaN or infinite coordinates")
         degree = np.atleast_1d(np.asarray(self.degree))
@@ -71,19 +72,19 @@ class Lattice:
         if degree.size != pdim or not np.all(degree == np.round(degree)):
             raise InputError(f"degree needs {pdim} integers (one per direction), got {self.degree!r}")
         degree = tuple(int(d) for d in degree)
-        for axis, (p, n) in enumerate(zip(degree, sizes)):
+        for axis, (p, n) in enumerate(zip(degree, sizes, strict=True)):
             if not 1 <= p <= MAX_DEGREE:
                 raise InputError(f"degree {p} in direction {axis} is not supported: use 1 to {MAX_DEGREE}")
             if p >= n:
                 raise InputError(f"degree {p} in direction {axis} needs more than {p} control points, "
                                  f"the lattice has {n}", hint="lower the degree or add points")
         if self.knots is None:
-            knots = tuple(clamped_knots(n, p) for n, p in zip(sizes, degree))
+            knots = tuple(clamped_knots(n, p) for n, p in zip(sizes, degree, strict=True))
         else:
             if len(self.knots) != pdim:
                 raise InputError(f"a {pdim}D lattice needs {pdim} knot vectors, got {len(self.knots)}")
             try:
-                knots = tuple(check_knots(k, p, n) for k, p, n in zip(self.knots, degree, sizes))
+                knots = tuple(check_knots(k, p, n) for k, p, n in zip(self.knots, degree, sizes, strict=True))
             except ValueError as exc:
                 raise InputError(f"invalid knot vector: {exc}") from None
         cp.setflags(write=False)
