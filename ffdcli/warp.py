@@ -162,6 +162,65 @@ class WarpSettings:
         """``{field name: one-line description}`` for the design-file schema."""
         return {f.name: f.metadata["doc"] for f in fields(cls)}
 
+    @classmethod
+    def from_dict(cls, d: dict | None, path=None, *, key: str = "volume") -> WarpSettings:
+        """Settings from the design file's ``volume:`` mapping (None or {} gives the defaults).
+
+        Raises InputError naming ``path`` and the key path (``volume.a``) for an unknown key or a
+        bad value. Integers are accepted for the float fields; booleans are not numbers here.
+        """
+        if d is None:
+            return cls()
+        if not isinstance(d, dict):
+            raise InputError(f"expected a mapping of volume-mesh settings, got {type(d).__name__}",
+                             path=path, key=key)
+        names = [f.name for f in fields(cls)]
+        kw = {}
+        for k, v in d.items():
+            if k not in names:
+                raise InputError(f"unknown key {k!r}; expected one of {', '.join(names)}",
+                                 path=path, key=f"{key}.{k}")
+            if isinstance(v, bool) and k not in ("fixed", "sliding"):
+                raise InputError(f"expected a {'name' if k == 'method' else 'number'}, got {v!r}",
+                                 path=path, key=f"{key}.{k}")
+            if k in ("fixed", "sliding") and v is not None:
+                if isinstance(v, str):
+                    v = [v]
+                if not isinstance(v, (list, tuple)) or not all(isinstance(s, str) for s in v):
+                    raise InputError(f"expected a list of marker names, got {v!r}", path=path,
+                                     key=f"{key}.{k}")
+            if k in ("a", "b", "alpha", "ldef", "tolerance") and isinstance(v, int):
+                v = float(v)
+            kw[k] = v
+        try:
+            return cls(**kw)
+        except InputError as e:
+            sub = e.key[len("volume"):] if e.key and e.key.startswith("volume") else ""
+            raise InputError(e.message, path=path, key=key + sub, hint=e.hint) from None
+
+    @classmethod
+    def schema(cls) -> dict:
+        """JSON-schema fragment of the design file's ``volume:`` block."""
+        doc = cls.field_docs()
+        names = {"type": "array", "items": {"type": "string"}}
+        pos = {"type": "number", "exclusiveMinimum": 0}
+        props = {
+            "method": {"enum": list(METHODS), "default": "idw"},
+            "a": {**pos, "default": 3},
+            "b": {**pos, "default": 5},
+            "alpha": {**pos, "default": 0.25},
+            "ldef": {**pos},
+            "tolerance": {"type": "number", "minimum": 0, "default": 1e-3},
+            "fixed": names,
+            "sliding": names,
+            "chunk": {"type": "integer", "minimum": 1, "default": 65536},
+        }
+        for k, v in props.items():
+            v["description"] = doc[k]
+        return {"type": "object", "description": "How the volume mesh follows the surface "
+                "(inverse-distance weighting with rotations, IDWarp style).",
+                "properties": props, "additionalProperties": False}
+
 
 class SlidingPlane(NamedTuple):
     """Nodes that slide in a plane: mesh node ids, unit plane normal (3,), a point of the plane."""
@@ -492,6 +551,21 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos, slide_rows,
                      slide_proj, origin, ldef, spos_t, a_t, perm.astype(np.int64), nlo, nhi, nleft, nright,
                      center, radius, narea)
+
+
+def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None
+                      ) -> tuple[WarpModel, MarkerRoles]:
+    """:func:`marker_roles` then :func:`prepare_warp` for an :class:`ffdcli.mesh.Mesh`.
+
+    ``surface`` is the marker name or names of the deforming surface. The warp's surface nodes
+    (``model.surface_ids``) are the sorted unique nodes of those markers: :func:`warp` takes their
+    displacement in that order.
+    """
+    settings = settings or WarpSettings()
+    roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path)
+    model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
+                         faces=roles.faces, progress=progress)
+    return model, roles
 
 
 def _sliding_projectors(sliding, is_target: np.ndarray, n: int):
