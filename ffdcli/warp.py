@@ -540,7 +540,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     spos = np.ascontiguousarray(pts[src_ids] - origin)
     with progress("warp tree", 1) as bar:
         if len(spos):
-            perm, nlo, nhi, nleft, nright = _build_tree(spos, LEAF_SIZE)
+            perm, nlo, nhi, nleft, nright = _build_forest(spos, len(surface_ids))
             spos_t = np.ascontiguousarray(spos[perm])
             a_t = a[perm]
             center, radius, narea = _node_geometry(spos_t, a_t, nlo, nhi)
@@ -621,6 +621,33 @@ def _spread_bits(v: np.ndarray) -> np.ndarray:
     v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
     v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
     return v
+
+
+def _build_forest(pos: np.ndarray, n_first: int):
+    """One tree over pos whose root splits [0, n_first) (surface) from the rest (fixed markers).
+
+    Median splits over a far-field sphere and a wing together would put far-field and wing nodes
+    in the same groups for a dozen levels (groups of radius ~ the farfield radius, which no wing
+    target can aggregate); a subtree per kind keeps every group compact.
+    """
+    m = len(pos)
+    if n_first in (0, m):
+        return _build_tree(pos, LEAF_SIZE)
+    parts = [_build_tree(np.ascontiguousarray(pos[:n_first]), LEAF_SIZE),
+             _build_tree(np.ascontiguousarray(pos[n_first:]), LEAF_SIZE)]
+    perm = [np.zeros(0, np.int64)]
+    lo, hi, left, right = [np.array([0])], [np.array([m])], [np.array([1])], [np.array([0])]
+    node_off, src_off = 1, 0
+    for p, plo, phi, pl, pr in parts:
+        perm.append(p + src_off)
+        lo.append(plo + src_off)
+        hi.append(phi + src_off)
+        left.append(np.where(pl >= 0, pl + node_off, -1))
+        right.append(np.where(pr >= 0, pr + node_off, -1))
+        src_off += len(p)
+        node_off += len(plo)
+    right[0][0] = 1 + len(parts[0][1])
+    return tuple(np.concatenate(x).astype(np.int64) for x in (perm, lo, hi, left, right))
 
 
 @njit(cache=True)
