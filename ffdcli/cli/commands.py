@@ -3,4 +3,5 @@
 Order here is the order in ``ffd --help``.
 """
 
-from ffdcli.cli import inspect  # noqa: F401
+from ffdcli.cli import inspect  # noqa: F401, I001  (order = order in --help)
+from ffdcli.cli import check  # noqa: F401
