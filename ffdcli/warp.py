@@ -39,7 +39,7 @@ Area weights are vertex areas: each boundary face (a line in 2D) gives an equal 
   two sliding planes moves along their intersection line (three or more: it does not move).
 
 **Tree approximation.** The exact sum costs O(N_targets x N_sources). Sources are held in a k-d
-tree (median splits on the widest coordinate, leaves of up to 8 sources). For each tree node C the
+tree (median splits on the widest coordinate, leaves of up to 16 sources). For each tree node C the
 warp keeps the aggregate moments ``A_C = sum A_i``, ``sum A_i (b_i - M_i x_i)`` and
 ``sum A_i M_i``, so that the whole group contributes ``phi(|x - c_C|) [sum A_i (b_i - M_i x_i) +
 (sum A_i M_i) x]`` with ``c_C`` the area-weighted centroid: the rotation term is exact up to the
@@ -78,7 +78,7 @@ from ffdcli.progress import chunks, no_progress
 #: diagonal from one plane (2D: one line).
 PLANE_TOLERANCE = 1e-9
 #: Sources per tree leaf.
-LEAF_SIZE = 8
+LEAF_SIZE = 16
 #: Targets per parallel work item (inside a chunk).
 _BLOCK = 128
 #: Traversal stack size: the tree depth is at most log2(sources) + 1 < 64.
