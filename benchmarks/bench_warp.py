@@ -9,6 +9,8 @@ surface node's frame, i.e. the use case of `ffd deform`.
 
 Columns: ``volume_nodes`` (targets), ``surface_nodes``, ``prepare_s`` (tree build),
 ``warp_s`` (one warp with rotations, after a warm-up call that compiles/loads the kernels),
+``warp_cpu_s`` (CPU seconds of that call over all threads: warp_s on an idle machine is about
+warp_cpu_s / cores),
 ``peak_mb`` (max RSS of the child process that did everything), ``err_max`` (max |tree - exact|
 over a subset of ``err_subset`` volume nodes, relative to the max surface displacement; the exact
 O(N x Ns) sum is evaluated on that subset only), and the targets.
@@ -109,7 +111,9 @@ def measure(n_volume: int, n_surface: int, n_subset: int, tolerance: float = 1e-
     t0 = time.perf_counter()
     model = prepare_warp(pts, sid, fid, settings=settings, areas=areas)
     t1 = time.perf_counter()
+    c1 = _cpu()
     d = warp(model, b, R)
+    c2 = _cpu()
     t2 = time.perf_counter()
     rng = np.random.default_rng(1)
     first = len(sid) + len(fid)
@@ -125,9 +129,15 @@ def measure(n_volume: int, n_surface: int, n_subset: int, tolerance: float = 1e-
     err = float(np.linalg.norm(d[sub] - exact, axis=1).max() / bmax)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     return {"volume_nodes": model.n_targets, "surface_nodes": model.n_surface,
-            "prepare_s": t1 - t0, "warp_s": t2 - t1, "peak_mb": peak, "err_subset": len(sub),
+            "prepare_s": t1 - t0, "warp_s": t2 - t1,
+            "warp_cpu_s": c2 - c1, "peak_mb": peak, "err_subset": len(sub),
             "err_max": err, "exact_subset_s": t4 - t3, "tolerance": tolerance,
             "max_disp": bmax}
+
+
+def _cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
 
 
 def _child(n_volume: int, n_surface: int, n_subset: int) -> dict:
