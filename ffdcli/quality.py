@@ -129,13 +129,12 @@ def cell_orientation(points: np.ndarray, cells: list[CellBlock], dim: int = 3) -
         if abs(normal[k]) >= 1 - 1e-12:                        # a mesh in a coordinate plane
             normal = np.sign(normal[k]) * np.eye(3)[k]
         return Orientation(np.ones(len(cells)), normal)
-    signs = np.ones(len(cells))
-    for i, blk in enumerate(cells):
-        if len(blk):
-            q = _raw_quality(pts, blk.data, blk.type, None)
-            if np.count_nonzero(q < 0) > np.count_nonzero(q > 0):
-                signs[i] = -1.0
-    return Orientation(signs, None)
+    return Orientation(_majority_signs([_raw_quality(pts, b.data, b.type, None) for b in cells]), None)
+
+
+def _majority_signs(raws: list[np.ndarray]) -> np.ndarray:
+    """-1 for a block whose cells are mostly negative, else +1."""
+    return np.array([-1.0 if np.count_nonzero(q < 0) > np.count_nonzero(q > 0) else 1.0 for q in raws])
 
 
 def cell_quality(points: np.ndarray, cells: list[CellBlock], dim: int = 3, *,
@@ -236,9 +235,18 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     if after.shape != mesh.points.shape:
         raise ValueError(f"points {after.shape} do not match the mesh {mesh.points.shape}")
     cells = [b for b in mesh.cells if len(b)]
-    orient = cell_orientation(mesh.points if before is None else before, cells, mesh.dim)
-    q = cell_quality(after, cells, mesh.dim, orientation=orient)
-    qb = None if before is None else cell_quality(before, cells, mesh.dim, orientation=orient)
+    ref = after if before is None else before
+    _check_types(cells, mesh.dim)
+    # one pass over the reference points gives both the orientation and the quality before
+    normal = cell_orientation(ref, cells, 2).normal if mesh.dim == 2 else None
+    raws = [_raw_quality(ref, b.data, b.type, normal) for b in cells]
+    signs = np.ones(len(cells)) if mesh.dim == 2 else _majority_signs(raws)
+    q_ref = (np.concatenate([np.clip(sg * r, -1.0, 1.0) for sg, r in zip(signs, raws, strict=True)])
+             if raws else np.zeros(0))
+    del raws
+    q = q_ref if before is None else cell_quality(after, cells, mesh.dim,
+                                                   orientation=Orientation(signs, normal))
+    qb = None if before is None else q_ref
     if len(q) == 0:
         return QualityReport(0, 0, 0, float(threshold), float(relative), None, None, [])
     inverted = q <= 0
