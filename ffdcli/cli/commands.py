@@ -8,5 +8,6 @@ from ffdcli.cli import box  # noqa: F401, I001
 from ffdcli.cli import deform  # noqa: F401, I001
 from ffdcli.cli import plot  # noqa: F401, I001
 from ffdcli.cli import fit  # noqa: F401, I001
-from ffdcli.cli import schema  # noqa: F401, I001
 from ffdcli.cli import grad  # noqa: F401, I001
+from ffdcli.cli import check  # noqa: F401, I001
+from ffdcli.cli import schema  # noqa: F401, I001

@@ -1,0 +1,1267 @@
+"""The volume mesh follows the surface: inverse-distance weighting with rotations (IDWarp style).
+
+Every mesh node that is not on the deforming surface or on a fixed marker moves by a weighted
+blend of the boundary motion, in the manner of IDWarp (Secco et al., AIAA J. 59(4), 2021). The
+*sources* are the surface nodes (moving) and the nodes of the fixed markers (not moving). Source
+``i`` at ``x_i`` with area weight ``A_i`` has a translation ``b_i`` and a frame rotation ``R_i``
+(``M_i = R_i - I``; zero for fixed sources). A target node at ``x`` moves by::
+
+    d(x) = sum_i w_i(x) [b_i + M_i (x - x_i)] / sum_i w_i(x)
+    w_i(x) = A_i [ (L/r_i)^a + (alpha L/r_i)^b ],   r_i = |x - x_i|
+
+The rotation term carries each surface node's local frame along, so cells near a twisted wing
+rotate with it instead of shearing (boundary-layer cells stay orthogonal). Because the weights are
+normalised, a rigid translation or rotation of all sources moves every node rigidly. The fixed
+sources hold the far field still: without them a far node would move with the average surface
+motion.
+
+Settings (``volume:`` in the design file, :class:`WarpSettings`): ``a`` = 3, ``b`` = 5,
+``alpha`` = 0.25 and ``ldef`` = L. Only the ratio of the two terms depends on L (the common factor
+cancels), so L sets where the short-range ``b`` term takes over: closer than ``alpha^(b/(b-a)) L``
+(3 % of L with the defaults). Default L: the diagonal of the bounding box of the surface nodes.
+Area weights are vertex areas: each boundary face (a line in 2D) gives an equal share of its area
+(length) to each of its nodes (:func:`vertex_areas`).
+
+**Marker rules** (the README copies this list):
+
+- The deforming surface: its nodes get exactly the FFD displacement, bit for bit.
+- ``fixed`` markers: their nodes do not move, and they are sources of zero motion.
+- ``sliding`` markers: their nodes get the IDW displacement with its component normal to the
+  marker's plane removed, so they stay on the plane (exactly, when the plane is normal to a mesh
+  axis). They are targets, not sources.
+- Default rule, for every marker other than the surface that ``volume.fixed`` / ``volume.sliding``
+  do not name: the marker is *sliding* when all its nodes lie in one plane (within
+  :data:`PLANE_TOLERANCE` x the diagonal of the mesh's bounding box; in 2D: on one straight line
+  of the mesh plane) **and** it shares at least one node with the surface — a symmetry plane at
+  the wing root. Every other marker is *fixed*: the farfield, inlets and outlets, other bodies.
+  A marker named in ``volume.sliding`` must be planar.
+- A node on several markers takes the strongest role: surface, then fixed, then sliding. A node on
+  two sliding planes moves along their intersection line (three or more: it does not move).
+
+**Tree approximation.** The exact sum costs O(N_targets x N_sources). Sources are held in a k-d
+tree (median splits on the widest coordinate, leaves of up to 16 sources; the surface sources and
+the fixed sources in separate subtrees under the root). For each tree node C the warp keeps the
+area, the area-weighted centroid ``c_C``, the radius ``r`` (largest distance of a source from
+``c_C``) and the moments ``sum A_i v_i`` and ``sum A_i (x_i - c_C) v_i^T`` of the votes
+``v_i = (b_i - M_i x_i, M_i)``. A group at distance ``D = |x - c_C| > r`` contributes its monopole
+and dipole terms: ``phi(D) sum A_i v_i + psi(D) sum A_i ((x - c_C).(x_i - c_C)) v_i`` to the
+numerator and ``A_C phi(D)`` to W (the dipole of the weights is zero about the centroid), with
+``phi(D) = (L/D)^a + (alpha L/D)^b`` and ``psi = -phi'(D)/D``. Each target walks the tree nearest
+groups first and aggregates a group when the bound of the second-order remainder of its weights
+
+    A_C (t^2 / 2) [a (a+1) (L/D)^a (1-t)^-(a+2) + b (b+1) (alpha L/D)^b (1-t)^-(b+2)],  t = r/D
+
+is at most ``tolerance * W / s(x)``, W the weight the target has summed so far and
+``s(x) = 2 (max_i |b_i - M_i x_i| + |x| max_i ||M_i||) / max_i |b_i|`` a bound of the spread of the
+votes at x (relative to the largest surface displacement). This is a per-group criterion, not a
+bound on the total: the error measured against the exact sum is about ``tolerance x max |b|``
+(``benchmarks/bench_warp.py``: 0.9e-3 at tolerance 1e-3 on a 1M-node mesh; the largest errors are
+far from the wall where the rotation votes are large); the tests check ``<= tolerance x max |b|``
+on small meshes. The decisions depend on geometry and on ``s`` only, so with ``s`` taken from a
+fixed base motion (``decide_for``), ``d`` is linear in (b, M) and :func:`warp_vjp` is its exact
+transpose.
+
+Numba kernels (``prange`` over blocks of targets, explicit stack traversal) have NumPy references
+(:func:`idw_reference`) used by the tests.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+from typing import NamedTuple
+
+import numba
+import numpy as np
+from numba import njit, prange
+
+from ffdcli.errors import InputError
+from ffdcli.mesh import CellBlock
+from ffdcli.progress import chunks, no_progress
+
+#: A marker is planar when all its nodes are within this fraction of the mesh's bounding-box
+#: diagonal from one plane (2D: one line).
+PLANE_TOLERANCE = 1e-9
+#: Sources per tree leaf.
+LEAF_SIZE = 16
+#: Targets per parallel work item (inside a chunk).
+_BLOCK = 128
+#: Traversal stack size: the tree depth is at most log2(sources) + 1 < 64.
+_STACK = 160
+
+METHODS = ("idw", "none")
+
+
+def _doc(text: str) -> dict:
+    return {"doc": text}
+
+
+@dataclass(frozen=True)
+class WarpSettings:
+    """How the volume mesh follows the surface (``volume:`` in the design file).
+
+    Every field carries a one-line description in ``metadata["doc"]`` (the design-file schema
+    uses them).
+    """
+
+    method: str = field(default="idw", metadata=_doc(
+        "idw: every node follows the surface by inverse-distance weighting (default); "
+        "none: only the surface nodes move"))
+    a: float = field(default=3.0, metadata=_doc(
+        "exponent of the long-range weight term (L/d)^a"))
+    b: float = field(default=5.0, metadata=_doc(
+        "exponent of the short-range weight term (alpha L/d)^b; must be at least a"))
+    alpha: float = field(default=0.25, metadata=_doc(
+        "scale of the short-range term: it dominates closer than alpha^(b/(b-a)) L"))
+    ldef: float | None = field(default=None, metadata=_doc(
+        "reference length L in mesh units; default: diagonal of the surface's bounding box"))
+    tolerance: float = field(default=1e-3, metadata=_doc(
+        "tree approximation: groups of far surface nodes are aggregated so that the error is about "
+        "tolerance x the largest surface displacement (0 = exact sum over every surface node)"))
+    fixed: tuple[str, ...] | None = field(default=None, metadata=_doc(
+        "markers whose nodes never move (default: every marker that is not sliding)"))
+    sliding: tuple[str, ...] | None = field(default=None, metadata=_doc(
+        "planar markers whose nodes move only in their plane (default: planar markers that "
+        "touch the surface, e.g. a symmetry plane)"))
+    chunk: int = field(default=65536, metadata=_doc(
+        "volume nodes per chunk (progress and memory granularity)"))
+
+    def __post_init__(self):
+        for name in ("fixed", "sliding"):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            if isinstance(v, str):
+                v = (v,)
+            try:
+                v = tuple(str(s) for s in v)
+            except TypeError:
+                raise InputError(f"expected a list of marker names, got {v!r}",
+                                 key=f"volume.{name}") from None
+            object.__setattr__(self, name, v)
+        if self.method not in METHODS:
+            raise InputError(f"expected one of {', '.join(METHODS)}, got {self.method!r}",
+                             key="volume.method")
+        for name in ("a", "b", "alpha"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                raise InputError(f"expected a positive number, got {v!r}", key=f"volume.{name}")
+        if self.b < self.a:
+            raise InputError(f"b ({self.b}) must be at least a ({self.a}): the b term is the "
+                             "short-range one", key="volume.b")
+        if self.ldef is not None and (not isinstance(self.ldef, (int, float))
+                                      or not math.isfinite(self.ldef) or self.ldef <= 0):
+            raise InputError(f"expected a positive length, got {self.ldef!r}", key="volume.ldef")
+        t = self.tolerance
+        if not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
+            raise InputError(f"expected a number >= 0, got {t!r}", key="volume.tolerance")
+        if not isinstance(self.chunk, int) or self.chunk < 1:
+            raise InputError(f"expected a positive integer, got {self.chunk!r}", key="volume.chunk")
+        both = set(self.fixed or ()) & set(self.sliding or ())
+        if both:
+            raise InputError(f"marker(s) {', '.join(sorted(both))} named both fixed and sliding",
+                             key="volume")
+
+    @classmethod
+    def field_docs(cls) -> dict[str, str]:
+        """``{field name: one-line description}`` for the design-file schema."""
+        return {f.name: f.metadata["doc"] for f in fields(cls)}
+
+    @classmethod
+    def from_dict(cls, d: dict | None, path=None, *, key: str = "volume") -> WarpSettings:
+        """Settings from the design file's ``volume:`` mapping (None or {} gives the defaults).
+
+        Raises InputError naming ``path`` and the key path (``volume.a``) for an unknown key or a
+        bad value. Integers are accepted for the float fields; booleans are not numbers here.
+        """
+        if d is None:
+            return cls()
+        if not isinstance(d, dict):
+            raise InputError(f"expected a mapping of volume-mesh settings, got {type(d).__name__}",
+                             path=path, key=key)
+        names = [f.name for f in fields(cls)]
+        kw = {}
+        for k, v in d.items():
+            if k not in names:
+                raise InputError(f"unknown key {k!r}; expected one of {', '.join(names)}",
+                                 path=path, key=f"{key}.{k}")
+            if isinstance(v, bool) and k not in ("fixed", "sliding"):
+                raise InputError(f"expected a {'name' if k == 'method' else 'number'}, got {v!r}",
+                                 path=path, key=f"{key}.{k}")
+            if k in ("fixed", "sliding") and v is not None:
+                if isinstance(v, str):
+                    v = [v]
+                if not isinstance(v, (list, tuple)) or not all(isinstance(s, str) for s in v):
+                    raise InputError(f"expected a list of marker names, got {v!r}", path=path,
+                                     key=f"{key}.{k}")
+            if k in ("a", "b", "alpha", "ldef", "tolerance") and isinstance(v, int):
+                v = float(v)
+            kw[k] = v
+        try:
+            return cls(**kw)
+        except InputError as e:
+            sub = e.key[len("volume"):] if e.key and e.key.startswith("volume") else ""
+            raise InputError(e.message, path=path, key=key + sub, hint=e.hint) from None
+
+    @classmethod
+    def schema(cls) -> dict:
+        """JSON-schema fragment of the design file's ``volume:`` block."""
+        doc = cls.field_docs()
+        names = {"type": "array", "items": {"type": "string"}}
+        pos = {"type": "number", "exclusiveMinimum": 0}
+        props = {
+            "method": {"enum": list(METHODS), "default": "idw"},
+            "a": {**pos, "default": 3},
+            "b": {**pos, "default": 5},
+            "alpha": {**pos, "default": 0.25},
+            "ldef": {**pos},
+            "tolerance": {"type": "number", "minimum": 0, "default": 1e-3},
+            "fixed": names,
+            "sliding": names,
+            "chunk": {"type": "integer", "minimum": 1, "default": 65536},
+        }
+        for k, v in props.items():
+            v["description"] = doc[k]
+        return {"type": "object", "description": "How the volume mesh follows the surface "
+                "(inverse-distance weighting with rotations, IDWarp style).",
+                "properties": props, "additionalProperties": False}
+
+
+class SlidingPlane(NamedTuple):
+    """Nodes that slide in a plane: mesh node ids, unit plane normal (3,), a point of the plane."""
+
+    ids: np.ndarray
+    normal: np.ndarray
+    point: np.ndarray
+
+
+@dataclass
+class MarkerRoles:
+    """What each marker does while the volume follows the surface (see the module docstring).
+
+    roles
+        ``{marker name: "surface" | "fixed" | "sliding"}``.
+    surface_ids, fixed_ids
+        Sorted unique mesh node ids; fixed ids exclude surface nodes.
+    sliding
+        One :class:`SlidingPlane` per sliding marker; ids exclude surface and fixed nodes.
+    faces
+        Boundary faces (lines in 2D) of the surface and fixed markers: the area weights.
+    """
+
+    roles: dict[str, str]
+    surface_ids: np.ndarray
+    fixed_ids: np.ndarray
+    sliding: list[SlidingPlane]
+    faces: list[CellBlock]
+
+
+def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surface, dim: int = 3,
+                 settings: WarpSettings | None = None, *, path=None) -> MarkerRoles:
+    """Decide which markers are fixed and which slide, by the rules of the module docstring.
+
+    Parameters
+    ----------
+    points
+        (N, 3) mesh points.
+    markers
+        ``{name: [CellBlock, ...]}`` as in :class:`ffdcli.mesh.Mesh`.
+    surface
+        Name or names of the deforming surface markers.
+    dim
+        2 for an airfoil mesh (planes become lines of the mesh plane), 3 otherwise.
+    settings
+        ``fixed``/``sliding`` name markers whose role the user chose.
+    """
+    settings = settings or WarpSettings()
+    pts = np.asarray(points, dtype=np.float64)
+    surface = (surface,) if isinstance(surface, str) else tuple(surface)
+    have = ", ".join(markers) or "(none)"
+    for key, names in (("surface", surface), ("volume.fixed", settings.fixed or ()),
+                       ("volume.sliding", settings.sliding or ())):
+        for name in names:
+            if name not in markers:
+                raise InputError(f"no marker named {name!r}; the markers are: {have}",
+                                 key=key, path=path)
+    clash = set(surface) & (set(settings.fixed or ()) | set(settings.sliding or ()))
+    if clash:
+        raise InputError(f"{', '.join(sorted(clash))} is the deforming surface; it cannot also be "
+                         "fixed or sliding", key="volume", path=path)
+
+    def ids_of(name):
+        blocks = markers[name]
+        if not blocks:
+            return np.zeros(0, dtype=np.int64)
+        return np.unique(np.concatenate([b.data.ravel() for b in blocks]))
+
+    surface_ids = (np.unique(np.concatenate([ids_of(n) for n in surface])) if surface
+                   else np.zeros(0, dtype=np.int64))
+    size = _diagonal(pts)
+    mesh_normal = _plane_normal(pts) if dim == 2 else None
+    roles: dict[str, str] = {n: "surface" for n in surface}
+    planes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    for name in markers:
+        if name in roles:
+            continue
+        ids = ids_of(name)
+        plane = _fit_plane(pts[ids], size, mesh_normal)
+        if settings.sliding is not None and name in settings.sliding:
+            if plane is None:
+                raise InputError(f"marker {name!r} is not planar, so its nodes cannot slide in a "
+                                 f"plane", key="volume.sliding", path=path)
+            roles[name] = "sliding"
+        elif settings.fixed is not None and name in settings.fixed:
+            roles[name] = "fixed"
+        elif plane is not None and np.intersect1d(ids, surface_ids, assume_unique=True).size:
+            roles[name] = "sliding"
+        else:
+            roles[name] = "fixed"
+        if roles[name] == "sliding":
+            planes[name] = plane
+    fixed = [ids_of(n) for n, r in roles.items() if r == "fixed"]
+    fixed_ids = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=np.int64)
+    fixed_ids = np.setdiff1d(fixed_ids, surface_ids, assume_unique=True)
+    taken = np.union1d(surface_ids, fixed_ids)
+    sliding = []
+    for name, (normal, point) in planes.items():
+        ids = np.setdiff1d(ids_of(name), taken, assume_unique=True)
+        sliding.append(SlidingPlane(ids, normal, point))
+    faces = [b for n, r in roles.items() if r in ("surface", "fixed") for b in markers[n]
+             if b.type != "vertex"]
+    return MarkerRoles(roles, surface_ids, fixed_ids, sliding, faces)
+
+
+def _diagonal(pts: np.ndarray) -> float:
+    if len(pts) == 0:
+        return 0.0
+    return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+
+
+def _snap_axis(n: np.ndarray) -> np.ndarray:
+    """A unit normal within 1e-12 of a mesh axis becomes that axis exactly."""
+    n = n / np.linalg.norm(n)
+    k = int(np.argmax(np.abs(n)))
+    if abs(n[k]) >= 1.0 - 1e-12:
+        e = np.zeros(3)
+        e[k] = np.sign(n[k])
+        return e
+    return n
+
+
+def _plane_normal(pts: np.ndarray) -> np.ndarray:
+    """Unit normal of the best-fit plane of points (smallest principal direction)."""
+    c = pts - pts.mean(axis=0)
+    _, _, vt = np.linalg.svd(c, full_matrices=False)
+    return _snap_axis(vt[-1])
+
+
+def _fit_plane(pts: np.ndarray, size: float, mesh_normal: np.ndarray | None):
+    """(normal, point) when the points lie in one plane (3D) / on one line of the mesh plane (2D)."""
+    tol = PLANE_TOLERANCE * max(size, np.finfo(float).tiny)
+    if len(pts) < (3 if mesh_normal is None else 2):
+        return None
+    center = pts.mean(axis=0)
+    c = pts - center
+    if mesh_normal is None:
+        _, s, vt = np.linalg.svd(c, full_matrices=False)
+        if s[1] <= tol:                 # all on a line or a point: no unique plane
+            return None
+        normal = _snap_axis(vt[-1])
+    else:
+        inplane = c - np.outer(c @ mesh_normal, mesh_normal)
+        _, s, vt = np.linalg.svd(inplane, full_matrices=False)
+        if s[0] <= tol:
+            return None
+        normal = _snap_axis(np.cross(mesh_normal, vt[0]))
+    if np.max(np.abs(c @ normal)) > tol:
+        return None
+    return normal, center
+
+
+def vertex_areas(points: np.ndarray, faces: list[CellBlock], n_points: int | None = None) -> np.ndarray:
+    """Area weight of every node: each face gives an equal share of its area to its nodes.
+
+    Triangles and quads (a quad's area is half the norm of the cross product of its diagonals);
+    lines (2D meshes) give half their length to each end. Vertex blocks are ignored. Returns an
+    (n_points,) array, zero for nodes on no face.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts) if n_points is None else n_points
+    out = np.zeros(n)
+    for blk in faces:
+        c = blk.data
+        if len(c) == 0 or blk.type == "vertex":
+            continue
+        if blk.type == "line":
+            a = np.linalg.norm(pts[c[:, 1]] - pts[c[:, 0]], axis=1)
+        elif blk.type == "triangle":
+            a = 0.5 * np.linalg.norm(np.cross(pts[c[:, 1]] - pts[c[:, 0]], pts[c[:, 2]] - pts[c[:, 0]]),
+                                     axis=1)
+        elif blk.type == "quad":
+            a = 0.5 * np.linalg.norm(np.cross(pts[c[:, 2]] - pts[c[:, 0]], pts[c[:, 3]] - pts[c[:, 1]]),
+                                     axis=1)
+        else:
+            raise ValueError(f"boundary faces must be lines, triangles or quads, got {blk.type}")
+        k = c.shape[1]
+        np.add.at(out, c.ravel(), np.repeat(a / k, k))
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# The model
+
+
+@dataclass
+class WarpModel:
+    """Everything :func:`warp` needs, precomputed from the undeformed mesh by :func:`prepare_warp`.
+
+    Coordinates are stored relative to ``origin`` (the centre of the surface's bounding box),
+    which keeps the rotation moments well conditioned. Sources are in tree order: ``src_index``
+    maps them to the concatenation [surface nodes, fixed nodes] (values < ``n_surface`` move).
+    """
+
+    n_points: int
+    settings: WarpSettings
+    surface_ids: np.ndarray
+    surface_pos: np.ndarray         # (Ns, 3) relative to origin
+    fixed_ids: np.ndarray
+    target_ids: np.ndarray          # every other node, in tree-friendly (Morton) order
+    target_pos: np.ndarray          # (Nt, 3) relative to origin
+    slide_rows: np.ndarray          # rows of target_ids that slide
+    slide_proj: np.ndarray          # (K, 3, 3) symmetric projectors
+    origin: np.ndarray
+    ldef: float
+    src_pos: np.ndarray             # (Ms, 3) relative to origin, tree order
+    src_area: np.ndarray
+    src_index: np.ndarray
+    node_lo: np.ndarray
+    node_hi: np.ndarray
+    node_left: np.ndarray           # -1 for leaves; children have larger ids than parents
+    node_right: np.ndarray
+    node_center: np.ndarray         # area-weighted centroid
+    node_radius: np.ndarray         # max distance of the node's sources from the centroid
+    node_area: np.ndarray
+
+    @property
+    def n_surface(self) -> int:
+        return len(self.surface_ids)
+
+    @property
+    def n_targets(self) -> int:
+        return len(self.target_ids)
+
+    def params(self) -> tuple:
+        s = self.settings
+        fast = s.a == 3.0 and s.b == 5.0
+        eps2 = (1e-12 * self.ldef) ** 2
+        return (self.ldef ** 2, 0.5 * s.a, 0.5 * s.b, s.a, s.b, s.alpha ** s.b, fast, eps2,
+                float(s.tolerance))
+
+
+def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
+                 settings: WarpSettings | None = None, *, areas: np.ndarray | None = None,
+                 faces: list[CellBlock] | None = None, progress=None) -> WarpModel:
+    """Precompute the sources, their area weights, L and the tree, from the undeformed mesh.
+
+    Parameters
+    ----------
+    points
+        (N, 3) undeformed mesh points.
+    surface_ids
+        Node ids of the deforming surface (their displacement is given to :func:`warp`).
+    fixed_ids
+        Node ids that never move (sources of zero motion). Ids also in ``surface_ids`` are
+        surface nodes.
+    sliding
+        :class:`SlidingPlane` s, or ``(ids, normal, point)`` tuples: nodes that move only in a
+        plane. Ids that are surface or fixed nodes keep those roles.
+    settings
+        :class:`WarpSettings`. ``method="none"`` builds no tree.
+    areas, faces
+        Area weight per mesh node, (N,); or the boundary faces of the surface and fixed markers
+        (lines in 2D) to compute them with :func:`vertex_areas`. A source of zero area (a node on
+        no face) gets the median area of the sources.
+    """
+    settings = settings or WarpSettings()
+    progress = progress or no_progress
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
+    surface_ids = np.unique(np.asarray(surface_ids, dtype=np.int64))
+    fixed_ids = np.setdiff1d(np.asarray(fixed_ids, dtype=np.int64), surface_ids)
+    for name, ids in (("surface", surface_ids), ("fixed", fixed_ids)):
+        if ids.size and (ids[0] < 0 or ids[-1] >= n):
+            raise ValueError(f"{name} node ids out of range 0..{n - 1}")
+    is_target = np.ones(n, dtype=bool)
+    is_target[surface_ids] = False
+    is_target[fixed_ids] = False
+    target_ids = np.flatnonzero(is_target)
+
+    lo, hi = ((pts[surface_ids].min(axis=0), pts[surface_ids].max(axis=0)) if surface_ids.size
+              else (pts.min(axis=0), pts.max(axis=0)) if n else (np.zeros(3), np.zeros(3)))
+    origin = 0.5 * (lo + hi)
+    ldef = float(settings.ldef) if settings.ldef is not None else float(np.linalg.norm(hi - lo))
+    if ldef <= 0:
+        ldef = max(_diagonal(pts), 1.0)
+    surface_pos = pts[surface_ids] - origin
+
+    # sliding projectors, per target row
+    slide_rows, slide_proj = _sliding_projectors(sliding, is_target, n)
+    rows_of = np.full(n, -1, dtype=np.int64)
+
+    empty_tree = dict(src_pos=np.zeros((0, 3)), src_area=np.zeros(0), src_index=np.zeros(0, np.int64),
+                      node_lo=np.zeros(0, np.int64), node_hi=np.zeros(0, np.int64),
+                      node_left=np.zeros(0, np.int64), node_right=np.zeros(0, np.int64),
+                      node_center=np.zeros((0, 3)), node_radius=np.zeros(0), node_area=np.zeros(0))
+    if settings.method == "none":
+        return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, np.zeros((0, 3)),
+                         np.zeros(0, np.int64), np.zeros((0, 3, 3)), origin, ldef, **empty_tree)
+
+    # sources and their areas
+    src_ids = np.concatenate([surface_ids, fixed_ids])
+    if areas is None:
+        if faces is None:
+            raise ValueError("prepare_warp needs the area weights: pass areas= or faces=")
+        areas = vertex_areas(pts, faces, n)
+    areas = np.asarray(areas, dtype=np.float64)
+    if areas.shape != (n,):
+        raise ValueError(f"areas must have one value per mesh node ({n}), got {areas.shape}")
+    a = areas[src_ids].copy()
+    if np.any(~np.isfinite(a)) or np.any(a < 0):
+        raise ValueError("area weights must be finite and >= 0")
+    if a.size and np.any(a == 0):
+        pos = a[a > 0]
+        a[a == 0] = np.median(pos) if pos.size else 1.0
+
+    # targets in Morton order: neighbours in memory walk the same tree nodes
+    tpos = pts[target_ids] - origin
+    order = _morton_order(tpos)
+    target_ids = target_ids[order]
+    tpos = np.ascontiguousarray(tpos[order])
+    rows_of[target_ids] = np.arange(len(target_ids))
+    if len(slide_rows):
+        # slide_rows were given as mesh ids: translate to rows of the reordered targets
+        slide_rows = rows_of[slide_rows]
+
+    spos = np.ascontiguousarray(pts[src_ids] - origin)
+    with progress("warp tree", 1) as bar:
+        if len(spos):
+            perm, nlo, nhi, nleft, nright = _build_forest(spos, len(surface_ids))
+            spos_t = np.ascontiguousarray(spos[perm])
+            a_t = a[perm]
+            center, radius, narea = _node_geometry(spos_t, a_t, nlo, nhi)
+        else:
+            return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos,
+                             slide_rows, slide_proj, origin, ldef, **empty_tree)
+        bar.update(1)
+    return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos, slide_rows,
+                     slide_proj, origin, ldef, spos_t, a_t, perm.astype(np.int64), nlo, nhi, nleft, nright,
+                     center, radius, narea)
+
+
+def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None
+                      ) -> tuple[WarpModel, MarkerRoles]:
+    """:func:`marker_roles` then :func:`prepare_warp` for an :class:`ffdcli.mesh.Mesh`.
+
+    ``surface`` is the marker name or names of the deforming surface. The warp's surface nodes
+    (``model.surface_ids``) are the sorted unique nodes of those markers: :func:`warp` takes their
+    displacement in that order.
+    """
+    settings = settings or WarpSettings()
+    roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path)
+    model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
+                         faces=roles.faces, progress=progress)
+    return model, roles
+
+
+def _sliding_projectors(sliding, is_target: np.ndarray, n: int):
+    """Mesh ids of sliding target nodes and the projector onto their allowed directions."""
+    if not sliding:
+        return np.zeros(0, np.int64), np.zeros((0, 3, 3))
+    ids_all, normals_all = [], []
+    for plane in sliding:
+        ids, normal = np.asarray(plane[0], dtype=np.int64).ravel(), np.asarray(plane[1], dtype=float)
+        nrm = np.linalg.norm(normal)
+        if nrm == 0 or not np.isfinite(nrm):
+            raise ValueError("a sliding plane needs a non-zero normal")
+        normal = _snap_axis(normal)
+        ids = ids[is_target[ids]]
+        ids_all.append(ids)
+        normals_all.append(np.broadcast_to(normal, (len(ids), 3)))
+    ids = np.concatenate(ids_all)
+    normals = np.concatenate(normals_all)
+    uniq, inv = np.unique(ids, return_inverse=True)
+    nnt = np.zeros((len(uniq), 3, 3))
+    np.add.at(nnt, inv, normals[:, :, None] * normals[:, None, :])
+    counts = np.bincount(inv, minlength=len(uniq))
+    proj = np.empty_like(nnt)
+    one = counts == 1
+    # one plane: I - n n^T, exact zeros along an axis-aligned normal
+    proj[one] = np.eye(3) - nnt[one]
+    many = ~one
+    if np.any(many):
+        w, v = np.linalg.eigh(nnt[many])
+        keep = (w <= 1e-9).astype(float)          # directions orthogonal to every normal
+        proj[many] = np.einsum("nik,nk,njk->nij", v, keep, v)
+    return uniq, proj
+
+
+def _morton_order(pos: np.ndarray) -> np.ndarray:
+    """Permutation sorting points along a Z-order curve (21 bits per axis)."""
+    if len(pos) == 0:
+        return np.zeros(0, dtype=np.int64)
+    lo = pos.min(axis=0)
+    ext = np.maximum(pos.max(axis=0) - lo, 1e-300)
+    q = np.minimum(((pos - lo) / ext * (2 ** 21 - 1)).astype(np.uint64), 2 ** 21 - 1)
+    code = np.zeros(len(pos), dtype=np.uint64)
+    for k in range(3):
+        code |= _spread_bits(q[:, k]) << np.uint64(k)
+    return np.argsort(code, kind="stable")
+
+
+def _spread_bits(v: np.ndarray) -> np.ndarray:
+    v = v & np.uint64(0x1FFFFF)
+    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
+    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
+    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
+    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
+    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
+    return v
+
+
+def _build_forest(pos: np.ndarray, n_first: int):
+    """One tree over pos whose root splits [0, n_first) (surface) from the rest (fixed markers).
+
+    Median splits over a far-field sphere and a wing together would put far-field and wing nodes
+    in the same groups for a dozen levels (groups of radius ~ the farfield radius, which no wing
+    target can aggregate); a subtree per kind keeps every group compact.
+    """
+    m = len(pos)
+    if n_first in (0, m):
+        return _build_tree(pos, LEAF_SIZE)
+    parts = [_build_tree(np.ascontiguousarray(pos[:n_first]), LEAF_SIZE),
+             _build_tree(np.ascontiguousarray(pos[n_first:]), LEAF_SIZE)]
+    perm = [np.zeros(0, np.int64)]
+    lo, hi, left, right = [np.array([0])], [np.array([m])], [np.array([1])], [np.array([0])]
+    node_off, src_off = 1, 0
+    for p, plo, phi, pl, pr in parts:
+        perm.append(p + src_off)
+        lo.append(plo + src_off)
+        hi.append(phi + src_off)
+        left.append(np.where(pl >= 0, pl + node_off, -1))
+        right.append(np.where(pr >= 0, pr + node_off, -1))
+        src_off += len(p)
+        node_off += len(plo)
+    right[0][0] = 1 + len(parts[0][1])
+    return tuple(np.concatenate(x).astype(np.int64) for x in (perm, lo, hi, left, right))
+
+
+@njit(cache=True)
+def _build_tree(pos, leaf_size):
+    """k-d tree over pos (M, 3): permutation and per-node [lo, hi) ranges and children."""
+    m = pos.shape[0]
+    cap = 2 * m + 1
+    lo = np.empty(cap, np.int64)
+    hi = np.empty(cap, np.int64)
+    left = np.full(cap, -1, np.int64)
+    right = np.full(cap, -1, np.int64)
+    perm = np.arange(m)
+    stack = np.empty(200, np.int64)
+    lo[0] = 0
+    hi[0] = m
+    nn = 1
+    stack[0] = 0
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        k = stack[sp]
+        a, b = lo[k], hi[k]
+        if b - a <= leaf_size:
+            continue
+        best, axis = -1.0, 0
+        for c in range(3):
+            vmin, vmax = np.inf, -np.inf
+            for j in range(a, b):
+                v = pos[perm[j], c]
+                vmin = min(vmin, v)
+                vmax = max(vmax, v)
+            if vmax - vmin > best:
+                best, axis = vmax - vmin, c
+        seg = perm[a:b].copy()
+        keys = np.empty(b - a)
+        for j in range(b - a):
+            keys[j] = pos[seg[j], axis]
+        o = np.argsort(keys, kind="mergesort")
+        for j in range(b - a):
+            perm[a + j] = seg[o[j]]
+        mid = (a + b) // 2
+        lo[nn], hi[nn] = a, mid
+        lo[nn + 1], hi[nn + 1] = mid, b
+        left[k], right[k] = nn, nn + 1
+        stack[sp] = nn
+        stack[sp + 1] = nn + 1
+        sp += 2
+        nn += 2
+    return perm, lo[:nn].copy(), hi[:nn].copy(), left[:nn].copy(), right[:nn].copy()
+
+
+@njit(cache=True)
+def _node_geometry(pos, area, lo, hi):
+    nn = lo.shape[0]
+    center = np.zeros((nn, 3))
+    radius = np.zeros(nn)
+    narea = np.zeros(nn)
+    for k in range(nn):
+        s = 0.0
+        c0 = c1 = c2 = 0.0
+        for j in range(lo[k], hi[k]):
+            s += area[j]
+            c0 += area[j] * pos[j, 0]
+            c1 += area[j] * pos[j, 1]
+            c2 += area[j] * pos[j, 2]
+        if s > 0:
+            c0, c1, c2 = c0 / s, c1 / s, c2 / s
+        else:
+            cnt = hi[k] - lo[k]
+            c0 = c1 = c2 = 0.0
+            for j in range(lo[k], hi[k]):
+                c0 += pos[j, 0] / cnt
+                c1 += pos[j, 1] / cnt
+                c2 += pos[j, 2] / cnt
+        r2 = 0.0
+        for j in range(lo[k], hi[k]):
+            d = (pos[j, 0] - c0) ** 2 + (pos[j, 1] - c1) ** 2 + (pos[j, 2] - c2) ** 2
+            r2 = max(r2, d)
+        center[k, 0], center[k, 1], center[k, 2] = c0, c1, c2
+        # a hair larger than the largest distance so rounding never makes it too small
+        radius[k] = math.sqrt(r2) * (1.0 + 1e-12)
+        narea[k] = s
+    return center, radius, narea
+
+
+# ----------------------------------------------------------------------------------------------
+# Kernels
+
+
+@njit(cache=True, inline="always")
+def _terms(q, ha, hb, ab, fast):
+    """(L/r)^a and alpha^b (L/r)^b from q = (L/r)^2."""
+    if fast:
+        s = math.sqrt(q)
+        qa = q * s
+        return qa, ab * qa * q
+    return q ** ha, ab * q ** hb
+
+
+@njit(cache=True)
+def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left, node_right,
+              node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab,
+              fast, eps2, tol, rot, stack_n, stack_d, acc_node, acc_src, res):
+    """Walk the tree for one target. Returns the total weight W.
+
+    mode 0: res[:12] = the numerator sums (beta part, M part) of the forward map.
+    mode 1: weight only.
+    mode 2: adjoint: add the target's share of g into acc_node (per node, see :func:`warp_vjp`)
+    and acc_src (per source), scaled by 1 / wfinal.
+    The decisions use only geometry and the running weight, identically in every mode.
+    """
+    nv = 12 if rot else 3
+    if mode == 0:
+        for j in range(nv):
+            res[j] = 0.0
+    W = 0.0
+    d0 = x0 - node_c[0, 0]
+    d1 = x1 - node_c[0, 1]
+    d2 = x2 - node_c[0, 2]
+    stack_n[0] = 0
+    stack_d[0] = d0 * d0 + d1 * d1 + d2 * d2
+    sp = 1
+    while sp > 0:
+        sp -= 1
+        k = stack_n[sp]
+        dist2 = stack_d[sp]
+        r = node_r[k]
+        accept = False
+        fa = 0.0
+        fb = 0.0
+        if r * r < dist2:
+            fa, fb = _terms(l2 / (dist2 + eps2), ha, hb, ab, fast)
+            if r == 0.0:
+                accept = True
+            else:
+                t = r / math.sqrt(dist2)
+                u = 1.0 / (1.0 - t)
+                # bound of the second-order Taylor remainder of the weights over the group
+                if fast:
+                    u5 = u * u * u * u * u
+                    err = node_a[k] * t * t * u5 * (6.0 * fa + 15.0 * fb * u * u)
+                else:
+                    err = node_a[k] * 0.5 * t * t * (pa * (pa + 1.0) * fa * u ** (pa + 2.0)
+                                                     + pb * (pb + 1.0) * fb * u ** (pb + 2.0))
+                accept = err <= tol * W
+        if accept:
+            phi = fa + fb
+            W += node_a[k] * phi
+            if mode != 1:
+                psi = (pa * fa + pb * fb) / (dist2 + eps2)      # -phi'(D) / D
+                u0 = x0 - node_c[k, 0]
+                u1 = x1 - node_c[k, 1]
+                u2 = x2 - node_c[k, 2]
+            if mode == 0:
+                for p in range(3):
+                    res[p] += phi * node_bm[k, p] + psi * (u0 * node_bm[k, 12 + p]
+                                                           + u1 * node_bm[k, 15 + p]
+                                                           + u2 * node_bm[k, 18 + p])
+                if rot:
+                    for p in range(9):
+                        res[3 + p] += phi * node_bm[k, 3 + p] + psi * (u0 * node_bm[k, 21 + p]
+                                                                       + u1 * node_bm[k, 30 + p]
+                                                                       + u2 * node_bm[k, 39 + p])
+            elif mode == 2:
+                cf = phi / wfinal
+                cs = psi / wfinal
+                acc_node[k, 0] += cf * g0
+                acc_node[k, 1] += cf * g1
+                acc_node[k, 2] += cf * g2
+                _outer_add(acc_node, k, 3, cs, g0, g1, g2, u0, u1, u2)
+                if rot:
+                    _outer_add(acc_node, k, 12, cf, g0, g1, g2, x0, x1, x2)
+                    _outer_add(acc_node, k, 21, cs * u0, g0, g1, g2, x0, x1, x2)
+                    _outer_add(acc_node, k, 30, cs * u1, g0, g1, g2, x0, x1, x2)
+                    _outer_add(acc_node, k, 39, cs * u2, g0, g1, g2, x0, x1, x2)
+        elif node_left[k] < 0:
+            for j in range(node_lo[k], node_hi[k]):
+                e0 = x0 - src_x[j, 0]
+                e1 = x1 - src_x[j, 1]
+                e2 = x2 - src_x[j, 2]
+                ta, tb = _terms(l2 / (e0 * e0 + e1 * e1 + e2 * e2 + eps2), ha, hb, ab, fast)
+                w = src_a[j] * (ta + tb)
+                W += w
+                if mode == 0:
+                    for i in range(nv):
+                        res[i] += w * src_bm[j, i]
+                elif mode == 2:
+                    c = w / wfinal
+                    acc_src[j, 0] += c * g0
+                    acc_src[j, 1] += c * g1
+                    acc_src[j, 2] += c * g2
+                    if rot:
+                        _outer_add(acc_src, j, 3, c, g0, g1, g2, x0, x1, x2)
+        else:
+            lc = node_left[k]
+            rc = node_right[k]
+            a0 = x0 - node_c[lc, 0]
+            a1 = x1 - node_c[lc, 1]
+            a2 = x2 - node_c[lc, 2]
+            dl = a0 * a0 + a1 * a1 + a2 * a2
+            a0 = x0 - node_c[rc, 0]
+            a1 = x1 - node_c[rc, 1]
+            a2 = x2 - node_c[rc, 2]
+            dr = a0 * a0 + a1 * a1 + a2 * a2
+            if dl <= dr:       # nearer child on top: popped first
+                stack_n[sp], stack_d[sp] = rc, dr
+                stack_n[sp + 1], stack_d[sp + 1] = lc, dl
+            else:
+                stack_n[sp], stack_d[sp] = lc, dl
+                stack_n[sp + 1], stack_d[sp + 1] = rc, dr
+            sp += 2
+    return W
+
+
+@njit(cache=True, inline="always")
+def _outer_add(acc, k, off, c, g0, g1, g2, y0, y1, y2):
+    """acc[k, off + 3 p + q] += c g_p y_q."""
+    acc[k, off] += c * g0 * y0
+    acc[k, off + 1] += c * g0 * y1
+    acc[k, off + 2] += c * g0 * y2
+    acc[k, off + 3] += c * g1 * y0
+    acc[k, off + 4] += c * g1 * y1
+    acc[k, off + 5] += c * g1 * y2
+    acc[k, off + 6] += c * g2 * y0
+    acc[k, off + 7] += c * g2 * y1
+    acc[k, off + 8] += c * g2 * y2
+
+
+@njit(cache=True)
+def _exact_one(x0, x1, x2, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2, ha, hb, ab, fast,
+               eps2, rot, acc_src, res):
+    """The direct sum over every source for one target (same modes as :func:`_traverse`)."""
+    nv = 12 if rot else 3
+    if mode == 0:
+        for j in range(nv):
+            res[j] = 0.0
+    W = 0.0
+    for j in range(src_x.shape[0]):
+        e0 = x0 - src_x[j, 0]
+        e1 = x1 - src_x[j, 1]
+        e2 = x2 - src_x[j, 2]
+        ta, tb = _terms(l2 / (e0 * e0 + e1 * e1 + e2 * e2 + eps2), ha, hb, ab, fast)
+        w = src_a[j] * (ta + tb)
+        W += w
+        if mode == 0:
+            for i in range(nv):
+                res[i] += w * src_bm[j, i]
+        elif mode == 2:
+            c = w / wfinal
+            acc_src[j, 0] += c * g0
+            acc_src[j, 1] += c * g1
+            acc_src[j, 2] += c * g2
+            if rot:
+                _outer_add(acc_src, j, 3, c, g0, g1, g2, x0, x1, x2)
+    return W
+
+
+@njit(cache=True, inline="always")
+def _finish(res, W, x0, x1, x2, rot, out, i):
+    if W > 0:
+        v0, v1, v2 = res[0], res[1], res[2]
+        if rot:
+            v0 += res[3] * x0 + res[4] * x1 + res[5] * x2
+            v1 += res[6] * x0 + res[7] * x1 + res[8] * x2
+            v2 += res[9] * x0 + res[10] * x1 + res[11] * x2
+        out[i, 0] = v0 / W
+        out[i, 1] = v1 / W
+        out[i, 2] = v2 / W
+    else:
+        out[i, 0] = out[i, 1] = out[i, 2] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _target_tol(x0, x1, x2, tol, scale):
+    """The tolerance on misplaced weight for one target: tol * max|b| / (bound of |s_i(x) - d(x)|).
+
+    scale = (v0, m) / max|b| with v0 = max |s_i(origin)|, m = max ||M_i||_2, so that
+    |s_i(x) - d(x)| <= 2 (v0 + m |x|) for every source (d is a weighted mean of the s_i).
+    """
+    s = 2.0 * (scale[0] + scale[1] * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2))
+    return tol / s if s > 0 else np.inf
+
+
+@njit(parallel=True, cache=True)
+def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right, node_c, node_r,
+                 node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
+                 scale, rot):
+    n = tx.shape[0]
+    dummy = np.zeros((1, 48))
+    for bi in prange(blocks.shape[0]):
+        b = blocks[bi]
+        stack_n = np.empty(_STACK, np.int64)
+        stack_d = np.empty(_STACK)
+        res = np.empty(12)
+        for i in range(b * _BLOCK, min(n, (b + 1) * _BLOCK)):
+            x0, x1, x2 = tx[i, 0], tx[i, 1], tx[i, 2]
+            if exact:
+                W = _exact_one(x0, x1, x2, 0, 1.0, 0.0, 0.0, 0.0, src_x, src_a, src_bm, l2, ha, hb,
+                               ab, fast, eps2, rot, dummy, res)
+            else:
+                W = _traverse(x0, x1, x2, 0, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
+                              node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2,
+                              ha, hb, pa, pb, ab, fast, eps2, _target_tol(x0, x1, x2, tol, scale),
+                              rot, stack_n, stack_d, dummy, dummy, res)
+            _finish(res, W, x0, x1, x2, rot, out, i)
+
+
+@njit(parallel=True, cache=True)
+def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, node_right, node_c,
+                node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
+                tol, scale):
+    """Per-thread accumulators acc_node[t], acc_src[t]; thread t takes every T-th block."""
+    n = tx.shape[0]
+    nthreads = acc_node.shape[0]
+    nblocks = (n + _BLOCK - 1) // _BLOCK
+    for t in prange(nthreads):
+        stack_n = np.empty(_STACK, np.int64)
+        stack_d = np.empty(_STACK)
+        res = np.empty(12)
+        an = acc_node[t]
+        asrc = acc_src[t]
+        for b in range(t, nblocks, nthreads):
+            for i in range(b * _BLOCK, min(n, (b + 1) * _BLOCK)):
+                g0, g1, g2 = g[i, 0], g[i, 1], g[i, 2]
+                if g0 == 0.0 and g1 == 0.0 and g2 == 0.0:
+                    continue
+                x0, x1, x2 = tx[i, 0], tx[i, 1], tx[i, 2]
+                if exact:
+                    W = _exact_one(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, src_x, src_a, src_bm, l2, ha,
+                                   hb, ab, fast, eps2, True, asrc, res)
+                    if W > 0:
+                        _exact_one(x0, x1, x2, 2, W, g0, g1, g2, src_x, src_a, src_bm, l2, ha, hb,
+                                   ab, fast, eps2, True, asrc, res)
+                else:
+                    tolx = _target_tol(x0, x1, x2, tol, scale)
+                    W = _traverse(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
+                                  node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
+                                  l2, ha, hb, pa, pb, ab, fast, eps2, tolx, True, stack_n, stack_d,
+                                  an, asrc, res)
+                    if W > 0:
+                        _traverse(x0, x1, x2, 2, W, g0, g1, g2, node_lo, node_hi, node_left,
+                                  node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
+                                  l2, ha, hb, pa, pb, ab, fast, eps2, tolx, True, stack_n, stack_d,
+                                  an, asrc, res)
+
+
+@njit(cache=True)
+def _node_moments(src_bm, src_x, src_a, node_c, lo, hi, rot):
+    """Per node, over its sources (A = area, v = (beta, M), delta = x_i - centroid):
+
+    [0:12] sum A v; [12 + 3k + p] sum A delta_k beta_p; [21 + 9k + j] sum A delta_k M_j.
+    """
+    nn = lo.shape[0]
+    nv = 12 if rot else 3
+    out = np.zeros((nn, 48))
+    for k in range(nn):
+        for j in range(lo[k], hi[k]):
+            a = src_a[j]
+            for i in range(nv):
+                out[k, i] += a * src_bm[j, i]
+            for c in range(3):
+                ad = a * (src_x[j, c] - node_c[k, c])
+                for p in range(3):
+                    out[k, 12 + 3 * c + p] += ad * src_bm[j, p]
+                if rot:
+                    for p in range(9):
+                        out[k, 21 + 9 * c + p] += ad * src_bm[j, 3 + p]
+    return out
+
+
+@njit(cache=True)
+def _push_down(acc_node, left, right):
+    """Add every node's accumulator into its children's, parents first (ids grow downwards)."""
+    for k in range(acc_node.shape[0]):
+        if left[k] >= 0:
+            for i in range(acc_node.shape[1]):
+                acc_node[left[k], i] += acc_node[k, i]
+                acc_node[right[k], i] += acc_node[k, i]
+
+
+# ----------------------------------------------------------------------------------------------
+# Public evaluation
+
+
+def _source_motion(model: WarpModel, disp, rot):
+    """Per source in tree order: (beta = b - M x_i, M) as (Ms, 12), and whether M is used."""
+    ns = model.n_surface
+    b = np.asarray(disp, dtype=np.float64)
+    if b.shape != (ns, 3):
+        raise ValueError(f"surface displacement must be ({ns}, 3), got {b.shape}")
+    ms = len(model.src_index)
+    bm = np.zeros((ms, 12))
+    moving = model.src_index < ns
+    sid = model.src_index[moving]
+    bm[moving, :3] = b[sid]
+    use_rot = rot is not None
+    if use_rot:
+        R = np.asarray(rot, dtype=np.float64)
+        if R.shape != (ns, 3, 3):
+            raise ValueError(f"surface rotation must be ({ns}, 3, 3), got {R.shape}")
+        M = R[sid] - np.eye(3)
+        bm[moving, :3] -= np.einsum("nij,nj->ni", M, model.src_pos[moving])
+        bm[moving, 3:] = M.reshape(-1, 9)
+    return bm, use_rot
+
+
+def _decision_scale(model: WarpModel, disp, rot) -> np.ndarray:
+    """(v0, m) / max|b| of :func:`_target_tol`, from the motion the tree decisions are made for.
+
+    v0 = max |b_i - M_i x_i| (the vote of source i at the origin), m = max ||M_i||_2.
+    """
+    b = np.asarray(disp, dtype=np.float64)
+    bref = float(np.sqrt((b * b).sum(axis=1).max())) if len(b) else 0.0
+    if rot is None:
+        v0, m = bref, 0.0
+    else:
+        M = np.asarray(rot, dtype=np.float64) - np.eye(3)
+        x = model.surface_pos
+        v0 = float(np.linalg.norm(b - np.einsum("nij,nj->ni", M, x), axis=1).max()) if len(b) else 0.0
+        m = float(np.linalg.norm(M, 2, axis=(1, 2)).max()) if len(b) else 0.0
+    if bref == 0.0:
+        # no translation at all: the tolerance is relative to the largest vote instead
+        bref = max(v0, m * model.ldef)
+    if bref == 0.0:
+        return np.zeros(2)
+    return np.array([v0 / bref, m / bref])
+
+
+def _blocks(n: int) -> np.ndarray:
+    """Work items of a chunk, interleaved so that both threads get near-wall and far targets."""
+    nb = (n + _BLOCK - 1) // _BLOCK
+    stride = 7 if nb % 7 else 11
+    return (np.arange(nb, dtype=np.int64) * stride) % nb if nb % stride else np.arange(nb)
+
+
+def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: np.ndarray | None = None,
+         *, exact: bool = False, progress=None, decide_for=None) -> np.ndarray:
+    """Displacement (N, 3) of every mesh node given the motion of the surface nodes.
+
+    Parameters
+    ----------
+    model
+        From :func:`prepare_warp`.
+    surface_displacement
+        (Ns, 3) translation ``b`` of each surface node, in the order of ``model.surface_ids``.
+    surface_rotation
+        (Ns, 3, 3) rotation ``R`` of each surface node's local frame (see
+        :func:`rotations_from_deformation_gradient`), or None for translation only (M = 0).
+    exact
+        Evaluate the direct O(N x Ns) sum instead of the tree (tests, error reports).
+    progress
+        Progress factory (:mod:`ffdcli.progress`).
+    decide_for
+        ``(b0, R0)``: make the tree decisions for this motion instead of (b, R). With it fixed,
+        ``warp`` is linear in (b, R - I): the map whose transpose is ``warp_vjp(model, g, b0, R0)``.
+
+    Returns
+    -------
+    (N, 3) displacement: surface nodes get ``surface_displacement`` exactly, fixed nodes zero,
+    sliding nodes the IDW displacement projected on their plane, every other node the IDW value.
+    """
+    progress = progress or no_progress
+    b = np.asarray(surface_displacement, dtype=np.float64)
+    out = np.zeros((model.n_points, 3))
+    if b.shape != (model.n_surface, 3):
+        raise ValueError(f"surface displacement must be ({model.n_surface}, 3), got {b.shape}")
+    if model.settings.method == "none" or model.n_targets == 0 or len(model.src_index) == 0:
+        out[model.surface_ids] = b
+        return out
+    bm, use_rot = _source_motion(model, b, surface_rotation)
+    scale = _decision_scale(model, *(decide_for if decide_for is not None else (b, surface_rotation)))
+    node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
+                            model.node_hi, use_rot)
+    l2, ha, hb, pa, pb, ab, fast, eps2, tol = model.params()
+    d = np.empty((model.n_targets, 3))
+    with progress("volume mesh", model.n_targets) as bar:
+        for lo, hi in chunks(model.n_targets, model.settings.chunk):
+            _warp_kernel(model.target_pos[lo:hi], _blocks(hi - lo), d[lo:hi], exact, model.node_lo,
+                         model.node_hi, model.node_left, model.node_right, model.node_center,
+                         model.node_radius, model.node_area, node_bm, model.src_pos, model.src_area,
+                         bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol, scale, use_rot)
+            bar.update(hi - lo)
+    if len(model.slide_rows):
+        d[model.slide_rows] = np.einsum("nij,nj->ni", model.slide_proj, d[model.slide_rows])
+    out[model.target_ids] = d
+    out[model.surface_ids] = b
+    return out
+
+
+def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
+             surface_rotation: np.ndarray | None = None, *, exact: bool = False,
+             progress=None) -> tuple[np.ndarray, np.ndarray]:
+    """Transpose of :func:`warp`: ``g`` (N, 3) = dJ/d(displacement) -> (dJ/db (Ns, 3), dJ/dM (Ns, 3, 3)).
+
+    With the tree decisions that ``warp(model, b, R)`` makes (pass the same ``b``, ``R`` here),
+    the warp is a linear map of (b, M = R - I); this is its exact transpose, tree and all:
+    ``sum(g * warp(model, v, I + V, decide_for=(b, R))) == sum(g_b * v) + sum(g_M * V)`` to
+    rounding. It is the derivative of ``warp`` at (b, R) (the decisions change only at isolated
+    thresholds). The pass-through of surface nodes, the zero of fixed nodes and the sliding
+    projections are included. ``exact`` must match the :func:`warp` call being differentiated.
+
+    Linearisations: with the rotations held fixed (not depending on the design) dJ/db is ``g_b``
+    alone, and ``g_b`` is the same whatever ``R`` is (for fixed decisions d is a sum of a part
+    linear in b and a part linear in M). With rotations that follow the design (R from the FFD's
+    deformation gradient), chain ``g_M`` through dR/d(design) as well; ``ffdcli.warp`` does not
+    differentiate the polar decomposition.
+    """
+    progress = progress or no_progress
+    g = np.asarray(g, dtype=np.float64)
+    if g.shape != (model.n_points, 3):
+        raise ValueError(f"g must be ({model.n_points}, 3), got {g.shape}")
+    ns = model.n_surface
+    g_b = g[model.surface_ids].copy()
+    g_M = np.zeros((ns, 3, 3))
+    if model.settings.method == "none" or model.n_targets == 0 or len(model.src_index) == 0:
+        return g_b, g_M
+    scale = _decision_scale(model, surface_displacement, surface_rotation)
+    gt = g[model.target_ids]
+    if len(model.slide_rows):
+        gt[model.slide_rows] = np.einsum("nij,nj->ni", model.slide_proj, gt[model.slide_rows])
+    l2, ha, hb, pa, pb, ab, fast, eps2, tol = model.params()
+    nthreads = numba.get_num_threads()
+    nn, ms = len(model.node_lo), len(model.src_index)
+    acc_node = np.zeros((nthreads, nn, 48))
+    acc_src = np.zeros((nthreads, ms, 12))
+    dummy_bm = np.zeros((1, 48))
+    with progress("volume mesh (transpose)", model.n_targets) as bar:
+        for lo, hi in chunks(model.n_targets, model.settings.chunk):
+            _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node, acc_src,
+                        exact, model.node_lo, model.node_hi, model.node_left, model.node_right,
+                        model.node_center, model.node_radius, model.node_area, dummy_bm,
+                        model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
+                        tol, scale)
+            bar.update(hi - lo)
+    # Node accumulators, per node C over the targets that aggregated it (u = x - c_C):
+    # [0:3] G_f = sum phi/W g; [3 + 3p + k] G_s = sum psi/W g_p u_k; [12:21] sum phi/W g x^T;
+    # [21 + 9k + 3p + q] sum psi/W u_k g_p x_q. Source i of C gets A_i (G_f + G_s (x_i - c_C))
+    # for beta and the same with x for M: fold the -c_C parts into G_f so that the sums can be
+    # pushed down the tree unchanged.
+    an = acc_node.sum(axis=0)
+    asrc = acc_src.sum(axis=0)
+    c = model.node_center
+    gs = an[:, 3:12].reshape(-1, 3, 3)
+    gsx = an[:, 21:48].reshape(-1, 3, 3, 3)
+    an[:, 0:3] -= np.einsum("npk,nk->np", gs, c)
+    an[:, 12:21] -= np.einsum("nk,nkpq->npq", c, gsx).reshape(-1, 9)
+    _push_down(an, model.node_left, model.node_right)
+    leaves = np.flatnonzero(model.node_left < 0)
+    leaves = leaves[np.argsort(model.node_lo[leaves])]      # leaf ranges partition the sources
+    leaf = an[np.repeat(leaves, model.node_hi[leaves] - model.node_lo[leaves])]
+    x = model.src_pos
+    a = model.src_area
+    gbeta = asrc[:, :3] + a[:, None] * (leaf[:, 0:3] + np.einsum("npk,nk->np",
+                                                                 leaf[:, 3:12].reshape(-1, 3, 3), x))
+    gx = asrc[:, 3:12].reshape(-1, 3, 3) + a[:, None, None] * (
+        leaf[:, 12:21].reshape(-1, 3, 3) + np.einsum("nk,nkpq->npq", x, leaf[:, 21:48].reshape(-1, 3, 3, 3)))
+    moving = model.src_index < ns
+    sid = model.src_index[moving]
+    g_b[sid] += gbeta[moving]
+    g_M[sid] = gx[moving] - gbeta[moving][:, :, None] * model.src_pos[moving][:, None, :]
+    return g_b, g_M
+
+
+def idw_reference(points_src: np.ndarray, areas: np.ndarray, disp: np.ndarray, rot: np.ndarray | None,
+                  targets: np.ndarray, settings: WarpSettings, ldef: float) -> np.ndarray:
+    """Plain NumPy direct sum (the formula of the module docstring) for checking the kernels."""
+    s = settings
+    e = targets[:, None, :] - points_src[None, :, :]
+    r2 = np.einsum("tsk,tsk->ts", e, e) + (1e-12 * ldef) ** 2
+    q = ldef ** 2 / r2
+    w = areas[None, :] * (q ** (s.a / 2) + s.alpha ** s.b * q ** (s.b / 2))
+    v = np.broadcast_to(disp[None, :, :], e.shape).copy()
+    if rot is not None:
+        v += np.einsum("sij,tsj->tsi", rot - np.eye(3), e)
+    return np.einsum("ts,tsi->ti", w, v) / w.sum(axis=1)[:, None]
+
+
+# ----------------------------------------------------------------------------------------------
+# Rotations
+
+
+def rotations_from_deformation_gradient(F: np.ndarray, *, axis: int | None = None) -> np.ndarray:
+    """The rotation R of the polar decomposition F = R U, for a stack of (Ns, 3, 3) matrices.
+
+    3D: R = W V^T from the SVD F = W S V^T, with the sign of the last singular direction flipped
+    where det(W V^T) < 0, so R is always a proper rotation (the one nearest F). 2D meshes: pass
+    ``axis``, the out-of-plane axis (e.g. 2 for an x-y mesh); the in-plane block gets the closed
+    form R = rotation by atan2(F_ji - F_ij, F_ii + F_jj) and that axis's row and column are the
+    identity's.
+    """
+    F = np.asarray(F, dtype=np.float64)
+    if F.ndim != 3 or F.shape[1:] != (3, 3):
+        raise ValueError(f"F must be (N, 3, 3), got {F.shape}")
+    if axis is not None:
+        i, j = [k for k in range(3) if k != axis]
+        ang = np.arctan2(F[:, j, i] - F[:, i, j], F[:, i, i] + F[:, j, j])
+        R = np.broadcast_to(np.eye(3), F.shape).copy()
+        c, s = np.cos(ang), np.sin(ang)
+        R[:, i, i] = c
+        R[:, j, j] = c
+        R[:, j, i] = s
+        R[:, i, j] = -s
+        return R
+    if len(F) == 0:
+        return F.copy()
+    W, _, Vt = np.linalg.svd(F)
+    R = W @ Vt
+    neg = np.linalg.det(R) < 0
+    if np.any(neg):
+        W[neg, :, 2] *= -1
+        R[neg] = W[neg] @ Vt[neg]
+    return R
