@@ -175,7 +175,10 @@ class DesignModel:
     def uses_volume(self) -> bool:
         from ffdcli.pipeline import volume_method
 
-        return volume_method(self.run) == "idw" and self.run.prep.mesh.n_cells > 0
+        from ffdcli.pipeline import is_surface_mesh
+
+        mesh = self.run.prep.mesh
+        return volume_method(self.run) == "idw" and mesh.n_cells > 0 and not is_surface_mesh(mesh)
 
     def mesh_points(self, progress=None) -> np.ndarray:
         """(N, 3) every mesh node as ``ffd deform`` places it."""

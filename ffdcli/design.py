@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 
 from ffdcli.axes import SECTION_CHOICES
-from ffdcli.box import BoxSettings
+from ffdcli.box import DEFAULT_POINTS, BoxSettings
 from ffdcli.changes import Change, Chord, Dihedral, SectionLaw, Shape, Span, Sweep, Twist
 from ffdcli.errors import InputError
 
@@ -374,7 +374,7 @@ def validate(data, path=None, lines: dict | None = None) -> None:
     # what the schema cannot say in words
     box = data.get("box") or {}
     if "degree" in box:
-        points = box.get("points", list(BoxSettings().points))
+        points = box.get("points") or list(DEFAULT_POINTS.get(len(box["degree"]), DEFAULT_POINTS[3]))
         if len(box["degree"]) != len(points):
             fail(("box", "degree"), f"has {len(box['degree'])} values but box.points has {len(points)}")
         for d, (p, q) in enumerate(zip(points, box["degree"], strict=True)):
@@ -474,7 +474,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
             raise InputError(f"lattice file {box_file} not found", path=path, key="box.file",
                              line=_line(lines, ("box", "file")))
     defaults = BoxSettings()
-    box = BoxSettings(points=tuple(b.get("points", defaults.points)),
+    box = BoxSettings(points=tuple(b["points"]) if "points" in b else None,
                       degree=tuple(b["degree"]) if "degree" in b else None,
                       sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
                       root=b.get("root"), file=None if box_file is None else str(box_file))

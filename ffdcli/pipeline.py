@@ -59,6 +59,20 @@ class PreparedBox:
         return out
 
 
+def space_dim(mesh: Mesh) -> int:
+    """The dimension the box works in: 3 for volume meshes and for surface meshes that are not flat
+    (a wing surface given as a 2D-cell mesh, e.g. a structured CGNS surface), 2 for a planar mesh."""
+    if mesh.dim == 3:
+        return 3
+    ext = np.ptp(mesh.points, axis=0) if len(mesh.points) else np.zeros(3)
+    return 3 if ext.min() > 1e-9 * max(float(ext.max()), 1e-300) else 2
+
+
+def is_surface_mesh(mesh: Mesh) -> bool:
+    """A mesh whose cells are the surface itself (no volume to follow, no cells to gate)."""
+    return mesh.dim == 2 and space_dim(mesh) == 3
+
+
 def resolve_surface(mesh: Mesh, surface) -> list[str]:
     """The surface marker names: as given, else the default rule of :mod:`ffdcli.surface`."""
     from ffdcli.surface import default_surface
@@ -93,7 +107,7 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     surf = extract_surface(mesh, names)
     if len(surf.ids) == 0:
         raise InputError(f"the surface marker(s) {', '.join(names)} have no points", path=mesh.path)
-    dim = mesh.dim
+    dim = space_dim(mesh)
     settings = (settings or BoxSettings()).checked(dim, path=mesh.path)
 
     key = path = None
@@ -250,7 +264,7 @@ def volume_method(run: DesignRun) -> str:
     mesh = run.prep.mesh
     method = (run.design.volume or {}).get("method")
     if method is None:
-        return "idw" if mesh.n_cells else "none"
+        return "idw" if mesh.n_cells and not is_surface_mesh(mesh) else "none"
     return method
 
 
@@ -270,7 +284,7 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check:
     points = mesh.points.copy()
     method = volume_method(run)
     t1 = time.perf_counter()
-    if method == "idw" and mesh.n_cells:
+    if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
         from ffdcli.warp import WarpSettings, prepare_mesh_warp, warp
 
         vol = {k: v for k, v in (run.design.volume or {}).items() if k != "threshold"}
@@ -286,7 +300,7 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check:
     points[surf.ids] = mesh.points[surf.ids] + disp
     t["volume"] = time.perf_counter() - t1
     quality = None
-    if mesh.n_cells and check:
+    if mesh.n_cells and check and not is_surface_mesh(mesh):
         from ffdcli.quality import check_quality
 
         t2 = time.perf_counter()
