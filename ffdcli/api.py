@@ -173,9 +173,7 @@ class DesignModel:
         return self._warp
 
     def uses_volume(self) -> bool:
-        from ffdcli.pipeline import volume_method
-
-        from ffdcli.pipeline import is_surface_mesh
+        from ffdcli.pipeline import is_surface_mesh, volume_method
 
         mesh = self.run.prep.mesh
         return volume_method(self.run) == "idw" and mesh.n_cells > 0 and not is_surface_mesh(mesh)

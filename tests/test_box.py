@@ -6,14 +6,14 @@ import json
 
 import numpy as np
 import pytest
+from conftest import run_ffd
+from wingcase import write_surface_wing
 
 from ffdcli.box import BoxSettings, fit_box
 from ffdcli.cache import load
+from ffdcli.mesh import CellBlock
 from ffdcli.pipeline import prepare_box
 from ffdcli.wings import Planform, wing_surface
-from ffdcli.mesh import CellBlock
-from conftest import run_ffd
-from wingcase import write_surface_wing
 
 # Residual bound of the embedding: 1e-10 x lattice size (issue 3); the Newton stops far below it.
 RES = 1e-10

@@ -6,13 +6,13 @@ import json
 
 import numpy as np
 import pytest
+from conftest import run_ffd
+from wingcase import write_design, write_surface_wing
 
 from ffdcli.design import load_design
 from ffdcli.formats import read_mesh
 from ffdcli.pipeline import deform, load_run, write_outputs
 from ffdcli.wings import Planform
-from conftest import run_ffd
-from wingcase import write_design, write_surface_wing
 
 # Global changes (span, sweep, dihedral, uniform twist) are affine maps of the whole lattice, so by
 # affine invariance of B-splines every surface point moves by the same map: exact to rounding of

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 import yaml
-
 from conftest import REPO, assert_clean_failure, run_ffd
+
 from ffdcli.design import load_design
 from ffdcli.fit import build_problem, fit_design, solve
 from ffdcli.formats.airfoil import write_airfoil

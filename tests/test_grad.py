@@ -6,12 +6,12 @@ import json
 
 import numpy as np
 import pytest
+from conftest import REPO, assert_clean_failure, run_ffd
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
-from conftest import REPO, assert_clean_failure, run_ffd
-from ffdcli.api import DesignModel
 from wingcase import write_design, write_surface_wing, write_volume_wing
+
+from ffdcli.api import DesignModel
 
 # Central differences of a smooth map with step h have error O(h^2 f''') ~ 1e-10 relative for the
 # steps below, and rounding ~ eps / h ~ 1e-11: a 1e-6 relative tolerance has a wide margin.

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-
 from conftest import REPO, run_ffd
 from wingcase import write_design, write_surface_wing
 

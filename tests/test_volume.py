@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 import pytest
-
 from conftest import REPO, assert_clean_failure, file_hash, run_ffd
+
 from ffdcli.design import load_design
 from ffdcli.pipeline import deform, load_run
 

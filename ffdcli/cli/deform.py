@@ -51,7 +51,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     out_mesh = Path(output) if output else design.output["mesh"]
     from ffdcli.atomic import check_writable
 
-    given = set((design.data.get("output") or {}))
+    given = set(design.data.get("output") or {})
     want_plot = plot or "plot" in given
     # Default outputs go to out/ beside the design file: create it. A folder the user named must exist.
     for key, cli_value in (("mesh", output), ("lattice", lattice_out), ("plot", None)):
