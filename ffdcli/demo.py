@@ -13,6 +13,8 @@ import time
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
+#: cases that also get the pyvista 3D view (each costs ~10-20 s off-screen here)
+VIEW_3D = {"rect_twist_linear", "crm_twist_tip"}
 
 
 def run_case(config: Path, out: Path, progress) -> dict:
@@ -35,9 +37,15 @@ def run_case(config: Path, out: Path, progress) -> dict:
     if ok:
         write_outputs(run, result, mesh_path=mesh_out, lattice_path=lattice_out)
     plot_design(run, result, png)
+    png3d = None
+    if stem in VIEW_3D:
+        from ffdcli.plot import plot_3d
+
+        got = plot_3d(run, result, out / f"{stem}_3d.png")
+        png3d = got.name if got else None
     return {
         "case": stem, "config": str(config.relative_to(REPO)) if config.is_relative_to(REPO) else str(config),
-        "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None, "png": png.name,
+        "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None, "png": png.name, "png3d": png3d,
         "changes": ", ".join(next(iter(c)) for c in design.changes_spec),
         "max_displacement": result.max_displacement,
         "quality": (q.summary() if ok else f"refused by the quality gate: {q.summary()}; "
@@ -78,6 +86,8 @@ def write_index(rows: list[dict], out: Path) -> Path:
     lines.append("")
     for r in rows:
         lines += [f"## {r['case']}", "", f"`{r['config']}`: {r['changes']}", "", f"![{r['case']}]({r['png']})", ""]
+        if r.get("png3d"):
+            lines += [f"![{r['case']} 3D]({r['png3d']})", ""]
     path = out / "index.md"
     with atomic_write(path, "w") as fh:
         fh.write("\n".join(lines))

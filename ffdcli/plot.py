@@ -99,6 +99,17 @@ def section_curves(run, result, fractions=(("root", 0.0), ("mid-span", 0.5), ("t
     return out
 
 
+def plot_3d(run, result, path) -> Path | None:
+    """The 3D view (pyvista, off-screen, in a subprocess) of a 3D design; None when not possible."""
+    from ffdcli.render3d import render_3d
+
+    if run.box.dim != 3:
+        return None
+    surf = run.prep.surface
+    return render_3d(surf.points, result.points[surf.ids], surf.faces, run.P0, result.lattice, path,
+                     title=f"{Path(run.design.path).name}: original grey, deformed red")
+
+
 def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110) -> Path:
     """Write a PNG of the design ``run`` deformed into ``result`` (``ffdcli.pipeline``). Returns the path."""
     import matplotlib

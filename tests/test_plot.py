@@ -24,7 +24,7 @@ def test_plot_3d_twist(tmp_path):
     mesh = write_surface_wing(tmp_path)
     design = write_design(tmp_path, mesh, [{"twist": {"tip": 20}}])
     png = tmp_path / "twist.png"
-    proc = run_ffd("plot", str(design), "-o", str(png))
+    proc = run_ffd("plot", str(design), "-o", str(png), "--no-3d")
     assert proc.returncode == 0, proc.stderr
     img = read_png(png)
     assert img.shape[0] > 500 and img.shape[1] > 800
@@ -61,3 +61,22 @@ def test_plot_2d_and_deform_plot_flag(tmp_path):
     red, black = red_and_black(img)
     assert red.sum() > 500 and black.sum() > 100
     assert np.isfinite(img).all()
+
+
+def test_plot_3d_view_when_pyvista_is_there(tmp_path):
+    import pytest
+
+    pytest.importorskip("pyvista")
+    mesh = write_surface_wing(tmp_path)
+    design = write_design(tmp_path, mesh, [{"dihedral": 10}])
+    proc = run_ffd("plot", str(design), "-o", str(tmp_path / "d.png"), "--json")
+    assert proc.returncode == 0, proc.stderr
+    import json
+
+    plots = json.loads(proc.stdout)["plots"]
+    if len(plots) == 1:            # no off-screen OpenGL here: the 2D views only, and a warning
+        assert "no 3D view" in proc.stderr
+        return
+    img = read_png(tmp_path / "d_3d.png")
+    red, _ = red_and_black(img)
+    assert img.shape[0] >= 600 and red.sum() > 2000

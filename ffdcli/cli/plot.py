@@ -14,8 +14,11 @@ from ffdcli.cli import cli, common_options
 @click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="FILE.png",
               help="Where to write the picture (default: output.plot, else beside output.mesh).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
+@click.option("--3d/--no-3d", "view3d", default=True, show_default=True,
+              help="Also write <FILE>_3d.png, a 3D view rendered off-screen with pyvista (3D designs; "
+                   "skipped with a note when pyvista or an OpenGL backend is missing).")
 @common_options
-def plot_cmd(design_file, output, overrides, console):
+def plot_cmd(design_file, output, overrides, view3d, console):
     """Draw the design: planform, front view and root/mid/tip sections (2D: the airfoil), original
     surface in black, deformed in red, lattice points and edges. Headless (matplotlib Agg).
 
@@ -34,5 +37,15 @@ def plot_cmd(design_file, output, overrides, console):
     run = load_run(design, progress=console.progress)
     result = deform(run, progress=console.progress)
     plot_design(run, result, png)
-    console.result({"plot": str(png), "max_displacement": result.max_displacement},
-                   f"ffd plot: wrote {png}")
+    written = [str(png)]
+    if view3d and run.box.dim == 3:
+        from ffdcli.plot import plot_3d
+
+        got = plot_3d(run, result, png.with_name(png.stem + "_3d.png"))
+        if got is None:
+            console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
+                         "(pip install 'ffdcli[viz]'); the 2D views are written")
+        else:
+            written.append(str(got))
+    console.result({"plot": str(png), "plots": written, "max_displacement": result.max_displacement},
+                   "ffd plot: wrote " + ", ".join(written))
