@@ -106,8 +106,10 @@ def plot_3d(run, result, path) -> Path | None:
     if run.box.dim != 3:
         return None
     surf = run.prep.surface
+    box = run.box
+    axes = np.array([box.chord_dir, box.thickness_dir, box.span_dir])
     return render_3d(surf.points, result.points[surf.ids], surf.faces, run.P0, result.lattice, path,
-                     title=f"{Path(run.design.path).name}: original grey, deformed red")
+                     title=f"{Path(run.design.path).name}: original grey, deformed red", axes=axes)
 
 
 def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110) -> Path:

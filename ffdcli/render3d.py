@@ -26,7 +26,7 @@ def pyvista_available() -> bool:
 
 
 def render_3d(X0: np.ndarray, X1: np.ndarray, faces: list, P0: np.ndarray, P1: np.ndarray, path,
-              *, title: str = "") -> Path | None:
+              *, title: str = "", axes=None) -> Path | None:
     """Write a 3D PNG (original grey, deformed red, deformed lattice) to ``path``; None if impossible."""
     if not pyvista_available():
         return None
@@ -37,7 +37,7 @@ def render_3d(X0: np.ndarray, X1: np.ndarray, faces: list, P0: np.ndarray, P1: n
         data = Path(tmp) / "scene.npz"
         np.savez(data, X0=X0, X1=X1, tris=np.concatenate(tris) if tris else np.zeros((0, 3), int),
                  quads=np.concatenate(quads) if quads else np.zeros((0, 4), int), P0=P0, P1=P1,
-                 title=np.array(title))
+                 title=np.array(title), axes=np.asarray(axes if axes is not None else np.eye(3)))
         out = Path(tmp) / "view.png"
         env = dict(os.environ, VTK_DEFAULT_OPENGL_WINDOW="vtkEGLRenderWindow", PYVISTA_OFF_SCREEN="true")
         try:
@@ -87,9 +87,14 @@ def _main(data: str, out: str) -> None:
     title = str(z["title"])
     if title:
         p.add_text(title, font_size=10, color="black")
-    p.view_isometric()
+    c, t, s = z["axes"]                       # chord, thickness ("up"), span unit vectors
+    lo, hi = z["X1"].min(0), z["X1"].max(0)
+    focal = 0.5 * (lo + hi)
+    d = -0.55 * c + 0.75 * t - 0.65 * s       # from ahead, above and inboard of the root
+    d /= np.linalg.norm(d)
+    p.camera_position = [tuple(focal + 3.0 * np.linalg.norm(hi - lo) * d), tuple(focal), tuple(t)]
     p.reset_camera()
-    p.camera.zoom(1.5)
+    p.camera.zoom(1.2)
     p.screenshot(out)
     p.close()
 
