@@ -93,6 +93,7 @@ def test_fit_cli_writes_a_design_that_deforms_into_the_target(tmp_path):
     ("NAN\n1 0\n0.5 nan\n0 0\n0.5 -0.1\n1 0\n", "NaN"),
     ("one\n1 0\n", "points"),
     ("", "empty"),
+    ("shuffled\n0.5 0.06\n1 0\n0 0\n0.25 -0.05\n0.75 0.03\n0.1 0.04\n0.6 -0.03\n", "order"),
 ])
 def test_fit_bad_target_exit_2(tmp_path, text, what):
     bad = tmp_path / "bad.dat"
