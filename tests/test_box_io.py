@@ -97,3 +97,40 @@ def test_bad_box_inputs(tmp_path):
     assert_clean_failure(run_ffd("box", str(mesh), "--points", "1,1,1"), 2)
     assert_clean_failure(run_ffd("box", str(mesh), "--points", "4,4,2", "--degree", "4,3,1"), 2)
     assert_clean_failure(run_ffd("box", str(REPO / "nothing.su2")), 2, "nothing.su2")
+
+
+@pytest.mark.parametrize("name,marker", [
+    ("optimization_euler__steady_naca0012__mesh_NACA0012_inv.su2", None),
+    ("optimization_rans__steady_rae2822__mesh_RAE2822_turb.su2", None),
+    ("disc_adj_rans__naca0012__naca0012_FFD.su2", "AIRFOIL"),
+])
+def test_box_on_real_2d_su2_meshes(tmp_path, name, marker):
+    """SU2's own test meshes: the automatic 2D box contains the airfoil (0 outside, 1e-10 residual)."""
+    mesh = shared_file(f"su2/{name}")
+    args = ["box", str(mesh), "--json", "--cache-dir", str(tmp_path), "--lattice", str(tmp_path / "l.vtk")]
+    if marker:
+        args += ["--surface", marker]
+    proc = run_ffd(*args)
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["outside"] == 0 and s["lattice"] == [6, 5]
+    assert s["residual"] <= 1e-10
+    assert s["axes"]["chord"] == "x" and s["axes"]["thickness"] == "y"
+
+
+def test_deform_a_real_2d_su2_mesh_keeps_its_ffd_section(tmp_path):
+    """A real SU2 file with SU2's own FFD section: twisting writes a valid mesh and every byte after
+    the point block (markers, FFD section) is unchanged."""
+    import yaml
+
+    mesh = shared_file("su2/disc_adj_rans__naca0012__naca0012_FFD.su2")
+    d = tmp_path / "d.yaml"
+    d.write_text(yaml.safe_dump({"mesh": str(mesh), "surface": "AIRFOIL", "changes": [{"twist": 3}],
+                                 "output": {"mesh": str(tmp_path / "o.su2"), "lattice": str(tmp_path / "o.vtk")}}))
+    proc = run_ffd("deform", str(d), "--json", "--cache-dir", str(tmp_path))
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["quality"]["inverted"] == 0
+    a, b = mesh.read_bytes(), (tmp_path / "o.su2").read_bytes()
+    tail = a[a.index(b"NMARK"):]
+    assert b.endswith(tail) and b"FFD_NBOX" in tail
