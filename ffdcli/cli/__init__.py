@@ -55,6 +55,8 @@ def cli():
       ffd inspect wing.su2              what is in the mesh: markers, bounds, axes
       ffd box wing.su2 --points 6,8,2   fit a lattice to the wing and embed it (cached)
       ffd deform design.yaml            apply twist/span/sweep/dihedral/chord/shape, write the mesh
+      ffd plot design.yaml -o wing.png  original (black) and deformed (red) wing with its lattice
+      ffd fit airfoil.yaml --target s1223.dat         2D: shape values that morph into a target
       ffd grad design.yaml --sens surface_sens.csv    dJ/d(design variables) for an optimiser
 
     Every command has --help, -q/--quiet, -v/--verbose and --json. Exit status: 0 success,

@@ -22,8 +22,8 @@ from ffdcli.cli import cli, common_options
                    "upper and lower rows (shape: {upper, lower}), as in the paper, a much looser fit.")
 @common_options
 def fit_cmd(design_file, target, output, overrides, rows, console):
-    """Find the `shape` values (upper and lower lattice rows) of a 2D design that make its airfoil
-    best match TARGET, by linear least squares, and write them as a design file.
+    """Find the `shape` values of a 2D design (thickness-wise moves of the lattice rows) that make its
+    airfoil best match TARGET, by regularised linear least squares, and write them as a design file.
 
     \b
     The target is placed on the mesh airfoil's chord line (same leading and trailing edge); the
