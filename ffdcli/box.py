@@ -583,20 +583,27 @@ def _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim):
     return P
 
 
+def _edge_points(sections, stations, axes: Axes, chord_sign: float, dim: int):
+    """(m, 3) leading- and trailing-edge points in mesh coordinates of the sections' 2D cuts."""
+    m = len(sections)
+    le_pts, te_pts = np.zeros((m, 3)), np.zeros((m, 3))
+    for j, s in enumerate(sections):
+        for arr, q in ((le_pts, s.le), (te_pts, s.te)):
+            arr[j, axes.chord] = chord_sign * q[0]
+            arr[j, axes.thickness] = q[1]
+            arr[j, axes.span] = axes.span_sign * stations[j] if dim == 3 else stations[j]
+    return le_pts, te_pts
+
+
 def _assemble(P, degree, axes, dim, chord_sign, stations, sections, margins, settings) -> Box:
     from ffdcli.spline import clamped_knots
 
     n, m, l, _ = P.shape
     sizes = (n, m, l) if dim == 3 else (n, l)
     knots = tuple(clamped_knots(s, d) for s, d in zip(sizes, degree))
-    le_pts = np.zeros((m, 3))
-    te_pts = np.zeros((m, 3))
+    le_pts, te_pts = _edge_points(sections, stations, axes, chord_sign, dim)
     ref = np.zeros((m, n, l))
     for j, s in enumerate(sections):
-        for arr, q in ((le_pts, s.le), (te_pts, s.te)):
-            arr[j, axes.chord] = chord_sign * q[0]
-            arr[j, axes.thickness] = q[1]
-            arr[j, axes.span] = axes.span_sign * stations[j] if dim == 3 else stations[j]
         # the reference point in the rectangle's own (along, across) fractions: bilinear in corners
         L = s.chord
         front = s.front - margins[j, 0] * L
@@ -758,14 +765,9 @@ def import_box(file, points: np.ndarray, faces=(), settings: BoxSettings | None 
         stations = np.array([float(np.mean(pts[:, axes.span]))])
         secs = [analyse_section(_section_frame_2d(axes, pts, chord_sign))]
         warnings = []
-    le_pts = np.zeros((m, 3))
-    te_pts = np.zeros((m, 3))
+    le_pts, te_pts = _edge_points(secs, stations, axes, chord_sign, dim)
     ref = np.zeros((m, n, l))
     for j, s in enumerate(secs):
-        for arr, q in ((le_pts, s.le), (te_pts, s.te)):
-            arr[j, axes.chord] = chord_sign * q[0]
-            arr[j, axes.thickness] = q[1]
-            arr[j, axes.span] = axes.span_sign * stations[j] if dim == 3 else stations[j]
         corners = P[[0, -1, 0, -1], j, [0, 0, -1, -1]]          # A B C D
         c2 = np.stack([chord_sign * corners[:, axes.chord], corners[:, axes.thickness]], 1)
         a, b = _bilinear_inverse(c2, s.te)
