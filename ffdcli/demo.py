@@ -45,7 +45,8 @@ def run_case(config: Path, out: Path, progress) -> dict:
         png3d = got.name if got else None
     return {
         "case": stem, "config": str(config.relative_to(REPO)) if config.is_relative_to(REPO) else str(config),
-        "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None, "png": png.name, "png3d": png3d,
+        "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None,
+        "png": png.name, "png3d": png3d,
         "changes": ", ".join(next(iter(c)) for c in design.changes_spec),
         "max_displacement": result.max_displacement,
         "quality": (q.summary() if ok else f"refused by the quality gate: {q.summary()}; "
