@@ -156,3 +156,31 @@ def test_jacobian_file(tmp_path):
     model = DesignModel.from_file(design)
     dv = np.array([0.3, -0.02])
     np.testing.assert_allclose((J @ dv).reshape(-1, 3), model.surface_jvp(dv), atol=1e-14)
+
+
+def bundled_design(tmp_path, mesh, sections, changes, volume=None):
+    import yaml
+
+    data = {"mesh": str(REPO / "samples" / mesh), "surface": "wing",
+            "box": {"points": [6, 8, 2], "sections": sections}, "changes": changes}
+    if volume:
+        data["volume"] = volume
+    p = tmp_path / "bundled.yaml"
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+@pytest.mark.slow
+def test_bundled_crm_every_kind_surface(tmp_path):
+    model = DesignModel.from_file(bundled_design(tmp_path, "crm_wing.su2", "xz", ALL_KINDS), cache_dir=tmp_path)
+    g = np.random.default_rng(7).standard_normal((len(model.surface_ids), 3))
+    fd_check(model, g, surface_functional(model))
+
+
+@pytest.mark.slow
+def test_bundled_rect_wing_through_the_volume(tmp_path):
+    model = DesignModel.from_file(
+        bundled_design(tmp_path, "rect_wing.su2", "xy", [{"twist": {"tip": 15}}, {"dihedral": 5}],
+                       volume={"method": "idw", "tolerance": 0}), cache_dir=tmp_path)
+    g = np.random.default_rng(8).standard_normal((model.run.prep.mesh.n_points, 3))
+    fd_check(model, g, mesh_functional(model))
