@@ -373,8 +373,8 @@ def validate(data, path=None, lines: dict | None = None) -> None:
         fail(parts, message)
     # what the schema cannot say in words
     box = data.get("box") or {}
-    if "degree" in box:
-        points = box.get("points", list(BoxSettings().points))
+    if "degree" in box and box.get("points") is not None:   # else the default of the mesh's dimension
+        points = box["points"]
         if len(box["degree"]) != len(points):
             fail(("box", "degree"), f"has {len(box['degree'])} values but box.points has {len(points)}")
         for d, (p, q) in enumerate(zip(points, box["degree"], strict=True)):
@@ -474,7 +474,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
             raise InputError(f"lattice file {box_file} not found", path=path, key="box.file",
                              line=_line(lines, ("box", "file")))
     defaults = BoxSettings()
-    box = BoxSettings(points=tuple(b.get("points", defaults.points)),
+    box = BoxSettings(points=tuple(b["points"]) if b.get("points") is not None else defaults.points,
                       degree=tuple(b["degree"]) if "degree" in b else None,
                       sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
                       root=b.get("root"), file=None if box_file is None else str(box_file))
