@@ -222,8 +222,14 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     """Prepare the box of a loaded design (cached) and build its changes against the lattice."""
     from ffdcli.design import build_changes
 
-    prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
-                       use_cache=use_cache, rebuild=rebuild, progress=progress)
+    try:
+        prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
+                           use_cache=use_cache, rebuild=rebuild, progress=progress)
+    except InputError as e:      # a box setting of the design file: name the design file and its line
+        if e.key and e.key.startswith("box.") and e.line is None:
+            raise InputError(e.message, path=design.path, key=e.key, line=design.line_of(e.key),
+                             hint=e.hint) from None
+        raise
     n, m, l = prep.box.shape
     changes = build_changes(design, n, m, l, prep.box.dim)
     return DesignRun(design=design, prep=prep, changes=changes)
