@@ -159,7 +159,17 @@ class DesignRun:
         """Control points after the design's changes (or ``changes``)."""
         from ffdcli.changes import apply_changes
 
-        return apply_changes(self.P0, self.box.frame, self.changes if changes is None else changes)
+        if changes is not None:
+            return apply_changes(self.P0, self.box.frame, changes)
+        P = self.P0
+        for index, (change, spec) in enumerate(zip(self.changes, self.design.changes_spec, strict=True)):
+            try:
+                P = apply_changes(P, self.box.frame, [change])
+            except InputError as e:      # a change refused on this lattice: name the design file and key
+                if e.path is not None:
+                    raise
+                raise self.design.error(e.message, f"changes[{index}].{next(iter(spec))}") from None
+        return P
 
     def surface_displacement(self, P: np.ndarray) -> np.ndarray:
         """(S, 3) displacement of the surface points for control points ``P``: B @ (P - P0).
