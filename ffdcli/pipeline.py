@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.box import Box, BoxSettings, fit_box
-from ffdcli.errors import InputError
+from ffdcli.errors import InputError, QualityError
 from ffdcli.mesh import Mesh
 from ffdcli.progress import no_progress
 
@@ -270,12 +270,23 @@ def volume_method(run: DesignRun) -> str:
     return method
 
 
+@np.errstate(over="ignore", invalid="ignore", divide="ignore")    # absurd values end in the check below
 def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check: bool = True) -> Deformation:
     """Apply the design's changes and move the mesh: the surface exactly, the volume by IDW.
 
     Returns a :class:`Deformation`; nothing is written. The quality report is computed when the
-    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides).
+    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides). A
+    deformation that cannot be computed in floating point (design values so large that coordinates
+    overflow) raises :class:`~ffdcli.errors.QualityError`.
     """
+    try:
+        return _deform(run, progress=progress, P=P, check=check)
+    except np.linalg.LinAlgError as e:
+        raise QualityError(f"the deformation is numerically degenerate ({e}); are the design values far "
+                           "too large? nothing was written", path=run.design.path) from None
+
+
+def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
     progress = progress or no_progress
     t = {}
     t0 = time.perf_counter()
@@ -301,6 +312,9 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check:
     # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
     points[surf.ids] = mesh.points[surf.ids] + disp
     t["volume"] = time.perf_counter() - t1
+    if not np.all(np.isfinite(points)):
+        raise QualityError("the deformed mesh has non-finite coordinates; are the design values far too "
+                           "large? nothing was written", path=run.design.path)
     quality = None
     if mesh.n_cells and check:
         from ffdcli.quality import check_quality
