@@ -555,7 +555,10 @@ def _build_one(kind, spec, key, n, m, l, dim, error) -> Change:
     if kind == "shape":
         if "random" in spec:
             rng = np.random.default_rng(int(spec.get("seed", 0)))
-            upper, lower = rng.uniform(-spec["random"], spec["random"], size=(2, n, m))
+            try:
+                upper, lower = rng.uniform(-spec["random"], spec["random"], size=(2, n, m))
+            except OverflowError:
+                raise error(f"{spec['random']:g} is too large for a uniform draw", key + ".random") from None
             return Shape(upper, lower)
         for side in ("upper", "lower"):
             if side in spec and len(spec[side]) != n:
