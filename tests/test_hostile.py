@@ -284,6 +284,32 @@ def test_chord_list_with_zero(ws):
     assert_hostile(ws, ["deform", name], 2, names=["chord_zero_list.yaml", "changes[0].chord"])
 
 
+@pytest.mark.parametrize("change", [{"sweep": 90}, {"dihedral": -88}], ids=["sweep", "dihedral"])
+def test_shear_to_ninety_degrees(ws, change):
+    """A shear angle that reaches +-90 degrees is refused (found here: the message named no file)."""
+    kind = next(iter(change))
+    name = design_with(ws, f"{kind}_90.yaml", [{"twist": {"tip": 2}}, change])
+    assert_hostile(ws, ["deform", name], 2, "85", names=[f"{kind}_90.yaml:", f"changes[1].{kind}"])
+
+
+def test_random_shape_amplitude_overflows(ws):
+    """Found here: an amplitude of 1e308 crashed numpy's uniform draw (exit 1)."""
+    name = design_with(ws, "random_huge.yaml", [{"shape": {"random": 1e308, "seed": 1}}])
+    assert_hostile(ws, ["deform", name], 2, names=["random_huge.yaml:", "changes[0].shape.random"])
+
+
+@pytest.mark.parametrize("change", [{"chord": {"tip": 1e300}}, {"span": 1e300},
+                                   {"shape": {"upper": [0, 1e300, 0, 0, 0, 0]}}],
+                         ids=["chord", "span", "shape"])
+def test_finite_but_overflowing_values(ws, change):
+    """Finite values so large that coordinates overflow: refused by the gate, even with --force
+    (found here: chord 1e300 crashed in an SVD with exit 1, and --force would have written inf)."""
+    kind = next(iter(change))
+    name = design_with(ws, f"overflow_{kind}.yaml", [change])
+    line = assert_hostile(ws, ["deform", name, "--force"], 3, names=[f"overflow_{kind}.yaml"])
+    assert "nothing was written" in line
+
+
 def test_twist_single_number_in_3d(ws):
     """A 3D twist of one number would move the root section without naming it: refused."""
     name = design_with(ws, "twist_scalar.yaml", [{"twist": 5}])
