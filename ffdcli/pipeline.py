@@ -100,6 +100,8 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     if mesh.path is not None:
         extra = ""
         if settings.file:
+            if not Path(settings.file).is_file():
+                raise InputError("lattice file not found", path=settings.file)
             extra = cache_mod.file_hash(settings.file)
         mh = mesh_hash or cache_mod.file_hash(mesh.path)
         key = cache_mod.cache_key(mh, names, settings, extra)
