@@ -603,6 +603,39 @@ def test_grad_output_missing_folder(ws):
     assert_hostile(ws, ["grad", "good.yaml", "--sens", sens, "-o", "nodir/g.json"], 2, names=["g.json"])
 
 
+@pytest.mark.parametrize("target", ["vwing.su2", "good.yaml", "sens_ok.csv"])
+def test_grad_output_over_an_input(ws, target):
+    """Found here: ``ffd grad -o MESH`` replaced the input mesh with the JSON gradient."""
+    sens = _sens_csv(ws, "sens_ok.csv", ids=[0, 1, 2])
+    assert_hostile(ws, ["grad", "good.yaml", "--sens", sens, "-o", target], 2, "overwrite", names=[target])
+
+
+@pytest.mark.parametrize("target", ["vwing.su2", "good.yaml"])
+def test_jacobian_output_over_an_input(ws, target):
+    assert_hostile(ws, ["jacobian", "good.yaml", "-o", target], 2, "overwrite", names=[target])
+
+
+def test_box_lattice_file_missing(ws):
+    """Found here: ``ffd box --from MISSING`` crashed with FileNotFoundError (exit 1)."""
+    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--from", "nofile.xyz"], 2,
+                   names=["nofile.xyz"])
+
+
+def test_box_lattice_file_garbage(ws):
+    (ws / "bad_lattice.xyz").write_text("1\n2 2 2\n0 0 0\n")
+    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--from", "bad_lattice.xyz"], 2,
+                   names=["bad_lattice.xyz"])
+
+
+def test_box_lattice_output_is_input(ws):
+    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--lattice", "vwing.su2"], 2, "input",
+                   names=["vwing.su2"])
+
+
+def test_plot_output_is_input(ws):
+    assert_hostile(ws, ["plot", "good.yaml", "-o", "vwing.su2"], 2, "input", names=["vwing.su2"])
+
+
 # ----------------------------------------------------------------------------------------------
 # Sensitivity files
 # ----------------------------------------------------------------------------------------------
