@@ -24,18 +24,14 @@ import io
 import json
 import os
 import shutil
-import signal
 import subprocess
-import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
-
 from conftest import REPO, SAMPLES, assert_clean_failure, file_hash, run_ffd
-from wingcase import write_design, write_surface_wing, write_volume_wing
+from wingcase import write_design, write_volume_wing
 
 SUBPROCESS = os.environ.get("FFD_HOSTILE_SUBPROCESS") == "1"
 GOOD = [{"twist": {"tip": 5}}, {"chord": {"tip": 0.8}}]
