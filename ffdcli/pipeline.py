@@ -341,9 +341,9 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     out = run.design.output
     mesh_path = Path(mesh_path or out["mesh"])
     lattice_path = Path(lattice_path or out["lattice"]) if (lattice_path or out.get("lattice")) else None
-    check_writable(mesh_path, inputs=(mesh.path,))
+    check_writable(mesh_path, inputs=(mesh.path, run.design.path))
     if lattice_path is not None:
-        check_writable(lattice_path, inputs=(mesh.path, mesh_path))
+        check_writable(lattice_path, inputs=(mesh.path, mesh_path, run.design.path))
     written = {}
     write_mesh(mesh, mesh_path, result.points, progress=progress)
     written["mesh"] = str(mesh_path)
