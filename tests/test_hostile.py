@@ -580,6 +580,23 @@ def test_lattice_output_equals_input(ws):
     assert_hostile(ws, ["deform", "good.yaml", "--lattice", "vwing.su2"], 2, "input")
 
 
+@pytest.mark.parametrize("args", [["deform", "good.yaml", "--lattice", "good.yaml"],
+                                  ["deform", "good.yaml", "-o", "same.su2", "--lattice", "same.su2"],
+                                  ["plot", "good.yaml", "-o", "good.yaml"]],
+                         ids=["lattice_over_design", "lattice_over_mesh_output", "plot_over_design"])
+def test_output_over_the_design_file(ws, args):
+    """Found here: ``--lattice DESIGN.yaml`` replaced the design file with the lattice VTK."""
+    assert_hostile(ws, args, 2, "overwrite")
+
+
+def test_output_symlink_to_input(ws):
+    link = ws / "link.su2"
+    if not link.exists():
+        link.symlink_to("vwing.su2")
+    assert_hostile(ws, ["deform", "good.yaml", "-o", "link.su2"], 2, "input mesh", names=["link.su2"])
+    assert link.is_symlink()
+
+
 def test_output_is_a_folder(ws):
     (ws / "afolder.su2").mkdir(exist_ok=True)
     assert_hostile(ws, ["deform", "good.yaml", "-o", "afolder.su2"], 2, "directory", names=["afolder.su2"],
