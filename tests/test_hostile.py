@@ -478,6 +478,32 @@ def test_mesh_nan_coordinate(ws):
     assert_hostile(ws, ["inspect", name], 2, names=["nancoord.su2"])
 
 
+def test_mesh_nmark_too_small(ws):
+    """Found here: NMARK= 2 with four markers in the file silently dropped two markers."""
+    lines = mesh_lines(ws)
+    i = _find(lines, "NMARK")
+    lines[i] = "NMARK= 2\n"
+    name = bad_mesh(ws, "nmark_small.su2", lines)
+    line = assert_hostile(ws, ["inspect", name], 2, "symmetry", "NMARK", names=["nmark_small.su2:"])
+    assert f":{_find(lines, 'MARKER_TAG= symmetry') + 1}:" in line
+
+
+def test_mesh_last_marker_elems_too_small(ws):
+    """Found here: rows beyond the last MARKER_ELEMS= count were silently dropped."""
+    lines = mesh_lines(ws)
+    i = _find(lines, "MARKER_TAG= side") + 1
+    lines[i] = "MARKER_ELEMS= 300\n"
+    name = bad_mesh(ws, "melems_small.su2", lines)
+    assert_hostile(ws, ["inspect", name], 2, "MARKER_ELEMS", names=["melems_small.su2:"])
+
+
+def test_mesh_npoin_absurd(ws):
+    lines = mesh_lines(ws)
+    lines[_find(lines, "NPOIN")] = "NPOIN= 999999999999\n"
+    name = bad_mesh(ws, "npoin_absurd.su2", lines)
+    assert_hostile(ws, ["inspect", name], 2, "NPOIN", names=["npoin_absurd.su2:"])
+
+
 def test_mesh_duplicate_marker(ws):
     lines = mesh_lines(ws)
     i = _find(lines, "MARKER_TAG= farfield")
