@@ -538,6 +538,40 @@ def test_mesh_unknown_element_type(ws):
     assert_hostile(ws, ["inspect", name], 2, "77", names=["badtype.su2"])
 
 
+@pytest.fixture(scope="module")
+def other_formats(ws):
+    """The wing as CGNS, VTU and legacy VTK (written once, then damaged copies per case)."""
+    from ffdcli.formats import read_mesh, write_mesh
+
+    mesh = read_mesh(ws / "vwing.su2")
+    for ext in ("cgns", "vtu", "vtk"):
+        write_mesh(mesh, ws / f"vwing_fmt.{ext}")
+    return ws
+
+
+@pytest.mark.parametrize("ext", ["cgns", "vtu", "vtk"])
+@pytest.mark.parametrize("damage", ["truncated", "garbage", "empty"])
+def test_other_format_damaged(other_formats, ext, damage):
+    ws = other_formats
+    data = (ws / f"vwing_fmt.{ext}").read_bytes()
+    bad = {"truncated": data[: len(data) // 2], "garbage": b"not a mesh at all\n" * 64, "empty": b""}[damage]
+    name = f"{damage}.{ext}"
+    (ws / name).write_bytes(bad)
+    assert_hostile(ws, ["inspect", name], 2, names=[name])
+
+
+def test_check_damaged_mesh(ws):
+    lines = mesh_lines(ws)
+    name = bad_mesh(ws, "check_trunc.su2", lines[: len(lines) // 3])
+    assert_hostile(ws, ["check", name], 2, names=["check_trunc.su2"])
+
+
+def test_fit_output_over_design(ws):
+    name = _airfoil_design(ws, "airfoil_fit_over.yaml", {"shape": {"upper": [0] * 6, "lower": [0] * 6}})
+    assert_hostile(ws, ["fit", name, "--target", str(SAMPLES / "s1223.dat"), "-o", name], 2, "overwrite",
+                   names=[name])
+
+
 def test_marker_does_not_exist_design(ws):
     name = edit_design(ws, "no_marker.yaml", lambda d: d.__setitem__("surface", "fuselage"))
     assert_hostile(ws, ["deform", name], 2, "fuselage", names=["vwing.su2"])
