@@ -161,6 +161,11 @@ def key_path(parts) -> str:
     return out
 
 
+#: Limits of a design file once YAML aliases are expanded (a real one has hundreds of values).
+MAX_YAML_VALUES = 200_000
+MAX_YAML_DEPTH = 64
+
+
 def yaml_lines(text: str, path=None) -> dict[tuple, int]:
     """Map key paths (tuples) to 1-based YAML lines (a mapping entry -> the line of its key).
 
@@ -169,9 +174,17 @@ def yaml_lines(text: str, path=None) -> dict[tuple, int]:
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as e:
         raise _yaml_error(e, path) from None
+    except RecursionError:
+        raise InputError("not valid YAML: nested far too deeply for a design file", path=path) from None
     lines: dict[tuple, int] = {}
+    budget = [MAX_YAML_VALUES]
 
     def walk(node, parts):
+        budget[0] -= 1       # aliases expand: a few lines may stand for billions of values
+        if budget[0] < 0 or len(parts) > MAX_YAML_DEPTH:
+            raise InputError(f"the design file expands to more than {MAX_YAML_VALUES} values or "
+                             f"{MAX_YAML_DEPTH} levels (YAML aliases?); a design file is small", path=path,
+                             line=node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             seen = set()
             for k, v in node.value:
