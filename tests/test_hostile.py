@@ -25,6 +25,7 @@ import json
 import os
 import shutil
 import subprocess
+import time
 from pathlib import Path
 
 import numpy as np
@@ -163,6 +164,23 @@ def test_non_yaml_design(ws):
 def test_binary_design(ws):
     (ws / "binary.yaml").write_bytes(b"\x89PNG\r\n\x1a\n\x00\x00\xff\xfe garbage")
     assert_hostile(ws, ["deform", "binary.yaml"], 2, names=["binary.yaml"])
+
+
+def test_yaml_alias_bomb(ws):
+    """Found here: nine levels of nine aliases (a 'billion laughs' file of 12 lines) hung ffd."""
+    lines = ["mesh: vwing.su2", "surface: wing", "a0: &a0 [1, 1, 1, 1, 1, 1, 1, 1, 1]"]
+    lines += [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 10)]
+    lines += ["changes: [{twist: {tip: 3}}]"]
+    name = bad_design(ws, "laughs.yaml", "\n".join(lines) + "\n")
+    t0 = time.perf_counter()
+    assert_hostile(ws, ["deform", name], 2, "aliases", names=["laughs.yaml:"])
+    assert time.perf_counter() - t0 < 30
+
+
+def test_yaml_nested_too_deep(ws):
+    """Found here: 5000 nested brackets crashed the YAML composer with RecursionError (exit 1)."""
+    name = bad_design(ws, "deep.yaml", "mesh: vwing.su2\nchanges: " + "[" * 5000 + "]" * 5000 + "\n")
+    assert_hostile(ws, ["deform", name], 2, "deep", names=["deep.yaml"])
 
 
 def test_design_is_a_list(ws):
