@@ -247,6 +247,11 @@ def apply_overrides(data: dict, overrides=(), path=None) -> dict:
         key = key.strip()
         try:
             value = yaml.safe_load(text)
+            yaml_lines(text)            # the limits of a design file (aliases, depth) hold for a value too
+        except InputError as e:
+            raise InputError(f"--set {key}: {e.message}", path=path, key=key) from None
+        except RecursionError:
+            raise InputError(f"--set {key}: the value is nested far too deeply", path=path, key=key) from None
         except yaml.YAMLError:
             raise InputError(f"--set {item!r}: the value is not a YAML number, word or list",
                              path=path, key=key) from None
