@@ -388,6 +388,17 @@ def test_set_nan(ws):
                    names=["good.yaml", "changes[1].chord.tip"])
 
 
+def test_set_alias_bomb(ws):
+    """Found here: a --set value that is an alias bomb hung ffd; a deeply nested one crashed."""
+    bomb = "[&a0 [1,1,1,1,1,1,1,1,1]"
+    bomb += "".join(f", &a{i} [{','.join([f'*a{i - 1}'] * 9)}]" for i in range(1, 9)) + "]"
+    assert_hostile(ws, ["deform", "good.yaml", "--set", f"changes.0.twist.tip={bomb}"], 2, "aliases",
+                   names=["good.yaml", "changes.0.twist.tip"])
+    deep = "[" * 3000 + "]" * 3000
+    assert_hostile(ws, ["deform", "good.yaml", "--set", f"changes.0.twist.tip={deep}"], 2, "deep",
+                   names=["good.yaml", "changes.0.twist.tip"])
+
+
 # ----------------------------------------------------------------------------------------------
 # Meshes
 # ----------------------------------------------------------------------------------------------
