@@ -601,6 +601,32 @@ def test_fit_output_over_design(ws):
                    names=[name])
 
 
+def test_surface_marker_without_elements(ws):
+    lines = mesh_lines(ws)
+    i = _find(lines, "MARKER_TAG= wing")
+    n = int(lines[i + 1].split("=")[1])
+    name = bad_mesh(ws, "nowing.su2", lines[: i + 1] + ["MARKER_ELEMS= 0\n"] + lines[i + 2 + n:])
+    assert_hostile(ws, ["box", name, "--surface", "wing"], 2, "no points", names=["nowing.su2"])
+
+
+def test_degenerate_mesh_all_points_equal(ws):
+    from ffdcli.formats import read_mesh, write_mesh
+
+    mesh = read_mesh(ws / "vwing.su2")
+    write_mesh(mesh.with_points(np.zeros_like(mesh.points)), ws / "collapsed.su2")
+    assert_hostile(ws, ["box", "collapsed.su2", "--surface", "wing"], 2, "extent", names=["collapsed.su2"])
+
+
+@pytest.mark.parametrize("text", ["NACA\n1 0\n0.5 nan\n0 0\n0.5 -0.1\n1 0\n", "NACA\n1 0\n0 0\n",
+                                  "NACA\n" + "0.5 0.0\n" * 20],
+                         ids=["nan", "two_points", "all_equal"])
+def test_fit_target_bad_airfoil(ws, text):
+    (ws / "bad_airfoil.dat").write_text(text)
+    name = _airfoil_design(ws, "airfoil_fit2.yaml", {"shape": {"upper": [0] * 6, "lower": [0] * 6}})
+    assert_hostile(ws, ["fit", name, "--target", "bad_airfoil.dat", "-o", "fitted.yaml"], 2,
+                   names=["bad_airfoil.dat"])
+
+
 def test_marker_does_not_exist_design(ws):
     name = edit_design(ws, "no_marker.yaml", lambda d: d.__setitem__("surface", "fuselage"))
     assert_hostile(ws, ["deform", name], 2, "fuselage", names=["vwing.su2"])
