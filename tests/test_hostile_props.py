@@ -84,7 +84,7 @@ def _check_written(path: Path, original, points_expected):
 OUTCOMES: list[bool] = []       # quality verdicts of the drawn designs (both kinds must occur)
 
 
-@settings(max_examples=15, deadline=None, derandomize=True,
+@settings(max_examples=25, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(changes=DESIGN)
 def test_random_valid_designs_write_or_are_refused(wing, changes):
@@ -211,11 +211,12 @@ def test_sigint_leaves_no_partial_output(big_wing):
             time.sleep(0.002)
         p.send_signal(signal.SIGINT)
         _, err = p.communicate(timeout=120)
-        if p.returncode == 130:
+        assert p.returncode in (0, 130), err
+        if out.exists():             # the write finished between the poll and the signal: complete
+            assert file_hash(out) == ref_hash, err
+        else:
+            assert p.returncode == 130 and "Traceback" not in err, err
             inside_write += 1
-            assert not out.exists(), err
-        else:                        # the write finished between the poll and the signal
-            assert p.returncode == 0 and file_hash(out) == ref_hash, err
         assert not list(folder.glob("*.part*")), list(folder.glob("*"))
     assert inside_write, "no interrupt landed inside the write of the mesh"
     # The cache survived the interrupts: a later run reuses it and gives the same mesh.
