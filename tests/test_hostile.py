@@ -903,17 +903,24 @@ def test_cache_other_version(ws, field, value):
         cache.write_bytes(saved)
 
 
-def test_cache_arrays_tampered(ws):
-    """A cache whose header is right but whose embedding is out of range is not used."""
+@pytest.mark.parametrize("array,damage", [
+    ("params", lambda v: v * 7.0),                  # parameters outside [0, 1]
+    ("control_points", lambda v: v * np.nan),       # found here: used, then "contain NaN" (no file)
+    ("le_points", lambda v: v * np.nan),            # found here: used silently
+    ("control_points", lambda v: v[:, :3]),         # found here: used, then a lattice error (no file)
+], ids=["params_out_of_range", "nan_control_points", "nan_le_points", "lattice_shape"])
+def test_cache_arrays_tampered(ws, array, damage):
+    """A cache whose header is right but whose arrays are damaged is rebuilt, never used."""
     cache = _good_cache(ws)
     saved = cache.read_bytes()
     try:
         with np.load(cache, allow_pickle=False) as z:
             arrays = {k: z[k] for k in z.files}
-        arrays["params"] = arrays["params"] * 7.0
+        arrays[array] = damage(arrays[array])
         with open(cache, "wb") as fh:
             np.savez(fh, **arrays)
         _good_run_reuses_or_rebuilds(ws, expect_from_cache=False)
+        _good_run_reuses_or_rebuilds(ws, expect_from_cache=True)
     finally:
         cache.write_bytes(saved)
 
