@@ -241,6 +241,18 @@ def test_degree_too_high_without_points(ws):
     assert_hostile(ws, ["deform", name], 2, names=["degree_only.yaml:", "box.degree"])
 
 
+@pytest.mark.parametrize("points", [[6, 100_000_000, 2], [3000, 3000, 2]], ids=["1e8", "3000x3000"])
+def test_absurd_lattice_size(ws, points):
+    """Found here: box.points [6, 1e8, 2] ran for minutes, [3000, 3000, 2] ran out of memory (exit 1)."""
+    name = edit_design(ws, f"points_{points[1]}.yaml", lambda d: d["box"].__setitem__("points", points))
+    assert_hostile(ws, ["deform", name], 2, "at most", names=[f"points_{points[1]}.yaml:", "box.points"])
+
+
+def test_absurd_lattice_size_box_command(ws):
+    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--points", "6,100000000,2"], 2, "at most",
+                   names=["vwing.su2"])
+
+
 def test_surface_wrong_type(ws):
     name = edit_design(ws, "surface_num.yaml", lambda d: d.__setitem__("surface", 12))
     assert_hostile(ws, ["deform", name], 2, names=["surface_num.yaml:", "surface"])
