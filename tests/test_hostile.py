@@ -601,6 +601,24 @@ def test_other_format_damaged(other_formats, ext, damage):
     assert_hostile(ws, ["inspect", name], 2, names=[name])
 
 
+@pytest.mark.parametrize("damage", ["cell_point_missing", "non_numeric", "npoints_wrong"])
+def test_legacy_vtk_damaged(other_formats, damage):
+    ws = other_formats
+    lines = (ws / "vwing_fmt.vtk").read_text().split("\n")
+    cells = next(i for i, ln in enumerate(lines) if ln.startswith("CELLS"))
+    pts = next(i for i, ln in enumerate(lines) if ln.startswith("POINTS"))
+    if damage == "cell_point_missing":
+        first = cells + 1 + (1 if lines[cells + 1].startswith("OFFSETS") else 0)
+        lines[first + 1] = "99999"           # the first point id of the first cell
+    elif damage == "non_numeric":
+        lines[pts + 1] = "abc " + lines[pts + 1]
+    else:
+        lines[pts] = lines[pts].replace(lines[pts].split()[1], "100")
+    name = f"vtk_{damage}.vtk"
+    (ws / name).write_text("\n".join(lines))
+    assert_hostile(ws, ["inspect", name], 2, names=[name])
+
+
 def test_check_damaged_mesh(ws):
     lines = mesh_lines(ws)
     name = bad_mesh(ws, "check_trunc.su2", lines[: len(lines) // 3])
