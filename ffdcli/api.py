@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.changes import apply_changes, design_variables, set_design_variables
+from ffdcli.changes import design_variables, set_design_variables
 from ffdcli.errors import InputError
 
 
@@ -128,7 +128,7 @@ class DesignModel:
 
     def lattice(self) -> np.ndarray:
         if "P" not in self._cache:
-            self._cache["P"] = apply_changes(self.run.P0, self.run.box.frame, self.run.changes)
+            self._cache["P"] = self.run.lattice_after()
         return self._cache["P"]
 
     def surface_points(self) -> np.ndarray:

@@ -20,13 +20,13 @@ def check_writable(path: str | Path, *, inputs: tuple[str | Path, ...] = ()) -> 
     """Return ``path`` as a Path after checking that it can be written as an output.
 
     Raises InputError if its folder does not exist or is not writable, if it is a folder, or if
-    it is one of ``inputs`` (the input mesh is never overwritten).
+    it is one of ``inputs`` (the input mesh, first, and any other input file are never overwritten).
     """
     p = Path(path)
-    for src in inputs:
+    for index, src in enumerate(inputs):
         if src is not None and _same_file(p, Path(src)):
-            raise InputError("the output would overwrite the input mesh; choose another output path",
-                             path=p)
+            what = "the input mesh" if index == 0 else f"{Path(src).name}, which this run also uses"
+            raise InputError(f"the output would overwrite {what}; choose another output path", path=p)
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
         raise InputError(f"the output folder {str(parent)!r} does not exist", path=p,

@@ -34,6 +34,8 @@ from ffdcli.progress import no_progress
 
 #: Control points when the user gives none: the paper's wing lattice, and its airfoil lattice.
 DEFAULT_POINTS = {3: (6, 8, 2), 2: (6, 5)}
+#: The most control points in one direction of an automatic lattice.
+MAX_POINTS = 256
 #: Largest number of rebuilds when growing margins to contain the surface.
 MAX_REBUILDS = 12
 #: Where the first cut inboard of a degenerate tip cut is searched, as fractions of the span.
@@ -82,6 +84,9 @@ class BoxSettings:
                              key=f"{key}.points")
         if min(pts) < 2:
             raise InputError(f"every direction needs at least 2 control points, got {list(pts)}",
+                             path=path, key=f"{key}.points")
+        if max(pts) > MAX_POINTS:     # an FFD lattice has tens; millions would run out of memory or time
+            raise InputError(f"at most {MAX_POINTS} control points per direction, got {list(pts)}",
                              path=path, key=f"{key}.points")
         deg = tuple(min(3, p - 1) for p in pts) if self.degree is None else \
             tuple(int(d) for d in self.degree)

@@ -22,6 +22,7 @@ import numpy as np
 from ffdcli import __version__
 from ffdcli.axes import Axes
 from ffdcli.box import Box, BoxSettings
+from ffdcli.errors import InputError
 
 #: Bumped whenever the content of the cache changes meaning.
 CACHE_FORMAT = 1
@@ -110,6 +111,8 @@ def load(path: str | Path, key: str, settings: BoxSettings):
             a = {k: z[k] for k in z.files}
     except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError):
         return None
+    if any(v.dtype.kind == "f" and not np.all(np.isfinite(v)) for v in a.values()):
+        return None                  # a damaged file: no cache we write holds NaN or inf
     try:
         dim = int(a["dim"])
         ax = a["axes"]
@@ -131,6 +134,6 @@ def load(path: str | Path, key: str, settings: BoxSettings):
         if not (np.all(np.isfinite(params)) and params.min(initial=0) >= 0 and params.max(initial=0) <= 1):
             return None
         emb = Embedding.from_params(box.lattice(), params, inside=inside, residual=residual)
-    except (KeyError, ValueError, TypeError, IndexError):
+    except (KeyError, ValueError, TypeError, IndexError, InputError):    # arrays that do not fit together
         return None
     return box, ids, emb, header

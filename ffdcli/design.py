@@ -28,7 +28,7 @@ import numpy as np
 import yaml
 
 from ffdcli.axes import SECTION_CHOICES
-from ffdcli.box import DEFAULT_POINTS, BoxSettings
+from ffdcli.box import BoxSettings
 from ffdcli.changes import Change, Chord, Dihedral, SectionLaw, Shape, Span, Sweep, Twist
 from ffdcli.errors import InputError
 
@@ -161,6 +161,11 @@ def key_path(parts) -> str:
     return out
 
 
+#: Limits of a design file once YAML aliases are expanded (a real one has hundreds of values).
+MAX_YAML_VALUES = 200_000
+MAX_YAML_DEPTH = 64
+
+
 def yaml_lines(text: str, path=None) -> dict[tuple, int]:
     """Map key paths (tuples) to 1-based YAML lines (a mapping entry -> the line of its key).
 
@@ -169,9 +174,17 @@ def yaml_lines(text: str, path=None) -> dict[tuple, int]:
         root = yaml.compose(text, Loader=yaml.SafeLoader)
     except yaml.YAMLError as e:
         raise _yaml_error(e, path) from None
+    except RecursionError:
+        raise InputError("not valid YAML: nested far too deeply for a design file", path=path) from None
     lines: dict[tuple, int] = {}
+    budget = [MAX_YAML_VALUES]
 
     def walk(node, parts):
+        budget[0] -= 1       # aliases expand: a few lines may stand for billions of values
+        if budget[0] < 0 or len(parts) > MAX_YAML_DEPTH:
+            raise InputError(f"the design file expands to more than {MAX_YAML_VALUES} values or "
+                             f"{MAX_YAML_DEPTH} levels (YAML aliases?); a design file is small", path=path,
+                             line=node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             seen = set()
             for k, v in node.value:
@@ -234,6 +247,11 @@ def apply_overrides(data: dict, overrides=(), path=None) -> dict:
         key = key.strip()
         try:
             value = yaml.safe_load(text)
+            yaml_lines(text)            # the limits of a design file (aliases, depth) hold for a value too
+        except InputError as e:
+            raise InputError(f"--set {key}: {e.message}", path=path, key=key) from None
+        except RecursionError:
+            raise InputError(f"--set {key}: the value is nested far too deeply", path=path, key=key) from None
         except yaml.YAMLError:
             raise InputError(f"--set {item!r}: the value is not a YAML number, word or list",
                              path=path, key=key) from None
@@ -373,8 +391,8 @@ def validate(data, path=None, lines: dict | None = None) -> None:
         fail(parts, message)
     # what the schema cannot say in words
     box = data.get("box") or {}
-    if "degree" in box:
-        points = box.get("points") or list(DEFAULT_POINTS.get(len(box["degree"]), DEFAULT_POINTS[3]))
+    if "degree" in box and box.get("points") is not None:   # else the default of the mesh's dimension
+        points = box["points"]
         if len(box["degree"]) != len(points):
             fail(("box", "degree"), f"has {len(box['degree'])} values but box.points has {len(points)}")
         for d, (p, q) in enumerate(zip(points, box["degree"], strict=True)):
@@ -474,7 +492,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
             raise InputError(f"lattice file {box_file} not found", path=path, key="box.file",
                              line=_line(lines, ("box", "file")))
     defaults = BoxSettings()
-    box = BoxSettings(points=tuple(b["points"]) if "points" in b else None,
+    box = BoxSettings(points=tuple(b["points"]) if b.get("points") is not None else defaults.points,
                       degree=tuple(b["degree"]) if "degree" in b else None,
                       sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
                       root=b.get("root"), file=None if box_file is None else str(box_file))
@@ -555,7 +573,10 @@ def _build_one(kind, spec, key, n, m, l, dim, error) -> Change:
     if kind == "shape":
         if "random" in spec:
             rng = np.random.default_rng(int(spec.get("seed", 0)))
-            upper, lower = rng.uniform(-spec["random"], spec["random"], size=(2, n, m))
+            try:
+                upper, lower = rng.uniform(-spec["random"], spec["random"], size=(2, n, m))
+            except OverflowError:
+                raise error(f"{spec['random']:g} is too large for a uniform draw", key + ".random") from None
             return Shape(upper, lower)
         for side in ("upper", "lower"):
             if side in spec and len(spec[side]) != n:

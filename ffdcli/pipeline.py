@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.box import Box, BoxSettings, fit_box
-from ffdcli.errors import InputError
+from ffdcli.errors import InputError, QualityError
 from ffdcli.mesh import Mesh
 from ffdcli.progress import no_progress
 
@@ -114,6 +114,8 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     if mesh.path is not None:
         extra = ""
         if settings.file:
+            if not Path(settings.file).is_file():
+                raise InputError("lattice file not found", path=settings.file)
             extra = cache_mod.file_hash(settings.file)
         mh = mesh_hash or cache_mod.file_hash(mesh.path)
         key = cache_mod.cache_key(mh, names, settings, extra)
@@ -173,7 +175,17 @@ class DesignRun:
         """Control points after the design's changes (or ``changes``)."""
         from ffdcli.changes import apply_changes
 
-        return apply_changes(self.P0, self.box.frame, self.changes if changes is None else changes)
+        if changes is not None:
+            return apply_changes(self.P0, self.box.frame, changes)
+        P = self.P0
+        for index, (change, spec) in enumerate(zip(self.changes, self.design.changes_spec, strict=True)):
+            try:
+                P = apply_changes(P, self.box.frame, [change])
+            except InputError as e:      # a change refused on this lattice: name the design file and key
+                if e.path is not None:
+                    raise
+                raise self.design.error(e.message, f"changes[{index}].{next(iter(spec))}") from None
+        return P
 
     def surface_displacement(self, P: np.ndarray) -> np.ndarray:
         """(S, 3) displacement of the surface points for control points ``P``: B @ (P - P0).
@@ -236,8 +248,14 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     """Prepare the box of a loaded design (cached) and build its changes against the lattice."""
     from ffdcli.design import build_changes
 
-    prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
-                       use_cache=use_cache, rebuild=rebuild, progress=progress)
+    try:
+        prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
+                           use_cache=use_cache, rebuild=rebuild, progress=progress)
+    except InputError as e:      # a box setting of the design file: name the design file and its line
+        if e.key and e.key.startswith("box.") and e.line is None:
+            raise InputError(e.message, path=design.path, key=e.key, line=design.line_of(e.key),
+                             hint=e.hint) from None
+        raise
     n, m, l = prep.box.shape
     changes = build_changes(design, n, m, l, prep.box.dim)
     return DesignRun(design=design, prep=prep, changes=changes)
@@ -268,12 +286,23 @@ def volume_method(run: DesignRun) -> str:
     return method
 
 
+@np.errstate(over="ignore", invalid="ignore", divide="ignore")    # absurd values end in the check below
 def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check: bool = True) -> Deformation:
     """Apply the design's changes and move the mesh: the surface exactly, the volume by IDW.
 
     Returns a :class:`Deformation`; nothing is written. The quality report is computed when the
-    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides).
+    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides). A
+    deformation that cannot be computed in floating point (design values so large that coordinates
+    overflow) raises :class:`~ffdcli.errors.QualityError`.
     """
+    try:
+        return _deform(run, progress=progress, P=P, check=check)
+    except np.linalg.LinAlgError as e:
+        raise QualityError(f"the deformation is numerically degenerate ({e}); are the design values far "
+                           "too large? nothing was written", path=run.design.path) from None
+
+
+def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
     progress = progress or no_progress
     t = {}
     t0 = time.perf_counter()
@@ -299,6 +328,9 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check:
     # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
     points[surf.ids] = mesh.points[surf.ids] + disp
     t["volume"] = time.perf_counter() - t1
+    if not np.all(np.isfinite(points)):
+        raise QualityError("the deformed mesh has non-finite coordinates; are the design values far too "
+                           "large? nothing was written", path=run.design.path)
     quality = None
     if mesh.n_cells and check and not is_surface_mesh(mesh):
         from ffdcli.quality import check_quality
@@ -323,9 +355,9 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     out = run.design.output
     mesh_path = Path(mesh_path or out["mesh"])
     lattice_path = Path(lattice_path or out["lattice"]) if (lattice_path or out.get("lattice")) else None
-    check_writable(mesh_path, inputs=(mesh.path,))
+    check_writable(mesh_path, inputs=(mesh.path, run.design.path))
     if lattice_path is not None:
-        check_writable(lattice_path, inputs=(mesh.path, mesh_path))
+        check_writable(lattice_path, inputs=(mesh.path, mesh_path, run.design.path))
     written = {}
     write_mesh(mesh, mesh_path, result.points, progress=progress)
     written["mesh"] = str(mesh_path)

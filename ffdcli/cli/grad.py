@@ -47,6 +47,8 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
 
         check_writable(output)
     model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
+    if output:      # never over an input (the mesh, the design, the sensitivity file)
+        check_writable(output, inputs=(model.run.prep.mesh.path, design_file, sens))
     sens_file = sens
     g, sens = read_sensitivity_for(model, sens_file)
     on_surface = np.isin(sens.ids, model.surface_ids)
@@ -109,6 +111,7 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
 
     check_writable(output)
     model = DesignModel.from_file(design_file, overrides, progress=console.progress)
+    check_writable(output, inputs=(model.run.prep.mesh.path, design_file))
     B, D = model.jacobian_factors()
     arrays = dict(names=np.array(model.names), point_ids=model.surface_ids, values=model.values,
                   B_data=B.data, B_indices=B.indices, B_indptr=B.indptr, B_shape=np.array(B.shape), D=D,

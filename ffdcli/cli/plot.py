@@ -33,7 +33,7 @@ def plot_cmd(design_file, output, overrides, view3d, console):
 
     design = load_design(design_file, overrides=overrides)
     png = Path(output or design.output.get("plot") or Path(design.output["mesh"]).with_suffix(".png"))
-    check_writable(png, inputs=(design.mesh,))
+    check_writable(png, inputs=(design.mesh, design.path))
     run = load_run(design, progress=console.progress)
     result = deform(run, progress=console.progress)
     plot_design(run, result, png)

@@ -259,7 +259,9 @@ class _Parser:
                     if need not in self.seen:
                         raise self.error(f"NMARK= comes before {need}=; expected the {need} block "
                                          f"before the markers", lineno)
-                self.read_markers(self.count(key, value, lineno, "markers"), lineno)
+                nmark = self.count(key, value, lineno, "markers")
+                self.read_markers(nmark, lineno)
+                self.check_markers_end(nmark, lineno)
                 break        # the rest (FFD section, periodic info ...) is not ours to read
             elif k in ("MARKER_TAG", "MARKER_ELEMS"):
                 raise self.error(f"{k}= before NMARK=; expected NMARK= (the number of markers) first",
@@ -490,6 +492,29 @@ class _Parser:
             self.markers[name] = blocks
             self.marker_lines[name] = tag_line
             self.marker_blocks.append((name, b, rng))
+
+    def check_markers_end(self, nmark: int, key_line: int) -> None:
+        """Refuse a file with more markers than NMARK=, or more rows than the last MARKER_ELEMS=,
+        instead of silently dropping them (the rest of the file is otherwise not read)."""
+        b = self.last_block
+        while True:
+            got = self.next_line()
+            if got is None:
+                return
+            text, lineno = got
+            s = text.strip()
+            if not s or s.startswith(b"%"):
+                continue
+            m = _KEY_RE.match(s)
+            if m is None:
+                if b is not None and lineno == b.first_line + b.rows:
+                    raise self.unexpected(s, lineno)
+                return
+            if m.group(1) == b"MARKER_TAG":
+                raise self.error(f"found MARKER_TAG= {_show(m.group(2).strip())} after the {nmark} markers "
+                                 f"of NMARK= (line {key_line}); the file has more markers than NMARK= says",
+                                 lineno)
+            return
 
     def check_ids(self) -> None:
         """Point ids of the elements and markers lie in 0..NPOIN-1 (re-reads a bad block to name
