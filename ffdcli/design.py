@@ -126,8 +126,9 @@ def design_schema() -> dict:
                     "ldef": pos,
                     "tolerance": {"type": "number", "minimum": 0,
                                   "description": "tree approximation of the IDW sum (0 = exact)"},
-                    "threshold": {"type": "number",
-                                  "description": "quality gate: cells below it (and halved) fail; default 0.05"},
+                    "threshold": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                  "description": "quality gate (scaled Jacobian, 0..1): cells below it "
+                                                 "(and halved) fail; default 0.05"},
                     "fixed": names, "sliding": names,
                 }},
             "changes": {

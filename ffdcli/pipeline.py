@@ -358,6 +358,8 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     check_writable(mesh_path, inputs=(mesh.path, run.design.path))
     if lattice_path is not None:
         check_writable(lattice_path, inputs=(mesh.path, mesh_path, run.design.path))
+        if lattice_path.suffix.lower() != ".vtk":
+            raise InputError("the lattice is written as legacy VTK: give it a .vtk name", path=lattice_path)
     written = {}
     write_mesh(mesh, mesh_path, result.points, progress=progress)
     written["mesh"] = str(mesh_path)

@@ -980,3 +980,34 @@ def test_zz_cache_not_poisoned(ws):
     assert file_hash(ws / "vwing.su2") == (ws / "vwing.su2.sha256").read_text()
     assert not list(ws.rglob("*.part*"))
     _good_run_reuses_or_rebuilds(ws, expect_from_cache=True)
+
+
+def test_sensitivity_missing_surface_nodes_is_an_error(tmp_path):
+    """A surface sensitivity file that leaves out some wing nodes is an error, not a partial gradient."""
+    import numpy as np
+
+    from conftest import assert_clean_failure, run_ffd
+    from ffdcli.api import DesignModel
+    from wingcase import write_design, write_surface_wing
+
+    mesh = write_surface_wing(tmp_path)
+    design = write_design(tmp_path, mesh, [{"span": 1.1}])
+    model = DesignModel.from_file(design)
+    X = model.surface_points()
+    rows = np.c_[X, np.ones_like(X)][:-3]
+    np.savetxt(tmp_path / "part.dat", rows, fmt="%.17g")
+    assert_clean_failure(run_ffd("grad", str(design), "--sens", str(tmp_path / "part.dat")), 2, "part.dat",
+                         "no row for 3")
+
+
+def test_lattice_and_picture_extensions(tmp_path):
+    from conftest import assert_clean_failure, run_ffd
+    from wingcase import write_design, write_surface_wing
+
+    mesh = write_surface_wing(tmp_path)
+    design = write_design(tmp_path, mesh, [{"span": 1.1}])
+    assert_clean_failure(run_ffd("deform", str(design), "--lattice", str(tmp_path / "l.su2")), 2, "l.su2", ".vtk")
+    assert not (tmp_path / "l.su2").exists()
+    assert_clean_failure(run_ffd("plot", str(design), "-o", str(tmp_path / "p.txt")), 2, "p.txt", ".png")
+    bad = write_design(tmp_path, mesh, [{"span": 1.1}], name="t.yaml", volume={"method": "idw", "threshold": 7})
+    assert_clean_failure(run_ffd("deform", str(bad)), 2, "volume.threshold")

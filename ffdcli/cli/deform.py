@@ -81,6 +81,10 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
         from ffdcli.plot import plot_design
 
         png = Path(design.output["plot"]) if "plot" in given else Path(out_mesh).with_suffix(".png")
+        if png.suffix.lower() != ".png":
+            from ffdcli.errors import InputError
+
+            raise InputError("pictures are written as PNG: give output.plot a .png name", path=png)
         plot_design(run, result, png)
         written["plot"] = str(png)
     secs = time.perf_counter() - t0

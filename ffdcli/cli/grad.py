@@ -52,6 +52,13 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     sens_file = sens
     g, sens = read_sensitivity_for(model, sens_file)
     on_surface = np.isin(sens.ids, model.surface_ids)
+    missing = np.setdiff1d(model.surface_ids, sens.ids)
+    if len(missing):
+        from ffdcli.errors import InputError
+
+        raise InputError(f"has no row for {len(missing)} of the {len(model.surface_ids)} surface nodes "
+                         f"(first mesh node ids: {', '.join(map(str, missing[:5].tolist()))}); dJ/dX is needed "
+                         "at every node of the surface marker(s)", path=sens_file)
     volume_nodes = int((~on_surface).sum())
     if volume_nodes and model.uses_volume():
         grad = model.mesh_vjp(g, progress=console.progress)
