@@ -985,10 +985,10 @@ def test_zz_cache_not_poisoned(ws):
 def test_sensitivity_missing_surface_nodes_is_an_error(tmp_path):
     """A surface sensitivity file that leaves out some wing nodes is an error, not a partial gradient."""
     import numpy as np
-
     from conftest import assert_clean_failure, run_ffd
-    from ffdcli.api import DesignModel
     from wingcase import write_design, write_surface_wing
+
+    from ffdcli.api import DesignModel
 
     mesh = write_surface_wing(tmp_path)
     design = write_design(tmp_path, mesh, [{"span": 1.1}])
