@@ -172,8 +172,8 @@ def test_csr_times_dense_matches_scipy(density):
     B.eliminate_zeros()
     D = rng.normal(size=(40, 33))
     ref = np.asarray(B @ D)
-    # both sum each row's nonzeros in CSR order in float64; only the order of a fused multiply-add
-    # may differ, so agreement is to a few ulps of the row's magnitude
+    # both sum each row's (<= 40) products in float64, grouped differently (four at a time, fused
+    # multiply-adds): rounding differs by a few ulps of the row's magnitude, ~1e-15 relative
     np.testing.assert_allclose(csr_times_dense(B, D), ref, rtol=0, atol=1e-13 * max(1.0, np.abs(ref).max()))
     out = np.full((257, 33), np.nan)           # out is overwritten, not accumulated into
     assert csr_times_dense(B, D, out=out) is out
