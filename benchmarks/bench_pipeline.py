@@ -92,7 +92,8 @@ def timed_process(args: list[str], cwd: Path) -> dict:
     """Run ``python args...``; wall seconds, peak RSS (MB) of that process, its last stdout line as JSON."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         t0 = time.perf_counter()
-        proc = subprocess.Popen([sys.executable, *args], cwd=cwd, env=_env(), stdout=out, stderr=err, text=True)
+        proc = subprocess.Popen([sys.executable, *args], cwd=cwd, env=_env(), stdout=out, stderr=err,
+                                text=True)
         # os.wait4 gives this child's own rusage (RUSAGE_CHILDREN would be the max over all children)
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
@@ -167,25 +168,28 @@ def run(quick: bool = False) -> list[dict]:
                      "measured": f"{box['wall']:.1f} s, {box['rss_mb']:.0f} MB",
                      "target": "", "pyGeo reference": "",
                      "detail": f"outside {box['json'].get('outside')}, residual "
-                               f"{box['json'].get('residual', float('nan')):.1e}, cmd {box['json'].get('seconds')} s"})
+                               f"{box['json'].get('residual', float('nan')):.1e}, "
+                               f"cmd {box['json'].get('seconds')} s"})
         for method in ("idw", "none"):
             runs = [timed_process(["-m", "ffdcli", "deform", f"design_{method}.yaml", "--json", "--force"],
                                   folder) for _ in range(repeats)]
             best = min(runs, key=lambda r: r["wall"])
             j = best["json"]
             q = j.get("quality") or {}
+            walls = ", ".join(format(r["wall"], ".1f") for r in runs)
             rows.append({"case": f"ffd deform, volume {method} ({size})",
                          "measured": f"{best['wall']:.1f} s, {best['rss_mb']:.0f} MB",
                          "target": TARGET_DEFORM if not quick else "",
                          "pyGeo reference": "",
-                         "detail": f"cmd {j.get('seconds')} s; runs {', '.join(format(r['wall'], '.1f') for r in runs)} s; "
+                         "met": (best["wall"] <= 20.0 and best["rc"] == 0) if not quick else None,
+                         "detail": f"cmd {j.get('seconds')} s; runs {walls} s; "
                                    f"from_cache {j.get('from_cache')}; quality ok {q.get('ok')}"
                                    + ("" if best["rc"] == 0 else f"; exit {best['rc']}")})
         for method in ("idw", "none"):
-            ph = timed_process(["-m", "benchmarks.bench_pipeline", "--phases", str(folder / f"design_{method}.yaml")],
-                               REPO)["json"]
-            parts = ", ".join(f"{k} {ph[k]:.1f}" for k in ("read+box", "changes", "volume", "quality", "write")
-                              if k in ph)
+            ph = timed_process(["-m", "benchmarks.bench_pipeline", "--phases",
+                                str(folder / f"design_{method}.yaml")], REPO)["json"]
+            parts = ", ".join(f"{k} {ph[k]:.1f}" for k in ("read+box", "changes", "volume", "quality",
+                                                            "write") if k in ph)
             rows.append({"case": f"  phases, volume {method} (in one process)",
                          "measured": f"{ph['total']:.1f} s, {ph['peak_mb']:.0f} MB",
                          "target": "", "pyGeo reference": "", "detail": parts + " s"})
@@ -195,6 +199,8 @@ def run(quick: bool = False) -> list[dict]:
                              f"{w['surface_nodes'] / 1e3:.0f}k surface nodes)",
                      "measured": f"{w['prepare'] + w['warp']:.1f} s, {w['peak_mb']:.0f} MB",
                      "target": TARGET_WARP if not quick else "", "pyGeo reference": "",
+                     "met": (w["prepare"] + w["warp"] <= 30.0 and w["peak_mb"] <= 4096) if not quick
+                     else None,
                      "detail": f"prepare {w['prepare']:.1f} s + warp {w['warp']:.1f} s "
                                f"(warp CPU {w['warp_cpu']:.1f} s)"})
     return rows
