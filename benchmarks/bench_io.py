@@ -60,7 +60,7 @@ def structured_tet_mesh(n_points: int):
 
 
 _CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 from ffdcli.formats import su2
 op, src, out = sys.argv[1:4]
@@ -78,7 +78,9 @@ elif op == "write_new":
     t = time.perf_counter()
     su2.write(mesh, out, mesh.points)
     res["write_new"] = time.perf_counter() - t
-res["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+# VmHWM: this process's own peak (ru_maxrss would include the parent's peak, inherited at exec)
+with open("/proc/self/status") as fh:
+    res["peak_mb"] = int(next(ln for ln in fh if ln.startswith("VmHWM:")).split()[1]) / 1024
 print(json.dumps(res))
 """
 

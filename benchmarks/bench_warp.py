@@ -11,7 +11,7 @@ Columns: ``volume_nodes`` (targets), ``surface_nodes``, ``prepare_s`` (tree buil
 ``warp_s`` (one warp with rotations, after a warm-up call that compiles/loads the kernels),
 ``warp_cpu_s`` (CPU seconds of that call over all threads: warp_s on an idle machine is about
 warp_cpu_s / cores),
-``peak_mb`` (max RSS of the child process that did everything), ``err_max`` (max |tree - exact|
+``peak_mb`` (peak RSS, VmHWM, of the child process that did everything), ``err_max`` (max |tree - exact|
 over a subset of ``err_subset`` volume nodes, relative to the max surface displacement; the exact
 O(N x Ns) sum is evaluated on that subset only), and the targets.
 """
@@ -127,7 +127,8 @@ def measure(n_volume: int, n_surface: int, n_subset: int, tolerance: float = 1e-
     t4 = time.perf_counter()
     bmax = float(np.linalg.norm(b, axis=1).max())
     err = float(np.linalg.norm(d[sub] - exact, axis=1).max() / bmax)
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    # VmHWM: this process's own peak (ru_maxrss would include the parent's peak, inherited at exec)
+    peak = int(next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")).split()[1]) / 1024
     return {"volume_nodes": model.n_targets, "surface_nodes": model.n_surface,
             "prepare_s": t1 - t0, "warp_s": t2 - t1,
             "warp_cpu_s": c2 - c1, "peak_mb": peak, "err_subset": len(sub),
