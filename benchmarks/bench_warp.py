@@ -29,7 +29,7 @@ import numpy as np
 
 TITLE = "Volume-mesh warp (IDW with rotations, tree approximation)"
 NOTES = ("Targets (issue 6): 1M volume nodes and 50k surface nodes in <= 30 s and <= 4 GB; "
-         "err_max <= 1e-3 (x max surface displacement). peak_mb = max RSS of a child process that "
+         "err_max <= 1e-3 (x max surface displacement). peak_mb = peak RSS (VmHWM) of a child process that "
          "also built the mesh; the machine has 2 cores shared with other work.")
 
 SPAN, THICK, TAPER = 3.0, 0.12, 0.5
