@@ -1,7 +1,9 @@
 """Run the benchmarks: ``python -m benchmarks [--quick] [--only NAME ...]``.
 
 Finds every ``benchmarks/bench_*.py``, calls its ``run(quick)`` and prints one Markdown table per
-module (columns = the keys of its rows, in first-seen order).
+module with the columns case / measured / target / pyGeo reference (a module whose rows have other
+keys defines ``summary(rows)`` mapping them to those columns; its full rows follow as a "details"
+table). At the end, one table of every case that has a target, with whether it is met.
 """
 
 from __future__ import annotations
@@ -49,14 +51,27 @@ def markdown_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+SUMMARY_COLUMNS = ("case", "measured", "target", "pyGeo reference")
+
+
+def summary_rows(module, rows: list[dict]) -> tuple[list[dict], bool]:
+    """(rows in the summary columns, whether they differ from ``rows``)."""
+    fn = getattr(module, "summary", None)
+    if fn is None:
+        return rows, False
+    return fn(rows), True
+
+
 def main(argv=None) -> int:
     names = discover()
     ap = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="small sizes only (a smoke run, seconds)")
+    ap.add_argument("--quick", action="store_true", help="small sizes only (a smoke run, about 2 minutes)")
     ap.add_argument("--only", action="append", metavar="NAME", choices=names,
                     help=f"run only this module (repeatable): {', '.join(names)}")
     args = ap.parse_args(argv)
     failed = 0
+    targets: list[dict] = []
+    t_all = time.perf_counter()
     for name in args.only or names:
         module = importlib.import_module(f"benchmarks.bench_{name}")
         title = getattr(module, "TITLE", name)
@@ -64,15 +79,25 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         try:
             rows = module.run(quick=args.quick)
+            table, has_details = summary_rows(module, rows)
         except Exception as exc:  # one broken benchmark must not hide the others' tables
             failed += 1
             print(f"benchmark {name} failed: {type(exc).__name__}: {exc}\n", flush=True)
             continue
-        print(markdown_table(rows))
+        print(markdown_table(table))
+        if has_details:
+            print("\nDetails:\n\n" + markdown_table(rows))
         notes = getattr(module, "NOTES", "")
         if notes:
             print("\n" + notes.strip())
         print(f"\n({name}: {time.perf_counter() - t0:.1f} s)\n", flush=True)
+        targets += [{"module": name, **{k: r.get(k) for k in ("case", "measured", "target")},
+                     "met": r.get("met")} for r in table if r.get("target")]
+    if targets:
+        print("## Targets\n")
+        print(markdown_table(targets))
+        print()
+    print(f"(all: {time.perf_counter() - t_all:.0f} s)")
     return 1 if failed else 0
 
 

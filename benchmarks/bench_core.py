@@ -168,6 +168,28 @@ def run(quick: bool = False) -> list[dict]:
     return rows
 
 
+def summary(rows: list[dict]) -> list[dict]:
+    """The rows in the runner's columns: case / measured / target / pyGeo reference / met."""
+    out = []
+    for r in rows:
+        n = r["N"]
+        size = f"{n / 1e6:g}M" if n >= 1_000_000 else f"{n // 1000}k"
+        met_embed = None
+        if n == 100_000:
+            met_embed = r["embed s"] <= 0.4
+        elif n == 1_000_000:
+            met_embed = r["embed s"] <= 3.0 and (r["peak RSS MB"] or 0) <= 1536
+        peak = f", {r['peak RSS MB']:.0f} MB" if r["peak RSS MB"] is not None else ""
+        out.append({"case": f"embed {size} points, lattice {r['lattice']}",
+                    "measured": f"{r['embed s']:.3g} s{peak}", "target": r["embed target"],
+                    "pyGeo reference": r["pyGeo embed"], "met": met_embed})
+        out.append({"case": f"deform {size} points (B @ P), lattice {r['lattice']}",
+                    "measured": f"{r['deform s']:.3g} s", "target": r["deform target"],
+                    "pyGeo reference": r["pyGeo deform"],
+                    "met": (r["deform s"] <= 0.05) if r["deform target"] else None})
+    return out
+
+
 def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(description="one bench_core case (used by run())")
     ap.add_argument("--case", nargs=2, metavar=("LATTICE", "N"), required=True)

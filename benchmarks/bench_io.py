@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+TITLE = "SU2 mesh I/O (ffdcli.formats.su2): read and write a synthetic tet mesh"
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -59,7 +60,7 @@ def structured_tet_mesh(n_points: int):
 
 
 _CHILD = r"""
-import json, resource, sys, time
+import json, sys, time
 import numpy as np
 from ffdcli.formats import su2
 op, src, out = sys.argv[1:4]
@@ -77,7 +78,9 @@ elif op == "write_new":
     t = time.perf_counter()
     su2.write(mesh, out, mesh.points)
     res["write_new"] = time.perf_counter() - t
-res["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+# VmHWM: this process's own peak (ru_maxrss would include the parent's peak, inherited at exec)
+with open("/proc/self/status") as fh:
+    res["peak_mb"] = int(next(ln for ln in fh if ln.startswith("VmHWM:")).split()[1]) / 1024
 print(json.dumps(res))
 """
 
@@ -118,6 +121,19 @@ def run_sizes(sizes=(100_000, 1_000_000)) -> list[dict]:
                          "write_patch_s": patch["write_patch"], "write_patch_peak_mb": patch["peak_mb"],
                          "write_new_s": new["write_new"], "write_new_peak_mb": new["peak_mb"]})
     return rows
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """The rows in the runner's columns: case / measured / target / pyGeo reference."""
+    out = []
+    for r in rows:
+        size = f"{r['points'] / 1e6:.2f}M points, {r['cells'] / 1e6:.1f}M tets, {r['file_mb']:.0f} MB"
+        for key, what in (("read", "read"), ("write_patch", "write (patch the point block)"),
+                          ("write_new", "write (from scratch)")):
+            t = r[f"{key}_s"]
+            out.append({"case": f"SU2 {what}, {size}", "measured": f"{t:.2f} s, {r[f'{key}_peak_mb']:.0f} MB",
+                        "target": "", "pyGeo reference": ""})
+    return out
 
 
 def main(argv=None) -> None:

@@ -233,18 +233,18 @@ class Embedding:
         Columns follow the C order of ``control_points.reshape(-1, gdim)``; column indices are
         sorted within each row.
         """
-        rows = np.flatnonzero(self.inside)
-        cols = np.zeros((rows.size, 1), dtype=np.int64)
-        data = np.ones((rows.size, 1))
-        for axis in range(self.pdim):
-            p1 = self.degree[axis] + 1
-            idx = self.first[axis][rows, None].astype(np.int64) + np.arange(p1)[None, :]
-            cols = (cols[:, :, None] * self.shape[axis] + idx[:, None, :]).reshape(rows.size, -1)
-            data = (data[:, :, None] * self.values[axis][rows, None, :]).reshape(rows.size, -1)
-        nnz_row = cols.shape[1]
-        indptr = np.zeros(self.n_points + 1, dtype=np.int64)
-        indptr[1:] = np.cumsum(self.inside.astype(np.int64) * nnz_row)
-        return sparse.csr_matrix((data.ravel(), cols.ravel(), indptr), shape=(self.n_points, self.n_ctrl))
+        nnz_row = int(np.prod([p + 1 for p in self.degree]))
+        counts = self.inside.astype(np.int64) * nnz_row
+        nnz = int(counts.sum())
+        # 32-bit indices when they fit (what SciPy would convert them to anyway, at the cost of a copy)
+        itype = np.int32 if max(nnz, self.n_ctrl) < np.iinfo(np.int32).max else np.int64
+        indptr = np.zeros(self.n_points + 1, dtype=itype)
+        indptr[1:] = np.cumsum(counts)
+        cols = np.empty(nnz, dtype=itype)
+        data = np.empty(nnz)
+        if nnz:
+            _basis_rows_nb(*self._kernel_axes(), self.inside, indptr, cols, data)
+        return sparse.csr_matrix((data, cols, indptr), shape=(self.n_points, self.n_ctrl))
 
     # ------------------------------------------------------------------ report
     def outside_report(self, max_indices: int = 10) -> dict:
@@ -318,6 +318,29 @@ def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
 
 
 @njit(cache=True, parallel=True)
+def _basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, data):
+    """The CSR rows of B: for each inside point, its (p+1)(q+1)(r+1) columns in increasing order
+    and the products V0[a] * V1[b] * V2[c] of its basis values (in that order of multiplication)."""
+    npts = f0.shape[0]
+    a1 = V0.shape[1]
+    b1 = V1.shape[1]
+    c1 = V2.shape[1] if has_w else 1
+    for i in prange(npts):
+        if not inside[i]:
+            continue
+        k = indptr[i]
+        i2 = f2[i] if has_w else 0
+        for a in range(a1):
+            for b in range(b1):
+                base = ((f0[i] + a) * n1 + (f1[i] + b)) * n2 + i2
+                wab = V0[i, a] * V1[i, b]
+                for c in range(c1):
+                    cols[k] = base + c
+                    data[k] = wab * V2[i, c] if has_w else wab
+                    k += 1
+
+
+@njit(cache=True, parallel=True)
 def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
     npts = f0.shape[0]
     gdim = g.shape[1]
@@ -344,6 +367,23 @@ def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
                         w = wab * V2[i, c] if has_w else wab
                         for d in range(gdim):
                             out[base + c, d] += w * g[i, d]
+
+
+def basis_matrix_reference(emb: Embedding) -> sparse.csr_matrix:
+    """:meth:`Embedding.basis_matrix` built with NumPy broadcasting (int64 indices): the reference
+    the compiled construction is tested against (same columns, same products, bit for bit)."""
+    rows = np.flatnonzero(emb.inside)
+    cols = np.zeros((rows.size, 1), dtype=np.int64)
+    data = np.ones((rows.size, 1))
+    for axis in range(emb.pdim):
+        p1 = emb.degree[axis] + 1
+        idx = emb.first[axis][rows, None].astype(np.int64) + np.arange(p1)[None, :]
+        cols = (cols[:, :, None] * emb.shape[axis] + idx[:, None, :]).reshape(rows.size, -1)
+        data = (data[:, :, None] * emb.values[axis][rows, None, :]).reshape(rows.size, -1)
+    nnz_row = cols.shape[1]
+    indptr = np.zeros(emb.n_points + 1, dtype=np.int64)
+    indptr[1:] = np.cumsum(emb.inside.astype(np.int64) * nnz_row)
+    return sparse.csr_matrix((data.ravel(), cols.ravel(), indptr), shape=(emb.n_points, emb.n_ctrl))
 
 
 def dense_basis_reference(lattice: Lattice, params) -> np.ndarray:
