@@ -57,9 +57,15 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     KeyboardInterrupt) the temporary file is removed and ``path`` is left as it was.
     """
     p = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part" + p.suffix, dir=p.parent or ".")
-    os.close(fd)
-    tmp_path = Path(tmp)
+    # Ctrl-C between creating the temporary file and entering the try block would leave it behind:
+    # hold SIGINT until the cleanup below is armed (a pending one is delivered right after).
+    blocked = _block_sigint()
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part" + p.suffix, dir=p.parent or ".")
+        os.close(fd)
+        tmp_path = Path(tmp)
+    finally:
+        _unblock_sigint(blocked)
     try:
         yield tmp_path
         _keep_mode(p, tmp_path)
@@ -86,6 +92,22 @@ def _keep_mode(dest: Path, tmp: Path) -> None:
         os.chmod(tmp, mode)
     except OSError:
         pass
+
+
+def _block_sigint():
+    import signal
+
+    try:
+        return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    except (AttributeError, OSError, ValueError):      # not on this platform
+        return None
+
+
+def _unblock_sigint(previous) -> None:
+    import signal
+
+    if previous is not None and signal.SIGINT not in previous:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _umask() -> int:

@@ -33,11 +33,11 @@ def plot_cmd(design_file, output, overrides, view3d, console):
 
     design = load_design(design_file, overrides=overrides)
     png = Path(output or design.output.get("plot") or Path(design.output["mesh"]).with_suffix(".png"))
+    check_writable(png, inputs=(design.mesh, design.path))
     if png.suffix.lower() != ".png":
         from ffdcli.errors import InputError
 
         raise InputError("pictures are written as PNG: give the file a .png name", path=png)
-    check_writable(png, inputs=(design.mesh, design.path))
     run = load_run(design, progress=console.progress)
     result = deform(run, progress=console.progress)
     plot_design(run, result, png)
