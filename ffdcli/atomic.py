@@ -57,22 +57,21 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     KeyboardInterrupt) the temporary file is removed and ``path`` is left as it was.
     """
     p = Path(path)
-    # Ctrl-C between creating the temporary file and entering the try block would leave it behind:
-    # hold SIGINT until the cleanup below is armed (a pending one is delivered right after).
-    blocked = _block_sigint()
+    tmp_path = None
     try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part" + p.suffix, dir=p.parent or ".")
-        os.close(fd)
-        tmp_path = Path(tmp)
-    finally:
-        _unblock_sigint(blocked)
-    try:
+        # Ctrl-C between creating the temporary file and knowing its name would leave it behind:
+        # hold SIGINT until the name is known (a pending one is raised right after, inside this try).
+        with _sigint_deferred():
+            fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".part" + p.suffix, dir=p.parent or ".")
+            tmp_path = Path(tmp)
+            os.close(fd)
         yield tmp_path
         _keep_mode(p, tmp_path)
         os.replace(tmp_path, p)
     except BaseException:
-        with contextlib.suppress(OSError):
-            tmp_path.unlink()
+        if tmp_path is not None:
+            with contextlib.suppress(OSError):
+                tmp_path.unlink()
         raise
 
 
@@ -94,20 +93,33 @@ def _keep_mode(dest: Path, tmp: Path) -> None:
         pass
 
 
-def _block_sigint():
-    import signal
+@contextlib.contextmanager
+def _sigint_deferred():
+    """Postpone Ctrl-C (SIGINT) to the end of the block; then raise it as usual.
 
+    Python runs signal handlers in the main thread only, so swapping the handler there defers the
+    KeyboardInterrupt whichever thread the signal arrived on. Elsewhere (other threads) a no-op."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    got = []
     try:
-        return signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    except (AttributeError, OSError, ValueError):      # not on this platform
-        return None
-
-
-def _unblock_sigint(previous) -> None:
-    import signal
-
-    if previous is not None and signal.SIGINT not in previous:
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        old = signal.signal(signal.SIGINT, lambda signum, frame: got.append(signum))
+    except (ValueError, OSError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+        if got:
+            if callable(old):
+                old(signal.SIGINT, None)
+            elif old != signal.SIG_IGN:
+                raise KeyboardInterrupt
 
 
 def _umask() -> int:
