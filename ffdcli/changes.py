@@ -297,15 +297,11 @@ def _check_sections(P: np.ndarray, m: int, what: str):
 
 
 @dataclass(frozen=True, eq=False)
-class Twist(Change):
-    """Rotate section j by ``values[j]`` degrees about the span axis through its trailing-edge point.
-
-    ``law`` is a :class:`SectionLaw` or a sequence of degrees per section (root first).
-    P' = T(p_j) R(theta_j) T(-p_j) P; positive = nose up (the leading edge moves in +thickness).
-    """
+class _SectionMap(Change):
+    """A change that maps each section j by a 4 x 4 homogeneous matrix from a :class:`SectionLaw`
+    of per-section values (twist, chord): ``maps(P, frame)`` gives the (m, 4, 4) matrices."""
 
     law: SectionLaw
-    kind = "twist"
 
     def __post_init__(self):
         object.__setattr__(self, "law", _law(self.law))
@@ -314,10 +310,8 @@ class Twist(Change):
     def values(self) -> np.ndarray:
         return self.law.values
 
-    def maps(self, P, frame) -> np.ndarray:
-        """(m, 4, 4) homogeneous maps of the sections."""
-        _check_sections(P, self.law.base.size, "twist")
-        return about(frame.ref_points(P), rotation(frame, self.values * DEG))
+    def maps(self, P, frame) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
 
     def apply(self, P, frame):
         return apply_homogeneous(self.maps(P, frame), P)
@@ -327,6 +321,22 @@ class Twist(Change):
 
     def with_values(self, values):
         return replace(self, law=self.law.with_params(values))
+
+
+@dataclass(frozen=True, eq=False)
+class Twist(_SectionMap):
+    """Rotate section j by ``values[j]`` degrees about the span axis through its trailing-edge point.
+
+    ``law`` is a :class:`SectionLaw` or a sequence of degrees per section (root first).
+    P' = T(p_j) R(theta_j) T(-p_j) P; positive = nose up (the leading edge moves in +thickness).
+    """
+
+    kind = "twist"
+
+    def maps(self, P, frame) -> np.ndarray:
+        """(m, 4, 4) homogeneous maps of the sections."""
+        _check_sections(P, self.law.base.size, "twist")
+        return about(frame.ref_points(P), rotation(frame, self.values * DEG))
 
     def jacobian_own(self, P, frame):
         _check_sections(P, self.law.base.size, "twist")
@@ -342,22 +352,14 @@ class Twist(Change):
 
 
 @dataclass(frozen=True, eq=False)
-class Chord(Change):
+class Chord(_SectionMap):
     """Scale section j by ``values[j]`` in its own plane (chord and thickness) about its TE point.
 
     ``law`` is a :class:`SectionLaw` or a sequence of factors per section (root first).
     Thickness-to-chord is kept; the span coordinate does not change.
     """
 
-    law: SectionLaw
     kind = "chord"
-
-    def __post_init__(self):
-        object.__setattr__(self, "law", _law(self.law))
-
-    @property
-    def values(self) -> np.ndarray:
-        return self.law.values
 
     def _scales(self, frame):
         return np.eye(3) + (self.values - 1.0)[:, None, None] * frame.plane()
@@ -365,15 +367,6 @@ class Chord(Change):
     def maps(self, P, frame):
         _check_sections(P, self.law.base.size, "chord")
         return about(frame.ref_points(P), self._scales(frame))
-
-    def apply(self, P, frame):
-        return apply_homogeneous(self.maps(P, frame), P)
-
-    def variables(self):
-        return [(self.kind + s, float(v)) for s, v in zip(self.law.suffixes, self.law.params, strict=True)]
-
-    def with_values(self, values):
-        return replace(self, law=self.law.with_params(values))
 
     def jacobian_own(self, P, frame):
         _check_sections(P, self.law.base.size, "chord")
