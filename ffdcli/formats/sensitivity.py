@@ -15,6 +15,7 @@ Two layouts are read (see SPEC.md, "Derivatives"):
 
 from __future__ import annotations
 
+import io
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -53,6 +54,55 @@ def _is_number(tok: str) -> bool:
         return False
 
 
+class _Rows:
+    """Where the numeric rows of a sensitivity file are: line numbers for messages, and the header."""
+
+    def __init__(self, linenos: np.ndarray, header):
+        self.linenos = linenos
+        self.header = header
+
+    def lineno(self, row: int) -> int:
+        return int(self.linenos[row])
+
+
+def _parse_rows(text: str, p: Path):
+    """(data (K, C), rows) of the file's text: one C-level parse (numpy), the line-by-line checks only
+    to name the line of a problem. Blank and ``%`` lines are skipped; a non-numeric first line is the
+    header (names lower-cased, quotes stripped)."""
+    raw = text.splitlines()
+    keep = [i for i, ln in enumerate(raw) if ln.strip() and not ln.lstrip().startswith("%")]
+    if not keep:
+        raise InputError("the sensitivity file is empty", path=p)
+    first = _split(raw[keep[0]])
+    header = None
+    if not all(_is_number(t) for t in first):
+        header = [t.lower() for t in first]
+        keep = keep[1:]
+    if not keep:
+        raise InputError("the sensitivity file has a header but no rows", path=p)
+    ncol = len(_split(raw[keep[0]]))
+    body = "\n".join(raw[i] for i in keep).replace(",", " ").replace('"', " ").replace("'", " ")
+    data = None
+    try:
+        data = np.loadtxt(io.StringIO(body), dtype=np.float64, ndmin=2)
+    except ValueError:
+        pass
+    if data is None or data.shape != (len(keep), ncol):
+        for i in keep:                      # only to say which line is wrong
+            toks = _split(raw[i])
+            if len(toks) != ncol:
+                raise InputError(f"expected {ncol} values in this row, found {len(toks)}", path=p, line=i + 1)
+            bad = [t for t in toks if not _is_number(t)]
+            if bad:
+                raise InputError(f"not a number: {bad[0]!r}", path=p, line=i + 1)
+        raise InputError("could not read the rows as numbers", path=p)
+    linenos = np.asarray(keep) + 1
+    if not np.all(np.isfinite(data)):
+        r = int(np.flatnonzero(~np.isfinite(data).all(1))[0])
+        raise InputError("NaN or infinite value", path=p, line=int(linenos[r]))
+    return data, _Rows(linenos, header)
+
+
 def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None) -> Sensitivity:
     """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3)."""
     p = Path(path)
@@ -62,31 +112,9 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read the sensitivity file: {e}", path=p) from None
-    lines = [(i + 1, ln) for i, ln in enumerate(text.splitlines()) if ln.strip() and not ln.lstrip().startswith("%")]
-    if not lines:
-        raise InputError("the sensitivity file is empty", path=p)
-    first = _split(lines[0][1])
-    header = None
-    if not all(_is_number(t) for t in first):
-        header = [t.lower() for t in first]
-        lines = lines[1:]
-    if not lines:
-        raise InputError("the sensitivity file has a header but no rows", path=p)
-    ncol = len(_split(lines[0][1]))
-    rows = []
-    for lineno, ln in lines:
-        toks = _split(ln)
-        if len(toks) != ncol:
-            raise InputError(f"expected {ncol} values in this row, found {len(toks)}", path=p, line=lineno)
-        try:
-            rows.append([float(t) for t in toks])
-        except ValueError:
-            bad = next(t for t in toks if not _is_number(t))
-            raise InputError(f"not a number: {bad!r}", path=p, line=lineno) from None
-    data = np.array(rows)
-    if not np.all(np.isfinite(data)):
-        r = int(np.flatnonzero(~np.isfinite(data).all(1))[0])
-        raise InputError("NaN or infinite value", path=p, line=lines[r][0])
+    data, lines = _parse_rows(text, p)
+    header = lines.header
+    ncol = data.shape[1]
     size = float(np.linalg.norm(points.max(0) - points.min(0))) or 1.0
     tol = 1e-6 * size if tol is None else tol
     gd = 3 if dim == 3 else 2
@@ -103,7 +131,7 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         if np.any(ids != np.round(ids)) or ids.min() < 0 or ids.max() >= len(points):
             bad = int(np.flatnonzero((ids != np.round(ids)) | (ids < 0) | (ids >= len(points)))[0])
             raise InputError(f"point id {ids[bad]:g} is not a node of the mesh (0..{len(points) - 1})",
-                             path=p, line=lines[bad][0])
+                             path=p, line=lines.lineno(bad))
         ids = ids.astype(np.int64)
         values = np.zeros((len(ids), 3))
         values[:, :gd] = data[:, [col[n] for n in names]]
@@ -124,7 +152,7 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         if len(far):
             raise InputError(f"{len(far)} rows match no mesh node within {tol:.3g} (worst {dist.max():.3g}); "
                              "the coordinates must be those of the deformed mesh", path=p,
-                             line=lines[int(far[0])][0])
+                             line=lines.lineno(int(far[0])))
         ids = ids.astype(np.int64)
         values = np.zeros((len(ids), 3))
         values[:, :gd] = data[:, gd:]
