@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ffdcli.cli import cli, common_options
-from ffdcli.errors import QualityError
+from ffdcli.errors import InputError, QualityError
 
 
 @cli.command("deform")
@@ -57,7 +57,18 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     for key, cli_value in (("mesh", output), ("lattice", lattice_out), ("plot", None)):
         if cli_value is None and key not in given and (key != "plot" or want_plot):
             Path(design.output[key]).parent.mkdir(parents=True, exist_ok=True)
-    check_writable(out_mesh, inputs=(design.mesh,))    # fail before minutes of work, not after
+    # Every output is checked before minutes of work, not after.
+    check_writable(out_mesh, inputs=(design.mesh, design.path))
+    out_lattice = Path(lattice_out) if lattice_out else Path(design.output["lattice"])
+    check_writable(out_lattice, inputs=(design.mesh, out_mesh, design.path))
+    if out_lattice.suffix.lower() != ".vtk":
+        raise InputError("the lattice is written as legacy VTK: give it a .vtk name", path=out_lattice)
+    png = None
+    if want_plot:
+        png = Path(design.output["plot"]) if "plot" in given else Path(out_mesh).with_suffix(".png")
+        check_writable(png, inputs=(design.mesh, out_mesh, out_lattice, design.path))
+        if png.suffix.lower() != ".png":
+            raise InputError("pictures are written as PNG: give it a .png name", path=png)
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress)
     for w in run.prep.warnings:
         console.warn(w)
@@ -77,14 +88,9 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
         console.warn(f"quality check failed but --force given: {q.summary()}")
     written = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
                             progress=console.progress)
-    if want_plot:
+    if png is not None:
         from ffdcli.plot import plot_design
 
-        png = Path(design.output["plot"]) if "plot" in given else Path(out_mesh).with_suffix(".png")
-        if png.suffix.lower() != ".png":
-            from ffdcli.errors import InputError
-
-            raise InputError("pictures are written as PNG: give output.plot a .png name", path=png)
         plot_design(run, result, png)
         written["plot"] = str(png)
     secs = time.perf_counter() - t0
