@@ -79,7 +79,6 @@ class DesignModel:
         self.run = run
         self.names, self.values = design_variables(run.changes)
         self._B = None
-        self._warp = None
         self._cache = {}
 
     @classmethod
@@ -163,14 +162,7 @@ class DesignModel:
 
     # -- whole mesh ---------------------------------------------------------------------------
     def _warp_model(self, progress=None):
-        if self._warp is None:
-            from ffdcli.warp import WarpSettings, prepare_mesh_warp
-
-            vol = {k: v for k, v in (self.run.design.volume or {}).items() if k != "threshold"}
-            settings = WarpSettings.from_dict(vol, path=self.run.design.path)
-            self._warp, _ = prepare_mesh_warp(self.run.prep.mesh, list(self.run.prep.surface.names),
-                                              settings, progress=progress)
-        return self._warp
+        return self.run.warp_model(progress)
 
     def uses_volume(self) -> bool:
         from ffdcli.pipeline import is_surface_mesh, volume_method

@@ -161,6 +161,22 @@ class DesignRun:
     design: object               # ffdcli.design.Design
     prep: PreparedBox
     changes: list                # ffdcli.changes change objects, in pipeline order
+    _warp: object = field(default=None, repr=False)   # the volume warp model, built on first use
+
+    def warp_model(self, progress=None):
+        """The IDW model of this mesh (``volume:`` settings of the design; the quality ``threshold``
+        there is not the warp's), built once and kept: a design loop does not rebuild its tree."""
+        if self._warp is None:
+            from ffdcli.warp import WarpSettings, prepare_mesh_warp
+
+            vol = {k: v for k, v in (self.design.volume or {}).items() if k != "threshold"}
+            settings = WarpSettings.from_dict(vol, path=self.design.path)
+            model, _ = prepare_mesh_warp(self.prep.mesh, list(self.prep.surface.names), settings,
+                                         progress=progress)
+            if not np.array_equal(model.surface_ids, self.prep.surface.ids):
+                raise RuntimeError("the warp's surface nodes differ from the box's")
+            self._warp = model
+        return self._warp
 
     @property
     def box(self) -> Box:
@@ -314,13 +330,9 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
     method = volume_method(run)
     t1 = time.perf_counter()
     if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
-        from ffdcli.warp import WarpSettings, prepare_mesh_warp, warp
+        from ffdcli.warp import warp
 
-        vol = {k: v for k, v in (run.design.volume or {}).items() if k != "threshold"}
-        settings = WarpSettings.from_dict(vol, path=run.design.path)
-        model, _ = prepare_mesh_warp(mesh, list(surf.names), settings, progress=progress)
-        if not np.array_equal(model.surface_ids, surf.ids):
-            raise RuntimeError("the warp's surface nodes differ from the box's")
+        model = run.warp_model(progress)
         rot = run.surface_rotations(P1)
         points += warp(model, disp, rot, progress=progress)
     else:
