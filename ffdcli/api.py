@@ -73,17 +73,54 @@ def planar_rotation_derivative(F: np.ndarray, dF: np.ndarray, axis: int) -> np.n
 
 
 class DesignModel:
-    """A design prepared for repeated evaluation: values in, points and derivatives out."""
+    """A design prepared for repeated evaluation: values in, points and derivatives out.
+
+    Attributes
+    ----------
+    run : ffdcli.pipeline.DesignRun
+        The design file with its box (loaded from the cache or built once) and its changes.
+    names : list of str
+        (n_vars,) design-variable names, ``c<index>.<kind>[<j>]`` as in ``ffd grad``.
+    values : ndarray, shape (n_vars,)
+        Their current values (degrees for angles, factors, mesh units for offsets and shape).
+    bounds : ffdcli.bounds.Bounds
+        Natural (open) and user (``bounds:``, closed) bounds; :attr:`lower` and :attr:`upper`.
+    """
 
     def __init__(self, run):
+        from ffdcli.bounds import make_bounds
+        from ffdcli.changes import design_bounds, design_units
+
         self.run = run
         self.names, self.values = design_variables(run.changes)
+        self.units = design_units(run.changes)
+        natural = design_bounds(run.P0, run.box.frame, run.changes)
+        design = run.design
+        spec = (getattr(design, "data", None) or {}).get("bounds")
+        error = getattr(design, "error", None)
+        self.bounds = make_bounds(self.names, natural, spec, values=self.values, error=error)
         self._B = None
         self._cache = {}
+        self._point_sets = {}
 
     @classmethod
     def from_file(cls, path, overrides=(), *, cache_dir=None, use_cache: bool = True,
                   progress=None) -> DesignModel:
+        """Load a design file (with ``--set`` style ``overrides``), its box from the cache or built.
+
+        Parameters
+        ----------
+        path : str or Path
+            The design file (YAML).
+        overrides : sequence of str
+            ``KEY=VALUE`` items as ``ffd deform --set``.
+        cache_dir : str or Path, optional
+            Where the box cache lives (default: beside the mesh).
+        use_cache : bool
+            False neither reads nor writes the cache.
+        progress : callable, optional
+            A progress factory (:mod:`ffdcli.progress`).
+        """
         from ffdcli.design import load_design
         from ffdcli.pipeline import load_run
 
@@ -93,10 +130,25 @@ class DesignModel:
     # -- values ------------------------------------------------------------------------------
     @property
     def n_vars(self) -> int:
+        """Number of design variables."""
         return len(self.names)
 
+    @property
+    def lower(self) -> np.ndarray:
+        """(n_vars,) lower bounds (``-inf``: none); natural bounds are open (a factor must be > 0)."""
+        return self.bounds.lower
+
+    @property
+    def upper(self) -> np.ndarray:
+        """(n_vars,) upper bounds (``inf``: none)."""
+        return self.bounds.upper
+
     def set_values(self, values) -> None:
-        """New values of the design variables: an array in ``names`` order, or {name: value}."""
+        """New values of the design variables: an array (n_vars,) in ``names`` order, or {name: value}.
+
+        Raises :class:`~ffdcli.errors.InputError` naming the variable for NaN, inf, a value out of its
+        bounds (:attr:`lower`, :attr:`upper`; chord and span factors > 0), an unknown name or a wrong
+        length; the model is then unchanged."""
         if isinstance(values, dict):
             unknown = [k for k in values if k not in self.names]
             if unknown:
@@ -106,16 +158,63 @@ class DesignModel:
             for k, x in values.items():
                 v[self.names.index(k)] = float(x)
             values = v
-        values = np.asarray(values, dtype=float).reshape(-1)
-        if values.shape != self.values.shape:
-            raise ValueError(f"expected {self.n_vars} values, got {values.size}")
+        values = self.bounds.check(values)
         self.run.changes = set_design_variables(self.run.changes, values)
         self.values = values.copy()
         self._cache.clear()
 
+    def _check_dv(self, dv, what: str) -> np.ndarray:
+        dv = np.asarray(dv, dtype=float)
+        if dv.shape != (self.n_vars,):
+            raise InputError(f"{what}: dv must have shape ({self.n_vars},) (one value per design variable, "
+                             f"in names order), got {dv.shape}")
+        return dv
+
+    # -- point sets ----------------------------------------------------------------------------
+    def add_points(self, name: str, X, progress=None) -> dict:
+        """Embed points ``X`` (k, 3) in the design's lattice under ``name`` (replacing a set of that name).
+
+        Returns ``{"points": k, "outside": count, "outside_ids": [...], "outside_worst": distance}``:
+        points outside the lattice are kept and never move."""
+        from ffdcli.pointset import PointSet
+
+        ps = PointSet.embed(str(name), self.run.box, X, progress=progress)
+        self._point_sets[str(name)] = ps
+        return {"points": ps.n_points, **ps.outside_report()}
+
+    @property
+    def point_sets(self) -> list[str]:
+        """Names of the point sets added with :meth:`add_points`, in order."""
+        return list(self._point_sets)
+
+    def point_set(self, name: str):
+        """The :class:`ffdcli.pointset.PointSet` named ``name``."""
+        try:
+            return self._point_sets[name]
+        except KeyError:
+            have = ", ".join(self._point_sets) or "(none)"
+            raise InputError(f"no point set named {name!r}; the point sets are: {have}") from None
+
+    def _dP(self) -> np.ndarray:
+        return (self.lattice() - self.run.P0).reshape(-1, 3)
+
+    def points(self, name: str) -> np.ndarray:
+        """(k, 3) the points of set ``name`` moved by the current design."""
+        return self.point_set(name).points(self._dP())
+
+    def points_jvp(self, name: str, dv) -> np.ndarray:
+        """(k, 3) dX/dv @ dv for the points of set ``name`` and ``dv`` (n_vars,)."""
+        ps = self.point_set(name)
+        return ps.jvp(self.lattice_jacobian(), self._check_dv(dv, f"points_jvp({name!r})"))
+
+    def points_vjp(self, name: str, g) -> np.ndarray:
+        """(n_vars,) dJ/dv for ``g`` = dJ/dX (k, 3) at the points of set ``name``."""
+        return self.point_set(name).vjp(self.lattice_jacobian(), g)
+
     # -- evaluation --------------------------------------------------------------------------
     @property
     def surface_ids(self) -> np.ndarray:
+        """(S,) mesh node ids of the surface points, in the row order of :meth:`surface_points`."""
         return self.run.prep.surface.ids
 
     @property
@@ -126,6 +225,7 @@ class DesignModel:
         return self._B
 
     def lattice(self) -> np.ndarray:
+        """(n, m, l, 3) control points after the changes at the current values."""
         if "P" not in self._cache:
             self._cache["P"] = self.run.lattice_after()
         return self._cache["P"]
@@ -150,21 +250,27 @@ class DesignModel:
         return self.basis, self.lattice_jacobian()
 
     def surface_jvp(self, dv) -> np.ndarray:
+        """(S, 3) surface motion dX/dv @ dv for ``dv`` (n_vars,)."""
         from ffdcli.derivatives import surface_jvp
 
-        return surface_jvp(self.basis, self.lattice_jacobian(), dv)
+        return surface_jvp(self.basis, self.lattice_jacobian(), self._check_dv(dv, "surface_jvp"))
 
     def surface_vjp(self, g) -> np.ndarray:
-        """dJ/dv for g = dJ/dX at the surface points (S, 3)."""
+        """(n_vars,) dJ/dv for g = dJ/dX at the surface points (S, 3)."""
         from ffdcli.derivatives import vjp
 
-        return vjp(self.basis, np.asarray(g, dtype=float), self.lattice_jacobian())
+        g = np.asarray(g, dtype=float)
+        if g.shape != (len(self.surface_ids), 3):
+            raise InputError(f"surface_vjp: g must have shape ({len(self.surface_ids)}, 3) (one row per "
+                             f"surface point, surface_ids order), got {g.shape}")
+        return vjp(self.basis, g, self.lattice_jacobian())
 
     # -- whole mesh ---------------------------------------------------------------------------
     def _warp_model(self, progress=None):
         return self.run.warp_model(progress)
 
     def uses_volume(self) -> bool:
+        """True when the volume mesh follows the surface (``volume.method: idw`` on a volume mesh)."""
         from ffdcli.pipeline import is_surface_mesh, volume_method
 
         mesh = self.run.prep.mesh
@@ -214,7 +320,7 @@ class DesignModel:
         g = np.asarray(g, dtype=float)
         mesh = self.run.prep.mesh
         if g.shape != (mesh.n_points, 3):
-            raise ValueError(f"g must be ({mesh.n_points}, 3), got {g.shape}")
+            raise InputError(f"mesh_vjp: g must be ({mesh.n_points}, 3), got {g.shape}")
         ids = self.surface_ids
         if not self.uses_volume():
             return self.surface_vjp(g[ids])

@@ -19,7 +19,11 @@ Each change is a frozen dataclass with
     the derivative of ``apply`` with respect to its own variables (per degree for angles);
 ``jvp_P(P, frame, dP) -> dP'``
     the derivative with respect to the input lattice (the trailing-edge points and the sweep and
-    dihedral angles depend on ``P``); ``dP`` may carry leading batch axes ``(..., n, m, l, 3)``.
+    dihedral angles depend on ``P``); ``dP`` may carry leading batch axes ``(..., n, m, l, 3)``;
+``bounds(P, frame) -> (k, 2)``
+    the natural bounds of its variables as an open interval (lower, upper) per variable: chord and
+    span factors > 0, a sweep or dihedral angle that keeps the leading-edge line within
+    +-``MAX_SHEAR_ANGLE`` of the span axis; twist, offsets and shape moves are unbounded.
 
 All derivatives are analytic. :func:`apply_changes`, :func:`design_variables` and
 :func:`set_design_variables` work on a whole pipeline (a list of changes applied in order).
@@ -262,6 +266,12 @@ class Change:
     """Common interface (see the module docstring). Subclasses are frozen dataclasses."""
 
     kind: str = ""
+    #: Unit of the variables: ``deg`` (angles), ``factor`` (scale factors), ``length`` (mesh units).
+    unit: str = "length"
+
+    def units(self) -> list[str]:
+        """The unit of each variable (``deg``, ``factor`` or ``length``)."""
+        return [self.unit] * self.size
 
     def apply(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
@@ -277,6 +287,14 @@ class Change:
 
     def jvp_P(self, P: np.ndarray, frame: LatticeFrame, dP: np.ndarray) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
+
+    def bounds(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:
+        """(k, 2) natural (lower, upper) bounds of this change's variables at its input lattice ``P``.
+
+        Open intervals: a value must lie strictly between them (``-inf``/``inf``: unbounded)."""
+        out = np.empty((self.size, 2))
+        out[:, 0], out[:, 1] = -np.inf, np.inf
+        return out
 
     def jvp(self, P: np.ndarray, frame: LatticeFrame, dvalues) -> np.ndarray:
         """dP' for a change ``dvalues`` (k,) of this change's variables (angles in degrees)."""
@@ -332,6 +350,7 @@ class Twist(_SectionMap):
     """
 
     kind = "twist"
+    unit = "deg"
 
     def maps(self, P, frame) -> np.ndarray:
         """(m, 4, 4) homogeneous maps of the sections."""
@@ -360,6 +379,14 @@ class Chord(_SectionMap):
     """
 
     kind = "chord"
+    unit = "factor"
+
+    def bounds(self, P, frame):
+        """Every factor of the written law (list item, root, tip) must be > 0 (a section of no or
+        negative chord is folded)."""
+        out = super().bounds(P, frame)
+        out[:, 0] = 0.0
+        return out
 
     def _scales(self, frame):
         return np.eye(3) + (self.values - 1.0)[:, None, None] * frame.plane()
@@ -394,6 +421,7 @@ class Span(Change):
 
     scale: float
     kind = "span"
+    unit = "factor"
 
     def maps(self, P, frame):
         _no_2d(frame, "span")
@@ -405,6 +433,10 @@ class Span(Change):
 
     def variables(self):
         return [(self.kind, float(self.scale))]
+
+    def bounds(self, P, frame):
+        """The span factor must be > 0."""
+        return np.array([[0.0, np.inf]])
 
     def with_values(self, values):
         (v,) = np.asarray(values, dtype=float).reshape(-1)
@@ -480,6 +512,17 @@ class _Shear(Change):
             return [(f"{self.kind}.offsets{s}", float(v))
                     for s, v in zip(self.offsets.suffixes, self.offsets.params, strict=True)]
         return [(self.kind, float(self.delta))]
+
+    def units(self):
+        return ["length" if self.offsets is not None else "deg"] * self.size
+
+    def bounds(self, P, frame):
+        """An angle: the leading-edge line must stay within +-``MAX_SHEAR_ANGLE`` of the span axis,
+        so ``delta`` lies in (-MAX - L, MAX - L) for the current angle L of ``P``; offsets: none."""
+        if self.offsets is not None:
+            return super().bounds(P, frame)
+        lam = math.degrees(self.angle(P, frame))
+        return np.array([[-MAX_SHEAR_ANGLE - lam, MAX_SHEAR_ANGLE - lam]])
 
     def with_values(self, values):
         if self.offsets is not None:
@@ -685,6 +728,24 @@ def design_variables(changes: Sequence[Change]) -> tuple[list[str], np.ndarray]:
             names.append(f"c{index}.{name}")
             values.append(value)
     return names, np.array(values, dtype=float)
+
+
+def design_units(changes: Sequence[Change]) -> list[str]:
+    """The unit of every design variable (order of :func:`design_variables`)."""
+    return [u for change in changes for u in change.units()]
+
+
+def design_bounds(P0: np.ndarray, frame: LatticeFrame, changes: Sequence[Change]) -> np.ndarray:
+    """(n_vars, 2) natural open bounds of every design variable (order of :func:`design_variables`).
+
+    Each change's bounds are taken at its input lattice for the current values of the changes
+    before it (a sweep angle's limit depends on the leading-edge line it starts from)."""
+    P = np.array(P0, dtype=float, copy=True)
+    out = [np.zeros((0, 2))]
+    for change in changes:
+        out.append(change.bounds(P, frame))
+        P = change.apply(P, frame)
+    return np.concatenate(out, axis=0)
 
 
 def set_design_variables(changes: Sequence[Change], values) -> list[Change]:
