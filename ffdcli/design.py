@@ -132,8 +132,8 @@ def design_schema() -> dict:
                     "fixed": names, "sliding": names,
                 }},
             "changes": {
-                "type": "array",
-                "description": "the pipeline, applied in order; each item has exactly one key",
+                "type": ["array", "null"],
+                "description": "the pipeline, applied in order; each item has exactly one key; empty = no change",
                 "items": {"type": "object", "minProperties": 1, "maxProperties": 1,
                           "properties": kinds, "additionalProperties": False},
             },

@@ -216,13 +216,17 @@ class DesignRun:
 
         The rotation of the surface frame under the FFD map (see :mod:`ffdcli.rotations`): the polar
         factor of F on the tangent plane completed by the deformed unit normal. Points outside the
-        lattice (which do not move) get the identity."""
+        lattice (which do not move) get the identity, and so does every point when ``P`` is the
+        original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by 1e-18, and
+        a design without changes must write the input back bit for bit)."""
         from ffdcli.warp import rotations_from_deformation_gradient
 
         box = self.box
-        ins, F, n0 = self._frame_gradient_inputs(P)
         S = len(self.prep.embedding.inside)
         R = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+        if np.array_equal(P, self.P0):
+            return R
+        ins, F, n0 = self._frame_gradient_inputs(P)
         if not len(ins):
             return R
         from ffdcli.rotations import surface_frame_gradient

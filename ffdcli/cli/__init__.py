@@ -53,6 +53,7 @@ def cli():
     \b
     Typical use:
       ffd inspect wing.su2              what is in the mesh: markers, bounds, axes
+      ffd init wing.su2 -o wing.yaml    a commented starter design file (uncomment a change)
       ffd box wing.su2 --points 6,8,2   fit a lattice to the wing and embed it (cached)
       ffd deform design.yaml            apply twist/span/sweep/dihedral/chord/shape, write the mesh
       ffd plot design.yaml -o wing.png  original (black) and deformed (red) wing with its lattice

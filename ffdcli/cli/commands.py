@@ -4,6 +4,7 @@ Order here is the order in ``ffd --help``.
 """
 
 from ffdcli.cli import inspect  # noqa: F401, I001
+from ffdcli.cli import init  # noqa: F401, I001
 from ffdcli.cli import box  # noqa: F401, I001
 from ffdcli.cli import deform  # noqa: F401, I001
 from ffdcli.cli import plot  # noqa: F401, I001
