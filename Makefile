@@ -12,7 +12,7 @@ OUT    ?= out
 help:
 	@echo "make demo    create .venv, install ffd (with the 3D viewer), run the paper's cases into $(OUT)/"
 	@echo "make test    create .venv, install ffd with test tools, run the test suite"
-	@echo "make bench   print the speed/memory table (embedding, deform, I/O, volume follow, Jacobian)"
+	@echo "make bench   print the speed/memory table (embedding, deform, I/O, volume follow, Jacobian) and the robustness matrix"
 	@echo "make lint    ruff"
 	@echo "make samples regenerate samples/ with gmsh (needs the [samples] extra)"
 
@@ -39,7 +39,7 @@ demo: $(VENV)/.stamp-viz
 test: $(VENV)/.stamp-test
 	$(BIN)/python -m pytest -q
 
-bench: $(VENV)/.stamp-core
+bench: $(VENV)/.stamp-test
 	$(BIN)/python -m benchmarks
 
 lint: $(VENV)/.stamp-core

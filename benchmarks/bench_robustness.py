@@ -1,0 +1,312 @@
+"""Robustness of the volume-mesh follow: plausible designs x wing meshes, with the default settings.
+
+For every mesh and design, the design file is deformed exactly as ``ffd deform`` does
+(:func:`ffdcli.pipeline.deform`, the quality gate of :mod:`ffdcli.quality`) and the table shows
+whether the gate refused it, the inverted cells, the minimum scaled Jacobian before -> after and
+the orthogonality measure of the gate (the smallest face angle before -> after, and the largest
+loss of a cell). Target: 0 refusals and 0 inverted cells with the default ``volume:`` settings.
+
+Meshes: the bundled wings (``samples/rect_wing.su2``, ``samples/crm_wing.su2``), the ONERA M6 of
+``../shared/data`` (skipped when absent) and the generated wings of :mod:`ffdcli.testmeshes`
+(``gen:<case>``: span along x, y and z, left and right, kinked, flat and round tips, blunt trailing
+edge, prism layers, far field at 5 and 50 chords). Generated meshes, design files and box caches go
+to ``--work`` (default ``out/robustness`` of the repository).
+
+Run alone, for quick iteration on the warp settings::
+
+    python -m benchmarks.bench_robustness --quick
+    python -m benchmarks.bench_robustness --mesh gen:transport_x_bl --design sweep+10 --set volume.alpha=1.0
+    python -m benchmarks.bench_robustness --list
+
+It is also part of ``make bench`` (``python -m benchmarks``), whose ``--quick`` runs the quick form.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+TITLE = "Robustness: designs x meshes with the default volume settings (target 0 refused, 0 inverted)"
+NOTES = ("Status: ok, REFUSED (the gate of ffd deform would exit 3; the failing counts follow), "
+         "ERROR (another failure). q = min scaled Jacobian before->after; ortho = min face angle (deg) "
+         "before->after and the largest loss of one cell. Run `python -m benchmarks.bench_robustness --help` "
+         "for one mesh or design.")
+
+
+# ----------------------------------------------------------------------------------------------
+# Designs (changes lists; m = sections of the box, chord = root chord of the mesh)
+# ----------------------------------------------------------------------------------------------
+
+def _designs() -> dict:
+    def bump(m, chord):
+        eta = np.linspace(0.0, 1.0, m)
+        return [{"twist": [round(float(v), 4) for v in 10.0 * np.sin(np.pi * eta)]}]
+
+    def washout_list(m, chord):
+        eta = np.linspace(0.0, 1.0, m)
+        return [{"twist": [round(float(v), 4) for v in 2.0 - 12.0 * eta ** 2]}]
+
+    d = {
+        "twist_tip+10": [{"twist": {"tip": 10}}],
+        "twist_tip-10": [{"twist": {"tip": -10}}],
+        "twist_root+tip": [{"twist": {"root": -4, "tip": 10}}],
+        "twist_list_bump": bump,
+        "twist_list_washout": washout_list,
+        "sweep+10": [{"sweep": 10}],
+        "sweep+5": [{"sweep": 5}],
+        "sweep-5": [{"sweep": -5}],
+        "sweep-10": [{"sweep": -10}],
+        "span0.85": [{"span": 0.85}],
+        "span1.1": [{"span": 1.1}],
+        "span1.15": [{"span": 1.15}],
+        "dihedral+5": [{"dihedral": 5}],
+        "dihedral-5": [{"dihedral": -5}],
+        "chord_tip0.5": [{"chord": {"tip": 0.5}}],
+        "chord_tip0.6": [{"chord": {"tip": 0.6}}],
+        "chord_tip0.7": [{"chord": {"tip": 0.7}}],
+        "chord_tip1.4": [{"chord": {"tip": 1.4}}],
+        "chord_tip1.5": [{"chord": {"tip": 1.5}}],
+        "chord_root0.8": [{"chord": {"root": 0.8, "tip": 1.0}}],
+        "chord_root1.2": [{"chord": {"root": 1.2, "tip": 1.0}}],
+        "shape_random": lambda m, chord: [{"shape": {"random": round(0.015 * chord, 6), "seed": 7}}],
+        "span1.1+sweep5": [{"span": 1.1}, {"sweep": 5}],
+        "mix4_a": [{"twist": {"tip": 8}}, {"span": 1.1}, {"sweep": 5}, {"dihedral": 3}],
+        "mix4_b": [{"chord": {"tip": 0.6}}, {"sweep": -8}, {"twist": {"root": 2, "tip": -6}}, {"dihedral": -4}],
+        "mix4_c": [{"span": 1.15}, {"sweep": 10}, {"twist": {"tip": -10}}, {"chord": {"tip": 0.5}}],
+    }
+    return d
+
+
+DESIGNS = _designs()
+QUICK_DESIGNS = ["twist_tip+10", "sweep+10", "span1.15", "dihedral+5", "chord_tip0.5", "chord_tip0.7",
+                 "shape_random", "mix4_a"]
+
+
+# ----------------------------------------------------------------------------------------------
+# Meshes
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class MeshSource:
+    name: str
+    surface: str
+    bundled: str | None = None      # a path (relative to the repo, or absolute)
+    case: str | None = None         # a ffdcli.testmeshes case
+
+    def path(self, work: Path) -> Path | None:
+        """The mesh file (generated into ``work`` when needed); None when it is not available."""
+        if self.case is not None:
+            from ffdcli import testmeshes
+
+            try:
+                import gmsh  # noqa: F401
+            except ImportError:         # the [test] extra brings gmsh
+                return None
+            return testmeshes.write_case(self.case, work / "meshes")
+        p = Path(self.bundled)
+        p = p if p.is_absolute() else REPO / p
+        return p if p.is_file() else None
+
+
+def _meshes() -> dict[str, MeshSource]:
+    from ffdcli.testmeshes import CASES
+
+    out = {"rect_wing": MeshSource("rect_wing", "wing", bundled="samples/rect_wing.su2"),
+           "crm_wing": MeshSource("crm_wing", "wing", bundled="samples/crm_wing.su2"),
+           "oneram6": MeshSource("oneram6", "WING",
+                                 bundled="/work/shared/data/oneram6/mesh_ONERAM6_gmsh_coarse.su2")}
+    for name in CASES:
+        out[f"gen:{name}"] = MeshSource(f"gen:{name}", "wing", case=name)
+    return out
+
+
+MESHES = _meshes()
+QUICK_MESHES = ["rect_wing", "crm_wing", "oneram6", "gen:rect_z_bl_ff5", "gen:left_swept_round",
+                "gen:transport_x_ff50"]
+
+
+# ----------------------------------------------------------------------------------------------
+# One deformation
+# ----------------------------------------------------------------------------------------------
+
+def _write_design(folder: Path, mesh: Path, surface: str, name: str, changes: list, points) -> Path:
+    data = {"mesh": str(mesh), "surface": surface, "box": {"points": list(points)}, "changes": changes,
+            "output": {"mesh": str(folder / f"{name}.su2"), "lattice": str(folder / f"{name}_lattice.vtk")}}
+    path = folder / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    return path
+
+
+def run_one(mesh_path: Path, surface: str, design: str, *, work: Path, overrides=(), points=(6, 8, 2)) -> dict:
+    """Deform one mesh by one design as ``ffd deform`` does; a row of the table (nothing written)."""
+    from ffdcli.design import load_design
+    from ffdcli.errors import InputError, QualityError
+    from ffdcli.pipeline import deform, load_run
+
+    folder = work / "designs" / mesh_path.stem
+    folder.mkdir(parents=True, exist_ok=True)
+    spec = DESIGNS[design]
+    row = {"mesh": None, "design": design}
+    t0 = time.perf_counter()
+    try:
+        if callable(spec):
+            base = load_run(load_design(_write_design(folder, mesh_path, surface, "base", [], points)),
+                            cache_dir=work / "cache")
+            chord = float(np.linalg.norm(base.box.te_points[0] - base.box.le_points[0]))
+            spec = spec(base.box.shape[1], chord)
+        path = _write_design(folder, mesh_path, surface, design.replace("+", "p"), spec, points)
+        run = load_run(load_design(path, overrides=overrides), cache_dir=work / "cache")
+        result = deform(run)
+    except (InputError, QualityError) as e:
+        row.update(status="ERROR" if isinstance(e, QualityError) else "INPUT", error=str(e).splitlines()[0][:160],
+                   seconds=round(time.perf_counter() - t0, 2))
+        return row
+    q = result.quality
+    row["status"] = "ok" if q is None or q.ok else "REFUSED"
+    if q is not None:
+        d = q.to_dict()
+        row.update(inverted=q.n_inverted, failed=q.n_failed, q_before=d.get("min_before"), q_after=d.get("min_after"))
+        for k in ("ortho_before", "ortho_after", "ortho_loss"):
+            if k in d:
+                row[k] = d[k]
+    recovery = getattr(result, "recovery", None)
+    if recovery:
+        row["recovery"] = recovery if isinstance(recovery, str) else json.dumps(recovery, default=str)
+    row["max_disp"] = result.max_displacement
+    row["seconds"] = round(time.perf_counter() - t0, 2)
+    return row
+
+
+def run_matrix(meshes: list[str], designs: list[str], *, work: Path, overrides=(), echo=None) -> list[dict]:
+    """Every design on every mesh; rows in mesh-major order. Unavailable meshes are skipped."""
+    rows = []
+    for mname in meshes:
+        src = MESHES[mname]
+        path = src.path(work)
+        if path is None:
+            if echo:
+                echo(f"(skipped {mname}: not present)")
+            continue
+        for d in designs:
+            row = run_one(path, src.surface, d, work=work, overrides=overrides)
+            row["mesh"] = mname
+            rows.append(row)
+            if echo:
+                echo(_line(row))
+    return rows
+
+
+def _fmt(v, spec=".3g"):
+    return "-" if v is None else format(v, spec)
+
+
+def _line(r: dict) -> str:
+    s = f"{r['mesh']:<24} {r['design']:<20} {r['status']:<8}"
+    if "error" in r:
+        return s + " " + r["error"]
+    s += f" inv {r.get('inverted', 0):>5} fail {r.get('failed', 0):>5}"
+    s += f"  q {_fmt(r.get('q_before'))}->{_fmt(r.get('q_after'))}"
+    if "ortho_after" in r:
+        s += f"  ortho {_fmt(r.get('ortho_before'), '.1f')}->{_fmt(r.get('ortho_after'), '.1f')}"
+        s += f" loss {_fmt(r.get('ortho_loss'), '.1f')}"
+    if "recovery" in r:
+        s += f"  [{r['recovery']}]"
+    return s + f"  {r['seconds']:.1f}s"
+
+
+def matrix_table(rows: list[dict]) -> str:
+    """Designs (rows) x meshes (columns): ok, or R<n inverted>/<n failed>, or ERR."""
+    meshes = list(dict.fromkeys(r["mesh"] for r in rows))
+    designs = list(dict.fromkeys(r["design"] for r in rows))
+    cell = {(r["design"], r["mesh"]): r for r in rows}
+    lines = ["| design | " + " | ".join(meshes) + " |", "|---" * (len(meshes) + 1) + "|"]
+    for d in designs:
+        out = []
+        for m in meshes:
+            r = cell.get((d, m))
+            if r is None:
+                out.append("")
+            elif r["status"] == "ok":
+                out.append("ok")
+            elif r["status"] == "REFUSED":
+                out.append(f"**R** {r.get('inverted', 0)} inv / {r.get('failed', 0)}")
+            else:
+                out.append(r["status"])
+        lines.append(f"| {d} | " + " | ".join(out) + " |")
+    refused = sum(r["status"] == "REFUSED" for r in rows)
+    errors = sum(r["status"] not in ("ok", "REFUSED") for r in rows)
+    inverted = sum(r.get("inverted", 0) for r in rows)
+    lines.append(f"\n{len(rows)} deformations: {refused} refused, {inverted} inverted cells in all, "
+                 f"{errors} errors")
+    return "\n".join(lines)
+
+
+# ----------------------------------------------------------------------------------------------
+# make bench / command line
+# ----------------------------------------------------------------------------------------------
+
+def run(quick: bool = False) -> list[dict]:
+    """Rows for ``python -m benchmarks`` (quick: the quick meshes and designs)."""
+    work = REPO / "out" / "robustness"
+    meshes = QUICK_MESHES if quick else list(MESHES)
+    designs = QUICK_DESIGNS if quick else list(DESIGNS)
+    rows = run_matrix(meshes, designs, work=work)
+    print(matrix_table(rows) + "\n", flush=True)
+    return rows
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    refused = sum(r["status"] == "REFUSED" for r in rows)
+    errors = sum(r["status"] not in ("ok", "REFUSED") for r in rows)
+    inverted = sum(r.get("inverted", 0) for r in rows)
+    return [{"case": f"{len(rows)} deformations: refused", "measured": refused, "target": "0", "met": refused == 0},
+            {"case": "inverted cells (all deformations)", "measured": inverted, "target": "0", "met": inverted == 0},
+            {"case": "errors", "measured": errors, "target": "0", "met": errors == 0}]
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_robustness",
+                                 description=__doc__.split("\n\n")[0])
+    ap.add_argument("--quick", action="store_true", help=f"meshes {', '.join(QUICK_MESHES)}; "
+                                                         f"designs {', '.join(QUICK_DESIGNS)}")
+    ap.add_argument("--mesh", action="append", metavar="NAME", help="only this mesh (repeatable; see --list)")
+    ap.add_argument("--design", action="append", metavar="NAME", help="only this design (repeatable)")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a design-file value for every run, e.g. volume.alpha=1.0")
+    ap.add_argument("--work", type=Path, default=REPO / "out" / "robustness",
+                    help="folder for generated meshes, design files and box caches")
+    ap.add_argument("--json", metavar="FILE", type=Path, help="also write the rows as JSON")
+    ap.add_argument("--list", action="store_true", help="print the mesh and design names and exit")
+    args = ap.parse_args(argv)
+    if args.list:
+        print("meshes: " + " ".join(MESHES))
+        print("designs: " + " ".join(DESIGNS))
+        return 0
+    for kind, names, known in (("mesh", args.mesh, MESHES), ("design", args.design, DESIGNS)):
+        for n in names or []:
+            if n not in known:
+                ap.error(f"unknown {kind} {n!r}; known: {', '.join(known)}")
+    meshes = args.mesh or (QUICK_MESHES if args.quick else list(MESHES))
+    designs = args.design or (QUICK_DESIGNS if args.quick else list(DESIGNS))
+    t0 = time.perf_counter()
+    rows = run_matrix(meshes, designs, work=args.work, overrides=args.overrides,
+                      echo=lambda s: print(s, flush=True))
+    print()
+    print(matrix_table(rows))
+    print(f"({time.perf_counter() - t0:.0f} s; overrides: {' '.join(args.overrides) or 'none'})")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1, default=str))
+    refused = sum(r["status"] != "ok" for r in rows)
+    return 1 if refused else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
