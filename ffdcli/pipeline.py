@@ -333,7 +333,9 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
     points = mesh.points.copy()
     method = volume_method(run)
     t1 = time.perf_counter()
-    if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
+    # An unchanged lattice moves nothing, bit for bit (the warp's rotations of an identity map are
+    # the identity only to rounding, which would move volume nodes by 1e-17).
+    if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh) and not np.array_equal(P1, run.P0):
         from ffdcli.warp import warp
 
         model = run.warp_model(progress)
@@ -361,11 +363,14 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
 
 
 def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattice_path=None,
-                  progress=None) -> dict:
-    """Write the deformed mesh and the lattice VTK (atomically). Returns {what: path}."""
+                  surface_file=None, progress=None) -> dict:
+    """Write the deformed mesh, the lattice VTK and (``surface_file``) SU2's surface-positions file of the
+    deformed surface nodes, each atomically. Returns {what: path}, plus
+    ``"su2_ffd"``: what was done to SU2's own FFD section of an SU2 mesh, when it has one."""
     from ffdcli.atomic import check_writable
     from ffdcli.formats import write_mesh
     from ffdcli.formats.lattice_vtk import write_lattice_vtk
+    from ffdcli.formats.su2_surface import write_surface_file
 
     mesh = run.prep.mesh
     out = run.design.output
@@ -376,10 +381,18 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
         check_writable(lattice_path, inputs=(mesh.path, mesh_path, run.design.path))
         if lattice_path.suffix.lower() != ".vtk":
             raise InputError("the lattice is written as legacy VTK: give it a .vtk name", path=lattice_path)
+    if surface_file is not None:
+        surface_file = check_writable(surface_file, inputs=(mesh.path, mesh_path, lattice_path, run.design.path))
     written = {}
-    write_mesh(mesh, mesh_path, result.points, progress=progress)
+    notes = write_mesh(mesh, mesh_path, result.points, progress=progress)
     written["mesh"] = str(mesh_path)
+    if "su2_ffd" in notes:           # SU2's own FFD section, brought up to date (or dropped): say so
+        written["su2_ffd"] = notes["su2_ffd"]
     if lattice_path is not None:
         write_lattice_vtk(lattice_path, result.lattice, original=run.P0)
         written["lattice"] = str(lattice_path)
+    if surface_file is not None:     # SU2's DV_KIND= SURFACE_FILE: the surface for SU2's own volume motion
+        ids = run.prep.surface.ids
+        write_surface_file(surface_file, ids, result.points[ids], space_dim(mesh))
+        written["surface_file"] = str(surface_file)
     return written

@@ -142,21 +142,24 @@ def test_unchanged_points_give_identical_file(tmp_path, text):
     assert (tmp_path / "out.su2").read_bytes() == src.read_bytes()
 
 
-def test_patch_changes_only_moved_rows_and_keeps_ffd_section(tmp_path):
+def test_patch_changes_only_moved_rows_and_drops_an_unreadable_ffd_section(tmp_path):
     src = write_text(tmp_path, "in.su2", HEX2 + FFD_TAIL)
     m = su2.read(src)
     pts = m.points.copy()
     pts[4] += [0.1, 1 / 3, -2e-17]              # non-representable decimals: needs %.17g
     pts[9, 2] = np.nextafter(1.0, 2.0)          # one ulp: must survive the round trip
     out = tmp_path / "out.su2"
-    su2.write(m, out, pts)
+    notes = su2.write(m, out, pts)
     old, new = src.read_text().splitlines(), out.read_text().splitlines()
-    assert len(old) == len(new)
-    changed = [i for i, (a, b) in enumerate(zip(old, new, strict=True)) if a != b]
+    n_ffd = len(FFD_TAIL.splitlines())
+    assert len(old) == len(new) + n_ffd
+    changed = [i for i, (a, b) in enumerate(zip(old[:-n_ffd], new, strict=True)) if a != b]
     row0 = old.index("NPOIN= 12") + 1
     assert changed == [row0 + 4, row0 + 9]
     assert new[row0 + 4].endswith(" 4")                     # index column kept
-    assert new[-5:] == FFD_TAIL.splitlines()
+    # a truncated FFD section cannot be brought up to date: it is left out, and the writer says so
+    assert "FFD_NBOX" not in out.read_text()
+    assert "could not be updated" in notes["su2_ffd"]["dropped"]
     back = su2.read(out)
     np.testing.assert_array_equal(back.points, pts)          # bit for bit (%.17g)
     _same_mesh(back.with_points(m.points), m)
@@ -298,9 +301,15 @@ def test_real_files_patch_and_round_trip(tmp_path, rel):
     back = su2.read(tmp_path / "moved.su2")
     np.testing.assert_array_equal(back.points, pts)
     _same_mesh(back.with_points(m.points), m)
-    # the bytes after the point block (markers, FFD section) are untouched
+    # the bytes after the point block (markers) are untouched, up to SU2's FFD section, which is
+    # brought up to date for the moved surface (tests/test_su2_ffd.py)
     old, new = src.read_bytes(), (tmp_path / "moved.su2").read_bytes()
-    assert new.endswith(old[m.source.block_end:])
+    tail = old[m.source.block_end:]
+    at = tail.find(b"FFD_NBOX=")
+    if at < 0:
+        assert new.endswith(tail)
+    else:
+        assert tail[:at] in new and b"FFD_SURFACE_POINTS=" in new[new.find(tail[:at]) + at:]
 
 
 def test_real_file_counts():
@@ -314,8 +323,8 @@ def test_real_file_counts():
 
 def test_crlf_file_patch_keeps_line_endings(tmp_path):
     src = tmp_path / "crlf.su2"
-    src.write_bytes((HEX2 + FFD_TAIL).replace("\n", "\r\n").encode())
-    m = su2.read(src)
+    src.write_bytes(HEX2.replace("\n", "\r\n").encode())     # (an FFD section is rewritten with LF: SU2
+    m = su2.read(src)                                           # reads it by character offsets)
     assert list(m.markers) == ["Wing Lower-1", "far", "tip_tri"]         # no stray '\r' in names
     write_mesh(m, tmp_path / "same.su2")
     assert (tmp_path / "same.su2").read_bytes() == src.read_bytes()

@@ -20,6 +20,9 @@ from ffdcli.errors import InputError, QualityError
               help="Write the deformed mesh here instead of the file's output.mesh.")
 @click.option("--lattice", "lattice_out", type=click.Path(dir_okay=False), metavar="FILE.vtk",
               help="Write the lattice here instead of the file's output.lattice.")
+@click.option("--surface-file", "surface_file", type=click.Path(dir_okay=False), metavar="FILE",
+              help="Also write the deformed surface nodes as SU2's surface-positions file (DV_KIND= "
+                   "SURFACE_FILE, DV_FILENAME= FILE), for SU2_DEF's own volume deformation. See docs/su2.md.")
 @click.option("--plot", "plot", is_flag=True,
               help="Also write a PNG picture (original black, deformed red) beside the mesh.")
 @click.option("--force", is_flag=True, help="Write the mesh even if the quality check fails.")
@@ -27,7 +30,8 @@ from ffdcli.errors import InputError, QualityError
               help="Where the box cache lives (default: beside the mesh).")
 @click.option("--no-cache", is_flag=True, help="Neither read nor write the box cache.")
 @common_options
-def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_dir, no_cache, console):
+def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, force, cache_dir, no_cache,
+               console):
     """Apply the changes of DESIGN.yaml to its mesh and write the deformed mesh and lattice.
 
     \b
@@ -41,6 +45,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     Examples:
       ffd deform configs/rect_twist_linear.yaml
       ffd deform design.yaml --set changes.0.twist.tip=12 -o out/tip12.su2 --json
+      ffd deform design.yaml --surface-file out/wing_surface.dat   # for SU2_DEF (DV_KIND= SURFACE_FILE)
       for t in 5 10 15; do ffd deform design.yaml --set changes.0.twist.tip=$t -o out/t$t.su2; done
     """
     from ffdcli.design import load_design
@@ -69,6 +74,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
         check_writable(png, inputs=(design.mesh, out_mesh, out_lattice, design.path))
         if png.suffix.lower() != ".png":
             raise InputError("pictures are written as PNG: give it a .png name", path=png)
+    if surface_file is not None:
+        check_writable(surface_file, inputs=(design.mesh, out_mesh, out_lattice, design.path))
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress)
     for w in run.prep.warnings:
         console.warn(w)
@@ -87,7 +94,12 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     if q is not None and not q.ok:
         console.warn(f"quality check failed but --force given: {q.summary()}")
     written = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
-                            progress=console.progress)
+                            surface_file=surface_file, progress=console.progress)
+    su2_ffd = written.pop("su2_ffd", None)
+    if su2_ffd is not None and su2_ffd.get("outside"):
+        console.warn(f"{su2_ffd['outside']} surface nodes are now outside the mesh's own SU2 FFD box(es): "
+                     "SU2's FFD design variables will not move them; enlarge the SU2 box "
+                     "(FFD_DEFINITION, then DV_KIND= FFD_SETTING) before using SU2's FFD on this mesh")
     if png is not None:
         from ffdcli.plot import plot_design
 
@@ -100,12 +112,14 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
         "output": written["mesh"],
         "lattice_file": written.get("lattice"),
         "plot": written.get("plot"),
+        "surface_file": written.get("surface_file"),
         "changes": [next(iter(c)) for c in design.changes_spec],
         "lattice": list(run.box.lattice_shape),
         "surface_points": int(len(run.prep.surface.ids)),
         "max_displacement": result.max_displacement,
         "volume": result.volume_method,
         "quality": qd,
+        "su2_ffd": su2_ffd,
         "cache": str(run.prep.cache) if run.prep.cache else None,
         "from_cache": run.prep.from_cache,
         "seconds": round(secs, 3),
@@ -119,6 +133,10 @@ def deform_cmd(design_file, overrides, output, lattice_out, plot, force, cache_d
     ]
     if q is not None:
         lines.append(f"  quality   {q.summary()}")
+    if su2_ffd is not None:
+        from ffdcli.formats.su2_ffd import describe
+
+        lines.append(f"  su2 ffd   {describe(su2_ffd)}")
     lines += [f"  wrote     {p}" for p in written.values()]
     lines.append(f"  time      {secs:.2f} s")
     console.result(summary, "\n".join(lines))

@@ -50,10 +50,11 @@ def read_mesh(path: str | Path, *, progress=None) -> Mesh:
 
 
 def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *,
-               progress=None) -> None:
+               progress=None) -> dict:
     """Write ``mesh`` with coordinates ``points`` (default: its own) to ``path``, atomically.
 
-    Never overwrites the file the mesh was read from.
+    Never overwrites the file the mesh was read from. Returns notes of the writer for the run's
+    summary (``{}`` for most; the SU2 writer reports what it did to SU2's own FFD section).
     """
     from ffdcli.atomic import check_writable
 
@@ -62,4 +63,4 @@ def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *
     pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
     if pts.shape != mesh.points.shape:
         raise ValueError(f"points {pts.shape} do not match the mesh {mesh.points.shape}")
-    _module(fmt).write(mesh, p, pts, progress=progress)
+    return _module(fmt).write(mesh, p, pts, progress=progress) or {}

@@ -24,8 +24,12 @@ so an appended FFD section is ignored. Multi-zone files (``NZONE=`` > 1) are ref
 Writing a mesh read from an SU2 file patches only the point block of a copy of that file: rows of
 points that did not move keep their original text, moved rows get their coordinates printed with
 ``%.17g`` (exact round trip) and keep their leading blanks and everything after the last coordinate
-(the index column, the line ending). Every byte outside the point block is copied unchanged. A mesh
-from another format is written from scratch (NDIME, NELEM, NPOIN, NMARK, markers by name).
+(the index column, the line ending). Every byte outside the point block is copied unchanged, except
+SU2's own FFD section: when points moved, its ``FFD_SURFACE_POINTS`` (parameters of the *original*
+surface, which SU2_DEF would silently restore) are recomputed for the new surface by
+:mod:`ffdcli.formats.su2_ffd`; a section that cannot be read is dropped. :func:`write` returns what it
+did to the section. A mesh from another format is written from scratch (NDIME, NELEM, NPOIN, NMARK,
+markers by name).
 """
 
 from __future__ import annotations
@@ -562,13 +566,17 @@ def _type_list() -> str:
 # writing
 
 
-def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> None:
+def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> dict:
     """Write ``mesh`` with coordinates ``points`` (N, 3) as an SU2 ASCII file, atomically.
 
     A mesh read from an SU2 file is written by patching the point block of a copy of that file
     (see the module docstring); any other mesh is written from scratch. Coordinates are printed
     with ``%.17g``, so reading the file back gives the same floats to the last bit. For a 2D mesh
     the third coordinate must be constant (it is not stored).
+
+    Returns ``{"su2_ffd": report}`` when the file carries SU2's FFD section and points moved
+    (see :func:`ffdcli.formats.su2_ffd.refresh`; ``{"su2_ffd": {"dropped": reason}}`` when the
+    section could not be read and was left out), else ``{}``.
     """
     path = Path(path)
     progress = progress or no_progress
@@ -583,12 +591,38 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
         raise InputError("a 2D mesh written as SU2 (NDIME= 2) must lie in a plane z = constant; "
                          "its z coordinates differ", path=path)
     if src is not None:
-        _write_patched(mesh, src, path, points[:, :ndim], progress)
-    else:
-        _write_new(mesh, path, points, progress)
+        return _write_patched(mesh, src, path, points, progress)
+    _write_new(mesh, path, points, progress)
+    return {}
 
 
-def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points: np.ndarray, progress) -> None:
+def _ffd_section(mm: mmap.mmap, src: Su2Source, original: Path, points: np.ndarray):
+    """(offset of SU2's FFD section, its new bytes, report), or None when there is nothing to change.
+
+    Only when some point moved: an unchanged mesh is written bit for bit, section included."""
+    # Imported here, not at the top: it brings numba's spline kernels, which reading an SU2 file
+    # (``ffd inspect``, ``ffd check``) does not need.
+    from ffdcli.formats import su2_ffd
+
+    tail_start = src.block_end
+    at = su2_ffd.find_section(mm[tail_start:])
+    if at is None or np.array_equal(points[:, :src.ndim], src.points):
+        return None
+    at += tail_start
+    first_line = mm[:at].count(b"\n") + 1
+    try:
+        section = su2_ffd.parse_section(mm[at:].decode("utf-8", errors="replace"), src.ndim, path=original,
+                                        first_line=first_line)
+        section, report = su2_ffd.refresh(section, points)
+    except (InputError, ValueError) as e:
+        reason = e.message if isinstance(e, InputError) else str(e)
+        return at, b"", {"dropped": f"SU2's FFD section (line {first_line}) could not be updated and was "
+                                    f"left out: {reason}"}
+    return at, su2_ffd.format_section(section, src.ndim).encode(), report
+
+
+def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points3: np.ndarray, progress) -> dict:
+    points = points3[:, :src.ndim]
     original = mesh.path
     try:
         fh = open(original, "rb")
@@ -603,6 +637,7 @@ def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points: np.ndarray, p
         mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
     try:
         n = len(points)
+        ffd = _ffd_section(mm, src, original, points3)
         with atomic_write(path) as out, progress(f"writing {path.name}", n) as bar:
             _copy(mm, 0, src.block_start, out)
             for a in range(0, n, WRITE_ROWS):
@@ -610,9 +645,14 @@ def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points: np.ndarray, p
                 out.write(_patch_rows(mm, src, points, a, b))
                 _release(mm, int(src.row_start[a]), int(src.row_start[b] - src.row_start[a]))
                 bar.update(b - a)
-            _copy(mm, src.block_end, len(mm), out)
+            if ffd is None:
+                _copy(mm, src.block_end, len(mm), out)
+            else:
+                _copy(mm, src.block_end, ffd[0], out)
+                out.write(ffd[1])
     finally:
         mm.close()
+    return {} if ffd is None else {"su2_ffd": ffd[2]}
 
 
 def _copy(mm: mmap.mmap, start: int, stop: int, out, step: int = 1 << 26) -> None:
