@@ -333,9 +333,7 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
     points = mesh.points.copy()
     method = volume_method(run)
     t1 = time.perf_counter()
-    # An unchanged lattice moves nothing, bit for bit (the warp's rotations of an identity map are
-    # the identity only to rounding, which would move volume nodes by 1e-17).
-    if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh) and not np.array_equal(P1, run.P0):
+    if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
         from ffdcli.warp import warp
 
         model = run.warp_model(progress)
