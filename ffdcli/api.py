@@ -100,7 +100,8 @@ class DesignModel:
         error = getattr(design, "error", None)
         self.bounds = make_bounds(self.names, natural, spec, values=self.values, error=error)
         self._B = None
-        self._cache = {}
+        self._cache = {}            # what depends on the values (cleared by set_values)
+        self._static = {}           # what does not (constraint geometry on the baseline)
         self._point_sets = {}
 
     @classmethod
@@ -210,6 +211,71 @@ class DesignModel:
     def points_vjp(self, name: str, g) -> np.ndarray:
         """(n_vars,) dJ/dv for ``g`` = dJ/dX (k, 3) at the points of set ``name``."""
         return self.point_set(name).vjp(self.lattice_jacobian(), g)
+
+    # -- constraints ---------------------------------------------------------------------------
+    @property
+    def constraints(self) -> list:
+        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints`),
+        built once on the baseline surface and lattice."""
+        if "constraints" not in self._static:
+            spec = (getattr(self.run.design, "data", None) or {}).get("constraints") or []
+            self._static["constraints"] = self._build_constraints(spec)
+        return self._static["constraints"]
+
+    def set_constraints(self, specs) -> None:
+        """Replace the constraints by those of a ``constraints:`` list ``specs`` (list of dict)."""
+        self._static["constraints"] = self._build_constraints(specs)
+
+    def _build_constraints(self, specs) -> list:
+        from ffdcli.constraints import build_constraints
+
+        run = self.run
+        return build_constraints(specs, run.box, run.prep.surface, run.changes,
+                                 error=getattr(run.design, "error", None))
+
+    @property
+    def constraint_names(self) -> list[str]:
+        """(C,) ``k<index>.<kind>[<j>]`` of every constraint item."""
+        from ffdcli.constraints import constraint_names
+
+        return constraint_names(self.constraints)
+
+    @property
+    def constraint_lower(self) -> np.ndarray:
+        """(C,) lower bounds of the constraint items (``-inf``: none)."""
+        from ffdcli.constraints import constraint_bounds
+
+        return constraint_bounds(self.constraints)[0]
+
+    @property
+    def constraint_upper(self) -> np.ndarray:
+        """(C,) upper bounds of the constraint items (``inf``: none)."""
+        from ffdcli.constraints import constraint_bounds
+
+        return constraint_bounds(self.constraints)[1]
+
+    def _constraint_inputs(self):
+        from ffdcli.constraints import ConstraintInputs
+
+        return ConstraintInputs(self.lattice(), self.run.P0, self.values, self.lattice_jacobian,
+                                self.surface_points, lambda: self.basis)
+
+    def constraint_values(self) -> np.ndarray:
+        """(C,) the constraint items at the current values."""
+        if "cv" not in self._cache:
+            from ffdcli.constraints import evaluate
+
+            self._cache["cv"] = evaluate(self.constraints, self._constraint_inputs())[0]
+        return self._cache["cv"]
+
+    def constraint_jacobian(self) -> np.ndarray:
+        """(C, n_vars) exact d(constraint item)/d(design variable) at the current values."""
+        if "cj" not in self._cache:
+            from ffdcli.constraints import evaluate
+
+            self._cache["cv"], self._cache["cj"] = evaluate(self.constraints, self._constraint_inputs(),
+                                                            jacobian=True)
+        return self._cache["cj"]
 
     # -- evaluation --------------------------------------------------------------------------
     @property
