@@ -265,11 +265,50 @@ def make_airfoils() -> list[dict]:
     return [{"file": "naca0012.dat", "points": len(naca)}]
 
 
+def make_volume_sens(out: Path) -> dict:
+    """dJ/dX of J = the enclosed volume of ``rect_wing.su2``'s wing, in SU2's ``surface_sens.csv`` layout.
+
+    Not an adjoint solution (SU2 is not available where the samples are made): a real sensitivity of
+    a functional known in closed form, so that ``ffd grad`` has a file to read and its answer can be
+    checked (README, docs/su2.md). The half wing is closed by its symmetry plane z = 0, so by the
+    divergence theorem with the field (0, 0, z), V = sum over the wing triangles of
+    mean(z) * (area normal)_z, exact for flat triangles; its gradient is formed triangle by triangle.
+    The marker's triangles face into the wing (out of the fluid), hence the sign.
+    """
+    from ffdcli.formats import read_mesh
+
+    m = read_mesh(HERE / "rect_wing.su2")
+    tri = np.concatenate([b.data for b in m.markers["wing"] if b.type == "triangle"])
+    p = m.points[tri]                                      # (T, 3 corners, 3)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    nz = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]         # 2 x area normal, z component
+    zbar = p[:, :, 2].sum(axis=1) / 3.0
+    sign = -1.0                                            # faces point into the wing
+    volume = sign * float((zbar * nz).sum()) / 2.0
+    g = np.zeros((m.n_points, 3))
+    # d(nz)/d(corner x, y): nz = (x1-x0)(y2-y0) - (y1-y0)(x2-x0)
+    x, y = p[:, :, 0], p[:, :, 1]
+    dnz_dx = np.stack([y[:, 1] - y[:, 2], y[:, 2] - y[:, 0], y[:, 0] - y[:, 1]], axis=1)
+    dnz_dy = np.stack([x[:, 2] - x[:, 1], x[:, 0] - x[:, 2], x[:, 1] - x[:, 0]], axis=1)
+    for c in range(3):
+        np.add.at(g[:, 0], tri[:, c], sign * zbar * dnz_dx[:, c] / 2.0)
+        np.add.at(g[:, 1], tri[:, c], sign * zbar * dnz_dy[:, c] / 2.0)
+        np.add.at(g[:, 2], tri[:, c], sign * nz / 6.0)
+    ids = np.unique(tri)
+    rows = np.column_stack([ids, m.points[ids], g[ids]])
+    header = '"PointID","x","y","z","Sensitivity_x","Sensitivity_y","Sensitivity_z"'
+    with atomic_write(out, "w") as fh:
+        fh.write(header + "\n")
+        np.savetxt(fh, rows, fmt=["%d"] + ["%.12e"] * 6, delimiter=",")
+    return {"file": out.name, "rows": len(ids), "volume": volume}
+
+
 MAKERS = {
     "naca0012_2d": lambda: make_naca0012_2d(HERE / "naca0012_2d.su2"),
     "rect_wing": lambda: make_rect_wing(HERE / "rect_wing.su2"),
     "crm_wing": lambda: make_crm_wing(HERE / "crm_wing.su2"),
     "airfoils": make_airfoils,
+    "surface_sens": lambda: make_volume_sens(HERE / "rect_wing_surface_sens.csv"),
 }
 
 
