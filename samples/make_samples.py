@@ -270,37 +270,26 @@ def make_volume_sens(out: Path) -> dict:
 
     Not an adjoint solution (SU2 is not available where the samples are made): a real sensitivity of
     a functional known in closed form, so that ``ffd grad`` has a file to read and its answer can be
-    checked (README, docs/su2.md). The half wing is closed by its symmetry plane z = 0, so by the
-    divergence theorem with the field (0, 0, z), V = sum over the wing triangles of
-    mean(z) * (area normal)_z, exact for flat triangles; its gradient is formed triangle by triangle.
+    checked (README, docs/su2.md). The volume and its exact gradient are those of ffd's ``volume``
+    constraint (:class:`ffdcli.constraints.Volume`: the half wing closed by its symmetry plane z = 0).
     The marker's triangles face into the wing (out of the fluid), hence the sign.
     """
+    from ffdcli.constraints import Volume, surface_triangles
     from ffdcli.formats import read_mesh
+    from ffdcli.surface import extract_surface
 
     m = read_mesh(HERE / "rect_wing.su2")
-    tri = np.concatenate([b.data for b in m.markers["wing"] if b.type == "triangle"])
-    p = m.points[tri]                                      # (T, 3 corners, 3)
-    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
-    nz = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]         # 2 x area normal, z component
-    zbar = p[:, :, 2].sum(axis=1) / 3.0
-    sign = -1.0                                            # faces point into the wing
-    volume = sign * float((zbar * nz).sum()) / 2.0
-    g = np.zeros((m.n_points, 3))
-    # d(nz)/d(corner x, y): nz = (x1-x0)(y2-y0) - (y1-y0)(x2-x0)
-    x, y = p[:, :, 0], p[:, :, 1]
-    dnz_dx = np.stack([y[:, 1] - y[:, 2], y[:, 2] - y[:, 0], y[:, 0] - y[:, 1]], axis=1)
-    dnz_dy = np.stack([x[:, 2] - x[:, 1], x[:, 0] - x[:, 2], x[:, 1] - x[:, 0]], axis=1)
-    for c in range(3):
-        np.add.at(g[:, 0], tri[:, c], sign * zbar * dnz_dx[:, c] / 2.0)
-        np.add.at(g[:, 1], tri[:, c], sign * zbar * dnz_dy[:, c] / 2.0)
-        np.add.at(g[:, 2], tri[:, c], sign * nz / 6.0)
-    ids = np.unique(tri)
-    rows = np.column_stack([ids, m.points[ids], g[ids]])
+    surf = extract_surface(m, ["wing"])
+    vol = Volume(index=0, lower=None, upper=None, cells=surface_triangles(surf.faces),
+                 origin=np.zeros(3), base=1.0, dim=3)
+    volume, g = vol.measure(surf.points, grad=True)
+    sign = np.sign(volume)
+    rows = np.column_stack([surf.ids, surf.points, sign * g])
     header = '"PointID","x","y","z","Sensitivity_x","Sensitivity_y","Sensitivity_z"'
     with atomic_write(out, "w") as fh:
         fh.write(header + "\n")
         np.savetxt(fh, rows, fmt=["%d"] + ["%.12e"] * 6, delimiter=",")
-    return {"file": out.name, "rows": len(ids), "volume": volume}
+    return {"file": out.name, "rows": len(surf.ids), "volume": abs(volume)}
 
 
 MAKERS = {

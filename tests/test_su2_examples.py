@@ -42,8 +42,8 @@ def test_readme_grad_example_gives_the_volume_oracle(tmp_path):
 
 def _rect_design(tmp_path):
     design = tmp_path / "d.yaml"
-    design.write_text(f"mesh: {REPO / 'samples' / 'rect_wing.su2'}\nsurface: wing\nbox: {{points: [6, 8, 2], sections: xy}}\n"
-                      "changes:\n  - twist: {tip: 0}\n")
+    design.write_text(f"mesh: {REPO / 'samples' / 'rect_wing.su2'}\nsurface: wing\n"
+                      "box: {points: [6, 8, 2], sections: xy}\nchanges:\n  - twist: {tip: 0}\n")
     cfg = tmp_path / "flow.cfg"
     cfg.write_text("SOLVER= EULER\nMESH_FILENAME= somewhere.su2\nAOA= 0\nSIDESLIP_ANGLE= 2\n")
     return design, cfg
