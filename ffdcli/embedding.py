@@ -4,15 +4,16 @@
 ``|V(u) - X|`` for the lattice map ``V`` (see :mod:`ffdcli.lattice`). The lattice is not a
 parallelepiped (it follows a swept, tapered, twisted wing), so the map is inverted numerically:
 
-1. a grid of samples (a few per knot span and direction) is evaluated and put in a k-d tree; each
-   point starts from the parameters of its nearest sample;
+1. each point starts from a first-order inverse of the lattice map at the centre of its cell in a
+   uniform grid (:class:`StartTable`: a table read and a 3 x 3 product per point); the table is
+   made once from a grid of samples (a few per knot span and direction) in a k-d tree;
 2. a projected Gauss-Newton iteration with backtracking line search runs per point inside a
    parallel compiled loop (numba ``prange``; no Python loop over points). Parameters are clipped
    to [0, 1] at every step and the variables held at a bound by the gradient are frozen, so the
    iteration converges to the nearest point of the lattice also for points outside it;
 3. parameters within ``snap`` (1e-10) of 0 or 1 are set exactly to 0 or 1 when the point stays
    within tolerance, so points on a lattice face (a wing root) get exact face parameters;
-4. points whose residual is above the tolerance are retried from their next-nearest samples,
+4. points whose residual is above the tolerance are retried from their nearest samples (k-d tree),
    keeping the best result.
 
 A point is *inside* when its residual ``|V(u) - X|`` is at most ``tol * lattice.size``. Points
@@ -38,7 +39,7 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
-from ffdcli.lattice import Lattice, eval_point_nb, evaluate, kernel_args
+from ffdcli.lattice import Lattice, derivatives, eval_point_nb, evaluate, kernel_args
 from ffdcli.progress import chunks, no_progress
 from ffdcli.spline import basis, basis_compiled
 
@@ -593,6 +594,111 @@ def sample_grid(lattice: Lattice, per_span: int = 4) -> np.ndarray:
     return np.ascontiguousarray(np.stack([m.ravel() for m in mesh], axis=1))
 
 
+@dataclass(frozen=True)
+class StartTable:
+    """Newton starts from a uniform grid of cells over the sampled lattice.
+
+    Each cell holds the parameters ``u_c`` of the lattice point nearest its centre ``C`` and the
+    pseudo-inverse ``J_c^+`` of the lattice map's Jacobian there; a point ``X`` of the cell starts at
+    ``clip(u_c + J_c^+ (X - C), 0, 1)``: one table read and a 3 x 3 product per point instead of a
+    k-d tree search (which took about a fifth of the embedding time), and a start whose error is of
+    second order in the cell size, so Gauss-Newton needs about one iteration less than from the
+    nearest sample. The cells are about as large as the sample spacing, per axis (a thin box gets
+    few cells across its thickness); points outside the grid use its border cells.
+
+    Attributes
+    ----------
+    lo : ndarray, shape (3,)
+        Lower corner of the grid (mesh units; the unused axis of a 2D lattice is 0).
+    inv_h : ndarray, shape (3,)
+        Cells per mesh unit along each axis.
+    dims : ndarray of int64, shape (3,)
+        Cells along each axis (1 for an unused axis).
+    centers : ndarray, shape (n_cells, gdim)
+        Cell centres, C order of the cells.
+    params : ndarray, shape (n_cells, pdim)
+        Parameters of the lattice point nearest each centre.
+    jinv : ndarray, shape (n_cells, pdim, gdim)
+        Pseudo-inverse of dV/du at ``params`` (zero where the lattice is degenerate).
+    """
+
+    lo: np.ndarray
+    inv_h: np.ndarray
+    dims: np.ndarray
+    centers: np.ndarray
+    params: np.ndarray
+    jinv: np.ndarray
+
+    @classmethod
+    def build(cls, lattice: Lattice, samples: np.ndarray, sample_points: np.ndarray, tree: cKDTree,
+              tol_abs: float, cells_per_sample: float = 2.0, max_cells: int = 1 << 16) -> StartTable:
+        """Grid over the bounding box of ``sample_points`` (S, gdim) with about ``cells_per_sample * S``
+        cells (at most ``max_cells``); the centres are embedded from their nearest samples."""
+        gdim = sample_points.shape[1]
+        lo = sample_points.min(axis=0)
+        ext = sample_points.max(axis=0) - lo
+        ext = np.maximum(ext, 1e-12 * max(float(ext.max()), 1e-300))
+        ncell = min(max_cells, max(1, int(cells_per_sample * sample_points.shape[0])))
+        h = (np.prod(ext) / ncell) ** (1.0 / gdim)
+        dims = np.clip(np.ceil(ext / h), 1, 4096).astype(np.int64)
+        axes = [lo[a] + (np.arange(dims[a]) + 0.5) * ext[a] / dims[a] for a in range(gdim)]
+        centers = np.ascontiguousarray(np.stack([c.ravel() for c in np.meshgrid(*axes, indexing="ij")], axis=1))
+        _, nearest = tree.query(centers, k=1, workers=-1)
+        params = np.ascontiguousarray(samples[nearest])
+        residual = np.empty(len(centers))
+        _run_newton(kernel_args(lattice), centers, params, residual, tol_abs, 1e-3 * tol_abs, SNAP, 50)
+        jinv = np.linalg.pinv(derivatives(lattice, params), rcond=1e-10)
+        jinv[~np.isfinite(jinv).all(axis=(1, 2))] = 0.0
+        lo3, inv3, dims3 = np.zeros(3), np.zeros(3), np.ones(3, dtype=np.int64)
+        lo3[:gdim], inv3[:gdim], dims3[:gdim] = lo, dims / ext, dims
+        return cls(lo=lo3, inv_h=inv3, dims=dims3, centers=centers, params=params,
+                   jinv=np.ascontiguousarray(jinv))
+
+    def start(self, points: np.ndarray) -> np.ndarray:
+        """Start parameters (N, pdim) in [0, 1] for points (N, gdim)."""
+        points = np.ascontiguousarray(points, dtype=np.float64)
+        out = np.empty((points.shape[0], self.params.shape[1]))
+        if points.shape[0]:
+            _start_nb(points, self.lo, self.inv_h, self.dims, self.centers, self.params, self.jinv, out)
+        return out
+
+
+@njit(cache=True, parallel=True)
+def _start_nb(X, lo, inv_h, dims, centers, params, jinv, out):
+    npts = X.shape[0]
+    gdim = X.shape[1]
+    pdim = params.shape[1]
+    for i in prange(npts):
+        cell = 0
+        for a in range(3):
+            j = 0
+            if a < gdim:
+                t = (X[i, a] - lo[a]) * inv_h[a]
+                if t > 0.0:
+                    j = int(t) if t < dims[a] else dims[a] - 1
+            cell = cell * dims[a] + j
+        for e in range(pdim):
+            v = params[cell, e]
+            for d in range(gdim):
+                v += jinv[cell, e, d] * (X[i, d] - centers[cell, d])
+            out[i, e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
+
+
+def start_reference(start: StartTable, points: np.ndarray) -> np.ndarray:
+    """NumPy reference of :meth:`StartTable.start`."""
+    points = np.asarray(points, dtype=np.float64)
+    gdim = points.shape[1]
+    cell = np.zeros(points.shape[0], dtype=np.int64)
+    for a in range(3):
+        j = np.zeros(points.shape[0], dtype=np.int64)
+        if a < gdim:
+            t = (points[:, a] - start.lo[a]) * start.inv_h[a]
+            j = np.minimum(np.floor(np.maximum(t, 0.0)), start.dims[a] - 1).astype(np.int64)
+        cell = cell * start.dims[a] + j
+    u = start.params[cell] + np.einsum("ned,nd->ne", start.jinv[cell], points - start.centers[cell])
+    return np.clip(u, 0.0, 1.0)
+
+
 def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_iter):
     _newton_nb(*args, points, params, float(tol_abs), float(stop_abs), float(snap), int(max_iter), residual)
 
@@ -639,23 +745,24 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
     args = kernel_args(lattice)
 
     samples = sample_grid(lattice, samples_per_span)
-    tree = cKDTree(evaluate(lattice, samples))
+    sample_points = evaluate(lattice, samples)
+    tree = cKDTree(sample_points)
+    start = StartTable.build(lattice, samples, sample_points, tree, tol_abs)
     params = np.empty((npts, lattice.pdim))
     residual = np.empty(npts)
     factory = progress or no_progress
     with factory("embedding", npts) as bar:
         for lo, hi in chunks(npts, CHUNK):
-            _, nearest = tree.query(pts[lo:hi], k=1, workers=-1)
-            params[lo:hi] = samples[nearest]
+            params[lo:hi] = start.start(pts[lo:hi])
             _run_newton(args, pts[lo:hi], params[lo:hi], residual[lo:hi], tol_abs, stop_abs, snap, max_iter)
             bar.update(hi - lo)
 
     # Retry the points left outside from their next-nearest samples, keeping the best result.
     fail = np.flatnonzero(residual > tol_abs)
     kmax = min(retries + 1, samples.shape[0])
-    if fail.size and kmax > 1:
+    if fail.size and retries > 0:
         _, nearest = tree.query(pts[fail], k=kmax, workers=-1)
-        for kth in range(1, kmax):
+        for kth in range(kmax):          # the table's start was near, not always the nearest
             if not fail.size:
                 break
             sub_pts = np.ascontiguousarray(pts[fail])

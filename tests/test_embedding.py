@@ -289,3 +289,27 @@ def test_out_argument_is_filled_and_checked(embedded):
                 np.empty((lat.gdim, emb.n_points)).T):
         with pytest.raises(ValueError, match="out must be"):
             emb.evaluate(P, out=bad)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_start_table_kernel_matches_numpy_and_starts_near(case):
+    """The compiled start lookup equals its NumPy reference (points inside, on and far outside the
+    grid), and its starts are close: most points are already within 1e-3 of their parameters."""
+    from scipy.spatial import cKDTree
+
+    from ffdcli.embedding import StartTable, start_reference
+
+    lat = CASES[case]()
+    rng = np.random.default_rng(3)
+    samples = sample_grid(lat, 4)
+    S = evaluate(lat, samples)
+    table = StartTable.build(lat, samples, S, cKDTree(S), 1e-10 * lat.size)
+    u = rng.uniform(0.0, 1.0, (2000, lat.pdim))
+    X = evaluate(lat, u)
+    far = S.min(axis=0) + rng.uniform(-1.0, 2.0, (300, S.shape[1])) * np.ptp(S, axis=0)
+    pts = np.concatenate([X, far, S[:50]])
+    got = table.start(pts)
+    np.testing.assert_allclose(got, start_reference(table, pts), rtol=0, atol=1e-14)
+    assert got.shape == (len(pts), lat.pdim) and np.all((got >= 0) & (got <= 1))
+    err = np.abs(got[: len(X)] - u).max(axis=1)
+    assert np.median(err) < 1e-2
