@@ -17,8 +17,10 @@ REPO = Path(__file__).resolve().parent.parent
 VIEW_3D = {"rect_twist_linear", "crm_twist_tip"}
 
 
-def run_case(config: Path, out: Path, progress) -> dict:
-    """Deform one design into ``out`` (mesh, lattice, PNG); return its summary row."""
+def run_case(config: Path, out: Path, progress, target=None) -> dict:
+    """Deform one design into ``out`` (mesh, lattice, PNG); return its summary row.
+
+    ``target``: a unit-chord airfoil (K, 2) drawn on the picture (the fit's target)."""
     from ffdcli.design import load_design
     from ffdcli.pipeline import deform, load_run, write_outputs
     from ffdcli.plot import plot_design
@@ -36,7 +38,7 @@ def run_case(config: Path, out: Path, progress) -> dict:
     ok = q is None or q.ok
     if ok:
         write_outputs(run, result, mesh_path=mesh_out, lattice_path=lattice_out)
-    plot_design(run, result, png)
+    plot_design(run, result, png, target=target)
     png3d = None
     if stem in VIEW_3D:
         from ffdcli.plot import plot_3d
@@ -66,7 +68,9 @@ def run_fit(out: Path, progress) -> dict | None:
     t0 = time.perf_counter()
     fitted_yaml = out / "naca0012_s1223_fitted.yaml"
     rep = fit_design(config, target, fitted_yaml, progress=progress)
-    row = run_case(fitted_yaml, out, progress)
+    from ffdcli.formats.airfoil import read_airfoil
+
+    row = run_case(fitted_yaml, out, progress, target=read_airfoil(target).coords)
     row["case"] = "naca0012_s1223_fit"
     row["changes"] = (f"shape fitted to S1223: max deviation {rep['before']['max']:.4f} -> "
                       f"{rep['after']['max']:.4f} chords")

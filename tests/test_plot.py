@@ -80,3 +80,128 @@ def test_plot_3d_view_when_pyvista_is_there(tmp_path):
     img = read_png(tmp_path / "d_3d.png")
     red, _ = red_and_black(img)
     assert img.shape[0] >= 600 and red.sum() > 2000
+
+
+# --------------------------------------------------------------------------------------------------
+# Issue 19: outlines, the change panel, labels, target, gate note, 3D from deform --plot
+# --------------------------------------------------------------------------------------------------
+
+def _run(tmp_path, changes, **planform):
+    from ffdcli.design import load_design
+    from ffdcli.pipeline import deform, load_run
+
+    mesh = write_surface_wing(tmp_path, **planform)
+    run = load_run(load_design(write_design(tmp_path, mesh, changes)))
+    return run, deform(run)
+
+
+def test_outline_of_a_swept_tapered_planform_follows_its_edges():
+    from ffdcli.plot import outline
+    from ffdcli.wings import Planform, wing_surface
+
+    pf = Planform(semi_span=3.0, root_chord=1.5, taper=0.4, le_sweep_deg=30.0, sections="xz")
+    X = wing_surface(pf, n_chord=41, n_span=31)[0]
+    o = outline(X, 1, 0, bins=30)                 # along span y, across chord x
+    span, x = o[:, 0], o[:, 1]
+    le = np.tan(np.radians(30.0)) * span
+    half = len(o) // 2
+    # the leading-edge half of the loop is the minimum chord coordinate per span slice
+    assert np.abs(x[:half] - le[:half]).max() < 0.12          # within a slice's LE drift
+    assert x[half:-1].max() == X[:, 0].max() or np.isclose(x[half:-1].max(), X[:, 0].max())
+    assert o[0, 0] == X[:, 1].min() and np.isclose(o[:, 0].max(), X[:, 1].max())
+    np.testing.assert_array_equal(o[0], o[-1])                   # closed
+
+
+def test_change_panel_is_the_exact_rigid_rotation_for_a_uniform_twist(tmp_path):
+    """Every section twisted by the same angle about the straight trailing edge: the lattice and
+    the surface rotate rigidly, so each panel's Delta is the rotation of its own points."""
+    from ffdcli.plot import section_change, section_curves
+
+    theta = 4.0
+    run, result = _run(tmp_path, [{"twist": [theta] * 8}])
+    box = run.box
+    c, t = box.axes.chord, box.axes.thickness
+    th = np.radians(theta)
+    for label, (_value, j, q0, q1) in section_curves(run, result).items():
+        te = box.te_points[j][[c, t]]
+        le = box.le_points[j][[c, t]]
+        chord = np.hypot(*(te - le))
+        r = q0 - te
+        # nose up positive: the leading edge (chord-axis coordinate below the TE's) goes up
+        sgn = box.chord_sign
+        rot_t = -np.sin(th) * r[:, 0] * sgn + np.cos(th) * r[:, 1]
+        np.testing.assert_allclose(q1[:, 1] - te[1], rot_t, atol=1e-9)
+        xc, d, up = section_change(box, j, q0, q1)
+        assert np.isclose(xc.min(), 0.0, atol=0.02) and np.isclose(xc.max(), 1.0, atol=0.02)
+        np.testing.assert_allclose(np.sort(d), np.sort(100 * (q1[:, 1] - q0[:, 1]) / chord))
+        assert 0.9 * 100 * np.sin(th) < d.max() < 1.1 * 100 * np.sin(th), label   # LE: c sin(theta)
+
+
+def test_a_one_percent_shape_change_shows_as_about_one_percent(tmp_path):
+    from ffdcli.plot import section_change, section_curves
+
+    run, result = _run(tmp_path, [{"shape": {"upper": [0, 0.01, 0.01, 0.01, 0.01, 0]}}])
+    for label, (_value, j, q0, q1) in section_curves(run, result).items():
+        xc, d, up = section_change(run.box, j, q0, q1)
+        assert 0.5 < d[up].max() <= 1.0 + 1e-9, label      # chord 1: 0.01 is 1 %
+        assert d.min() >= -1e-12, label                     # nothing moves down
+        assert d[~up].max() < 0.6 * d[up].max(), label      # the lower side (linear in l = 2) less
+
+
+def test_section_labels_are_lattice_index_and_span_fraction(tmp_path):
+    from ffdcli.plot import section_curves, span_fraction
+
+    run, result = _run(tmp_path, [{"twist": {"tip": 3}}])
+    curves = section_curves(run, result)
+    assert [v[1] for v in curves.values()] == [0, 3, 7]
+    assert span_fraction(run.box, curves["root"][0]) == 0.0
+    assert np.isclose(span_fraction(run.box, curves["mid-span"][0]), 3 / 7)
+    assert 0.95 < span_fraction(run.box, curves["tip"][0]) < 1.0
+
+
+def test_plot_draws_the_target_airfoil(tmp_path):
+    png = tmp_path / "fit.png"
+    proc = run_ffd("plot", REPO / "configs" / "naca0012_s1223.yaml", "-o", png, "--target",
+                   REPO / "samples" / "s1223.dat")
+    assert proc.returncode == 0, proc.stderr
+    rgb = read_png(png)[..., :3]
+    violet = (rgb[..., 0] > 0.4) & (rgb[..., 0] < 0.75) & (rgb[..., 1] < 0.2) & (rgb[..., 2] > 0.65)
+    assert violet.sum() > 300
+    proc = run_ffd("plot", REPO / "configs" / "naca0012_s1223.yaml", "-o", tmp_path / "n.png")
+    rgb = read_png(tmp_path / "n.png")[..., :3]
+    violet0 = (rgb[..., 0] > 0.4) & (rgb[..., 0] < 0.75) & (rgb[..., 1] < 0.2) & (rgb[..., 2] > 0.65)
+    assert violet0.sum() < 20
+
+
+def test_plot_says_when_the_gate_would_refuse(tmp_path):
+    import json
+
+    design = REPO / "configs" / "rect_twist_sections.yaml"
+    proc = run_ffd("plot", design, "-o", tmp_path / "r.png", "--no-3d", "--json",
+                   "--set", "volume.alpha=0.25", "--set", "volume.threshold=0.05")
+    assert proc.returncode == 0, proc.stderr
+    assert "quality gate would refuse" in proc.stderr
+    assert json.loads(proc.stdout)["refused"] is True
+    proc = run_ffd("plot", design, "-o", tmp_path / "ok.png", "--no-3d", "--json")
+    assert "quality gate" not in proc.stderr and json.loads(proc.stdout)["refused"] is False
+
+
+def test_deform_plot_writes_the_3d_view_too(tmp_path):
+    import json
+
+    import pytest
+
+    pytest.importorskip("pyvista")
+    mesh = write_surface_wing(tmp_path)
+    design = write_design(tmp_path, mesh, [{"twist": {"tip": 10}}])
+    proc = run_ffd("deform", design, "--plot", "--json")
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    if s.get("plot_3d") is None:        # no off-screen OpenGL here: said so
+        assert "no 3D view" in proc.stderr
+        return
+    rgb = read_png(s["plot_3d"])[..., :3]
+    reddish = rgb[..., 0] - rgb[..., 1:].max(-1) > 0.2      # the translucent deformed surface
+    grey = (np.ptp(rgb, axis=-1) < 0.05) & (rgb.mean(-1) > 0.45) & (rgb.mean(-1) < 0.8)
+    black = rgb.sum(-1) < 0.3
+    assert reddish.sum() > 20000 and grey.sum() > 2000 and black.sum() > 200

@@ -24,7 +24,8 @@ from ffdcli.errors import InputError, QualityError
               help="Also write the deformed surface nodes as SU2's surface-positions file (DV_KIND= "
                    "SURFACE_FILE, DV_FILENAME= FILE), for SU2_DEF's own volume deformation. See docs/su2.md.")
 @click.option("--plot", "plot", is_flag=True,
-              help="Also write a PNG picture (original black, deformed red) beside the mesh.")
+              help="Also write a PNG picture (original black, deformed red) beside the mesh, and for "
+                   "a 3D wing <picture>_3d.png, the 3D view (needs pyvista: the [viz] extra).")
 @click.option("--force", is_flag=True, help="Write the mesh even if the quality check fails.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR",
               help="Where the box cache lives (default: beside the mesh).")
@@ -74,6 +75,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         check_writable(png, inputs=(design.mesh, out_mesh, out_lattice, design.path))
         if png.suffix.lower() != ".png":
             raise InputError("pictures are written as PNG: give it a .png name", path=png)
+        check_writable(png.with_name(png.stem + "_3d.png"),
+                       inputs=(design.mesh, out_mesh, out_lattice, design.path))
     if surface_file is not None:
         check_writable(surface_file, inputs=(design.mesh, out_mesh, out_lattice, design.path))
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress)
@@ -105,6 +108,15 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
 
         plot_design(run, result, png)
         written["plot"] = str(png)
+        if run.box.dim == 3:
+            from ffdcli.plot import plot_3d
+
+            got = plot_3d(run, result, png.with_name(png.stem + "_3d.png"))
+            if got is None:
+                console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
+                             "(pip install 'ffdcli[viz]')")
+            else:
+                written["plot_3d"] = str(got)
     secs = time.perf_counter() - t0
     summary = {
         "design": str(design.path),
@@ -112,6 +124,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         "output": written["mesh"],
         "lattice_file": written.get("lattice"),
         "plot": written.get("plot"),
+        "plot_3d": written.get("plot_3d"),
         "surface_file": written.get("surface_file"),
         "changes": [next(iter(c)) for c in design.changes_spec],
         "lattice": list(run.box.lattice_shape),

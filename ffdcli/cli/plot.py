@@ -17,14 +17,26 @@ from ffdcli.cli import cli, common_options
 @click.option("--3d/--no-3d", "view3d", default=True, show_default=True,
               help="Also write <FILE>_3d.png, a 3D view rendered off-screen with pyvista (3D designs; "
                    "skipped with a note when pyvista or an OpenGL backend is missing).")
+@click.option("--target", type=click.Path(dir_okay=False), metavar="AIRFOIL.dat",
+              help="2D: also draw this airfoil (Selig/Lednicer .dat) on the mesh airfoil's chord line, "
+                   "e.g. the target of `ffd fit`.")
 @common_options
-def plot_cmd(design_file, output, overrides, view3d, console):
+def plot_cmd(design_file, output, overrides, view3d, target, console):
     """Draw the design: planform, front view and root/mid/tip sections (2D: the airfoil), original
     surface in black, deformed in red, lattice points and edges. Headless (matplotlib Agg).
 
     \b
-    Example:
+    The pictures: a planform (chord streamwise to the right, root at the bottom) and a front view
+    as outlines (leading/trailing edge, root, tip, sections at the lattice stations), black over
+    red; the change itself (thickness-wise displacement along the chord at root, mid and tip, in %
+    of the local chord, so a 1 % change is plain); the root/mid/tip sections labelled by lattice
+    section j and span fraction eta. When the quality gate would refuse the design (ffd deform would
+    write nothing), the picture's title and a warning say so.
+
+    \b
+    Examples:
       ffd plot configs/rect_twist_linear.yaml -o out/twist.png
+      ffd plot out/s1223.yaml --target samples/s1223.dat -o out/fit.png
     """
     from ffdcli.atomic import check_writable
     from ffdcli.design import load_design
@@ -38,9 +50,18 @@ def plot_cmd(design_file, output, overrides, view3d, console):
         from ffdcli.errors import InputError
 
         raise InputError("pictures are written as PNG: give the file a .png name", path=png)
+    coords = None
+    if target is not None:
+        from ffdcli.formats.airfoil import read_airfoil
+
+        coords = read_airfoil(target).coords
     run = load_run(design, progress=console.progress)
     result = deform(run, progress=console.progress)
-    plot_design(run, result, png)
+    q = result.quality
+    if q is not None and not q.ok:
+        console.warn(f"the quality gate would refuse this design (ffd deform writes nothing without "
+                     f"--force): {q.summary()}")
+    plot_design(run, result, png, target=coords)
     written = [str(png)]
     if view3d and run.box.dim == 3:
         from ffdcli.plot import plot_3d
@@ -51,5 +72,7 @@ def plot_cmd(design_file, output, overrides, view3d, console):
                          "(pip install 'ffdcli[viz]'); the 2D views are written")
         else:
             written.append(str(got))
-    console.result({"plot": str(png), "plots": written, "max_displacement": result.max_displacement},
+    console.result({"plot": str(png), "plots": written, "max_displacement": result.max_displacement,
+                    "refused": bool(q is not None and not q.ok),
+                    "quality": q.to_dict() if q is not None else None},
                    "ffd plot: wrote " + ", ".join(written))
