@@ -109,6 +109,10 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
         raise InputError(f"the surface marker(s) {', '.join(names)} have no points", path=mesh.path)
     dim = space_dim(mesh)
     settings = (settings or BoxSettings()).checked(dim, path=mesh.path)
+    from ffdcli.extruded import one_cell_thick
+
+    extrusion = one_cell_thick(mesh, names)
+    notes = [extrusion.message()] if extrusion is not None else []
 
     key = path = None
     if mesh.path is not None:
@@ -128,7 +132,7 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
                     return PreparedBox(mesh=mesh, surface=surf, box=box, embedding=emb,
                                        report=header.get("report", {}), cache=path, from_cache=True,
                                        seconds=time.perf_counter() - t0,
-                                       warnings=list(header.get("report", {}).get("warnings", [])))
+                                       warnings=notes + list(header.get("report", {}).get("warnings", [])))
 
     if settings.file:
         from ffdcli.box import import_box
@@ -138,7 +142,7 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     else:
         box, emb, report = fit_box(surf.points, surf.faces, settings, dim=dim, path=mesh.path,
                                    progress=progress)
-    warnings = list(report.get("warnings", []))
+    warnings = notes + list(report.get("warnings", []))
     if path is not None and use_cache:
         try:
             cache_mod.save(path, key, box, surf.ids, emb, report,

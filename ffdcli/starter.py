@@ -106,7 +106,11 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     if len(surf.ids) == 0:
         raise InputError(f"the surface marker(s) {', '.join(names)} have no points", path=mesh_path)
     dim = space_dim(mesh)
-    axes = detect_axes(surf.points, dim, path=mesh_path)
+    from ffdcli.extruded import one_cell_thick
+
+    extrusion = one_cell_thick(mesh, names)
+    axes = detect_axes(surf.points, dim, sections=extrusion.sections if extrusion else None,
+                       path=mesh_path)
     points = DEFAULT_POINTS[dim]
     ext = np.ptp(surf.points, axis=0)
     chord = float(ext[axes.chord])
@@ -121,6 +125,11 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     add("# As written it changes nothing: `ffd deform` of it writes the input mesh back. Uncomment a")
     add("# change (delete the leading '# ') and edit its numbers; `ffd plot` draws the result, `ffd vars`")
     add("# lists the design variables, `ffd schema` prints every key. Paths are relative to this file.")
+    if extrusion is not None:
+        add("#")
+        for w in textwrap.wrap("WARNING: " + extrusion.message() + " (box.sections below is set so).",
+                               WIDTH - 2):
+            add("# " + w)
     add("")
     add(_line(f"mesh: {_flow(rel)}", "the mesh; the format comes from the extension"))
     add(_line(f"surface: {_flow(names[0] if len(names) == 1 else names)}",
@@ -131,7 +140,8 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
         add(_line(f"  points: {_flow(list(points))}",
                   "control points: chordwise, spanwise (sections root to tip), thickness"))
         add(_line("  # degree: [3, 3, 1]", "B-spline degree per direction; default min(3, points - 1)"))
-        guess = "; detected, a guess: check it" if axes.guessed else " (detected)"
+        guess = " (the extrusion is the span)" if extrusion else \
+            "; detected, a guess: check it" if axes.guessed else " (detected)"
         add(_line(f"  sections: {axes.sections}",
                   f"airfoil sections in the {c}-{t} plane: chord along {c}, thickness along {t}, "
                   f"span along {s}{guess}"))

@@ -133,3 +133,12 @@ def test_init_cli_refuses_to_overwrite_and_names_bad_markers(tmp_path):
     assert_clean_failure(run_ffd("init", src, "-o", tmp_path / "a.txt"), 2, ".yaml")
     assert_clean_failure(run_ffd("init", src, "-o", target, "--force", "--surface", "nope"), 2, "nope")
     assert target.read_text() == text
+
+
+def test_init_of_an_extruded_airfoil_says_so_and_puts_the_span_along_the_extrusion(tmp_path):
+    from test_inspect import _extruded_airfoil
+
+    p = _extruded_airfoil(tmp_path, merge=True)
+    text = starter_design(p, ["wing"], design_path=tmp_path / "e.yaml")
+    assert "one cell thick along z" in text and "volume.sliding" in text
+    assert yaml.safe_load(text)["box"]["sections"] == "xy"

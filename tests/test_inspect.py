@@ -91,3 +91,83 @@ def test_unknown_surface_lists_markers(tmp_path):
     proc = run_ffd("inspect", p, "--surface", "wing", "--json")
     assert_clean_failure(proc, 2, "'wing'", "Wing Lower-1, far, tip_tri")
     assert json.loads(proc.stdout)["exit_code"] == 2
+
+
+# --------------------------------------------------------------------------------------------------
+# Issue 19: a 3D surface mesh is 3D with the box's axes; a one-cell-thick extruded airfoil is named
+# --------------------------------------------------------------------------------------------------
+
+def _box_axes(path, surface=None):
+    from ffdcli.pipeline import prepare_box
+
+    prep = prepare_box(path, surface, use_cache=False)
+    return prep.box.axes.as_dict(), prep.box.axes.root, prep.warnings
+
+
+@pytest.mark.parametrize("sections", ["xy", "xz", "zx"])
+def test_surface_mesh_is_3d_with_the_axes_of_ffd_box(tmp_path, sections):
+    from wingcase import write_surface_wing
+
+    p = write_surface_wing(tmp_path, sections=sections, semi_span=3.0, root_chord=1.0, taper=0.6,
+                           le_sweep_deg=20.0)
+    summary, text = inspect_mesh(p)
+    assert summary["dim"] == 3 and summary["surface_mesh"] is True
+    axes, root, _ = _box_axes(p)
+    assert summary["axes"] == axes and summary["root"] == root
+    assert "3D surface mesh" in text and "span" in text
+
+
+def test_multizone_cgns_wing_surface_is_3d_with_the_box_axes():
+    src = shared_file("cgns/aero__meshing__volume__wing.cgns")
+    summary, text = inspect_mesh(src)
+    assert summary["dim"] == 3 and summary["surface_mesh"] is True and "2D" not in text.splitlines()[0]
+    axes, root, _ = _box_axes(src)
+    assert summary["axes"] == axes == {"chord": "x", "thickness": "y", "span": "z"}
+    assert summary["root"] == root == "min"
+
+
+def _extruded_airfoil(tmp_path, merge: bool):
+    """A one-cell-thick extruded NACA0012 (span z 0..1); ``merge``: both side planes one marker."""
+    from ffdcli.wings import Planform, extruded_wing_mesh
+
+    m = extruded_wing_mesh(Planform(semi_span=1.0, root_chord=1.0, sections="xy"), n_around=41,
+                           n_radial=9, n_span=2)
+    if merge:
+        m.markers["sym"] = m.markers.pop("symmetry") + m.markers.pop("side")
+    p = tmp_path / ("merged.su2" if merge else "sides.su2")
+    write_mesh(m, p)
+    return p
+
+
+@pytest.mark.parametrize("merge", [True, False])
+def test_one_cell_thick_extruded_airfoil_is_named_in_inspect_box_and_deform(tmp_path, merge):
+    from wingcase import write_design
+
+    p = _extruded_airfoil(tmp_path, merge)
+    summary, text = inspect_mesh(p, ("wing",))
+    side = "sym" if merge else "symmetry"
+    assert len(summary["warnings"]) == 1
+    w = summary["warnings"][0]
+    assert "one cell thick along z" in w and side in w and "box.sections: xy" in w
+    assert ("volume.sliding" in w) is merge          # a merged marker is fixed: say how to fix it
+    _, _, warnings = _box_axes(p, ["wing"])
+    assert any("one cell thick" in x for x in warnings)
+    proc = run_ffd("box", p, "--surface", "wing", "--sections", "xy", "--lattice", tmp_path / "l.vtk")
+    assert proc.returncode == 0 and "one cell thick along z" in proc.stderr, proc.stderr
+    design = write_design(tmp_path, p, [{"twist": [1.0, 1.0]}], points=(6, 2, 2), sections="xy")
+    proc = run_ffd("deform", design, "--force")
+    assert "one cell thick along z" in proc.stderr, proc.stderr
+
+
+def test_real_extruded_airfoil_cgns_is_named():
+    src = shared_file("cgns/airfoil__analysis__n0012.cgns")
+    summary, _ = inspect_mesh(src)
+    (w,) = summary["warnings"]
+    assert "one cell thick along z" in w and "Sym" in w and "box.sections: xy" in w
+
+
+def test_volume_meshes_get_no_extrusion_warning():
+    from conftest import SAMPLES
+
+    summary, _ = inspect_mesh(SAMPLES / "rect_wing.su2")
+    assert summary["warnings"] == []

@@ -30,7 +30,9 @@ def inspect_mesh(path, surfaces=(), progress=None) -> tuple[dict, str]:
 
     from ffdcli.axes import detect_axes
     from ffdcli.errors import InputError
+    from ffdcli.extruded import one_cell_thick
     from ffdcli.formats import read_mesh
+    from ffdcli.pipeline import is_surface_mesh, space_dim
     from ffdcli.surface import default_surface, extract_surface
 
     mesh = read_mesh(path, progress=progress)
@@ -60,17 +62,25 @@ def inspect_mesh(path, surfaces=(), progress=None) -> tuple[dict, str]:
         except InputError as e:
             names, surf, note = None, None, e.message + (f" ({e.hint})" if e.hint else "")
     axes = None
+    dim = space_dim(mesh) if mesh.n_points else mesh.dim      # the box's dimension (ffd box uses it)
+    surface_only = bool(mesh.n_points) and dim == 3 and (not mesh.n_cells or is_surface_mesh(mesh))
+    warnings = []
     if surf is not None and surf.n_points:
-        axes = detect_axes(surf.points, mesh.dim, path=mesh.path)
+        axes = detect_axes(surf.points, dim, path=mesh.path)
+        extrusion = one_cell_thick(mesh, names)
+        if extrusion is not None:
+            warnings.append(extrusion.message())
 
-    summary = {"file": str(mesh.path), "format": mesh.format, "dim": mesh.dim,
+    summary = {"file": str(mesh.path), "format": mesh.format, "dim": dim, "surface_mesh": surface_only,
+               "warnings": warnings,
                "points": mesh.n_points, "cells": cells,
                "markers": {k: {"elements": v["elements"], "points": v["points"]}
                            for k, v in markers.items()},
                "bounds": bounds, "axes": axes.as_dict() if axes else None,
                "root": axes.root if axes else None, "surface": names}
 
-    lines = [f"{mesh.path}: {mesh.format.upper()}, {mesh.dim}D, {mesh.n_points} points, "
+    kind = f"{dim}D surface mesh (no volume cells)" if surface_only else f"{dim}D"
+    lines = [f"{mesh.path}: {mesh.format.upper()}, {kind}, {mesh.n_points} points, "
              f"{mesh.n_cells} cells"]
     if cells:
         lines.append("  cells:   " + ", ".join(f"{n} {t}" for t, n in cells.items()))
@@ -87,7 +97,7 @@ def inspect_mesh(path, surfaces=(), progress=None) -> tuple[dict, str]:
     if axes is not None:
         ax = axes.as_dict()
         guess = " (a guess: extents are close; set box.sections to be sure)" if axes.guessed else ""
-        if mesh.dim == 2:
+        if dim == 2:
             lines.append(f"  axes:    chord {ax['chord']}, thickness {ax['thickness']} "
                          f"(sections: {axes.sections}){guess}")
         else:
@@ -95,4 +105,5 @@ def inspect_mesh(path, surfaces=(), progress=None) -> tuple[dict, str]:
                          f"(sections: {axes.sections}); root at {ax['span']} {axes.root}{guess}")
     elif note:
         lines.append(f"  surface: not detected: {note}")
+    lines += [f"  warning: {w}" for w in warnings]
     return summary, "\n".join(lines)
