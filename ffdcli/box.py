@@ -419,7 +419,7 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
                          path=path)
     if not np.all(np.isfinite(pts)):
         raise InputError("the surface has non-finite coordinates", path=path)
-    axes = detect_axes(pts, dim, sections=settings.sections, root=settings.root, path=path)
+    axes = detect_axes(pts, dim, sections=settings.sections, root=settings.root, path=path, faces=faces)
     warnings: list[str] = []
     if axes.guessed and settings.sections is None:
         warnings.append(f"the surface is not clearly wing-shaped: axes guessed as {axes.as_dict()} "
@@ -699,7 +699,7 @@ def import_box(file, points: np.ndarray, faces=(), settings: BoxSettings | None 
                          "(split the file, one box per wing)", path=file)
     blk = blocks[0]
     pts = np.asarray(points, dtype=np.float64)
-    axes = detect_axes(pts, dim, sections=settings.sections, root=settings.root, path=path)
+    axes = detect_axes(pts, dim, sections=settings.sections, root=settings.root, path=path, faces=faces)
     edges = surface_edges(faces, unique=False)
     size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
     span_len = np.ptp(pts[:, axes.span])

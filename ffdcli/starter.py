@@ -110,7 +110,7 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
 
     extrusion = one_cell_thick(mesh, names)
     axes = detect_axes(surf.points, dim, sections=extrusion.sections if extrusion else None,
-                       path=mesh_path)
+                       path=mesh_path, faces=surf.faces)
     points = DEFAULT_POINTS[dim]
     ext = np.ptp(surf.points, axis=0)
     chord = float(ext[axes.chord])

@@ -118,9 +118,10 @@ def test_box_on_real_2d_su2_meshes(tmp_path, name, marker):
     assert s["axes"]["chord"] == "x" and s["axes"]["thickness"] == "y"
 
 
-def test_deform_a_real_2d_su2_mesh_keeps_its_ffd_section(tmp_path):
-    """A real SU2 file with SU2's own FFD section: twisting writes a valid mesh and every byte after
-    the point block (markers, FFD section) is unchanged."""
+def test_deform_a_real_2d_su2_mesh_keeps_its_markers_and_updates_its_ffd_section(tmp_path):
+    """A real SU2 file with SU2's own FFD section: twisting writes a valid mesh, every byte of the
+    markers is unchanged, and SU2's section is brought up to date (issue 20: copied unchanged, it
+    would make SU2_DEF restore the original airfoil; tests/test_su2_ffd.py checks its contents)."""
     import yaml
 
     mesh = shared_file("su2/disc_adj_rans__naca0012__naca0012_FFD.su2")
@@ -132,5 +133,7 @@ def test_deform_a_real_2d_su2_mesh_keeps_its_ffd_section(tmp_path):
     s = json.loads(proc.stdout)
     assert s["quality"]["inverted"] == 0
     a, b = mesh.read_bytes(), (tmp_path / "o.su2").read_bytes()
-    tail = a[a.index(b"NMARK"):]
-    assert b.endswith(tail) and b"FFD_NBOX" in tail
+    markers = a[a.index(b"NMARK"):a.index(b"FFD_NBOX")]
+    assert markers in b and b.index(markers) + len(markers) == b.index(b"FFD_NBOX")
+    assert s["su2_ffd"]["boxes"][0]["tag"] == "AIRFOIL_BOX"
+    assert b[b.index(b"FFD_NBOX"):] != a[a.index(b"FFD_NBOX"):]        # not the stale section

@@ -66,7 +66,7 @@ def inspect_mesh(path, surfaces=(), progress=None) -> tuple[dict, str]:
     surface_only = bool(mesh.n_points) and dim == 3 and (not mesh.n_cells or is_surface_mesh(mesh))
     warnings = []
     if surf is not None and surf.n_points:
-        axes = detect_axes(surf.points, dim, path=mesh.path)
+        axes = detect_axes(surf.points, dim, path=mesh.path, faces=surf.faces)
         extrusion = one_cell_thick(mesh, names)
         if extrusion is not None:
             warnings.append(extrusion.message())
