@@ -56,7 +56,7 @@ def cache_path(mesh_path: str | Path, key: str, cache_dir: str | Path | None = N
 
 def _settings_dict(s: BoxSettings) -> dict:
     d = asdict(s)
-    d["points"] = list(s.points)
+    d["points"] = None if s.points is None else list(s.points)
     d["degree"] = None if s.degree is None else list(s.degree)
     return d
 

@@ -108,7 +108,9 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     if len(surf.ids) == 0:
         raise InputError(f"the surface marker(s) {', '.join(names)} have no points", path=mesh.path)
     dim = space_dim(mesh)
-    settings = (settings or BoxSettings()).checked(dim, path=mesh.path)
+    settings = settings or BoxSettings()
+    if not settings.file:        # an imported lattice (box.file) has the file's size: checked on import
+        settings = settings.checked(dim, path=mesh.path)
     from ffdcli.extruded import one_cell_thick
 
     extrusion = one_cell_thick(mesh, names)
