@@ -142,3 +142,17 @@ def test_init_of_an_extruded_airfoil_says_so_and_puts_the_span_along_the_extrusi
     text = starter_design(p, ["wing"], design_path=tmp_path / "e.yaml")
     assert "one cell thick along z" in text and "volume.sliding" in text
     assert yaml.safe_load(text)["box"]["sections"] == "xy"
+
+
+@pytest.mark.parametrize("planform", [dict(sections="xz", semi_span=1.2, root_chord=1.0, taper=0.5,
+                                           le_sweep_deg=40.0),        # low aspect ratio, swept (a fin)
+                                      dict(sections="yx", semi_span=4.0, root_chord=1.0)])
+def test_init_writes_the_axes_ffd_box_detects(tmp_path, planform):
+    from ffdcli.pipeline import prepare_box
+
+    mesh = surface_mesh(Planform(**planform), n_chord=25, n_span=9)
+    path = tmp_path / "w.su2"
+    write_mesh(mesh, path)
+    data = yaml.safe_load(starter_design(path, design_path=tmp_path / "w.yaml"))
+    axes = prepare_box(path, use_cache=False).box.axes
+    assert data["box"]["sections"] == axes.sections and data["box"]["root"] == axes.root
