@@ -256,8 +256,8 @@ def _change_panel(ax, part: Part, curves: dict):
     ax.set_xlim(-0.02, 1.02)
     if big == 0.0:
         ax.set_ylim(-1, 1)
-        ax.text(0.5, 0.5, "no thickness-wise change", transform=ax.transAxes, ha="center",
-                color=GREY)
+        ax.text(0.5, 0.6, "no thickness-wise change (a planform change: see the planform)",
+                transform=ax.transAxes, ha="center", color=GREY)
     t = AXIS[box.axes.thickness]
     ax.set_xlabel("x/c (chord fraction of the original section)")
     ax.set_ylabel(f"\u0394{t} / c  (% of local chord)")
