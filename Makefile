@@ -25,6 +25,7 @@ $(VENV)/.stamp-core: pyproject.toml | $(BIN)/python
 
 $(VENV)/.stamp-test: $(VENV)/.stamp-core
 	$(PIP) install -e '.[test]'
+	$(PIP) install -e '.[mpi]' || echo "mpi4py/mpich could not be installed: the MPI tests are skipped"
 	@touch $@
 
 $(VENV)/.stamp-viz: $(VENV)/.stamp-core

@@ -704,7 +704,7 @@ def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_ite
 
 
 def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, samples_per_span: int = 4,
-          retries: int = 4, max_iter: int = 50, snap: float = SNAP) -> Embedding:
+          retries: int = 4, max_iter: int = 50, snap: float = SNAP, comm=None) -> Embedding:
     """Embed points in a lattice: parameters of the nearest lattice point, residual, inside flag.
 
     Parameters
@@ -726,11 +726,26 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
     snap : float
         Parameters within ``snap`` of 0 or 1 become exactly 0 or 1 when the residual stays within
         the tolerance.
+    comm : ffdcli.parallel.SerialComm, optional
+        Every rank passes all the points; each embeds its block (:meth:`~ffdcli.parallel.SerialComm.share`)
+        and the parameters are gathered, so every rank returns the whole embedding, equal bit for
+        bit to the serial one (each point is inverted independently). An error on any rank is
+        raised on every rank.
 
     Returns
     -------
     Embedding
     """
+    if comm is not None and comm.size > 1:
+        kw = dict(tol=tol, progress=progress, samples_per_span=samples_per_span, retries=retries,
+                  max_iter=max_iter, snap=snap)
+        pts = np.asarray(points, dtype=np.float64)
+        lo, hi = comm.share(pts.shape[0] if pts.ndim == 2 else 0)
+        part = comm.run(embed, lattice, pts[lo:hi] if pts.ndim == 2 else pts, **kw)
+        params = comm.allgather_rows(part.params)
+        residual = comm.allgather_rows(part.residual)
+        return Embedding.from_params(lattice, params, residual <= part.tolerance, residual,
+                                     tolerance=part.tolerance)
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != lattice.gdim:
         raise ValueError(f"points must have shape (N, {lattice.gdim}), got {pts.shape}")

@@ -89,12 +89,20 @@ def resolve_surface(mesh: Mesh, surface) -> list[str]:
 
 def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | None = None, *,
                 cache_dir: str | Path | None = None, use_cache: bool = True, rebuild: bool = False,
-                progress=None, mesh_hash: str | None = None) -> PreparedBox:
+                progress=None, mesh_hash: str | None = None, comm=None) -> PreparedBox:
     """Read the mesh (if a path), extract the surface, and load the cached box or build it.
 
     ``use_cache=False`` neither reads nor writes a cache file; ``rebuild=True`` ignores an existing
-    one and replaces it.
+    one and replaces it. ``comm`` (:mod:`ffdcli.parallel`): rank 0 reads the mesh and the cache and
+    broadcasts them; the cache is written by rank 0 only (it holds the whole surface's embedding, so
+    any rank count reads it).
     """
+    from ffdcli.parallel import SerialComm
+
+    comm = comm or SerialComm()
+    if comm.size > 1:
+        return _prepare_box_mpi(mesh, surface, settings, cache_dir=cache_dir, use_cache=use_cache,
+                                rebuild=rebuild, progress=progress, mesh_hash=mesh_hash, comm=comm)
     from ffdcli import cache as cache_mod
     from ffdcli.formats import read_mesh
     from ffdcli.surface import extract_surface
@@ -156,6 +164,58 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
                        from_cache=False, seconds=time.perf_counter() - t0, warnings=warnings)
 
 
+def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, progress, mesh_hash, comm):
+    """:func:`prepare_box` over ranks: rank 0 reads the mesh and looks the cache up, every rank gets
+    them by broadcast; on a miss every rank fits the box and rank 0 writes the cache."""
+    from ffdcli import cache as cache_mod
+    from ffdcli.formats import read_mesh
+
+    t0 = time.perf_counter()
+    progress = progress or no_progress
+
+    def read():
+        m = mesh if isinstance(mesh, Mesh) else read_mesh(mesh, progress=progress)
+        h = mesh_hash or (cache_mod.file_hash(m.path) if m.path is not None else None)
+        return m, h
+
+    got_mesh, mh = comm.root_then_bcast(read)
+
+    def lookup():
+        if got_mesh.path is None or not use_cache or rebuild:
+            return None
+        names = resolve_surface(got_mesh, surface)
+        s = (settings or BoxSettings()).checked(space_dim(got_mesh), path=got_mesh.path)
+        extra = cache_mod.file_hash(s.file) if s.file and Path(s.file).is_file() else ""
+        key = cache_mod.cache_key(mh, names, s, extra)
+        path = cache_mod.cache_path(got_mesh.path, key, cache_dir)
+        return cache_mod.load(path, key, s), path
+
+    hit = comm.root_then_bcast(lookup)
+    if hit is not None and hit[0] is not None:
+        (box, ids, emb, header), path = hit
+        surf = comm.run(_surface_of, got_mesh, surface)
+        if np.array_equal(ids, surf.ids):
+            return PreparedBox(mesh=got_mesh, surface=surf, box=box, embedding=emb,
+                               report=header.get("report", {}), cache=path, from_cache=True,
+                               seconds=time.perf_counter() - t0,
+                               warnings=list(header.get("report", {}).get("warnings", [])))
+    # every rank fits the box (the same arithmetic on the same data); the cache is rank 0's to write
+    prep = comm.run(prepare_box, got_mesh, surface, settings, cache_dir=cache_dir,
+                    use_cache=use_cache and comm.is_root, rebuild=True, progress=progress, mesh_hash=mh)
+    if not comm.is_root and use_cache:
+        prep.cache = comm.bcast(None)
+    elif use_cache:
+        comm.bcast(prep.cache)
+    prep.seconds = time.perf_counter() - t0
+    return prep
+
+
+def _surface_of(mesh: Mesh, surface):
+    from ffdcli.surface import extract_surface
+
+    return extract_surface(mesh, resolve_surface(mesh, surface))
+
+
 # ----------------------------------------------------------------------------------------------
 # One design: the deformed lattice, surface and volume
 # ----------------------------------------------------------------------------------------------
@@ -168,6 +228,7 @@ class DesignRun:
     prep: PreparedBox
     changes: list                # ffdcli.changes change objects, in pipeline order
     _warp: object = field(default=None, repr=False)   # the volume warp model, built on first use
+    comm: object = field(default=None, repr=False)    # ffdcli.parallel communicator (None: serial)
 
     def warp_model(self, progress=None):
         """The IDW model of this mesh (``volume:`` settings of the design; the quality ``threshold``
@@ -270,13 +331,16 @@ class DesignRun:
 
 
 def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = False,
-             progress=None) -> DesignRun:
-    """Prepare the box of a loaded design (cached) and build its changes against the lattice."""
+             progress=None, comm=None) -> DesignRun:
+    """Prepare the box of a loaded design (cached) and build its changes against the lattice.
+
+    ``comm`` (:mod:`ffdcli.parallel`) is kept by the run: :func:`deform` shares the volume among
+    the ranks."""
     from ffdcli.design import build_changes
 
     try:
         prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
-                           use_cache=use_cache, rebuild=rebuild, progress=progress)
+                           use_cache=use_cache, rebuild=rebuild, progress=progress, comm=comm)
     except InputError as e:      # a box setting of the design file: name the design file and its line
         if e.key and e.key.startswith("box.") and e.line is None:
             raise InputError(e.message, path=design.path, key=e.key, line=design.line_of(e.key),
@@ -284,7 +348,7 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
         raise
     n, m, l = prep.box.shape
     changes = build_changes(design, n, m, l, prep.box.dim)
-    return DesignRun(design=design, prep=prep, changes=changes)
+    return DesignRun(design=design, prep=prep, changes=changes, comm=comm)
 
 
 @dataclass
@@ -344,7 +408,12 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
 
         model = run.warp_model(progress)
         rot = run.surface_rotations(P1)
-        points += warp(model, disp, rot, progress=progress)
+        comm = run.comm
+        if comm is not None and comm.size > 1:      # each rank warps its share of the volume nodes
+            part = comm.run(warp, model, disp, rot, progress=progress, rows=comm.share(model.n_targets))
+            points[model.target_ids] += comm.allgather_rows(part)
+        else:
+            points += warp(model, disp, rot, progress=progress)
     else:
         points[surf.ids] += disp
     # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).

@@ -1089,7 +1089,8 @@ def _blocks(n: int) -> np.ndarray:
 
 
 def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: np.ndarray | None = None,
-         *, exact: bool = False, progress=None, decide_for=None) -> np.ndarray:
+         *, exact: bool = False, progress=None, decide_for=None, rows: tuple[int, int] | None = None
+         ) -> np.ndarray:
     """Displacement (N, 3) of every mesh node given the motion of the surface nodes.
 
     Parameters
@@ -1108,6 +1109,10 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     decide_for
         ``(b0, R0)``: make the tree decisions for this motion instead of (b, R). With it fixed,
         ``warp`` is linear in (b, R - I): the map whose transpose is ``warp_vjp(model, g, b0, R0)``.
+    rows
+        ``(lo, hi)``: compute only the volume nodes ``model.target_ids[lo:hi]`` (one MPI rank's
+        share, :func:`ffdcli.parallel.share`) and return their (hi - lo, 3) displacements; each
+        node's value is the same as in the whole run.
 
     Returns
     -------
@@ -1119,7 +1124,12 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     out = np.zeros((model.n_points, 3))
     if b.shape != (model.n_surface, 3):
         raise ValueError(f"surface displacement must be ({model.n_surface}, 3), got {b.shape}")
+    t_lo, t_hi = (0, model.n_targets) if rows is None else (int(rows[0]), int(rows[1]))
+    if not 0 <= t_lo <= t_hi <= model.n_targets:
+        raise ValueError(f"rows {rows} out of range 0..{model.n_targets}")
     if model.settings.method == "none" or model.n_targets == 0 or len(model.src_index) == 0:
+        if rows is not None:
+            return np.zeros((t_hi - t_lo, 3))
         out[model.surface_ids] = b
         return out
     bm, use_rot = _source_motion(model, b, surface_rotation)
@@ -1127,16 +1137,20 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
     l2, ha, hb, pa, pb, ab, fast, eps2, tol = model.params()
-    d = np.empty((model.n_targets, 3))
-    with progress("volume mesh", model.n_targets) as bar:
-        for lo, hi in chunks(model.n_targets, model.settings.chunk):
-            _warp_kernel(model.target_pos[lo:hi], _blocks(hi - lo), d[lo:hi], exact, model.node_lo,
-                         model.node_hi, model.node_left, model.node_right, model.node_center,
+    d = np.empty((t_hi - t_lo, 3))
+    with progress("volume mesh", t_hi - t_lo) as bar:
+        for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
+            _warp_kernel(model.target_pos[t_lo + lo:t_lo + hi], _blocks(hi - lo), d[lo:hi], exact,
+                         model.node_lo, model.node_hi, model.node_left, model.node_right, model.node_center,
                          model.node_radius, model.node_area, node_bm, model.src_pos, model.src_area,
                          bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol, scale, use_rot)
             bar.update(hi - lo)
     if len(model.slide_rows):
-        d[model.slide_rows] = np.einsum("nij,nj->ni", model.slide_proj, d[model.slide_rows])
+        mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)
+        sr = model.slide_rows[mine] - t_lo
+        d[sr] = np.einsum("nij,nj->ni", model.slide_proj[mine], d[sr])
+    if rows is not None:
+        return d
     out[model.target_ids] = d
     out[model.surface_ids] = b
     return out

@@ -31,7 +31,8 @@ def common_options(func):
                   help="Print one JSON object as the summary instead of text (for scripts).")
     @functools.wraps(func)
     def wrapper(*args, quiet, verbose, as_json, **kwargs):
-        console = Console(quiet=quiet, verbose=verbose, json=as_json)
+        obj = click.get_current_context().find_root().obj or {}
+        console = Console(quiet=quiet, verbose=verbose, json=as_json, comm=obj.get("comm"))
         click.get_current_context().meta["ffd.console"] = console
         return func(*args, console=console, **kwargs)
 
@@ -70,35 +71,57 @@ def _register():
 
 
 def main(argv=None):
-    """Entry point of the ``ffd`` console script."""
+    """Entry point of the ``ffd`` console script.
+
+    Under ``mpiexec -n N`` (N > 1, the ``[mpi]`` extra) the command runs on every rank with one
+    communicator (:func:`ffdcli.parallel.world`); at the end the ranks agree on the outcome, so they
+    all exit with the same status and only rank 0 prints the error."""
     _register()
     argv = list(sys.argv[1:] if argv is None else argv)
     as_json = "--json" in argv
     verbose = "-v" in argv or "--verbose" in argv
+    from ffdcli.parallel import SerialComm, world
+
     try:
-        cli.main(args=argv, prog_name="ffd", standalone_mode=False)
+        comm = world()
+    except FfdError as e:
+        comm = SerialComm()
+        _fail(str(e), e.exit_code, as_json)
+    try:
+        try:
+            cli.main(args=argv, prog_name="ffd", standalone_mode=False, obj={"comm": comm})
+            error = None
+        except BaseException as e:   # noqa: BLE001 - agreed on below, then reported as before
+            error = e
+        if comm.size > 1 and not getattr(error, "ffd_agreed", False):
+            comm.agree(error)        # the last agreement: every rank learns how every other ended
+        if error is not None:
+            raise error
     except click.exceptions.Exit as e:
         sys.exit(e.exit_code)
     except click.ClickException as e:        # usage errors: exit 2 (click's own convention)
-        e.show()
+        if comm.is_root:
+            e.show()
         sys.exit(e.exit_code)
     except (click.Abort, KeyboardInterrupt):
         _fail("interrupted; nothing was written", 130, as_json)
     except FfdError as e:
-        _fail(str(e), e.exit_code, as_json, extra=getattr(e, "report", None))
+        _fail(str(e), e.exit_code, as_json, extra=getattr(e, "report", None), show=comm.is_root)
     except BrokenPipeError:
         sys.exit(1)
     except MemoryError:
-        _fail("out of memory", 1, as_json)
+        _fail("out of memory", 1, as_json, show=comm.is_root)
     except Exception as e:  # a bug: one line unless -v
         if verbose:
             traceback.print_exc()
         _fail(f"internal error: {type(e).__name__}: {e} (this is a bug in ffd; -v shows where)",
-              1, as_json)
+              1, as_json, show=comm.is_root)
     sys.exit(0)
 
 
-def _fail(message: str, code: int, as_json: bool, extra: dict | None = None):
+def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, show: bool = True):
+    if not show:             # another MPI rank than 0: rank 0 reports the (agreed) error
+        sys.exit(code)
     click.echo(f"ffd: error: {message}", err=True)
     if as_json:
         obj = {"ok": False, "exit_code": code, "error": message}

@@ -11,9 +11,21 @@ from ffdcli.progress import ProgressFactory, terminal_progress
 
 @dataclass
 class Console:
+    """What a command prints. ``comm`` is the run's communicator (:mod:`ffdcli.parallel`); under
+    ``mpiexec`` only rank 0 prints (messages, warnings, progress and the ``--json`` summary)."""
+
     quiet: bool = False
     verbose: bool = False
     json: bool = False
+    comm: object = None
+
+    def __post_init__(self):
+        if self.comm is None:
+            from ffdcli.parallel import SerialComm
+
+            self.comm = SerialComm()
+        if not self.comm.is_root:
+            self.quiet = True
 
     def say(self, text: str) -> None:
         """Normal output (stdout); silent with --quiet or --json."""
@@ -32,7 +44,7 @@ class Console:
 
     def result(self, summary: dict, text: str) -> None:
         """The command's summary: JSON with --json, else ``text``."""
-        if self.json:
+        if self.json and self.comm.is_root:
             print(json.dumps(summary, default=_jsonable), file=sys.stdout, flush=True)
         else:
             self.say(text)

@@ -79,7 +79,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
                        inputs=(design.mesh, out_mesh, out_lattice, design.path))
     if surface_file is not None:
         check_writable(surface_file, inputs=(design.mesh, out_mesh, out_lattice, design.path))
-    run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress)
+    comm = console.comm
+    run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress, comm=comm)
     for w in run.prep.warnings:
         console.warn(w)
     if run.prep.summary()["outside"]:
@@ -96,27 +97,32 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
                            "writes it anyway)", path=design.path, report=qd)
     if q is not None and not q.ok:
         console.warn(f"quality check failed but --force given: {q.summary()}")
-    written = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
+
+    def write():             # every output once: rank 0 of an MPI run
+        out = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
                             surface_file=surface_file, progress=console.progress)
+        if png is not None:
+            from ffdcli.plot import plot_design
+
+            plot_design(run, result, png)
+            out["plot"] = str(png)
+            if run.box.dim == 3:
+                from ffdcli.plot import plot_3d
+
+                got = plot_3d(run, result, png.with_name(png.stem + "_3d.png"))
+                if got is None:
+                    console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
+                                 "(pip install 'ffdcli[viz]')")
+                else:
+                    out["plot_3d"] = str(got)
+        return out
+
+    written = comm.root_then_bcast(write)
     su2_ffd = written.pop("su2_ffd", None)
     if su2_ffd is not None and su2_ffd.get("outside"):
         console.warn(f"{su2_ffd['outside']} surface nodes are now outside the mesh's own SU2 FFD box(es): "
                      "SU2's FFD design variables will not move them; enlarge the SU2 box "
                      "(FFD_DEFINITION, then DV_KIND= FFD_SETTING) before using SU2's FFD on this mesh")
-    if png is not None:
-        from ffdcli.plot import plot_design
-
-        plot_design(run, result, png)
-        written["plot"] = str(png)
-        if run.box.dim == 3:
-            from ffdcli.plot import plot_3d
-
-            got = plot_3d(run, result, png.with_name(png.stem + "_3d.png"))
-            if got is None:
-                console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
-                             "(pip install 'ffdcli[viz]')")
-            else:
-                written["plot_3d"] = str(got)
     secs = time.perf_counter() - t0
     summary = {
         "design": str(design.path),

@@ -1,0 +1,249 @@
+"""MPI runs (ffdcli.parallel): the serial stand-in, the partitioned kernels, and ``mpiexec -n 2 ffd``
+compared with the serial run on the bundled samples.
+
+The tests that launch ``mpiexec`` need the ``[mpi]`` extra (mpi4py and the mpich wheel, which
+``make test`` installs); without it they are skipped with the reason.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import REPO, SAMPLES, run_ffd
+
+from ffdcli.parallel import RankError, SerialComm, launched_size, share, world
+
+BIN = Path(sys.executable).parent
+MPIEXEC = shutil.which("mpiexec", path=str(BIN)) or shutil.which("mpiexec")
+
+
+def _have_mpi4py() -> bool:
+    try:
+        import mpi4py  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+needs_mpi = pytest.mark.skipif(not (_have_mpi4py() and MPIEXEC),
+                               reason="the [mpi] extra (mpi4py + mpich) is not installed: pip install -e '.[mpi]'")
+
+
+def _env():
+    e = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "OMPI_", "PMIX_", "SLURM_"))}
+    e["PYTHONPATH"] = str(REPO) + os.pathsep + e.get("PYTHONPATH", "")
+    return e
+
+
+def mpirun(n: int, *args, cwd=None, timeout=600) -> subprocess.CompletedProcess:
+    """``mpiexec -n N python ARGS`` (text mode, captured)."""
+    return subprocess.run([MPIEXEC, "-n", str(n), sys.executable, *map(str, args)], cwd=cwd, env=_env(),
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def mpi_ffd(n: int, *args, cwd=None) -> subprocess.CompletedProcess:
+    return mpirun(n, "-m", "ffdcli", *args, cwd=cwd)
+
+
+def mpi_script(n: int, code: str, tmp_path: Path) -> subprocess.CompletedProcess:
+    script = tmp_path / "script.py"
+    script.write_text(textwrap.dedent(code))
+    return mpirun(n, script, cwd=tmp_path)
+
+
+# ---------------------------------------------------------------------------------------------- serial
+
+
+@pytest.mark.parametrize("n", [0, 1, 2, 7, 100, 1001])
+@pytest.mark.parametrize("size", [1, 2, 3, 8])
+def test_share_partitions_in_rank_order(n, size):
+    blocks = [share(n, r, size) for r in range(size)]
+    assert blocks[0][0] == 0 and blocks[-1][1] == n
+    assert all(a[1] == b[0] for a, b in zip(blocks, blocks[1:]))
+    lengths = [hi - lo for lo, hi in blocks]
+    assert max(lengths) - min(lengths) <= 1
+
+
+def test_serial_comm_is_the_identity():
+    comm = SerialComm()
+    a = np.arange(6.0).reshape(3, 2)
+    assert comm.size == 1 and comm.is_root and comm.share(5) == (0, 5)
+    np.testing.assert_array_equal(comm.allgather_rows(a), a)
+    np.testing.assert_array_equal(comm.allreduce_sum(a), a)
+    assert comm.bcast({"x": 1}) == {"x": 1} and comm.allgather(3) == [3]
+    assert comm.run(lambda x: x + 1, 1) == 2
+    assert comm.root_then_bcast(lambda: "once") == "once"
+    with pytest.raises(ZeroDivisionError):
+        comm.run(lambda: 1 / 0)
+
+
+def test_world_is_serial_without_a_launcher_and_refuses_mpiexec_without_mpi4py(monkeypatch):
+    assert launched_size({}) == 1 and launched_size({"PMI_SIZE": "4"}) == 4
+    assert launched_size({"OMPI_COMM_WORLD_SIZE": "3"}) == 3
+    assert isinstance(world({}), SerialComm) and world({}).size == 1
+    import ffdcli.parallel as par
+    from ffdcli.errors import InputError
+
+    monkeypatch.setattr(par, "mpi_available", lambda: False)
+    with pytest.raises(InputError, match=r"mpi4py is not installed.*ffdcli\[mpi\]"):
+        par.world({"PMI_SIZE": "2"})
+
+
+def test_warp_rows_are_the_rows_of_the_whole_warp():
+    """Each rank's block of volume nodes (``warp(rows=)``) is bit for bit that block of the whole warp,
+    sliding nodes included."""
+    from ffdcli.formats import read_mesh
+    from ffdcli.warp import WarpSettings, prepare_mesh_warp, warp
+
+    mesh = read_mesh(SAMPLES / "rect_wing.su2")
+    model, _ = prepare_mesh_warp(mesh, ["wing"], WarpSettings())
+    rng = np.random.default_rng(0)
+    b = 0.01 * rng.normal(size=(model.n_surface, 3))
+    ang = 0.05 * rng.normal(size=(model.n_surface, 3))
+    from scipy.spatial.transform import Rotation
+
+    R = Rotation.from_rotvec(ang).as_matrix()
+    whole = warp(model, b, R)
+    for size in (2, 3):
+        parts = [warp(model, b, R, rows=share(model.n_targets, r, size)) for r in range(size)]
+        np.testing.assert_array_equal(np.concatenate(parts), whole[model.target_ids])
+    assert warp(model, b, R, rows=(5, 5)).shape == (0, 3)
+    with pytest.raises(ValueError):
+        warp(model, b, R, rows=(0, model.n_targets + 1))
+
+
+# ---------------------------------------------------------------------------------------------- mpiexec
+
+
+@needs_mpi
+def test_mpi_comm_collectives_and_error_agreement(tmp_path):
+    """Collectives over 2 ranks; an error on rank 1 only is raised on both ranks (rank 1 its own,
+    rank 0 a RankError with rank 1's message and exit status): nobody hangs."""
+    proc = mpi_script(2, """
+        import numpy as np
+        from ffdcli.parallel import MPIComm, RankError
+        from ffdcli.errors import InputError
+        c = MPIComm()
+        rows = c.allgather_rows(np.full((c.rank + 1, 2), float(c.rank)))
+        assert rows.shape == (3, 2) and rows[0, 0] == 0 and rows[2, 0] == 1
+        flags = c.allgather_rows(np.array([c.rank == 1]))
+        assert flags.tolist() == [False, True]
+        assert c.allreduce_sum(np.ones(3)).tolist() == [2.0, 2.0, 2.0]
+        assert c.root_then_bcast(lambda: "from root") == "from root"
+        def fail_on_1():
+            if c.rank == 1:
+                raise InputError("bad thing on rank 1", path="x.su2")
+            return 1
+        try:
+            c.run(fail_on_1)
+        except RankError as e:
+            print(f"rank {c.rank}: RankError {e.exit_code} {e.rank} {e}")
+        except InputError as e:
+            print(f"rank {c.rank}: own {e.exit_code} {e}")
+        else:
+            print(f"rank {c.rank}: no error")
+    """, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "rank 0: RankError 2 1 x.su2: bad thing on rank 1" in proc.stdout
+    assert "rank 1: own 2 x.su2: bad thing on rank 1" in proc.stdout
+
+
+@needs_mpi
+def test_mpi_embedding_equals_serial_bit_for_bit(tmp_path):
+    proc = mpi_script(2, f"""
+        import sys
+        sys.path.insert(0, {str(REPO / 'tests')!r})
+        import numpy as np
+        from lattice_cases import wing_lattice
+        from ffdcli.embedding import embed
+        from ffdcli.lattice import evaluate
+        from ffdcli.parallel import MPIComm
+        c = MPIComm()
+        lat = wing_lattice((8, 6, 2), (3, 3, 1))
+        rng = np.random.default_rng(1)
+        X = evaluate(lat, rng.uniform(0, 1, (4001, 3)))
+        X[:200] += rng.normal(scale=0.3, size=(200, 3))      # some outside
+        a, b = embed(lat, X, comm=c), embed(lat, X)
+        assert np.array_equal(a.params, b.params) and np.array_equal(a.residual, b.residual)
+        assert np.array_equal(a.inside, b.inside) and (~a.inside).any()
+        for f, g in zip(a.values, b.values):
+            assert np.array_equal(f, g)
+        print("same", c.rank)
+    """, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "same 0" in proc.stdout and "same 1" in proc.stdout
+
+
+def _design(tmp_path: Path, mesh: str = "rect_wing.su2", extra: str = "") -> Path:
+    d = tmp_path / "design.yaml"
+    d.write_text(textwrap.dedent(f"""
+        mesh: {SAMPLES / mesh}
+        surface: wing
+        box:
+          points: [6, 8, 2]
+          sections: xy
+        volume:
+          method: idw
+        changes:
+          - twist: [0, 2, 4, 6, 8, 10, 12, 14]
+          - sweep: 5
+        output:
+          mesh: out.su2
+          lattice: lattice.vtk
+        {extra}
+    """))
+    return d
+
+
+@needs_mpi
+def test_mpiexec_deform_writes_the_serial_mesh_once_and_prints_once(tmp_path):
+    design = _design(tmp_path)
+    serial = run_ffd("deform", design, "-o", tmp_path / "serial.su2", "--no-cache", "--json", cwd=tmp_path)
+    assert serial.returncode == 0, serial.stderr
+    (tmp_path / "cache").mkdir()
+    par = mpi_ffd(2, "deform", design, "-o", tmp_path / "mpi.su2", "--json", "--cache-dir", tmp_path / "cache",
+                  cwd=tmp_path)
+    assert par.returncode == 0, par.stderr
+    assert (tmp_path / "mpi.su2").read_bytes() == (tmp_path / "serial.su2").read_bytes()
+    lines = [ln for ln in par.stdout.splitlines() if ln.strip()]
+    assert len(lines) == 1, par.stdout                 # one JSON summary, from rank 0
+    a, b = json.loads(serial.stdout), json.loads(lines[0])
+    assert a["max_displacement"] == b["max_displacement"] and a["quality"] == b["quality"]
+    # the cache written by rank 0 is read by any rank count: 2 ranks, then 3, then the serial run
+    caches = list((tmp_path / "cache").glob("*.ffdcache.npz"))
+    assert len(caches) == 1
+    again = mpi_ffd(3, "deform", design, "-o", tmp_path / "mpi3.su2", "--json", "--cache-dir", tmp_path / "cache",
+                    cwd=tmp_path)
+    assert again.returncode == 0, again.stderr
+    assert json.loads(again.stdout)["from_cache"] is True
+    assert (tmp_path / "mpi3.su2").read_bytes() == (tmp_path / "serial.su2").read_bytes()
+    cached = run_ffd("deform", design, "-o", tmp_path / "s2.su2", "--json", "--cache-dir", tmp_path / "cache",
+                     cwd=tmp_path)
+    assert json.loads(cached.stdout)["from_cache"] is True
+    assert (tmp_path / "s2.su2").read_bytes() == (tmp_path / "serial.su2").read_bytes()
+
+
+@needs_mpi
+def test_mpiexec_errors_end_every_rank_with_one_message_and_one_status(tmp_path):
+    design = _design(tmp_path, mesh="no_such_mesh.su2")
+    proc = mpi_ffd(2, "deform", design, "--json", cwd=tmp_path)
+    assert proc.returncode == 2, (proc.returncode, proc.stderr)
+    assert proc.stderr.count("ffd: error:") == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert proc.stdout.count('"exit_code": 2') == 1
+    # a quality failure (exit 3): nothing written, every rank agrees
+    bad = _design(tmp_path, extra="")
+    bad.write_text(bad.read_text().replace("[0, 2, 4, 6, 8, 10, 12, 14]", "[0, 0, 0, 0, 0, 0, 90, -90]"))
+    proc = mpi_ffd(2, "deform", bad, "-o", tmp_path / "bad.su2", "--no-cache", cwd=tmp_path)
+    assert proc.returncode == 3, proc.stderr
+    assert "fails the quality check" in proc.stderr
+    assert proc.stderr.count("ffd: error:") == 1, proc.stderr
+    assert not (tmp_path / "bad.su2").exists()
