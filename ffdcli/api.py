@@ -87,11 +87,16 @@ class DesignModel:
         Natural (open) and user (``bounds:``, closed) bounds; :attr:`lower` and :attr:`upper`.
     """
 
-    def __init__(self, run):
+    def __init__(self, run, comm=None):
+        """``comm`` (:mod:`ffdcli.parallel`; default the run's, else serial): under MPI every rank
+        holds the same model (names, values, surface); point sets are per rank (each adds its own
+        mesh partition's points) and their reverse products are summed over the ranks."""
         from ffdcli.bounds import make_bounds
         from ffdcli.changes import design_bounds, design_units
+        from ffdcli.parallel import SerialComm
 
         self.run = run
+        self.comm = comm or getattr(run, "comm", None) or SerialComm()
         self.names, self.values = design_variables(run.changes)
         self.units = design_units(run.changes)
         natural = design_bounds(run.P0, run.box.frame, run.changes)
@@ -106,7 +111,7 @@ class DesignModel:
 
     @classmethod
     def from_file(cls, path, overrides=(), *, cache_dir=None, use_cache: bool = True,
-                  progress=None) -> DesignModel:
+                  progress=None, comm=None) -> DesignModel:
         """Load a design file (with ``--set`` style ``overrides``), its box from the cache or built.
 
         Parameters
@@ -121,12 +126,15 @@ class DesignModel:
             False neither reads nor writes the cache.
         progress : callable, optional
             A progress factory (:mod:`ffdcli.progress`).
+        comm : ffdcli.parallel.SerialComm, optional
+            MPI communicator: rank 0 reads the mesh and the cache and broadcasts them.
         """
         from ffdcli.design import load_design
         from ffdcli.pipeline import load_run
 
         design = load_design(path, overrides=overrides)
-        return cls(load_run(design, cache_dir=cache_dir, use_cache=use_cache, progress=progress))
+        return cls(load_run(design, cache_dir=cache_dir, use_cache=use_cache, progress=progress, comm=comm),
+                   comm=comm)
 
     # -- values ------------------------------------------------------------------------------
     @property
@@ -159,7 +167,12 @@ class DesignModel:
             for k, x in values.items():
                 v[self.names.index(k)] = float(x)
             values = v
-        values = self.bounds.check(values)
+        values = self.comm.run(self.bounds.check, values)     # a refusal on one rank stops every rank
+        if self.comm.size > 1:      # one design on every rank, or the partitions disagree silently
+            ranks = self.comm.allgather(values.tobytes())
+            if any(r != ranks[0] for r in ranks):
+                raise InputError("set_values: the MPI ranks were given different design values; every rank "
+                                 "must set the same values")
         self.run.changes = set_design_variables(self.run.changes, values)
         self.values = values.copy()
         self._cache.clear()
@@ -209,8 +222,12 @@ class DesignModel:
         return ps.jvp(self.lattice_jacobian(), self._check_dv(dv, f"points_jvp({name!r})"))
 
     def points_vjp(self, name: str, g) -> np.ndarray:
-        """(n_vars,) dJ/dv for ``g`` = dJ/dX (k, 3) at the points of set ``name``."""
-        return self.point_set(name).vjp(self.lattice_jacobian(), g)
+        """(n_vars,) dJ/dv for ``g`` = dJ/dX (k, 3) at the points of set ``name``.
+
+        Under MPI (``comm``) a collective: each rank passes its own points' ``g`` and every rank gets
+        the sum over all ranks' points (forward products, :meth:`points_jvp`, stay local)."""
+        local = self.comm.run(self.point_set(name).vjp, self.lattice_jacobian(), g)
+        return self.comm.allreduce_sum(np.asarray(local, dtype=np.float64))
 
     # -- constraints ---------------------------------------------------------------------------
     @property
@@ -397,7 +414,8 @@ class DesignModel:
         rot = self.run.surface_rotations(P1)
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
-        g_b, g_M = warp_vjp(self._warp_model(progress), gs, disp, rot, progress=progress)
+        comm = self.comm if self.comm.size > 1 else None      # each rank sums its share of the volume
+        g_b, g_M = warp_vjp(self._warp_model(progress), gs, disp, rot, progress=progress, comm=comm)
         g_b = g_b + g[ids] - gs[ids]
         out = self.surface_vjp(g_b)
         dR = self._rotation_jacobian()

@@ -1158,7 +1158,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
 
 def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
              surface_rotation: np.ndarray | None = None, *, exact: bool = False,
-             progress=None) -> tuple[np.ndarray, np.ndarray]:
+             progress=None, comm=None) -> tuple[np.ndarray, np.ndarray]:
     """Transpose of :func:`warp`: ``g`` (N, 3) = dJ/d(displacement) -> (dJ/db (Ns, 3), dJ/dM (Ns, 3, 3)).
 
     With the tree decisions that ``warp(model, b, R)`` makes (pass the same ``b``, ``R`` here),
@@ -1167,6 +1167,9 @@ def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
     rounding. It is the derivative of ``warp`` at (b, R) (the decisions change only at isolated
     thresholds). The pass-through of surface nodes, the zero of fixed nodes and the sliding
     projections are included. ``exact`` must match the :func:`warp` call being differentiated.
+    ``comm`` (:mod:`ffdcli.parallel`, a collective): each rank sums over its share of the volume
+    nodes and the sums are added over the ranks; every rank passes the whole ``g`` and gets the
+    whole result (equal to the serial one to rounding: the sums are added in another order).
 
     Linearisations: with the rotations held fixed (not depending on the design) dJ/db is ``g_b``
     alone, and ``g_b`` is the same whatever ``R`` is (for fixed decisions d is a sum of a part
@@ -1193,14 +1196,25 @@ def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
     acc_node = np.zeros((nthreads, nn, 48))
     acc_src = np.zeros((nthreads, ms, 12))
     dummy_bm = np.zeros((1, 48))
-    with progress("volume mesh (transpose)", model.n_targets) as bar:
-        for lo, hi in chunks(model.n_targets, model.settings.chunk):
-            _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node, acc_src,
-                        exact, model.node_lo, model.node_hi, model.node_left, model.node_right,
-                        model.node_center, model.node_radius, model.node_area, dummy_bm,
-                        model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
-                        tol, scale)
-            bar.update(hi - lo)
+    t_lo, t_hi = (0, model.n_targets) if comm is None else comm.share(model.n_targets)
+
+    def accumulate():
+        with progress("volume mesh (transpose)", t_hi - t_lo) as bar:
+            for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
+                lo, hi = lo + t_lo, hi + t_lo
+                _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node, acc_src,
+                            exact, model.node_lo, model.node_hi, model.node_left, model.node_right,
+                            model.node_center, model.node_radius, model.node_area, dummy_bm,
+                            model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
+                            tol, scale)
+                bar.update(hi - lo)
+
+    if comm is None:
+        accumulate()
+    else:
+        comm.run(accumulate)
+        acc_node = comm.allreduce_sum(acc_node.sum(axis=0, keepdims=True))
+        acc_src = comm.allreduce_sum(acc_src.sum(axis=0, keepdims=True))
     # Node accumulators, per node C over the targets that aggregated it (u = x - c_C):
     # [0:3] G_f = sum phi/W g; [3 + 3p + k] G_s = sum psi/W g_p u_k; [12:21] sum phi/W g x^T;
     # [21 + 9k + 3p + q] sum psi/W u_k g_p x_q. Source i of C gets A_i (G_f + G_s (x_i - c_C))

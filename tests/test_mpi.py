@@ -247,3 +247,84 @@ def test_mpiexec_errors_end_every_rank_with_one_message_and_one_status(tmp_path)
     assert "fails the quality check" in proc.stderr
     assert proc.stderr.count("ffd: error:") == 1, proc.stderr
     assert not (tmp_path / "bad.su2").exists()
+
+
+@needs_mpi
+def test_mpi_design_model_point_sets_sum_their_reverse_products(tmp_path):
+    """Each rank adds only its own points; points_vjp is the serial vjp of all the points (summed
+    over ranks), forward products stay local, names and values are the same on every rank."""
+    design = _design(tmp_path)
+    proc = mpi_script(2, f"""
+        import numpy as np
+        from ffdcli.api import DesignModel
+        from ffdcli.parallel import MPIComm, RankError
+        from ffdcli.errors import InputError
+        c = MPIComm()
+        m = DesignModel.from_file({str(design)!r}, comm=c, cache_dir={str(tmp_path)!r})
+        s = DesignModel.from_file({str(design)!r}, use_cache=False)
+        assert m.names == s.names and np.array_equal(m.values, s.values)
+        rng = np.random.default_rng(5)
+        X = m.surface_points()[::7] + rng.normal(scale=1e-3, size=(len(m.surface_points()[::7]), 3))
+        g = rng.normal(size=X.shape)
+        lo, hi = c.share(len(X))
+        m.add_points("mine", X[lo:hi])
+        s.add_points("all", X)
+        v = m.values + 0.5
+        m.set_values(v); s.set_values(v)
+        par = m.points_vjp("mine", g[lo:hi])
+        ser = s.points_vjp("all", g)
+        assert np.allclose(par, ser, rtol=1e-12, atol=1e-12 * np.abs(ser).max()), (par, ser)
+        dv = rng.normal(size=m.n_vars)
+        assert np.array_equal(m.points_jvp("mine", dv), s.points_jvp("all", dv)[lo:hi])
+        assert np.array_equal(m.points("mine"), s.points("all")[lo:hi])
+        try:
+            m.set_values(v + c.rank)          # ranks disagree: refused on every rank
+        except (InputError, RankError) as e:
+            print("refused", c.rank, type(e).__name__)
+        print("ok", c.rank)
+    """, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    for r in (0, 1):
+        assert f"ok {r}" in proc.stdout and f"refused {r}" in proc.stdout
+
+
+@needs_mpi
+def test_mpiexec_grad_jacobian_and_box_equal_the_serial_run(tmp_path):
+    """``ffd grad`` through the volume (each rank sums its share of the transpose warp), ``ffd
+    jacobian`` and ``ffd box`` under 2 ranks: the serial results, written once."""
+    design = _design(tmp_path)
+    # a sensitivity on every node (surface and volume) so that the transpose warp is used
+    vol = tmp_path / "volume_sens.csv"
+    from ffdcli.formats import read_mesh
+
+    mesh = read_mesh(SAMPLES / "rect_wing.su2")
+    dep = run_ffd("deform", design, "-o", tmp_path / "d.su2", "--no-cache", cwd=tmp_path)
+    assert dep.returncode == 0, dep.stderr
+    pts = read_mesh(tmp_path / "d.su2").points
+    rng = np.random.default_rng(2)
+    g = rng.normal(size=pts.shape) * np.exp(-np.linalg.norm(pts - pts.mean(0), axis=1))[:, None]
+    np.savetxt(vol, np.hstack([pts, g]), delimiter=",", header="x,y,z,dJ/dx,dJ/dy,dJ/dz", comments="")
+    assert mesh.n_points == len(pts)
+    for sfile in (vol,):
+        ser = run_ffd("grad", design, "--sens", sfile, "--json", cwd=tmp_path)
+        assert ser.returncode == 0, ser.stderr
+        par = mpi_ffd(2, "grad", design, "--sens", sfile, "--json", "-o", tmp_path / "grad.json", cwd=tmp_path)
+        assert par.returncode == 0, par.stderr
+        a, b = json.loads(ser.stdout), json.loads(par.stdout)
+        assert a["through_volume"] and b["through_volume"]
+        for k, v in a["gradient"].items():
+            assert abs(b["gradient"][k] - v) <= 1e-12 * max(1.0, max(abs(x) for x in a["gradient"].values())), k
+        assert json.loads((tmp_path / "grad.json").read_text()) == b["gradient"]
+    ser = run_ffd("jacobian", design, "-o", tmp_path / "js.npz", cwd=tmp_path)
+    par = mpi_ffd(2, "jacobian", design, "-o", tmp_path / "jp.npz", cwd=tmp_path)
+    assert ser.returncode == 0 and par.returncode == 0, par.stderr
+    with np.load(tmp_path / "js.npz") as A, np.load(tmp_path / "jp.npz") as B:
+        for k in A.files:
+            np.testing.assert_array_equal(A[k], B[k])
+    ser = run_ffd("box", SAMPLES / "rect_wing.su2", "--points", "6,8,2", "--lattice", tmp_path / "bs.vtk",
+                  "--cache-dir", tmp_path, cwd=tmp_path)
+    par = mpi_ffd(2, "box", SAMPLES / "rect_wing.su2", "--points", "6,8,2", "--lattice", tmp_path / "bp.vtk",
+                  "--cache-dir", tmp_path, "--rebuild", cwd=tmp_path)
+    assert ser.returncode == 0 and par.returncode == 0, par.stderr
+    assert (tmp_path / "bs.vtk").read_bytes() == (tmp_path / "bp.vtk").read_bytes()
+    assert par.stdout.count("ffd box:") == 1

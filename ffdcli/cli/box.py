@@ -101,18 +101,22 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
         if "points" in overrides and "degree" not in overrides:
             settings = replace(settings, degree=None)
     prep = prepare_box(mesh_path, surface, settings, cache_dir=cache_dir, rebuild=rebuild,
-                       progress=console.progress)
+                       progress=console.progress, comm=console.comm)
     mpath = Path(prep.mesh.path)
     out = Path(lattice_out) if lattice_out else mpath.with_name(mpath.stem + "_lattice.vtk")
-    from ffdcli.atomic import check_writable
 
-    check_writable(out, inputs=(mpath,))
-    write_lattice_vtk(out, prep.box.control_points)
-    if export_plot3d:
-        from ffdcli.formats.plot3d import write_plot3d
+    def write():             # once: rank 0 of an MPI run
+        from ffdcli.atomic import check_writable
 
-        check_writable(export_plot3d, inputs=(mpath,))
-        write_plot3d(export_plot3d, [prep.box.control_points])
+        check_writable(out, inputs=(mpath,))
+        write_lattice_vtk(out, prep.box.control_points)
+        if export_plot3d:
+            from ffdcli.formats.plot3d import write_plot3d
+
+            check_writable(export_plot3d, inputs=(mpath,))
+            write_plot3d(export_plot3d, [prep.box.control_points])
+
+    console.comm.root_then_bcast(write)
     s = prep.summary()
     s["lattice_file"] = str(out)
     for w in prep.warnings:

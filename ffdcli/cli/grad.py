@@ -46,7 +46,8 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
         from ffdcli.atomic import check_writable
 
         check_writable(output)
-    model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
+    model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress,
+                                  comm=console.comm)
     if output:      # never over an input (the mesh, the design, the sensitivity file)
         check_writable(output, inputs=(model.run.prep.mesh.path, design_file, sens))
     sens_file = sens
@@ -75,8 +76,11 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     if output:
         from ffdcli.atomic import atomic_write
 
-        with atomic_write(output, "w") as fh:
-            json.dump(result, fh, indent=1)
+        def write():         # once: rank 0 of an MPI run
+            with atomic_write(output, "w") as fh:
+                json.dump(result, fh, indent=1)
+
+        console.comm.root_then_bcast(write)
         summary["output"] = str(output)
     lines = [f"ffd grad: {Path(design_file).name}, {len(sens.ids)} sensitivity rows matched by "
              f"{sens.matched_by}" + (f" (worst distance {sens.worst_distance:.2e})"
@@ -117,7 +121,7 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     from ffdcli.atomic import atomic_path, check_writable
 
     check_writable(output)
-    model = DesignModel.from_file(design_file, overrides, progress=console.progress)
+    model = DesignModel.from_file(design_file, overrides, progress=console.progress, comm=console.comm)
     check_writable(output, inputs=(model.run.prep.mesh.path, design_file))
     B, D = model.jacobian_factors()
     arrays = dict(names=np.array(model.names), point_ids=model.surface_ids, values=model.values,
@@ -127,8 +131,12 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
         from ffdcli.derivatives import surface_jacobian
 
         arrays["J"] = surface_jacobian(B, D)
-    with atomic_path(output) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+
+    def write():             # once: rank 0 of an MPI run
+        with atomic_path(output) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+
+    console.comm.root_then_bcast(write)
     console.result({"output": str(output), "variables": len(model.names), "points": int(B.shape[0])},
                    f"ffd jacobian: {len(model.names)} variables x {B.shape[0]} surface points -> {output}")
