@@ -332,7 +332,8 @@ def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110,
 
 def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=None,
                note: str | None = None) -> Path:
-    """Write the PNG of ``parts`` (the first one's views; :class:`Part`)."""
+    """Write the PNG of ``parts`` (:class:`Part`): every part's outlines in the planform and front
+    views (in the first part's axes), the first part's change panel and sections."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -368,14 +369,16 @@ def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=No
         fig = plt.figure(figsize=(14, 12))
         grid = fig.add_gridspec(3, 3, height_ratios=[1.25, 1, 0.9])
         ax_plan = fig.add_subplot(grid[0:2, 0])
-        _draw_outlines(ax_plan, part, s, c, swap=True)
+        for other in parts:              # every component in the planform and front views
+            _draw_outlines(ax_plan, other, s, c, swap=True)
         ax_plan.set_xlabel(names[0] + ", streamwise \u2192")
         ax_plan.set_ylabel(names[2] + ", root to tip")
         ax_plan.set_aspect("equal", adjustable="datalim")
         _orient(ax_plan, part, chord_on_x=True)
         ax_plan.set_title("planform")
         ax_front = fig.add_subplot(grid[0, 1:])
-        _draw_outlines(ax_front, part, s, t, swap=False)
+        for other in parts:
+            _draw_outlines(ax_front, other, s, t, swap=False)
         ax_front.set_xlabel(names[2] + ", root to tip")
         ax_front.set_ylabel(names[1])
         ax_front.set_aspect("equal", adjustable="datalim")

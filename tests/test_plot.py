@@ -205,3 +205,21 @@ def test_deform_plot_writes_the_3d_view_too(tmp_path):
     grey = (np.ptp(rgb, axis=-1) < 0.05) & (rgb.mean(-1) > 0.45) & (rgb.mean(-1) < 0.8)
     black = rgb.sum(-1) < 0.3
     assert reddish.sum() > 20000 and grey.sum() > 2000 and black.sum() > 200
+
+
+def test_plot_parts_draws_several_components(tmp_path):
+    """The hook for several components: two parts (a wing and a shifted copy) in one picture."""
+    from dataclasses import replace
+
+    from ffdcli.plot import plot_parts, run_parts
+
+    run, result = _run(tmp_path, [{"dihedral": 5}])
+    (wing,) = run_parts(run, result)
+    shift = np.array([4.0, 0.0, 0.0])
+    tail = replace(wing, name="tail", X0=wing.X0 + shift, X1=wing.X1 + shift, P0=wing.P0 + shift,
+                   P1=wing.P1 + shift)
+    one = plot_parts([wing], tmp_path / "one.png", title="one")
+    two = plot_parts([wing, tail], tmp_path / "two.png", title="two")
+    r1, b1 = red_and_black(read_png(one))
+    r2, b2 = red_and_black(read_png(two))
+    assert b2.sum() > b1.sum() + 300 and r2.sum() > r1.sum()
