@@ -13,9 +13,10 @@ NOTES = "Target: the box's own work (cuts, fitting, rebuilds) adds no more than 
 
 
 def _case(n_chord: int, n_span: int) -> dict:
-    from ffdcli.box import BoxSettings, fit_box
+    from ffdcli.box import fit_box
     from ffdcli.embedding import embed
     from ffdcli.mesh import CellBlock
+    from ffdcli.settings import BoxSettings
     from ffdcli.wings import Planform, wing_surface
 
     pf = Planform(le_sweep_deg=30, taper=0.3, twist_root_deg=2, twist_tip_deg=-4, dihedral_deg=5)

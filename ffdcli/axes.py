@@ -25,9 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.settings import SECTION_CHOICES
 
 AXIS_NAMES = ("x", "y", "z")
-SECTION_CHOICES = ("xy", "xz", "yz", "yx", "zx", "zy")
 #: Two extents closer than this ratio make the detection ambiguous (reported as a guess).
 AMBIGUOUS_RATIO = 1.15
 #: A free-edge node lies in an end plane when within this fraction of the surface's largest extent.

@@ -31,79 +31,12 @@ import numpy as np
 from ffdcli.axes import Axes, detect_axes
 from ffdcli.errors import InputError
 from ffdcli.progress import no_progress
+from ffdcli.settings import BoxSettings
 
-#: Control points when the user gives none: the paper's wing lattice, and its airfoil lattice.
-DEFAULT_POINTS = {3: (6, 8, 2), 2: (6, 5)}
-#: The most control points in one direction of an automatic lattice.
-MAX_POINTS = 256
 #: Largest number of rebuilds when growing margins to contain the surface.
 MAX_REBUILDS = 12
 #: Where the first cut inboard of a degenerate tip cut is searched, as fractions of the span.
 _TIP_SEARCH = (0.0025, 0.005, 0.01, 0.02, 0.04, 0.08, 0.16)
-
-
-@dataclass(frozen=True)
-class BoxSettings:
-    """What the user chooses about the lattice (``box:`` in the design file, options of ``ffd box``).
-
-    points
-        (n, m, l) in 3D, (n, l) in 2D: chordwise, spanwise, thickness control points.
-        ``None`` = the default of the mesh's dimension, :data:`DEFAULT_POINTS`.
-    degree
-        Per direction; ``None`` means min(3, points - 1).
-    sections
-        ``"xy"`` etc. (chord axis, thickness axis); ``None`` = detected.
-    margin
-        Clearance between the surface and the lattice, as a fraction of the local chord.
-    root
-        ``"min"``/``"max"``: the end of the span axis where the root is; ``None`` = detected.
-    file
-        A Plot3D lattice to use instead of building one (pyGeo/DAFoam users' boxes).
-    """
-
-    points: tuple[int, ...] | None = None
-    degree: tuple[int, ...] | None = None
-    sections: str | None = None
-    margin: float = 0.02
-    root: str | None = None
-    file: str | None = None
-
-    def degrees(self) -> tuple[int, ...]:
-        if self.degree is not None:
-            return tuple(int(d) for d in self.degree)
-        return tuple(min(3, int(p) - 1) for p in self.points)
-
-    def checked(self, dim: int, *, path=None, key: str = "box") -> BoxSettings:
-        """These settings after checking them against the mesh dimension; InputError if wrong."""
-        want = 3 if dim == 3 else 2
-        pts = tuple(int(p) for p in (self.points or DEFAULT_POINTS[dim]))
-        if len(pts) != want:
-            shape = "[n, m, l] (chordwise, spanwise, thickness)" if want == 3 else \
-                "[n, l] (chordwise, thickness) for a 2D mesh"
-            raise InputError(f"expected {want} numbers {shape}, got {list(pts)}", path=path,
-                             key=f"{key}.points")
-        if min(pts) < 2:
-            raise InputError(f"every direction needs at least 2 control points, got {list(pts)}",
-                             path=path, key=f"{key}.points")
-        if max(pts) > MAX_POINTS:     # an FFD lattice has tens; millions would run out of memory or time
-            raise InputError(f"at most {MAX_POINTS} control points per direction, got {list(pts)}",
-                             path=path, key=f"{key}.points")
-        deg = tuple(min(3, p - 1) for p in pts) if self.degree is None else \
-            tuple(int(d) for d in self.degree)
-        if len(deg) != want:
-            raise InputError(f"expected {want} degrees, got {list(deg)}", path=path, key=f"{key}.degree")
-        for p, d in zip(pts, deg):
-            if not 1 <= d <= 5:
-                raise InputError(f"degrees must be 1 to 5, got {list(deg)}", path=path,
-                                 key=f"{key}.degree")
-            if d >= p:
-                raise InputError(f"degree {d} needs more than {d} control points in that direction "
-                                 f"(points {list(pts)}, degree {list(deg)})", path=path,
-                                 key=f"{key}.degree")
-        if not np.isfinite(self.margin) or not 0 <= self.margin <= 1:
-            raise InputError(f"margin is a fraction of the local chord in [0, 1], got {self.margin}",
-                             path=path, key=f"{key}.margin")
-        return replace(self, points=pts, degree=deg)
 
 
 @dataclass

@@ -14,15 +14,15 @@ from __future__ import annotations
 import hashlib
 import json
 import zipfile
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from ffdcli import __version__
 from ffdcli.axes import Axes
-from ffdcli.box import Box, BoxSettings
+from ffdcli.box import Box
 from ffdcli.errors import InputError
+from ffdcli.settings import BoxSettings
 
 #: Bumped whenever the content of the cache changes meaning.
 CACHE_FORMAT = 1
@@ -42,7 +42,7 @@ def file_hash(path: str | Path, chunk: int = 1 << 22) -> str:
 
 def cache_key(mesh_hash: str, surface: list[str], settings: BoxSettings, extra: str = "") -> str:
     """The key of a box: mesh content, surface names, box settings, tool version, cache format."""
-    blob = json.dumps({"mesh": mesh_hash, "surface": list(surface), "settings": _settings_dict(settings),
+    blob = json.dumps({"mesh": mesh_hash, "surface": list(surface), "settings": settings.get_cache_key(),
                        "version": __version__, "format": CACHE_FORMAT, "extra": extra}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
@@ -54,20 +54,13 @@ def cache_path(mesh_path: str | Path, key: str, cache_dir: str | Path | None = N
     return folder / f"{mp.name}.{key[:16]}.ffdcache.npz"
 
 
-def _settings_dict(s: BoxSettings) -> dict:
-    d = asdict(s)
-    d["points"] = None if s.points is None else list(s.points)
-    d["degree"] = None if s.degree is None else list(s.degree)
-    return d
-
-
 def save(path: str | Path, key: str, box: Box, surface_ids: np.ndarray, embedding, report: dict,
          meta: dict | None = None) -> None:
     """Write the cache file atomically."""
     from ffdcli.atomic import atomic_path
 
     header = {"key": key, "version": __version__, "format": CACHE_FORMAT,
-              "settings": _settings_dict(box.settings), "report": report, **(meta or {})}
+              "settings": box.settings.as_dict(), "report": report, **(meta or {})}
     arrays = {
         "header": np.frombuffer(json.dumps(header, default=str).encode(), dtype=np.uint8),
         "control_points": box.control_points,

@@ -32,7 +32,7 @@ All derivatives are analytic. :func:`apply_changes`, :func:`design_variables` an
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -262,8 +262,42 @@ def _law(value) -> SectionLaw:
 # The changes
 # --------------------------------------------------------------------------------------------------
 
+@dataclass(frozen=True)
+class SpecContext:
+    """What building a change from its YAML needs: the lattice size and where the change is written.
+
+    n, m, l
+        Chordwise, spanwise (sections; 1 in 2D) and thickness control points.
+    dim
+        3 for a wing, 2 for an airfoil.
+    key
+        The change's key path in the design file (``changes[2].twist``).
+    error
+        ``error(message, key) -> Exception``: the error to raise (the design file's, with its line).
+    """
+
+    n: int
+    m: int
+    l: int
+    dim: int
+    key: str = "changes"
+    error: Callable[[str, str], Exception] | None = None
+
+    def fail(self, message: str, key: str | None = None) -> Exception:
+        """The exception for ``message`` at ``key`` (default: the change's own key)."""
+        key = self.key if key is None else key
+        if self.error is None:
+            return InputError(message, key=key)
+        return self.error(message, key)
+
+
 class Change:
-    """Common interface (see the module docstring). Subclasses are frozen dataclasses."""
+    """Common interface (see the module docstring). Subclasses are frozen dataclasses.
+
+    ``from_spec(spec, ctx)`` (a classmethod) builds the change from its YAML value ``spec`` (already
+    valid against the schema of :mod:`ffdcli.design.schema`) and checks what needs the lattice
+    (list lengths, section indices, the 2D rules); ``ctx`` is a :class:`SpecContext`.
+    """
 
     kind: str = ""
     #: Unit of the variables: ``deg`` (angles), ``factor`` (scale factors), ``length`` (mesh units).
@@ -272,6 +306,10 @@ class Change:
     def units(self) -> list[str]:
         """The unit of each variable (``deg``, ``factor`` or ``length``)."""
         return [self.unit] * self.size
+
+    @classmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> Change:  # pragma: no cover
+        raise NotImplementedError
 
     def apply(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
@@ -320,9 +358,30 @@ class _SectionMap(Change):
     of per-section values (twist, chord): ``maps(P, frame)`` gives the (m, 4, 4) matrices."""
 
     law: SectionLaw
+    #: The root value of ``{tip: T}`` (no change at the root).
+    default_root = 0.0
 
     def __post_init__(self):
         object.__setattr__(self, "law", _law(self.law))
+
+    @classmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> _SectionMap:
+        """One number in 2D; in 3D a list (one per section, root first) or ``{tip: }``/``{root:, tip:}``."""
+        kind, m = cls.kind, ctx.m
+        if ctx.dim == 2:
+            if isinstance(spec, (int, float)):
+                return cls(SectionLaw.scalar(spec, 1))
+            raise ctx.fail(f"in 2D {kind} takes one number (the whole airfoil, about its trailing edge)")
+        if isinstance(spec, list):
+            if len(spec) != m:
+                raise ctx.fail(f"has {len(spec)} values but the box has {m} sections (box.points[1]); "
+                               "give one value per section, root first")
+            return cls(SectionLaw.listed(spec))
+        if isinstance(spec, dict):
+            return cls(SectionLaw.root_tip(m, tip=spec["tip"], root=spec.get("root"),
+                                           default_root=cls.default_root))
+        raise ctx.fail(f"in 3D {kind} takes a list of {m} values (one per section, root first) or "
+                       "{tip: value} / {root: value, tip: value}")
 
     @property
     def values(self) -> np.ndarray:
@@ -379,6 +438,7 @@ class Chord(_SectionMap):
     """
 
     kind = "chord"
+    default_root = 1.0
     unit = "factor"
 
     def bounds(self, P, frame):
@@ -406,9 +466,14 @@ class Chord(_SectionMap):
         return np.einsum("jab,...ijkb->...ijka", S, dP - dp) + dp
 
 
+def not_in_2d(kind: str) -> str:
+    """The one wording of "this change needs a span": span, sweep and dihedral on an airfoil."""
+    return f"{kind} is not defined for a 2D (airfoil) mesh; use twist, chord or shape"
+
+
 def _no_2d(frame: LatticeFrame, kind: str):
     if frame.dim == 2:
-        raise InputError(f"{kind} is not defined for a 2D (airfoil) mesh; use twist, chord or shape")
+        raise InputError(not_in_2d(kind))
 
 
 @dataclass(frozen=True, eq=False)
@@ -422,6 +487,13 @@ class Span(Change):
     scale: float
     kind = "span"
     unit = "factor"
+
+    @classmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> Span:
+        """A scale factor > 0; not in 2D."""
+        if ctx.dim == 2:
+            raise ctx.fail(not_in_2d(cls.kind))
+        return cls(float(spec))
 
     def maps(self, P, frame):
         _no_2d(frame, "span")
@@ -476,6 +548,19 @@ class _Shear(Change):
             raise ValueError(f"{self.kind}: give exactly one of delta and offsets")
         if self.offsets is not None:
             object.__setattr__(self, "offsets", _law(self.offsets))
+
+    @classmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> _Shear:
+        """Degrees, or ``{offsets: [one per section]}``; not in 2D."""
+        if ctx.dim == 2:
+            raise ctx.fail(not_in_2d(cls.kind))
+        if isinstance(spec, dict):
+            offsets = spec["offsets"]
+            if len(offsets) != ctx.m:
+                raise ctx.fail(f"has {len(offsets)} values but the box has {ctx.m} sections (box.points[1])",
+                               ctx.key + ".offsets")
+            return cls(offsets=SectionLaw.listed(offsets))
+        return cls(delta=float(spec))
 
     def _dir(self, frame) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
@@ -606,6 +691,41 @@ class Shape(Change):
     sections: tuple[int, ...] | None = None
     rows: np.ndarray | None = None
     kind = "shape"
+
+    @classmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> Shape:
+        """``{upper: [n], lower: [n], sections: all | [j, ...]}``, ``{rows: [l lists of n]}`` or
+        ``{random: A, seed: S}`` (``default_rng(S).uniform(-A, A, size=(2, n, m))``: upper, lower)."""
+        n, m, l, key = ctx.n, ctx.m, ctx.l, ctx.key
+        if "random" in spec:
+            rng = np.random.default_rng(int(spec.get("seed", 0)))
+            try:
+                upper, lower = rng.uniform(-spec["random"], spec["random"], size=(2, n, m))
+            except OverflowError:
+                raise ctx.fail(f"{spec['random']:g} is too large for a uniform draw", key + ".random") from None
+            return cls(upper, lower)
+        for side in ("upper", "lower"):
+            if side in spec and len(spec[side]) != n:
+                raise ctx.fail(f"has {len(spec[side])} values but the box has {n} chordwise points "
+                               "(box.points[0])", f"{key}.{side}")
+        sections = spec.get("sections", "all")
+        if sections == "all":
+            sections = None
+        else:
+            for q, j in enumerate(sections):
+                if not 0 <= j < m:
+                    raise ctx.fail(f"section {j} does not exist: sections run from 0 (root) to {m - 1}",
+                                   f"{key}.sections[{q}]")
+        rows = spec.get("rows")
+        if rows is not None:
+            if len(rows) != l:
+                raise ctx.fail(f"has {len(rows)} rows but the box has {l} thickness points (box.points[-1])",
+                               f"{key}.rows")
+            for k, row in enumerate(rows):
+                if len(row) != n:
+                    raise ctx.fail(f"has {len(row)} values but the box has {n} chordwise points "
+                                   "(box.points[0])", f"{key}.rows[{k}]")
+        return cls(spec.get("upper"), spec.get("lower"), sections, rows=rows)
 
     def __post_init__(self):
         for side in ("upper", "lower"):
@@ -758,4 +878,30 @@ def set_design_variables(changes: Sequence[Change], values) -> list[Change]:
     for change, size in zip(changes, sizes, strict=True):
         out.append(change.with_values(vals[at:at + size]))
         at += size
+    return out
+
+
+# --------------------------------------------------------------------------------------------------
+# Changes from the design file
+# --------------------------------------------------------------------------------------------------
+
+#: The change class of each kind of the design file (``changes: - twist: ...``).
+CHANGE_CLASSES: dict[str, type[Change]] = {c.kind: c for c in (Twist, Span, Sweep, Dihedral, Chord, Shape)}
+
+
+def changes_from_spec(specs, n: int, m: int, l: int, dim: int, error=None) -> list[Change]:
+    """The change objects of a ``changes`` list (as written in a design file) for a lattice of
+    n x m x l points (2D: m = 1).
+
+    ``error(message, key) -> Exception`` makes the error of a change the lattice refuses (default: an
+    :class:`InputError` naming the key, ``changes[2].twist``). Each item has one key, its kind.
+    """
+    out = []
+    for index, item in enumerate(specs):
+        (kind, spec), = item.items()
+        ctx = SpecContext(n=n, m=m, l=l, dim=dim, key=f"changes[{index}].{kind}", error=error)
+        cls = CHANGE_CLASSES.get(kind)
+        if cls is None:                         # pragma: no cover (the schema rejects it)
+            raise ctx.fail(f"unknown change '{kind}'")
+        out.append(cls.from_spec(spec, ctx))
     return out

@@ -25,7 +25,8 @@ import numpy as np
 from numba import njit, prange
 
 from ffdcli.errors import InputError
-from ffdcli.spline import MAX_DEGREE, basis_d1_nb, basis_derivs, check_knots, clamped_knots, find_span_nb
+from ffdcli.settings import MAX_DEGREE, check_degree
+from ffdcli.spline import basis_d1_nb, basis_derivs, check_knots, clamped_knots, find_span_nb
 
 #: Knot vector of the dummy third axis of a 2D lattice (one control point, degree 0).
 _DUMMY_KNOTS = np.array([0.0, 1.0])
@@ -72,12 +73,7 @@ class Lattice:
         if degree.size != pdim or not np.all(degree == np.round(degree)):
             raise InputError(f"degree needs {pdim} integers (one per direction), got {self.degree!r}")
         degree = tuple(int(d) for d in degree)
-        for axis, (p, n) in enumerate(zip(degree, sizes, strict=True)):
-            if not 1 <= p <= MAX_DEGREE:
-                raise InputError(f"degree {p} in direction {axis} is not supported: use 1 to {MAX_DEGREE}")
-            if p >= n:
-                raise InputError(f"degree {p} in direction {axis} needs more than {p} control points, "
-                                 f"the lattice has {n}", hint="lower the degree or add points")
+        check_degree(sizes, degree, key=None)
         if self.knots is None:
             knots = tuple(clamped_knots(n, p) for n, p in zip(sizes, degree, strict=True))
         else:
@@ -254,7 +250,7 @@ def _evaluate_nb(P, k0, k1, k2, p0, p1, p2, params, gdim, want_jac, out, jac):
     pdim = params.shape[1]
     nchunk = min(npts, 256)
     for c in prange(nchunk):
-        scratch = np.zeros((8, 6))
+        scratch = np.zeros((8, MAX_DEGREE + 1))
         res = np.zeros(12)
         lo = c * npts // nchunk
         hi = (c + 1) * npts // nchunk

@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.box import Box, BoxSettings, fit_box
+from ffdcli.box import Box, fit_box
 from ffdcli.errors import InputError, QualityError
 from ffdcli.mesh import Mesh
 from ffdcli.progress import no_progress
+from ffdcli.settings import BoxSettings
 
 
 @dataclass

@@ -17,8 +17,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-MAX_DEGREE = 5
-
 
 def clamped_knots(n_ctrl: int, degree: int) -> np.ndarray:
     """Uniform clamped knot vector on [0, 1].

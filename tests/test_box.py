@@ -9,10 +9,11 @@ import pytest
 from conftest import run_ffd
 from wingcase import write_surface_wing
 
-from ffdcli.box import BoxSettings, fit_box
+from ffdcli.box import fit_box
 from ffdcli.cache import load
 from ffdcli.mesh import CellBlock
 from ffdcli.pipeline import prepare_box
+from ffdcli.settings import BoxSettings
 from ffdcli.wings import Planform, wing_surface
 
 # Residual bound of the embedding: 1e-10 x lattice size (issue 3); the Newton stops far below it.

@@ -9,9 +9,9 @@ import pytest
 from conftest import REPO, run_ffd, shared_file
 from wingcase import write_surface_wing
 
-from ffdcli.box import BoxSettings
 from ffdcli.formats.plot3d import read_plot3d
 from ffdcli.pipeline import prepare_box
+from ffdcli.settings import BoxSettings
 
 
 def test_export_then_import_plot3d_gives_the_same_lattice(tmp_path):

@@ -288,3 +288,23 @@ def test_ffd_schema_prints_the_schema():
     assert json.loads(proc.stdout) == design_schema()
     proc = run_ffd("schema", "--json")
     assert proc.returncode == 0 and json.loads(proc.stdout) == design_schema()
+
+
+def test_every_change_kind_of_the_schema_has_its_class():
+    """The schema's change kinds and the classes that build them from YAML are the same set."""
+    from ffdcli.changes import CHANGE_CLASSES
+    from ffdcli.design.schema import CHANGE_KINDS
+
+    assert set(CHANGE_KINDS) == set(CHANGE_CLASSES)
+    assert all(CHANGE_CLASSES[k].kind == k for k in CHANGE_KINDS)
+
+
+def test_settings_module_is_light():
+    """ffdcli.settings imports neither numpy nor the heavy libraries."""
+    import subprocess
+    import sys
+
+    code = ("import sys, ffdcli.settings; "
+            "print(','.join(m for m in ('numpy', 'numba', 'scipy', 'h5py', 'matplotlib') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == ""

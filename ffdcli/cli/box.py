@@ -78,9 +78,9 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
     """
     import numpy as np
 
-    from ffdcli.box import BoxSettings
     from ffdcli.formats.lattice_vtk import write_lattice_vtk
     from ffdcli.pipeline import prepare_box
+    from ffdcli.settings import BoxSettings
 
     if is_design_file(mesh):
         from ffdcli.design import load_design

@@ -1,0 +1,211 @@
+"""The JSON Schema of the design file: the one source of truth (``ffd schema`` prints it, loading
+validates against it).
+
+The schema is composed of one piece per top-level key (:data:`SECTIONS`: ``mesh``, ``surface``,
+``box``, ``volume``, ``changes``, ``output``) and, inside ``changes``, one piece per change kind
+(:data:`CHANGE_SCHEMAS`). A new part of the file (``constraints``, ``components``, a twist ``axis``,
+bounds of the variables) is one new function and one entry in these tables: it does not touch the
+other sections. Every piece returns a fresh dict.
+
+This module imports nothing heavy (no numpy): ``ffd schema`` and ``ffd --help`` stay fast.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from ffdcli.settings import ROOT_CHOICES, SECTION_CHOICES
+
+#: Objects whose known keys ``--set`` may add when the file does not have them.
+ADDABLE = ("output", "volume", "box")
+
+
+# --------------------------------------------------------------------------------------------------
+# Building blocks
+# --------------------------------------------------------------------------------------------------
+
+def number() -> dict:
+    return {"type": "number"}
+
+
+def positive() -> dict:
+    return {"type": "number", "exclusiveMinimum": 0}
+
+
+def number_list() -> dict:
+    return {"type": "array", "items": number(), "minItems": 1}
+
+
+def positive_list() -> dict:
+    return {"type": "array", "items": positive(), "minItems": 1}
+
+
+def marker_names() -> dict:
+    return {"anyOf": [{"type": "string", "minLength": 1},
+                      {"type": "array", "items": {"type": "string", "minLength": 1}, "minItems": 1}],
+            "description": "a marker name or a list of marker names"}
+
+
+def root_tip(value: dict) -> dict:
+    """``{tip: value}`` or ``{root: value, tip: value}``."""
+    return {"type": "object", "properties": {"root": value, "tip": value}, "required": ["tip"],
+            "additionalProperties": False}
+
+
+def _shear(what: str) -> dict:
+    return {"description": f"degrees added to the {what} angle, or {{offsets: [one per section]}}"
+                           " (mesh length units)",
+            "anyOf": [number(), {"type": "object", "properties": {"offsets": number_list()},
+                                 "required": ["offsets"], "additionalProperties": False}]}
+
+
+# --------------------------------------------------------------------------------------------------
+# The changes, one piece per kind (the classes are in ffdcli.changes, each with its from_spec)
+# --------------------------------------------------------------------------------------------------
+
+def twist_schema() -> dict:
+    return {"description": "degrees: a list (one per section, root first), {tip: T} or "
+                           "{root: R, tip: T}; in 2D one number",
+            "anyOf": [number(), number_list(), root_tip(number())]}
+
+
+def span_schema() -> dict:
+    return {"description": "a span scale factor > 0 about the root section", **positive()}
+
+
+def sweep_schema() -> dict:
+    return _shear("leading-edge sweep")
+
+
+def dihedral_schema() -> dict:
+    return _shear("dihedral (tip up positive)")
+
+
+def chord_schema() -> dict:
+    return {"description": "scale factors > 0: a list (one per section, root first), {tip: F} or "
+                           "{root: F, tip: F} (root default 1); in 2D one number",
+            "anyOf": [positive(), positive_list(), root_tip(positive())]}
+
+
+def shape_schema() -> dict:
+    return {"description": "{upper: [one per chordwise point], lower: [...], sections: all | [j, ...]}"
+                           " or {random: A, seed: S}",
+            "type": "object",
+            "properties": {
+                "upper": number_list(), "lower": number_list(),
+                "rows": {"description": "extension: one list per thickness row (lower first, "
+                                        "l lists of n values), instead of upper/lower",
+                         "type": "array", "items": number_list(), "minItems": 2},
+                "sections": {"description": "all, or a list of section indices",
+                             "anyOf": [{"const": "all"},
+                                       {"type": "array", "items": {"type": "integer", "minimum": 0},
+                                        "minItems": 1}]},
+                "random": {"type": "number", "minimum": 0},
+                "seed": {"type": "integer", "minimum": 0}},
+            "additionalProperties": False,
+            "anyOf": [{"required": ["upper"]}, {"required": ["lower"]}, {"required": ["random"]},
+                      {"required": ["rows"]}]}
+
+
+#: The change kinds in the order ``ffd schema`` lists them; each kind is a class of
+#: :mod:`ffdcli.changes` with the same ``kind``.
+CHANGE_SCHEMAS: dict[str, Callable[[], dict]] = {
+    "twist": twist_schema, "span": span_schema, "sweep": sweep_schema, "dihedral": dihedral_schema,
+    "chord": chord_schema, "shape": shape_schema,
+}
+CHANGE_KINDS = tuple(CHANGE_SCHEMAS)
+
+
+# --------------------------------------------------------------------------------------------------
+# The top-level sections
+# --------------------------------------------------------------------------------------------------
+
+def mesh_schema() -> dict:
+    return {"type": "string", "minLength": 1,
+            "description": "the mesh (.su2, .cgns, .vtu, .vtk), relative to this file"}
+
+
+def surface_schema() -> dict:
+    return marker_names()
+
+
+def box_schema() -> dict:
+    return {
+        "type": "object", "additionalProperties": False,
+        "properties": {
+            "points": {"type": "array", "items": {"type": "integer", "minimum": 2},
+                       "minItems": 2, "maxItems": 3,
+                       "description": "[n, m, l] chordwise, spanwise, thickness (2D: [n, l])"},
+            "degree": {"type": "array", "items": {"type": "integer", "minimum": 1},
+                       "minItems": 2, "maxItems": 3,
+                       "description": "per direction; default min(3, points - 1)"},
+            "sections": {"enum": list(SECTION_CHOICES),
+                         "description": "plane of the airfoil sections: chord axis, thickness axis"},
+            "margin": {"type": "number", "minimum": 0,
+                       "description": "clearance as a fraction of the local chord"},
+            "root": {"enum": list(ROOT_CHOICES), "description": "end of the span axis at the root"},
+            "file": {"type": "string", "minLength": 1,
+                     "description": "a Plot3D lattice to use instead of the automatic box"},
+        }}
+
+
+def volume_schema() -> dict:
+    num, pos = number(), positive()
+    return {
+        "type": "object", "additionalProperties": False,
+        "description": "how the rest of the mesh follows the surface",
+        "properties": {
+            "method": {"enum": ["idw", "none"]},
+            "a": num, "b": num, "alpha": num,
+            "ldef": pos,
+            "tolerance": {"type": "number", "minimum": 0,
+                          "description": "tree approximation of the IDW sum (0 = exact)"},
+            "threshold": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                          "description": "quality gate (scaled Jacobian, 0..1): cells below it "
+                                         "(and halved) fail; default 0.05"},
+            "fixed": marker_names(), "sliding": marker_names(),
+        }}
+
+
+def changes_schema() -> dict:
+    return {
+        "type": ["array", "null"],
+        "description": "the pipeline, applied in order; each item has exactly one key; empty = no change",
+        "items": {"type": "object", "minProperties": 1, "maxProperties": 1,
+                  "properties": {kind: piece() for kind, piece in CHANGE_SCHEMAS.items()},
+                  "additionalProperties": False},
+    }
+
+
+def output_schema() -> dict:
+    return {
+        "type": "object", "additionalProperties": False,
+        "properties": {
+            "mesh": {"type": "string", "minLength": 1,
+                     "description": "deformed mesh; format from the extension"},
+            "lattice": {"type": "string", "minLength": 1,
+                        "description": "VTK of the original and deformed lattice"},
+            "plot": {"type": "string", "minLength": 1, "description": "PNG picture"},
+        }}
+
+
+#: The top-level keys of a design file, in the order ``ffd schema`` lists them.
+SECTIONS: dict[str, Callable[[], dict]] = {
+    "mesh": mesh_schema, "surface": surface_schema, "box": box_schema, "volume": volume_schema,
+    "changes": changes_schema, "output": output_schema,
+}
+#: Top-level keys a design file must have.
+REQUIRED = ("mesh",)
+
+
+def design_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of the design file; a fresh dict on every call."""
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "title": "ffd design file",
+        "description": "Mesh, lattice, volume-mesh motion and the pipeline of design changes for ffd.",
+        "type": "object",
+        "required": list(REQUIRED),
+        "additionalProperties": False,
+        "properties": {key: piece() for key, piece in SECTIONS.items()},
+    }

@@ -1,0 +1,127 @@
+"""Validation of a design file against :func:`~ffdcli.design.schema.design_schema`, in words a
+user reads: the first problem in file order, as one :class:`~ffdcli.errors.InputError` naming the
+key path and line (``changes[2].twist``, line 14) and what was expected.
+"""
+
+from __future__ import annotations
+
+import math
+
+from ffdcli.design.schema import CHANGE_KINDS, design_schema
+from ffdcli.design.yamlmap import key_path, line_at
+from ffdcli.errors import InputError
+from ffdcli.settings import degree_problem
+
+_TYPE_WORDS = {"number": "a number", "integer": "an integer", "string": "text", "array": "a list",
+               "object": "a mapping (key: value)", "boolean": "true or false", "null": "nothing"}
+
+
+def _shown(value) -> str:
+    if isinstance(value, bool):
+        return str(value).lower()
+    if value is None:
+        return "nothing"
+    if isinstance(value, dict):
+        return "a mapping {" + ", ".join(map(str, value)) + "}"
+    if isinstance(value, list):
+        return f"a list of {len(value)}"
+    return repr(value)
+
+
+def _describe(error) -> tuple[tuple, str]:
+    """(key path parts, message) of one jsonschema error, in words a user reads."""
+    parts = tuple(error.absolute_path)
+    v, inst, schema = error.validator, error.instance, error.schema
+    if v in ("anyOf", "oneOf"):
+        # an object/list that has the right type for one branch: report that branch's problem
+        inner = [e for e in (error.context or []) if not (e.validator == "type" and not e.relative_path)]
+        inner = [e for e in inner if e.validator not in ("required",) or isinstance(inst, dict)]
+        if inner and isinstance(inst, (dict, list)):
+            return max((_describe(e) for e in inner), key=lambda d: len(d[0]))
+        what = schema.get("description")
+        if what is None and schema.get("anyOf", [{}])[0].get("required"):
+            what = "one of: " + ", ".join(b["required"][0] for b in schema["anyOf"])
+        return parts, f"expected {what or 'another value'}, got {_shown(inst)}"
+    if v == "type":
+        types = error.validator_value if isinstance(error.validator_value, list) else [error.validator_value]
+        return parts, f"expected {' or '.join(_TYPE_WORDS.get(t, t) for t in types)}, got {_shown(inst)}"
+    if v == "additionalProperties":
+        known = sorted(schema.get("properties", {}))
+        extra = [k for k in inst if k not in schema.get("properties", {})]
+        where = "change" if parts and parts[0] == "changes" and len(parts) == 2 else "key"
+        return parts + (extra[0],), f"unknown {where} '{extra[0]}' (expected one of: {', '.join(known)})"
+    if v == "required":
+        missing = [k for k in error.validator_value if k not in inst]
+        return parts, f"missing key '{missing[0]}'"
+    if v in ("minProperties", "maxProperties") and len(parts) == 2 and parts[0] == "changes":
+        keys = ", ".join(inst) or "none"
+        return parts, (f"each item of changes has exactly one key ({', '.join(CHANGE_KINDS)}); "
+                       f"got {len(inst)}: {keys}")
+    if v == "exclusiveMinimum":
+        return parts, f"must be greater than {error.validator_value}, got {_shown(inst)}"
+    if v == "minimum":
+        return parts, f"must be at least {error.validator_value}, got {_shown(inst)}"
+    if v in ("enum", "const"):
+        allowed = error.validator_value if v == "enum" else [error.validator_value]
+        return parts, f"must be one of {', '.join(map(str, allowed))}, got {_shown(inst)}"
+    if v == "minItems":
+        return parts, f"needs at least {error.validator_value} values, got {len(inst)}"
+    if v == "maxItems":
+        return parts, f"takes at most {error.validator_value} values, got {len(inst)}"
+    if v == "minLength":
+        return parts, "must not be empty"
+    return parts, error.message
+
+
+def _walk_nonfinite(value, parts=()):
+    if isinstance(value, float) and not math.isfinite(value):
+        yield parts, value
+    elif isinstance(value, dict):
+        for k, v in value.items():
+            yield from _walk_nonfinite(v, parts + (k,))
+    elif isinstance(value, list):
+        for i, v in enumerate(value):
+            yield from _walk_nonfinite(v, parts + (i,))
+
+
+def validate(data, path=None, lines: dict | None = None) -> None:
+    """Raise :class:`InputError` for the first problem (in file order) of ``data``; None if valid."""
+    import jsonschema  # 0.1 s: here, not at the top, so that ``ffd schema`` and ``--help`` do not pay it
+
+    lines = lines or {}
+
+    def fail(parts, message):
+        raise InputError(message, path=path, key=key_path(parts) or None, line=line_at(lines, parts))
+
+    if not isinstance(data, dict):
+        fail((), f"a design file is a mapping (mesh:, box:, changes:, ...), got {_shown(data)}")
+    for parts, value in _walk_nonfinite(data):
+        fail(parts, f"must be a finite number, got {value}")
+    validator = jsonschema.Draft202012Validator(design_schema())
+    problems = [_describe(e) for e in validator.iter_errors(data)]
+    if problems:
+        parts, message = min(problems, key=lambda p: (line_at(lines, p[0]) or 10**9, -len(p[0])))
+        fail(parts, message)
+    # what the schema cannot say in words
+    box = data.get("box") or {}
+    if "degree" in box and box.get("points") is not None:   # else the default of the mesh's dimension
+        points = box["points"]
+        if len(box["degree"]) != len(points):
+            fail(("box", "degree"), f"has {len(box['degree'])} values but box.points has {len(points)}")
+        problem = degree_problem(points, box["degree"])
+        if problem is not None:
+            fail(("box", "degree", problem[0]), problem[1])
+    for i, item in enumerate(data.get("changes") or []):
+        spec = item.get("shape")
+        if isinstance(spec, dict) and "random" in spec:
+            clash = [k for k in ("upper", "lower", "sections") if k in spec]
+            if clash:
+                fail(("changes", i, "shape", clash[0]),
+                     "a random shape takes only random and seed; write explicit shapes as another change")
+        elif isinstance(spec, dict) and "seed" in spec:
+            fail(("changes", i, "shape", "seed"), "seed goes with random")
+        if isinstance(spec, dict) and "rows" in spec:
+            clash = [k for k in ("upper", "lower", "random") if k in spec]
+            if clash:
+                fail(("changes", i, "shape", clash[0]), "rows gives every thickness row; write upper/lower "
+                                                        "or random as another change")
