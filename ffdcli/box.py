@@ -19,60 +19,48 @@ The user gives the wing surface and the number of control points; :func:`fit_box
    edge, a thick region between two thin sections), the margin of that side of the nearby sections is
    grown and the lattice rebuilt, until the box contains the whole surface.
 
+The section cuts are :mod:`ffdcli.sections`; a lattice from a file (pyGeo/DAFoam) is
+:mod:`ffdcli.box_import`; both end in :func:`assemble_box`, the one place a :class:`Box` is made.
+
 A 2D airfoil is the same with one section (``m = 1``) and the core B-spline working in the mesh plane.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+import json
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ffdcli.axes import Axes, detect_axes
+from ffdcli.changes import LatticeFrame
+from ffdcli.embedding import embed
 from ffdcli.errors import InputError
+from ffdcli.lattice import Lattice
 from ffdcli.progress import no_progress
+from ffdcli.sections import (
+    Cutter,
+    Section,
+    analyse_section,
+    edge_points,
+    leading_edge_sign,
+    repair_ends,
+    section_frame_2d,
+)
 from ffdcli.settings import BoxSettings
+from ffdcli.spline import basis, clamped_knots
 
 #: Largest number of rebuilds when growing margins to contain the surface.
 MAX_REBUILDS = 12
-#: Where the first cut inboard of a degenerate tip cut is searched, as fractions of the span.
-_TIP_SEARCH = (0.0025, 0.005, 0.01, 0.02, 0.04, 0.08, 0.16)
 
 
-@dataclass
-class Section:
-    """The local airfoil of one section, in the section plane's (chord', thickness) coordinates.
-
-    ``chord'`` is the chord-axis coordinate times the chord sign, so that it grows from the leading
-    to the trailing edge. ``le``/``te`` are 2-vectors; ``upper``/``lower`` the extent of the airfoil
-    above/below its chord line, and ``front``/``back`` its extent along the chord line measured from
-    the leading edge (normally 0 and ``chord``).
-    """
-
-    le: np.ndarray
-    te: np.ndarray
-    upper: float
-    lower: float
-    front: float
-    back: float
-    extrapolated: bool = False
-
-    @property
-    def chord(self) -> float:
-        return float(np.hypot(*(self.te - self.le)))
-
-    @property
-    def direction(self) -> np.ndarray:
-        d = self.te - self.le
-        return d / np.hypot(*d)
-
-    @property
-    def normal(self) -> np.ndarray:
-        d = self.direction
-        return np.array([-d[1], d[0]])
+def diagonal(points: np.ndarray) -> float:
+    """The length of the bounding-box diagonal of points (N, 3): the size scale of a surface."""
+    pts = np.asarray(points, dtype=np.float64)
+    return float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 0.0
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class Box:
     """A lattice fitted to a wing, with what the design changes need to know about it.
 
@@ -95,6 +83,13 @@ class Box:
     le_rows
         (2, n*m*l) B-spline basis rows of the surface leading-edge points at root and tip (3D), so the
         current leading-edge line is ``le_rows @ P.reshape(-1, 3)``; None in 2D.
+    settings
+        The (checked) :class:`BoxSettings` the box was made with.
+    imported
+        True for a lattice read from a file (:mod:`ffdcli.box_import`).
+
+    A box is a value: nothing changes it after :func:`assemble_box` made it. :meth:`to_arrays` and
+    :meth:`from_arrays` are how it is stored (the cache).
     """
 
     control_points: np.ndarray
@@ -111,7 +106,6 @@ class Box:
     le_rows: np.ndarray | None
     settings: BoxSettings
     imported: bool = False
-    notes: list[str] = field(default_factory=list)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -157,8 +151,6 @@ class Box:
 
     def lattice(self, P: np.ndarray | None = None):
         """The core :class:`ffdcli.lattice.Lattice` of control points ``P`` (default: the box's own)."""
-        from ffdcli.lattice import Lattice
-
         return Lattice(control_points=self.core_control_points(P), degree=tuple(self.degree),
                        knots=tuple(self.knots))
 
@@ -179,11 +171,57 @@ class Box:
     @property
     def frame(self):
         """The :class:`ffdcli.changes.LatticeFrame` the design changes act in."""
-        from ffdcli.changes import LatticeFrame
-
         return LatticeFrame(chord_dir=self.chord_dir, thickness_dir=self.thickness_dir,
                             span_dir=self.span_dir, ref_weights=self.ref_weights,
                             le_rows=self.le_rows, dim=self.dim)
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """Every field as named arrays (for ``numpy.savez``); :meth:`from_arrays` is the inverse."""
+        a = self.axes
+        arrays = {
+            "control_points": self.control_points,
+            "degree": np.asarray(self.degree, dtype=np.int64),
+            "axes": np.array([a.chord, a.thickness, a.span, 0 if a.root == "min" else 1, int(a.guessed)],
+                             dtype=np.int64),
+            "dim": np.int64(self.dim),
+            "chord_sign": np.float64(self.chord_sign),
+            "stations": self.stations,
+            "le_points": self.le_points,
+            "te_points": self.te_points,
+            "margins": self.margins,
+            "ref_weights": self.ref_weights,
+            "le_rows": self.le_rows if self.le_rows is not None else np.zeros((0, 0)),
+            "settings": np.frombuffer(json.dumps(self.settings.as_dict()).encode(), dtype=np.uint8),
+            "imported": np.int64(self.imported),
+        }
+        for i, k in enumerate(self.knots):
+            arrays[f"knots{i}"] = k
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> Box:
+        """The box stored by :meth:`to_arrays` (a mapping of arrays, e.g. the arrays of an ``.npz``).
+
+        Raises KeyError, ValueError or TypeError for arrays that do not make a box."""
+        dim = int(arrays["dim"])
+        ax = arrays["axes"]
+        axes = Axes(chord=int(ax[0]), thickness=int(ax[1]), span=int(ax[2]),
+                    root="min" if ax[3] == 0 else "max", guessed=bool(ax[4]))
+        knots = tuple(np.asarray(arrays[f"knots{i}"]) for i in range(3 if dim == 3 else 2))
+        le_rows = arrays["le_rows"] if arrays["le_rows"].size else None
+        settings = BoxSettings.from_dict(json.loads(bytes(arrays["settings"]).decode()))
+        box = cls(control_points=arrays["control_points"], degree=tuple(int(d) for d in arrays["degree"]),
+                  knots=knots, axes=axes, dim=dim, chord_sign=float(arrays["chord_sign"]),
+                  stations=arrays["stations"], le_points=arrays["le_points"], te_points=arrays["te_points"],
+                  margins=arrays["margins"], ref_weights=arrays["ref_weights"], le_rows=le_rows,
+                  settings=settings, imported=bool(arrays["imported"]))
+        n, m, l = box.shape
+        if len(box.degree) != len(knots) or box.ref_weights.shape != (m, n, l) \
+                or box.le_points.shape != (m, 3) or box.te_points.shape != (m, 3) \
+                or box.stations.shape != (m,) or box.margins.shape != (m, 4) \
+                or (le_rows is not None and le_rows.shape != (2, n * m * l)):
+            raise ValueError("the arrays of a box do not fit together")
+        return box
 
     def summary(self) -> dict:
         return {
@@ -200,125 +238,8 @@ class Box:
 
 
 # ----------------------------------------------------------------------------------------------
-# Section cuts
+# Fitting a box to a surface
 # ----------------------------------------------------------------------------------------------
-
-def surface_edges(faces, *, unique: bool = True) -> np.ndarray:
-    """Undirected edges (E, 2) of a list of CellBlocks (local point ids).
-
-    ``unique=False`` keeps an edge once per face that has it (interior edges twice): the section cuts
-    do not mind, and skipping the sort costs nothing while deduplicating a 1M-point surface costs as
-    much as embedding it."""
-    edges = []
-    for block in faces:
-        c = block.data
-        k = c.shape[1]
-        if k < 2:
-            continue
-        nxt = np.roll(np.arange(k), -1)
-        e = np.stack([c, c[:, nxt]], axis=-1).reshape(-1, 2) if k > 2 else c.reshape(-1, 2)
-        edges.append(e)
-    if not edges:
-        return np.zeros((0, 2), dtype=np.int64)
-    e = np.concatenate(edges)
-    if not unique:
-        return e
-    e = np.sort(e, axis=1)
-    n = int(e.max()) + 1
-    key = np.unique(e[:, 0] * n + e[:, 1])          # 1D unique: far faster than unique(axis=0)
-    return np.stack([key // n, key % n], axis=1)
-
-
-def cut(points: np.ndarray, edges: np.ndarray, axis: int, value: float, *, tol: float,
-        slab: float = 0.0) -> np.ndarray:
-    """Points (K, 3) where the surface crosses the plane ``points[:, axis] == value``.
-
-    Edge crossings are interpolated linearly; vertices within ``tol`` of the plane are included.
-    Without edges (a marker given only as nodes), the points within ``slab`` of the plane are used.
-    """
-    s = points[:, axis] - value
-    on = np.abs(s) <= tol
-    out = [points[on]]
-    if len(edges):
-        sa, sb = s[edges[:, 0]], s[edges[:, 1]]
-        cross = (sa * sb < 0) & (np.abs(sa) > tol) & (np.abs(sb) > tol)
-        a, b = edges[cross, 0], edges[cross, 1]
-        t = (sa[cross] / (sa[cross] - sb[cross]))[:, None]
-        out.append(points[a] + t * (points[b] - points[a]))
-    elif slab > 0:
-        out.append(points[(np.abs(s) <= slab) & ~on])
-    q = np.concatenate(out)
-    if len(q):
-        q[:, axis] = value
-    return q
-
-
-def analyse_section(q2: np.ndarray) -> Section | None:
-    """The airfoil of a cut given as (K, 2) points in (chord', thickness) coordinates, or None.
-
-    Trailing edge: the aft-most points (within 0.5 % of the chordwise extent); for a blunt trailing
-    edge the middle of its base. Leading edge: the point farthest from the trailing edge.
-    """
-    if len(q2) < 3:
-        return None
-    c, t = q2[:, 0], q2[:, 1]
-    extent = c.max() - c.min()
-    if not extent > 0:
-        return None
-    aft = c >= c.max() - 0.005 * extent
-    lo, hi = np.argmin(np.where(aft, t, np.inf)), np.argmax(np.where(aft, t, -np.inf))
-    te = np.array([c.max(), 0.5 * (t[lo] + t[hi])])  # aft-most point; mid-base if blunt
-    le = q2[np.argmax(np.hypot(c - te[0], t - te[1]))]
-    chord = np.hypot(*(te - le))
-    if not chord > 0:
-        return None
-    d = (te - le) / chord
-    n = np.array([-d[1], d[0]])
-    rel = q2 - le
-    along, across = rel @ d, rel @ n
-    return Section(le=le, te=te, upper=float(across.max()), lower=float(across.min()),
-                   front=float(min(along.min(), 0.0)), back=float(max(along.max(), chord)))
-
-
-def leading_edge_sign(q2_list: list[np.ndarray]) -> tuple[float, bool]:
-    """+1 if the leading edge is at the low end of the chord axis, and whether that was clear.
-
-    An airfoil is thickest nearer its leading edge (about 30 % chord) than its trailing edge. Each
-    cut votes by the chordwise position of its greatest thickness.
-    """
-    votes = []
-    for q in q2_list:
-        if len(q) < 8:
-            continue
-        c, t = q[:, 0], q[:, 1]
-        lo, hi = c.min(), c.max()
-        if not hi > lo:
-            continue
-        nb = 40
-        b = np.minimum(((c - lo) / (hi - lo) * nb).astype(int), nb - 1)
-        tmax = np.full(nb, -np.inf)
-        tmin = np.full(nb, np.inf)
-        np.maximum.at(tmax, b, t)
-        np.minimum.at(tmin, b, t)
-        thick = np.where(np.isfinite(tmax) & np.isfinite(tmin), tmax - tmin, 0.0)
-        where = (np.argmax(thick) + 0.5) / nb
-        if abs(where - 0.5) > 0.05:
-            votes.append(1.0 if where < 0.5 else -1.0)
-    if not votes:
-        return 1.0, False
-    s = float(np.sign(np.sum(votes)) or 1.0)
-    clear = abs(np.sum(votes)) >= 0.6 * len(votes)
-    return s, bool(clear)
-
-
-# ----------------------------------------------------------------------------------------------
-# Building the box
-# ----------------------------------------------------------------------------------------------
-
-def _section_frame_2d(axes: Axes, points: np.ndarray, chord_sign: float) -> np.ndarray:
-    """(N, 2) coordinates (chord', thickness) of mesh points."""
-    return np.stack([chord_sign * points[:, axes.chord], points[:, axes.thickness]], axis=1)
-
 
 def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *, dim: int = 3,
             path=None, progress=None):
@@ -342,8 +263,6 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
         ``report`` has ``rebuilds``, ``warnings`` (list of str), ``outside`` (count after the last
         rebuild: 0 unless the surface could not be contained).
     """
-    from ffdcli.embedding import embed
-
     progress = progress or no_progress
     settings = (settings or BoxSettings()).checked(dim, path=path)
     pts = np.asarray(points, dtype=np.float64)
@@ -357,18 +276,13 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
     if axes.guessed and settings.sections is None:
         warnings.append(f"the surface is not clearly wing-shaped: axes guessed as {axes.as_dict()} "
                         f"(chord, thickness, span); set box.sections / --sections to choose")
-    edges = surface_edges(faces, unique=False)
-    size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
-    tol = 1e-9 * size
-
     if dim == 3:
-        sections, stations, chord_sign, sign_clear, extra = _fit_sections_3d(pts, edges, axes, settings,
-                                                                          tol, size, path)
+        sections, stations, chord_sign, sign_clear, extra = _fit_sections_3d(pts, faces, axes, settings,
+                                                                          path)
         warnings += extra
     else:
-        q2 = np.stack([pts[:, axes.chord], pts[:, axes.thickness]], axis=1)
-        chord_sign, sign_clear = leading_edge_sign([q2])
-        sec = analyse_section(_section_frame_2d(axes, pts, chord_sign))
+        chord_sign, sign_clear = leading_edge_sign([pts[:, [axes.chord, axes.thickness]]])
+        sec = analyse_section(section_frame_2d(axes, pts, chord_sign))
         if sec is None:
             raise InputError("could not find an airfoil in the surface (it has no chordwise extent)",
                              path=path)
@@ -382,15 +296,13 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
     l = settings.points[-1]
     m = len(sections)
     margins = np.tile(np.full(4, settings.margin, dtype=np.float64), (m, 1))
-    degree = settings.degrees()
     core = None
     report = {"rebuilds": 0, "warnings": warnings, "outside": 0}
     with progress("fitting the box", MAX_REBUILDS + 1) as bar:
         for attempt in range(MAX_REBUILDS + 1):
             P = _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim)
-            box = _assemble(P, degree, axes, dim, chord_sign, stations, sections, margins, settings)
-            lat = box.lattice()
-            core = embed(lat, box.core_points(pts), progress=progress)
+            box = assemble_box(P, settings, axes, dim, chord_sign, stations, sections, margins=margins)
+            core = embed(box.lattice(), box.core_points(pts), progress=progress)
             bar.update(1)
             outside = ~core.inside
             if not outside.any():
@@ -400,104 +312,34 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
                 break
             margins = _grow_margins(margins, core, outside, sections, box, settings)
     report["outside"] = int((~core.inside).sum())
-    box.le_rows = _le_rows(box) if dim == 3 else None
+    if dim == 3:
+        rows, inside = le_basis_rows(box, box.le_points[[0, -1]])
+        if not inside:        # a leading-edge point must lie in the lattice (it has margins)
+            raise RuntimeError("leading-edge reference points fell outside the lattice")
+        box = replace(box, le_rows=rows)
     return box, core, report
 
 
-def _fit_sections_3d(pts, edges, axes: Axes, settings: BoxSettings, tol, size, path):
+def _fit_sections_3d(pts, faces, axes: Axes, settings: BoxSettings, path):
     """Sections (list of Section), stations (m,), chord sign, whether it was clear, warnings."""
     m = settings.points[1]
-    s_ax = axes.span
-    eta = axes.span_sign * pts[:, s_ax]
+    eta = axes.span_sign * pts[:, axes.span]
     root, tip = float(eta.min()), float(eta.max())
     span = tip - root
-    if not span > 1e-12 * size:
+    if not span > 1e-12 * diagonal(pts):
         raise InputError("the surface has no extent along the span axis "
-                         f"({'xyz'[s_ax]}); for an airfoil mesh use a 2D mesh", path=path)
+                         f"({'xyz'[axes.span]}); for an airfoil mesh use a 2D mesh", path=path)
     etas = root + span * np.arange(m) / (m - 1)
-    slab = 0.5 * span / (4 * (m - 1))
-
-    def cut_at(e):
-        q = cut(pts, edges, s_ax, axes.span_sign * e, tol=tol, slab=slab)
-        return q
-
-    # Leading-edge side from cuts across the span (skip the ends).
-    probe = [cut_at(root + f * span) for f in (0.2, 0.35, 0.5, 0.65, 0.8)]
-    chord_sign, clear = leading_edge_sign([np.stack([q[:, axes.chord], q[:, axes.thickness]], 1)
-                                           for q in probe])
-    sections: list[Section | None] = []
-    for e in etas:
-        q = cut_at(e)
-        sections.append(analyse_section(_section_frame_2d(axes, q, chord_sign)) if len(q) else None)
-    warnings = []
-    _repair_ends(sections, etas, cut_at, axes, chord_sign, span, warnings)
+    cutter = Cutter.of(pts, faces, axes, slab=0.5 * span / (4 * (m - 1)))
+    chord_sign, clear = cutter.chord_sign()
+    sections = cutter.sections(etas, chord_sign)
+    warnings: list[str] = []
+    repair_ends(sections, etas, cutter, chord_sign, span, warnings)
     if any(s is None for s in sections):
         bad = [j for j, s in enumerate(sections) if s is None]
         raise InputError(f"could not find the airfoil at sections {bad} of the surface; is it a wing? "
                          "(try box.sections / --sections to set the axes)", path=path)
     return sections, etas, chord_sign, clear, warnings
-
-
-def _predict(sections, etas, j, toward):
-    """Linear extrapolation of section ``j`` from its two neighbours on the ``toward`` side."""
-    a, b = j + toward, j + 2 * toward
-    if not (0 <= a < len(sections)) or sections[a] is None:
-        return None
-    sa = sections[a]
-    if not (0 <= b < len(sections)) or sections[b] is None:
-        return sa.le, sa.te, sa.chord
-    sb = sections[b]
-    f = (etas[j] - etas[a]) / (etas[a] - etas[b])
-    le = sa.le + f * (sa.le - sb.le)
-    te = sa.te + f * (sa.te - sb.te)
-    return le, te, float(np.hypot(*(te - le)))
-
-
-def _repair_ends(sections, etas, cut_at, axes, chord_sign, span, warnings):
-    """Replace a root/tip section whose cut misses the airfoil (rounded cap) by an extrapolation."""
-    m = len(sections)
-    for j, toward in ((m - 1, -1), (0, +1)):
-        pred = _predict(sections, etas, j, toward)
-        sec = sections[j]
-        ref = pred[2] if pred is not None else None
-        if sec is not None and (ref is None or sec.chord >= 0.9 * ref):
-            continue
-        # Search inward for a complete airfoil, then extrapolate the planform from it.
-        good = None
-        for f in _TIP_SEARCH:
-            e = etas[j] + toward * f * span
-            if toward * (e - etas[j + toward]) >= 0:
-                break
-            q = cut_at(e)
-            s2 = analyse_section(_section_frame_2d(axes, q, chord_sign)) if len(q) else None
-            if s2 is None:
-                continue
-            if ref is None or s2.chord >= 0.9 * _interp_chord(pred, sections[j + toward], etas, j, toward, e):
-                good = (e, s2)
-                break
-        if good is None:
-            continue
-        e, s2 = good
-        nb = sections[j + toward]
-        f = (etas[j] - e) / (e - etas[j + toward]) if nb is not None else 0.0
-        le = s2.le + f * (s2.le - nb.le) if nb is not None else s2.le
-        te = s2.te + f * (s2.te - nb.te) if nb is not None else s2.te
-        chord = float(np.hypot(*(te - le)))
-        scale = chord / s2.chord
-        sections[j] = Section(le=le, te=te, upper=s2.upper * scale, lower=s2.lower * scale,
-                              front=min(0.0, s2.front * scale), back=max(chord, s2.back * scale),
-                              extrapolated=True)
-        warnings.append(f"the {'tip' if j else 'root'} cut misses the airfoil (rounded cap?): "
-                        f"section {j} extrapolated from the planform at {abs(e - etas[j]) / span:.1%} "
-                        "span inboard")
-
-
-def _interp_chord(pred, nb, etas, j, toward, e):
-    """Chord expected at station ``e`` between the neighbour section and the prediction at j."""
-    if nb is None:
-        return pred[2]
-    w = (e - etas[j + toward]) / (etas[j] - etas[j + toward])
-    return (1 - w) * nb.chord + w * pred[2]
 
 
 def _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim):
@@ -521,46 +363,6 @@ def _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim):
     return P
 
 
-def _edge_points(sections, stations, axes: Axes, chord_sign: float, dim: int):
-    """(m, 3) leading- and trailing-edge points in mesh coordinates of the sections' 2D cuts."""
-    m = len(sections)
-    le_pts, te_pts = np.zeros((m, 3)), np.zeros((m, 3))
-    for j, s in enumerate(sections):
-        for arr, q in ((le_pts, s.le), (te_pts, s.te)):
-            arr[j, axes.chord] = chord_sign * q[0]
-            arr[j, axes.thickness] = q[1]
-            arr[j, axes.span] = axes.span_sign * stations[j] if dim == 3 else stations[j]
-    return le_pts, te_pts
-
-
-def _assemble(P, degree, axes, dim, chord_sign, stations, sections, margins, settings) -> Box:
-    from ffdcli.spline import clamped_knots
-
-    n, m, l, _ = P.shape
-    sizes = (n, m, l) if dim == 3 else (n, l)
-    knots = tuple(clamped_knots(s, d) for s, d in zip(sizes, degree))
-    le_pts, te_pts = _edge_points(sections, stations, axes, chord_sign, dim)
-    ref = np.zeros((m, n, l))
-    for j, s in enumerate(sections):
-        # the reference point in the rectangle's own (along, across) fractions: bilinear in corners
-        L = s.chord
-        front = s.front - margins[j, 0] * L
-        back = s.back + margins[j, 1] * L
-        lower = s.lower - margins[j, 2] * L
-        upper = s.upper + margins[j, 3] * L
-        fa = (L - front) / (back - front)
-        fb = (0.0 - lower) / (upper - lower)
-        ref[j, 0, 0] = (1 - fa) * (1 - fb)
-        ref[j, -1, 0] = fa * (1 - fb)
-        ref[j, 0, -1] = (1 - fa) * fb
-        ref[j, -1, -1] = fa * fb
-    return Box(control_points=P, degree=tuple(degree), knots=knots, axes=axes, dim=dim,
-               chord_sign=chord_sign,
-               stations=np.asarray(stations, dtype=np.float64) * (axes.span_sign if dim == 3 else 1.0),
-               le_points=le_pts, te_points=te_pts, margins=margins.copy(), ref_weights=ref,
-               le_rows=None, settings=settings)
-
-
 def _grow_margins(margins, core, outside, sections, box, settings):
     """Grow the margins of the sides where points fell out, at the sections nearest to them."""
     margins = margins.copy()
@@ -569,8 +371,6 @@ def _grow_margins(margins, core, outside, sections, box, settings):
     m = margins.shape[0]
     step0 = max(settings.margin, 0.01)
     if box.dim == 3:
-        from ffdcli.spline import basis
-
         first, vals = basis(box.knots[1], box.degree[1], params[:, 1])
         js = first[:, None] + np.arange(vals.shape[1])[None, :]
         near = vals > 0.05
@@ -596,165 +396,59 @@ def _grow_margins(margins, core, outside, sections, box, settings):
     return margins + grow
 
 
-def _le_rows(box: Box) -> np.ndarray:
-    """Basis rows (2, n*m*l) of the leading-edge points of the root and tip sections."""
-    from ffdcli.embedding import embed
-
-    lat = box.lattice()
-    e = embed(lat, box.core_points(box.le_points[[0, -1]]))
-    rows = e.basis_matrix().toarray()
-    if not e.inside.all():        # a leading-edge point must lie in the lattice (it has margins)
-        raise RuntimeError("leading-edge reference points fell outside the lattice")
-    return rows
-
-
 # ----------------------------------------------------------------------------------------------
-# Imported lattices (pyGeo/DAFoam Plot3D files)
+# Making a box (both paths: fitted here, imported in ffdcli.box_import)
 # ----------------------------------------------------------------------------------------------
 
-def import_box(file, points: np.ndarray, faces=(), settings: BoxSettings | None = None, *,
-               dim: int = 3, path=None, progress=None):
-    """Use a single-block Plot3D lattice (a pyGeo FFD file) as the box, and embed the surface in it.
+def assemble_box(P: np.ndarray, settings: BoxSettings, axes: Axes, dim: int, chord_sign: float,
+                 stations: np.ndarray, sections: list[Section], *, margins: np.ndarray | None = None,
+                 le_rows: np.ndarray | None = None, imported: bool = False) -> Box:
+    """The :class:`Box` of control points ``P`` (n, m, l, 3) and the sections it was made for.
 
-    The block's index directions are matched to chord, span and thickness by their alignment with
-    the mesh axes, and flipped so that ``i`` runs from leading to trailing edge, ``j`` from root to
-    tip and ``k`` upward. Points outside the lattice are reported, never snapped: they keep their
-    position when the lattice moves. The number of control points comes from the file; degrees
-    default to min(3, points - 1) as for an automatic box.
+    ``settings`` are checked ones (points and degree filled in); ``stations`` (m,) are signed span
+    coordinates of the sections (``axes.span_sign`` times the mesh coordinate; 2D: the plane's);
+    ``sections`` the airfoils read at them. Knots, edge points and the reference weights of each
+    section's trailing-edge point follow from these. ``margins`` (m, 4) default to zeros (an
+    imported lattice); ``le_rows`` are set once the lattice exists (:func:`le_basis_rows`).
     """
-    from ffdcli.embedding import embed
-    from ffdcli.formats.plot3d import read_plot3d
-
-    settings = settings or BoxSettings()
-    blocks = read_plot3d(file)
-    if len(blocks) != 1:
-        raise InputError(f"the lattice file has {len(blocks)} blocks; ffd takes a single-block lattice "
-                         "(split the file, one box per wing)", path=file)
-    blk = blocks[0]
-    pts = np.asarray(points, dtype=np.float64)
-    axes = detect_axes(pts, dim, sections=settings.sections, root=settings.root, path=path, faces=faces)
-    edges = surface_edges(faces, unique=False)
-    size = float(np.linalg.norm(pts.max(0) - pts.min(0)))
-    span_len = np.ptp(pts[:, axes.span])
-    slab = 0.02 * span_len if span_len > 0 else 0.0
-
-    def cut_at(e):
-        return cut(pts, edges, axes.span, axes.span_sign * e, tol=1e-9 * size, slab=slab)
-
-    if dim == 3:
-        eta = axes.span_sign * pts[:, axes.span]
-        root, tip = float(eta.min()), float(eta.max())
-        probe = [cut_at(root + f * (tip - root)) for f in (0.2, 0.35, 0.5, 0.65, 0.8)]
-        chord_sign, _ = leading_edge_sign([np.stack([q[:, axes.chord], q[:, axes.thickness]], 1)
-                                           for q in probe])
-    else:
-        chord_sign, _ = leading_edge_sign([pts[:, [axes.chord, axes.thickness]]])
-    dirs = {"chord": np.eye(3)[axes.chord] * chord_sign, "span": np.eye(3)[axes.span] * axes.span_sign,
-            "thickness": np.eye(3)[axes.thickness]}
-    mean_edge = []
-    for a in range(3):
-        if blk.shape[a] < 2:
-            mean_edge.append(np.zeros(3))
-            continue
-        d = np.diff(blk, axis=a).reshape(-1, 3).mean(axis=0)
-        mean_edge.append(d / (np.linalg.norm(d) or 1.0))
-    mean_edge = np.array(mean_edge)
-    order = {}
-    left = [0, 1, 2]
-    for name in ("span", "chord", "thickness"):
-        score = [abs(mean_edge[a] @ dirs[name]) for a in left]
-        a = left[int(np.argmax(score))]
-        order[name] = a
-        left.remove(a)
-    P = blk.transpose(order["chord"], order["span"], order["thickness"], 3)
-    for ax, name in ((0, "chord"), (1, "span"), (2, "thickness")):
-        if P.shape[ax] > 1 and np.diff(P, axis=ax).reshape(-1, 3).mean(axis=0) @ dirs[name] < 0:
-            P = np.flip(P, axis=ax)
-    if dim == 2:
-        P = P[:, :1, :, :].copy()
-        P[..., axes.span] = float(np.mean(pts[:, axes.span]))
-    P = np.ascontiguousarray(P)
+    P = np.ascontiguousarray(P, dtype=np.float64)
     n, m, l, _ = P.shape
-    want = (n, m, l) if dim == 3 else (n, l)
-    if settings.points is not None and tuple(settings.points) != want:
-        raise InputError(f"box.points {list(settings.points)} does not match the lattice in "
-                         f"{file} ({' x '.join(map(str, want))}); leave points out with box.file",
-                         path=path, key="box.points")
-    settings = replace(settings, points=want).checked(dim, path=path)
     degree = settings.degrees()
+    sizes = (n, m, l) if dim == 3 else (n, l)
+    knots = tuple(clamped_knots(s, d) for s, d in zip(sizes, degree, strict=True))
+    le_pts, te_pts = edge_points(sections, stations, axes, chord_sign, dim)
+    return Box(control_points=P, degree=tuple(degree), knots=knots, axes=axes, dim=dim,
+               chord_sign=chord_sign,
+               stations=np.asarray(stations, dtype=np.float64) * (axes.span_sign if dim == 3 else 1.0),
+               le_points=le_pts, te_points=te_pts,
+               margins=np.zeros((m, 4)) if margins is None else np.array(margins, dtype=np.float64),
+               ref_weights=reference_weights(P, sections, axes, chord_sign), le_rows=le_rows,
+               settings=settings, imported=imported)
 
-    # Sections at the lattice's stations (clamped to the surface's span) for the reference points.
-    if dim == 3:
-        stations = (axes.span_sign * P[..., axes.span]).mean(axis=(0, 2))
-        secs = []
-        for e in np.clip(stations, root, tip):
-            q = cut_at(e)
-            secs.append(analyse_section(_section_frame_2d(axes, q, chord_sign)) if len(q) else None)
-        etas = np.clip(stations, root, tip)
-        warnings: list[str] = []
-        _repair_ends(secs, etas, cut_at, axes, chord_sign, tip - root, warnings)
-        for j, s in enumerate(secs):
-            if s is None:
-                near = [k for k in range(m) if secs[k] is not None]
-                if not near:
-                    raise InputError("the lattice does not overlap the wing's span", path=file)
-                secs[j] = secs[min(near, key=lambda k: abs(k - j))]
-    else:
-        stations = np.array([float(np.mean(pts[:, axes.span]))])
-        secs = [analyse_section(_section_frame_2d(axes, pts, chord_sign))]
-        warnings = []
-    le_pts, te_pts = _edge_points(secs, stations, axes, chord_sign, dim)
+
+def reference_weights(P: np.ndarray, sections: list[Section], axes: Axes, chord_sign: float) -> np.ndarray:
+    """(m, n, l) weights of each section's trailing-edge point in the corners of its lattice section.
+
+    ``te_j = sum_ik w[j, i, k] P[i, j, k]`` with only the four corners non-zero: the bilinear
+    coordinates of the trailing-edge point in the quadrilateral of corners (exact for the rectangles
+    of a fitted box, Newton's method for an imported lattice's sections).
+    """
+    n, m, l, _ = P.shape
     ref = np.zeros((m, n, l))
-    for j, s in enumerate(secs):
+    for j, s in enumerate(sections):
         corners = P[[0, -1, 0, -1], j, [0, 0, -1, -1]]          # A B C D
         c2 = np.stack([chord_sign * corners[:, axes.chord], corners[:, axes.thickness]], 1)
         a, b = _bilinear_inverse(c2, s.te)
         ref[j, 0, 0], ref[j, -1, 0] = (1 - a) * (1 - b), a * (1 - b)
         ref[j, 0, -1], ref[j, -1, -1] = (1 - a) * b, a * b
-    from ffdcli.spline import clamped_knots
-
-    sizes = (n, m, l) if dim == 3 else (n, l)
-    knots = tuple(clamped_knots(s_, d) for s_, d in zip(sizes, degree))
-    box = Box(control_points=P, degree=tuple(degree), knots=knots, axes=axes, dim=dim,
-              chord_sign=chord_sign, stations=np.asarray(stations, float) * (axes.span_sign if dim == 3 else 1.0),
-              le_points=le_pts,
-              te_points=te_pts, margins=np.zeros((m, 4)), ref_weights=ref, le_rows=None,
-              settings=settings, imported=True)
-    core = embed(box.lattice(), box.core_points(pts), progress=progress)
-    n_out = int((~core.inside).sum())
-    if n_out:
-        warnings.append(f"{n_out} surface points are outside the imported lattice {file}; they will "
-                        f"not move (worst distance {core.residual[~core.inside].max():.3g})")
-    if dim == 3:
-        # the leading-edge line of the surface (root and tip), for sweep and dihedral
-        r_le, t_le = _surface_le(cut_at, root, tip, axes, chord_sign)
-        e = embed(box.lattice(), box.core_points(np.array([r_le, t_le])))
-        if not e.inside.all():
-            warnings.append("the wing's leading edge at the root or tip is outside the imported lattice: "
-                            "sweep and dihedral measure the angle from the lattice's own leading edge")
-        box.le_rows = e.basis_matrix().toarray()
-    return box, core, {"rebuilds": 0, "warnings": warnings, "outside": n_out}
+    return ref
 
 
-def _surface_le(cut_at, root, tip, axes, chord_sign):
-    """Leading-edge points (3,) of the surface's root and tip airfoils."""
-    etas = np.array([root, tip])
-    secs = []
-    for e in etas:
-        q = cut_at(e)
-        secs.append(analyse_section(_section_frame_2d(axes, q, chord_sign)) if len(q) else None)
-    mid = [cut_at(root + f * (tip - root)) for f in (0.5,)]
-    secs_full = [secs[0], analyse_section(_section_frame_2d(axes, mid[0], chord_sign)), secs[1]]
-    etas3 = np.array([root, 0.5 * (root + tip), tip])
-    _repair_ends(secs_full, etas3, cut_at, axes, chord_sign, tip - root, [])
-    out = []
-    for s, e in ((secs_full[0], root), (secs_full[2], tip)):
-        if s is None:
-            raise InputError("could not find the airfoil at the wing's root or tip")
-        p = np.zeros(3)
-        p[axes.chord], p[axes.thickness], p[axes.span] = chord_sign * s.le[0], s.le[1], axes.span_sign * e
-        out.append(p)
-    return out
+def le_basis_rows(box: Box, points: np.ndarray) -> tuple[np.ndarray, bool]:
+    """Basis rows (2, n*m*l) of two leading-edge points (2, 3) (root, tip) in the box's lattice, and
+    whether both are inside it."""
+    e = embed(box.lattice(), box.core_points(points))
+    return e.basis_matrix().toarray(), bool(e.inside.all())
 
 
 def _bilinear_inverse(c: np.ndarray, x: np.ndarray) -> tuple[float, float]:

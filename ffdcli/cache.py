@@ -19,13 +19,14 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli import __version__
-from ffdcli.axes import Axes
+from ffdcli.atomic import atomic_path
 from ffdcli.box import Box
+from ffdcli.embedding import Embedding
 from ffdcli.errors import InputError
 from ffdcli.settings import BoxSettings
 
 #: Bumped whenever the content of the cache changes meaning.
-CACHE_FORMAT = 1
+CACHE_FORMAT = 2
 
 
 def file_hash(path: str | Path, chunk: int = 1 << 22) -> str:
@@ -57,32 +58,16 @@ def cache_path(mesh_path: str | Path, key: str, cache_dir: str | Path | None = N
 def save(path: str | Path, key: str, box: Box, surface_ids: np.ndarray, embedding, report: dict,
          meta: dict | None = None) -> None:
     """Write the cache file atomically."""
-    from ffdcli.atomic import atomic_path
-
     header = {"key": key, "version": __version__, "format": CACHE_FORMAT,
               "settings": box.settings.as_dict(), "report": report, **(meta or {})}
     arrays = {
         "header": np.frombuffer(json.dumps(header, default=str).encode(), dtype=np.uint8),
-        "control_points": box.control_points,
-        "degree": np.asarray(box.degree, dtype=np.int64),
-        "axes": np.array([box.axes.chord, box.axes.thickness, box.axes.span,
-                          0 if box.axes.root == "min" else 1, int(box.axes.guessed)], dtype=np.int64),
-        "dim": np.int64(box.dim),
-        "chord_sign": np.float64(box.chord_sign),
-        "stations": box.stations,
-        "le_points": box.le_points,
-        "te_points": box.te_points,
-        "margins": box.margins,
-        "ref_weights": box.ref_weights,
-        "le_rows": box.le_rows if box.le_rows is not None else np.zeros((0, 0)),
-        "imported": np.int64(box.imported),
+        **box.to_arrays(),                 # the box says how it is stored; its names are not the ones below
         "surface_ids": np.asarray(surface_ids, dtype=np.int64),
         "params": embedding.params,
         "inside": embedding.inside,
         "residual": embedding.residual,
     }
-    for i, k in enumerate(box.knots):
-        arrays[f"knots{i}"] = k
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
@@ -90,8 +75,6 @@ def save(path: str | Path, key: str, box: Box, surface_ids: np.ndarray, embeddin
 
 def load(path: str | Path, key: str, settings: BoxSettings):
     """(box, surface_ids, embedding, header) from a cache file, or None if absent, stale or corrupt."""
-    from ffdcli.embedding import Embedding
-
     p = Path(path)
     if not p.is_file():
         return None
@@ -107,18 +90,10 @@ def load(path: str | Path, key: str, settings: BoxSettings):
     if any(v.dtype.kind == "f" and not np.all(np.isfinite(v)) for v in a.values()):
         return None                  # a damaged file: no cache we write holds NaN or inf
     try:
-        dim = int(a["dim"])
-        ax = a["axes"]
-        axes = Axes(chord=int(ax[0]), thickness=int(ax[1]), span=int(ax[2]),
-                    root="min" if ax[3] == 0 else "max", guessed=bool(ax[4]))
-        nk = 3 if dim == 3 else 2
-        knots = tuple(a[f"knots{i}"] for i in range(nk))
-        le_rows = a["le_rows"] if a["le_rows"].size else None
-        box = Box(control_points=a["control_points"], degree=tuple(int(d) for d in a["degree"]),
-                  knots=knots, axes=axes, dim=dim, chord_sign=float(a["chord_sign"]),
-                  stations=a["stations"], le_points=a["le_points"], te_points=a["te_points"],
-                  margins=a["margins"], ref_weights=a["ref_weights"], le_rows=le_rows,
-                  settings=settings, imported=bool(a["imported"]))
+        box = Box.from_arrays(a)
+        if box.settings != settings:
+            return None
+        nk = len(box.knots)
         ids = a["surface_ids"]
         params, inside, residual = a["params"], a["inside"].astype(bool), a["residual"]
         n_pts = len(ids)

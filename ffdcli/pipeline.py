@@ -16,7 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.box import Box, fit_box
+from ffdcli.box_import import import_box
 from ffdcli.errors import InputError, QualityError
+from ffdcli.formats.plot3d import read_plot3d
 from ffdcli.mesh import Mesh
 from ffdcli.progress import no_progress
 from ffdcli.settings import BoxSettings
@@ -88,6 +90,15 @@ def resolve_surface(mesh: Mesh, surface) -> list[str]:
     return default_surface(mesh)
 
 
+def read_lattice_block(file) -> np.ndarray:
+    """The control points (ni, nj, nk, 3) of a single-block Plot3D lattice file (``box.file``)."""
+    blocks = read_plot3d(file)
+    if len(blocks) != 1:
+        raise InputError(f"the lattice file has {len(blocks)} blocks; ffd takes a single-block lattice "
+                         "(split the file, one box per wing)", path=file)
+    return blocks[0]
+
+
 def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | None = None, *,
                 cache_dir: str | Path | None = None, use_cache: bool = True, rebuild: bool = False,
                 progress=None, mesh_hash: str | None = None, comm=None) -> PreparedBox:
@@ -146,10 +157,8 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
                                        warnings=notes + list(header.get("report", {}).get("warnings", [])))
 
     if settings.file:
-        from ffdcli.box import import_box
-
-        box, emb, report = import_box(settings.file, surf.points, surf.faces, settings, dim=dim,
-                                      path=mesh.path, progress=progress)
+        box, emb, report = import_box(read_lattice_block(settings.file), surf.points, surf.faces, settings,
+                                      dim=dim, path=mesh.path, source=settings.file, progress=progress)
     else:
         box, emb, report = fit_box(surf.points, surf.faces, settings, dim=dim, path=mesh.path,
                                    progress=progress)

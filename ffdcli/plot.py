@@ -51,7 +51,7 @@ class Part:
 
 def run_parts(run, result) -> list[Part]:
     """The parts of a design run (``ffdcli.pipeline``): one wing today."""
-    from ffdcli.box import surface_edges
+    from ffdcli.sections import surface_edges
 
     surf = run.prep.surface
     return [Part(name=", ".join(surf.names), X0=surf.points, X1=result.points[surf.ids],
