@@ -20,8 +20,8 @@ import yaml
 
 from ffdcli import __version__
 from ffdcli.axes import AXIS_NAMES, detect_axes
-from ffdcli.box import DEFAULT_POINTS
 from ffdcli.errors import InputError
+from ffdcli.settings import DEFAULT_POINTS
 
 #: Column where the ``#`` of a value's comment starts.
 COMMENT_COLUMN = 44
