@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from ffdcli.axes import detect_axes, free_edge_nodes
-from ffdcli.box import BoxSettings, fit_box
+from ffdcli.box import fit_box
+from ffdcli.settings import BoxSettings
 from ffdcli.surface import extract_surface
 from ffdcli.wings import Planform, surface_mesh
 
