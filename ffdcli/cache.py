@@ -90,9 +90,7 @@ def load(path: str | Path, key: str, settings: BoxSettings):
     if any(v.dtype.kind == "f" and not np.all(np.isfinite(v)) for v in a.values()):
         return None                  # a damaged file: no cache we write holds NaN or inf
     try:
-        box = Box.from_arrays(a)
-        if box.settings != settings:
-            return None
+        box = Box.from_arrays(a)            # its settings are in the key (and stored with it)
         nk = len(box.knots)
         ids = a["surface_ids"]
         params, inside, residual = a["params"], a["inside"].astype(bool), a["residual"]
