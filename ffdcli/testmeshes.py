@@ -37,7 +37,7 @@ from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.wings import Planform, crm_planform
 
 #: Bump when the generator changes what it writes (part of the cache key).
-GENERATOR_VERSION = 1
+GENERATOR_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -129,7 +129,7 @@ def _sections(case: WingCase) -> list[np.ndarray]:
         tip_chord = float(pf.chord(1.0))
         r = 0.5 * float(np.ptp(tip_coords[:, 1])) * tip_chord       # half the tip thickness
         camber = 0.5 * (tip_coords + tip_coords[::-1])[:, 1]           # mid-line (same x both sides)
-        for phi in np.radians([20.0, 40.0, 55.0, 70.0, 80.0]):
+        for phi in np.radians([25.0, 50.0, 70.0]):
             c = tip_coords.copy()
             c[:, 1] = camber + (tip_coords[:, 1] - camber) * np.cos(phi)
             local = pf.local_points(np.array([1.0]), c)[0]
