@@ -3,8 +3,8 @@
 For every mesh and design, the design file is deformed exactly as ``ffd deform`` does
 (:func:`ffdcli.pipeline.deform`, the quality gate of :mod:`ffdcli.quality`) and the table shows
 whether the gate refused it, the inverted cells, the minimum scaled Jacobian before -> after and
-the orthogonality measure of the gate (the smallest face angle before -> after, and the largest
-loss of a cell). Target: 0 refusals and 0 inverted cells with the default ``volume:`` settings.
+SU2's node orthogonality of the gate (the smallest before -> after, and the largest loss of a
+node). Target: 0 refusals and 0 inverted cells with the default ``volume:`` settings.
 
 Meshes: the bundled wings (``samples/rect_wing.su2``, ``samples/crm_wing.su2``), the ONERA M6 of
 ``../shared/data`` (skipped when absent) and the generated wings of :mod:`ffdcli.testmeshes`
@@ -35,10 +35,11 @@ import yaml
 
 REPO = Path(__file__).resolve().parents[1]
 TITLE = "Robustness: designs x meshes with the default volume settings (target 0 refused, 0 inverted)"
-NOTES = ("Status: ok, REFUSED (the gate of ffd deform would exit 3; the failing counts follow), "
-         "ERROR (another failure). q = min scaled Jacobian before->after; ortho = min face angle (deg) "
-         "before->after and the largest loss of one cell. Run `python -m benchmarks.bench_robustness --help` "
-         "for one mesh or design.")
+NOTES = ("Cells of the matrix: ok, or **R** (the gate of ffd deform would exit 3) with the cells inverted "
+         "(inv), made worse (worse) and the nodes that lost orthogonality (ortho); INPUT / ERROR: another "
+         "failure. Details: q = min scaled Jacobian before->after; ortho = min node orthogonality (SU2's, "
+         "degrees) before->after and the largest loss of one node. "
+         "`python -m benchmarks.bench_robustness --help` runs one mesh or design.")
 
 
 # ----------------------------------------------------------------------------------------------
@@ -172,11 +173,9 @@ def run_one(mesh_path: Path, surface: str, design: str, *, work: Path, overrides
     q = result.quality
     row["status"] = "ok" if q is None or q.ok else "REFUSED"
     if q is not None:
-        d = q.to_dict()
-        row.update(inverted=q.n_inverted, failed=q.n_failed, q_before=d.get("min_before"), q_after=d.get("min_after"))
-        for k in ("ortho_before", "ortho_after", "ortho_loss"):
-            if k in d:
-                row[k] = d[k]
+        row.update(inverted=q.n_inverted, failed=q.n_failed, worse=q.n_worse, ortho_failed=q.n_ortho_failed,
+                   input_bad=q.n_input_bad, q_before=q.min_before, q_after=q.min_after,
+                   ortho_before=q.ortho_before, ortho_after=q.ortho_after, ortho_loss=q.ortho_loss)
     recovery = getattr(result, "recovery", None)
     if recovery:
         row["recovery"] = recovery if isinstance(recovery, str) else json.dumps(recovery, default=str)
@@ -212,11 +211,12 @@ def _line(r: dict) -> str:
     s = f"{r['mesh']:<24} {r['design']:<20} {r['status']:<8}"
     if "error" in r:
         return s + " " + r["error"]
-    s += f" inv {r.get('inverted', 0):>5} fail {r.get('failed', 0):>5}"
+    s += (f" inv {r.get('inverted', 0):>5} worse {r.get('worse', 0):>5} ortho {r.get('ortho_failed', 0):>5}"
+          + (f" input-bad {r['input_bad']}" if r.get("input_bad") else ""))
     s += f"  q {_fmt(r.get('q_before'))}->{_fmt(r.get('q_after'))}"
-    if "ortho_after" in r:
-        s += f"  ortho {_fmt(r.get('ortho_before'), '.1f')}->{_fmt(r.get('ortho_after'), '.1f')}"
-        s += f" loss {_fmt(r.get('ortho_loss'), '.1f')}"
+    if r.get("ortho_after") is not None:
+        s += f"  ortho {_fmt(r.get('ortho_before'), '.1f')}->{_fmt(r.get('ortho_after'), '.1f')} deg"
+        s += f" (loss {_fmt(r.get('ortho_loss'), '.1f')})"
     if "recovery" in r:
         s += f"  [{r['recovery']}]"
     return s + f"  {r['seconds']:.1f}s"
@@ -237,7 +237,9 @@ def matrix_table(rows: list[dict]) -> str:
             elif r["status"] == "ok":
                 out.append("ok")
             elif r["status"] == "REFUSED":
-                out.append(f"**R** {r.get('inverted', 0)} inv / {r.get('failed', 0)}")
+                parts = [f"{r[k]} {w}" for k, w in (("inverted", "inv"), ("worse", "worse"),
+                                                      ("ortho_failed", "ortho")) if r.get(k)]
+                out.append("**R** " + ", ".join(parts))
             else:
                 out.append(r["status"])
         lines.append(f"| {d} | " + " | ".join(out) + " |")

@@ -1,7 +1,7 @@
-"""Cell quality: the scaled Jacobian of every cell, and the gate of ``ffd deform`` / ``ffd check``.
+"""Cell quality and orthogonality, and the one quality gate of ``ffd deform`` and ``ffd check``.
 
-**Measure.** The scaled Jacobian of a cell is the smallest, over its corners, of the corner's
-Jacobian determinant divided by the lengths of the corner's edges::
+**Scaled Jacobian** (:func:`cell_quality`, one value per cell). The smallest, over the cell's
+corners, of the corner's Jacobian determinant divided by the lengths of the corner's edges::
 
     q = min over corners  c * det[e1, e2, e3] / (|e1| |e2| |e3|)        (3D)
     q = min over corners  c * n . (e1 x e2) / (|e1| |e2|)               (2D, n the mesh-plane normal)
@@ -23,15 +23,36 @@ its sign is flipped (:func:`cell_orientation`, computed once from the undeformed
 the deformed one too), so a mesh is judged in its own convention. In 2D the mesh-plane normal is
 oriented so that most cells are positive.
 
-**The gate** (:func:`check_quality`). A cell *fails* when after the deformation
+**Orthogonality** (:func:`node_orthogonality`, one value per node, degrees): what SU2 reports as
+"Orthogonality" for its vertex-centred finite volumes. Each edge i-j has a dual face (the median
+dual: triangles through the edge midpoint, the centroids of the two cell faces at the edge and the
+cell centroid, summed over the cells around the edge); the edge's angle is ``90 - angle(dual-face
+normal, x_j - x_i)``, and the node's value is the area-weighted mean over its edges. 90 is ideal;
+SU2's own guidance is that values below about 20 degrees are poor. It sees what the scaled
+Jacobian misses: a sheared stack of thin boundary-layer cells keeps q but loses orthogonality.
 
-- it is inverted or degenerate: ``q_after <= 0``; or
-- it is below the threshold and the deformation made it markedly worse:
-  ``q_after < threshold`` and ``q_after < relative * q_before`` (default ``relative`` = 0.5).
+**The gate** (:func:`check_quality` gives the counts, :func:`enforce` applies them). With a mesh
+before (``ffd deform``):
 
-The second rule lets a mesh whose cells were already poor (anisotropic boundary-layer
-tetrahedra have q ~ 1e-3) deform without being blocked, unless their quality halves. Without a
-mesh before (``ffd check``) the rule is just ``q < threshold``.
+- *input problem, exit 2*: a cell already inverted or degenerate in the INPUT (``q_before <= 0``) is
+  the mesh's problem, not the design's: :func:`enforce` raises :class:`InputError` naming the cell
+  and where it is (with ``force``: only reported; such cells are not counted as failures below);
+- a cell *fails* when the design inverts it: ``q_after <= 0 < q_before``;
+- or when the design made it markedly worse: ``q_after < threshold`` (0.05) and ``q_after <
+  relative * q_before`` (``relative`` 0.5) and ``q_after <`` the input mesh's worst cell
+  (``min q_before``). The last condition means that a mesh whose worst cell did not get worse is not
+  refused on the scaled Jacobian: the solver already ran on a cell that bad;
+- a node *fails* when its orthogonality falls below ``ortho_min`` (20 degrees) after losing more than
+  ``ortho_loss`` (10 degrees) from the input.
+
+Without a mesh before (``ffd check``) nothing is relative: the counts are of the mesh as it is.
+
+**One set of words.** Both commands print the same counts of the mesh AS WRITTEN under the same
+words (:meth:`QualityReport.summary`): ``N inverted or degenerate`` (q <= 0) and ``N below 0.05``
+(0 < q < threshold) of the cells, the minimum q, the minimum orthogonality and ``N nodes below 20
+deg``; ``ffd check`` of a written mesh repeats the "after" numbers of the ``ffd deform`` that wrote
+it. ``ffd deform`` adds the "before" values and what the gate refuses on: ``inverted by the design``,
+``made worse`` and ``nodes that lost orthogonality``; the refusal message states the rule.
 """
 
 from __future__ import annotations
@@ -39,6 +60,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from ffdcli.mesh import CellBlock, Mesh
 
@@ -46,6 +68,10 @@ from ffdcli.mesh import CellBlock, Mesh
 DEFAULT_THRESHOLD = 0.05
 #: A cell below the threshold fails only if its quality dropped below this fraction of before.
 DEFAULT_RELATIVE = 0.5
+#: A node fails when its orthogonality (degrees) falls below this ...
+DEFAULT_ORTHO_MIN = 20.0
+#: ... after losing more than this many degrees from the input mesh.
+DEFAULT_ORTHO_LOSS = 10.0
 #: Cells evaluated per vectorised step (bounds the temporary arrays to ~100 MB).
 CHUNK = 200_000
 
@@ -165,18 +191,338 @@ def cell_quality(points: np.ndarray, cells: list[CellBlock], dim: int = 3, *,
     return np.concatenate(parts) if parts else np.zeros(0)
 
 
-@dataclass
-class QualityReport:
-    """The result of :func:`check_quality`.
+# ----------------------------------------------------------------------------------------------
+# Orthogonality of the dual grid (what SU2 computes)
+# ----------------------------------------------------------------------------------------------
 
-    count
-        Cells checked. ``n_inverted``: cells with q <= 0 (inverted or degenerate);
-        ``n_below``: the other failing cells (below the threshold and made worse, see the module
-        docstring). ``min_before`` / ``min_after``: the smallest q (None when unknown / no cells).
+# Faces of the 3D cells (local nodes, VTK order; the orientation of a face does not matter here).
+_FACES = {
+    "tetra": [(0, 1, 2), (0, 1, 3), (1, 2, 3), (0, 2, 3)],
+    "hexahedron": [(0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)],
+    "wedge": [(0, 1, 2), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)],
+    "pyramid": [(0, 1, 2, 3), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)],
+}
+# VTK reference cells (positive orientation), used to orient the edge tables once.
+_REFERENCE = {
+    "tetra": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    "hexahedron": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
+    "wedge": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]],
+    "pyramid": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]],
+    "triangle": [[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+    "quad": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+}
+
+
+def _face_table(ctype: str) -> tuple[np.ndarray, np.ndarray]:
+    """(F, 4) local face nodes padded with -1, and (F,) node counts (2D: the cell is its one face)."""
+    faces = _FACES.get(ctype) or [tuple(range(len(_REFERENCE[ctype])))]
+    tab = np.full((len(faces), 4), -1, dtype=np.int64)
+    for i, f in enumerate(faces):
+        tab[i, :len(f)] = f
+    return tab, np.array([len(f) for f in faces], dtype=np.int64)
+
+
+def _dual_facets(p: np.ndarray, faces: np.ndarray, counts: np.ndarray, table: np.ndarray,
+                 normal: np.ndarray | None) -> np.ndarray:
+    """Dual-face normals of the local edges of cells ``p`` (n, k, 3): (n, E, 3), oriented a -> b.
+
+    3D: the two triangles (edge midpoint, centroid of face f1, cell centroid) and (midpoint, cell
+    centroid, centroid of face f2); 2D: the segment from the edge midpoint to the cell centroid,
+    turned by 90 degrees in the mesh plane (``normal``)."""
+    centre = p.mean(axis=1)[:, None, :]                                       # (n, 1, 3)
+    mid = 0.5 * (p[:, table[:, 0]] + p[:, table[:, 1]])                       # (n, E, 3)
+    if normal is not None:
+        return np.cross(centre - mid, normal)
+    fc = np.stack([p[:, faces[f, :counts[f]]].mean(axis=1) for f in range(len(faces))], axis=1)
+    a, b = fc[:, table[:, 2]] - mid, fc[:, table[:, 3]] - mid
+    c = centre - mid
+    return 0.5 * (np.cross(a, c) + np.cross(c, b))
+
+
+def _edge_table(ctype: str) -> np.ndarray:
+    """(E, 4) rows (a, b, f1, f2): the local edges of a cell type and, in 3D, the two faces that
+    share each edge, ordered so that the dual-face normal points from a to b in a positive cell."""
+    faces, counts = _face_table(ctype)
+    if ctype in ("triangle", "quad"):
+        k = counts[0]
+        table = np.array([[i, (i + 1) % k, 0, 0] for i in range(k)], dtype=np.int64)
+        ref = np.asarray(_REFERENCE[ctype], float)[None]
+        n = _dual_facets(ref, faces, counts, table, np.array([0.0, 0.0, 1.0]))[0]
+        assert np.all(np.einsum("ek,ek->e", n, ref[0, table[:, 1]] - ref[0, table[:, 0]]) > 0)
+        return table
+    shared: dict[tuple[int, int], list[int]] = {}
+    for f, nodes in enumerate(_FACES[ctype]):
+        for i in range(len(nodes)):
+            a, b = nodes[i], nodes[(i + 1) % len(nodes)]
+            shared.setdefault((min(a, b), max(a, b)), []).append(f)
+    table = np.array([[a, b, *fs] for (a, b), fs in sorted(shared.items())], dtype=np.int64)
+    ref = np.asarray(_REFERENCE[ctype], float)[None]
+    n = _dual_facets(ref, faces, counts, table, None)[0]
+    flip = np.einsum("ek,ek->e", n, ref[0, table[:, 1]] - ref[0, table[:, 0]]) < 0
+    table[flip] = table[flip][:, [0, 1, 3, 2]]
+    return table
+
+
+_EDGES = {t: _edge_table(t) for t in _REFERENCE}
+
+
+@dataclass(frozen=True)
+class EdgeTopology:
+    """The edges of a mesh and, per cell block, which edge each local edge of a cell is.
+
+    edges
+        (E, 2) node pairs, lower id first.
+    ids, signs
+        Per block: (n, e) edge index of each local edge, and +1 where the local edge runs from the
+        lower to the higher node id, -1 otherwise.
+    """
+
+    edges: np.ndarray
+    ids: tuple
+    signs: tuple
+
+
+def edge_topology(cells: list[CellBlock], n_points: int, *, use_numba: bool = True) -> EdgeTopology:
+    """Number the edges of ``cells`` (shared by the cells around them). Linear time with numba."""
+    lo_parts, hi_parts, sign_parts, shapes = [], [], [], []
+    for blk in cells:
+        t = _EDGES[blk.type]
+        a, b = blk.data[:, t[:, 0]], blk.data[:, t[:, 1]]
+        lo_parts.append(np.minimum(a, b).ravel())
+        hi_parts.append(np.maximum(a, b).ravel())
+        sign_parts.append(np.where(a < b, 1, -1).astype(np.int8))
+        shapes.append(a.shape)
+    lo = np.concatenate(lo_parts) if lo_parts else np.zeros(0, np.int64)
+    hi = np.concatenate(hi_parts) if hi_parts else np.zeros(0, np.int64)
+    if use_numba:
+        eid, elo, ehi = _number_edges_nb(lo, hi, int(n_points))
+    else:
+        key, eid = np.unique(lo * np.int64(n_points) + hi, return_inverse=True)
+        elo, ehi = key // n_points, key % n_points
+    ids, start = [], 0
+    for shape in shapes:
+        size = shape[0] * shape[1]
+        ids.append(eid[start:start + size].reshape(shape))
+        start += size
+    return EdgeTopology(np.column_stack([elo, ehi]), tuple(ids), tuple(sign_parts))
+
+
+@njit(cache=True)
+def _number_edges_nb(lo, hi, n_points):
+    """Edge id of every (lo, hi) pair: a counting sort by ``lo``, then the distinct ``hi`` of each
+    node's (short) list. Ids are in order of (lo, first appearance of hi)."""
+    n = lo.size
+    start = np.zeros(n_points + 1, np.int64)
+    for p in range(n):
+        start[lo[p] + 1] += 1
+    for i in range(n_points):
+        start[i + 1] += start[i]
+    fill = start[:-1].copy()
+    order = np.empty(n, np.int64)
+    for p in range(n):
+        order[fill[lo[p]]] = p
+        fill[lo[p]] += 1
+    eid = np.empty(n, np.int64)
+    elo = np.empty(n, np.int64)
+    ehi = np.empty(n, np.int64)
+    m = 0
+    for i in range(n_points):
+        first = m
+        for q in range(start[i], start[i + 1]):
+            p = order[q]
+            h = hi[p]
+            found = -1
+            for e in range(first, m):
+                if ehi[e] == h:
+                    found = e
+                    break
+            if found < 0:
+                elo[m] = i
+                ehi[m] = h
+                found = m
+                m += 1
+            eid[p] = found
+    return eid, elo[:m].copy(), ehi[:m].copy()
+
+
+def edge_normals(points: np.ndarray, cells: list[CellBlock], topology: EdgeTopology,
+                 orientation: Orientation, *, use_numba: bool = True) -> np.ndarray:
+    """(E, 3) dual-face area normal of every edge (sum over the cells around it), pointing from the
+    lower to the higher node id. A numba kernel (one pass over the cells); ``use_numba=False``: the
+    NumPy reference, vectorised in chunks of cells."""
+    n_edges = len(topology.edges)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    plane = np.zeros(3) if orientation.normal is None else np.asarray(orientation.normal, dtype=np.float64)
+    acc = np.zeros((n_edges, 3))
+    for b, blk in enumerate(cells):
+        table = _EDGES[blk.type]
+        faces, counts = _face_table(blk.type)
+        sign = float(orientation.signs[b])
+        if use_numba:
+            _edge_normals_nb(pts, blk.data, table, faces, counts, sign, orientation.normal is not None, plane,
+                             topology.ids[b], topology.signs[b], acc)
+            continue
+        for lo in range(0, len(blk), CHUNK):
+            c = blk.data[lo:lo + CHUNK]
+            nrm = _dual_facets(pts[c], faces, counts, table, orientation.normal)      # (n, E, 3)
+            nrm *= (sign * topology.signs[b][lo:lo + CHUNK])[:, :, None]
+            ids = topology.ids[b][lo:lo + CHUNK].ravel()
+            for k in range(3):
+                acc[:, k] += np.bincount(ids, weights=nrm[..., k].ravel(), minlength=n_edges)
+    return acc
+
+
+@njit(cache=True)
+def _edge_normals_nb(points, data, table, faces, counts, sign, planar, plane, ids, signs, acc):
+    """Numba twin of the NumPy branch of :func:`edge_normals` for one block (adds into ``acc``)."""
+    n_cells, k = data.shape
+    n_faces = faces.shape[0]
+    fc = np.empty((n_faces, 3))
+    centre = np.empty(3)
+    for c in range(n_cells):
+        for d in range(3):
+            t = 0.0
+            for v in range(k):
+                t += points[data[c, v], d]
+            centre[d] = t / k
+        if not planar:
+            for f in range(n_faces):
+                for d in range(3):
+                    t = 0.0
+                    for v in range(counts[f]):
+                        t += points[data[c, faces[f, v]], d]
+                    fc[f, d] = t / counts[f]
+        for e in range(table.shape[0]):
+            a = data[c, table[e, 0]]
+            b = data[c, table[e, 1]]
+            m0 = 0.5 * (points[a, 0] + points[b, 0])
+            m1 = 0.5 * (points[a, 1] + points[b, 1])
+            m2 = 0.5 * (points[a, 2] + points[b, 2])
+            c0, c1, c2 = centre[0] - m0, centre[1] - m1, centre[2] - m2
+            if planar:
+                n0 = c1 * plane[2] - c2 * plane[1]
+                n1 = c2 * plane[0] - c0 * plane[2]
+                n2 = c0 * plane[1] - c1 * plane[0]
+            else:
+                f1 = table[e, 2]
+                f2 = table[e, 3]
+                a0, a1, a2 = fc[f1, 0] - m0, fc[f1, 1] - m1, fc[f1, 2] - m2
+                b0, b1, b2 = fc[f2, 0] - m0, fc[f2, 1] - m1, fc[f2, 2] - m2
+                # 0.5 * (a x c + c x b) = 0.5 * (a - b) x c
+                d0, d1, d2 = a0 - b0, a1 - b1, a2 - b2
+                n0 = 0.5 * (d1 * c2 - d2 * c1)
+                n1 = 0.5 * (d2 * c0 - d0 * c2)
+                n2 = 0.5 * (d0 * c1 - d1 * c0)
+            s = sign * signs[c, e]
+            i = ids[c, e]
+            acc[i, 0] += s * n0
+            acc[i, 1] += s * n1
+            acc[i, 2] += s * n2
+
+
+def edge_orthogonality(points: np.ndarray, cells: list[CellBlock], dim: int = 3, *,
+                       orientation: Orientation | None = None, topology: EdgeTopology | None = None,
+                       use_numba: bool = True) -> tuple[np.ndarray, np.ndarray, EdgeTopology]:
+    """Per edge: ``90 - angle(dual-face normal, edge vector)`` in degrees, the dual-face area, and the
+    topology (``topology.edges`` says which edge is which). A zero-area dual face counts as -90.
+    Arguments as :func:`node_orthogonality`."""
+    pts = np.asarray(points, dtype=np.float64)
+    _check_types(cells, dim)
+    orientation = orientation or cell_orientation(pts, cells, dim)
+    topology = topology or edge_topology(cells, len(pts), use_numba=use_numba)
+    nrm = edge_normals(pts, cells, topology, orientation, use_numba=use_numba)
+    e = topology.edges
+    vec = pts[e[:, 1]] - pts[e[:, 0]]
+    area = np.linalg.norm(nrm, axis=1)
+    length = np.linalg.norm(vec, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cos = np.einsum("ek,ek->e", nrm, vec) / (area * length)
+    cos = np.where(np.isfinite(cos), np.clip(cos, -1.0, 1.0), -1.0)
+    return 90.0 - np.degrees(np.arccos(cos)), area, topology
+
+
+def node_orthogonality(points: np.ndarray, cells: list[CellBlock], dim: int = 3, *,
+                       orientation: Orientation | None = None,
+                       topology: EdgeTopology | None = None, use_numba: bool = True) -> np.ndarray:
+    """SU2's orthogonality angle of every node, in degrees (NaN for a node of no cell).
+
+    For each edge i-j, the angle between its dual-face normal (the median-dual control-volume face,
+    :func:`edge_normals`) and the vector from i to j; the node's value is the area-weighted mean of
+    ``90 - angle`` over its edges (90: the dual face is normal to every edge; negative: some dual
+    face is turned over, as in an inverted cell). This is ``CPhysicalGeometry::
+    ComputeMeshQualityStatistics`` of SU2 (the "Orthogonality" volume output), with the cosine
+    clipped to [-1, 1] where SU2 can give NaN.
+
+    Parameters
+    ----------
+    points
+        (N, 3) coordinates.
+    cells
+        Interior cell blocks (VTK order).
+    dim
+        Topological dimension of the cells.
+    orientation
+        From :func:`cell_orientation` of the undeformed mesh (default: from ``points``).
+    topology
+        From :func:`edge_topology` (default: computed; pass it to evaluate a mesh twice).
+    use_numba
+        False: the NumPy reference (same values to rounding).
+
+    Returns
+    -------
+    (N,) float64 degrees.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    ortho, area, topology = edge_orthogonality(pts, cells, dim, orientation=orientation, topology=topology,
+                                               use_numba=use_numba)
+    e = topology.edges
+    n = len(pts)
+    wsum = np.bincount(e[:, 0], weights=area * ortho, minlength=n) + np.bincount(e[:, 1], weights=area * ortho,
+                                                                                 minlength=n)
+    asum = np.bincount(e[:, 0], weights=area, minlength=n) + np.bincount(e[:, 1], weights=area, minlength=n)
+    touched = np.zeros(n, dtype=bool)
+    touched[e.ravel()] = True
+    with np.errstate(divide="ignore", invalid="ignore"):
+        out = np.where(asum > 0, wsum / np.where(asum > 0, asum, 1.0), -90.0)
+    out[~touched] = np.nan
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# The gate
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class QualityReport:
+    """The counts of :func:`check_quality` (see the module docstring for each rule).
+
+    count, n_nodes
+        Cells checked; nodes with an orthogonality (nodes of some cell).
+    n_inverted, n_below
+        The mesh as written (after): cells with q <= 0, and with 0 < q < ``threshold``.
+    n_inverted_before, n_below_before
+        The same of the input mesh (None without a mesh before).
+    n_input_bad
+        Cells already inverted or degenerate in the input (0 without a mesh before).
+    n_new_inverted, n_worse, n_ortho_failed
+        What the gate refuses on: cells the design inverted, cells made markedly worse, nodes that
+        lost orthogonality (0 without a mesh before).
+    min_before, min_after
+        Smallest q (None when unknown / no cells).
+    ortho_before, ortho_after, ortho_loss
+        Smallest node orthogonality (degrees) before / after, and the largest loss of one node.
+    n_ortho_low, n_ortho_low_before
+        Nodes below ``ortho_min`` after / before.
     worst
-        Up to ``n_worst`` cells of smallest q after: ``{"cell": index in the concatenation of
-        the mesh's cell blocks, "type", "quality", "quality_before", "centroid": [x, y, z] after,
+        Up to ``n_worst`` cells of smallest q after: ``{"cell": index in the concatenation of the
+        mesh's cell blocks, "type", "quality", "quality_before", "centroid": [x, y, z] after,
         "failed": bool}``.
+    worst_nodes
+        Up to ``n_worst`` nodes of largest orthogonality loss (or smallest value without a before):
+        ``{"node", "before", "after", "point": [x, y, z] after, "failed"}``.
+    input_bad
+        Up to ``n_worst`` cells inverted or degenerate in the input: ``{"cell", "type", "quality",
+        "centroid"}`` (input coordinates).
     """
 
     count: int
@@ -186,46 +532,142 @@ class QualityReport:
     relative: float
     min_before: float | None
     min_after: float | None
-    worst: list[dict] = field(default_factory=list)
+    n_inverted_before: int | None = None
+    n_below_before: int | None = None
+    n_input_bad: int = 0
+    n_new_inverted: int = 0
+    n_worse: int = 0
+    n_nodes: int = 0
+    ortho_min: float = DEFAULT_ORTHO_MIN
+    ortho_loss_max: float = DEFAULT_ORTHO_LOSS
+    ortho_before: float | None = None
+    ortho_after: float | None = None
+    ortho_loss: float | None = None
+    n_ortho_low: int = 0
+    n_ortho_low_before: int | None = None
+    n_ortho_failed: int = 0
+    worst: list = field(default_factory=list)
+    worst_nodes: list = field(default_factory=list)
+    input_bad: list = field(default_factory=list)
+
+    @property
+    def relative_check(self) -> bool:
+        """True when there was a mesh before (``ffd deform``), False for ``ffd check``."""
+        return self.min_before is not None or self.n_inverted_before is not None
 
     @property
     def n_failed(self) -> int:
-        return self.n_inverted + self.n_below
+        """What the gate refuses on (cells inverted by the design, made worse; nodes that lost
+        orthogonality). Without a mesh before: the inverted or degenerate cells."""
+        if not self.relative_check:
+            return self.n_inverted
+        return self.n_new_inverted + self.n_worse + self.n_ortho_failed
 
     @property
     def ok(self) -> bool:
         return self.n_failed == 0
 
+    def rule(self) -> str:
+        """The gate's rule in words, for messages."""
+        return (f"a cell fails when the design inverts it, or when its scaled Jacobian falls below "
+                f"{self.threshold:g}, below {self.relative:g} x its value before and below the input mesh's "
+                f"worst ({_g(self.min_before)}); a node fails when its orthogonality falls below "
+                f"{self.ortho_min:g} deg after losing more than {self.ortho_loss_max:g} deg")
+
     def to_dict(self) -> dict:
+        """The report for ``--json`` (the same keys for ``deform`` and ``check``)."""
         return {"cells": self.count, "inverted": self.n_inverted, "below_threshold": self.n_below,
                 "threshold": self.threshold, "relative": self.relative, "min_before": self.min_before,
-                "min_after": self.min_after, "ok": self.ok, "worst": self.worst}
+                "min_after": self.min_after, "inverted_before": self.n_inverted_before,
+                "below_threshold_before": self.n_below_before, "input_degenerate": self.n_input_bad,
+                "inverted_by_design": self.n_new_inverted, "made_worse": self.n_worse,
+                "orthogonality": {"nodes": self.n_nodes, "min_before": self.ortho_before,
+                                  "min_after": self.ortho_after, "largest_loss": self.ortho_loss,
+                                  "below_min": self.n_ortho_low, "below_min_before": self.n_ortho_low_before,
+                                  "failed": self.n_ortho_failed, "min": self.ortho_min,
+                                  "loss": self.ortho_loss_max},
+                "failed": self.n_failed, "ok": self.ok, "worst": self.worst, "worst_nodes": self.worst_nodes,
+                "input_bad": self.input_bad}
 
     def summary(self) -> str:
-        """One line for people: counts and min quality before/after."""
-        before = "" if self.min_before is None else f"{self.min_before:.3g} before, "
-        after = "n/a" if self.min_after is None else f"{self.min_after:.3g}"
-        return (f"cell quality (scaled Jacobian): min {before}{after} after; {self.count} cells, "
-                f"{self.n_inverted} inverted, {self.n_below} below {self.threshold:g}")
+        """One line for people: the same words for ``ffd deform`` and ``ffd check``."""
+        rel = self.relative_check
+        before = f"{_g(self.min_before)} before, " if rel else ""
+        after = _g(self.min_after) + (" after" if rel else "")
+        text = (f"cell quality (scaled Jacobian): min {before}{after}; {self.count} cells: "
+                f"{self.n_inverted} inverted or degenerate, {self.n_below} below {self.threshold:g}")
+        if rel:
+            text += f" ({self.n_below_before} before); {self.n_new_inverted} inverted by the design, " \
+                    f"{self.n_worse} made worse"
+        if self.n_nodes:
+            ob = f"{_g(self.ortho_before, '.1f')} before, " if rel else ""
+            oa = _g(self.ortho_after, ".1f") + (" after" if rel else "")
+            text += (f". orthogonality (SU2): min {ob}{oa} deg; {self.n_ortho_low} nodes below "
+                     f"{self.ortho_min:g} deg")
+            if rel:
+                text += (f" ({self.n_ortho_low_before} before), largest loss {_g(self.ortho_loss, '.1f')} deg, "
+                         f"{self.n_ortho_failed} nodes lost orthogonality")
+        return text
 
     def describe_worst(self, n: int = 5) -> str:
-        """The worst failing cells, one per line: id, type, quality and where."""
+        """The worst failing cells and nodes, one per line: id, type, values and where."""
         lines = []
         for w in [w for w in self.worst if w["failed"]][:n]:
-            c = ", ".join(f"{v:.6g}" for v in w["centroid"])
             before = "" if w["quality_before"] is None else f" (before {w['quality_before']:.3g})"
-            lines.append(f"  cell {w['cell']} ({w['type']}): quality {w['quality']:.3g}{before} at ({c})")
+            lines.append(f"  cell {w['cell']} ({w['type']}): quality {w['quality']:.3g}{before} "
+                         f"at {_xyz(w['centroid'])}")
+        for w in [w for w in self.worst_nodes if w["failed"]][:n]:
+            lines.append(f"  node {w['node']}: orthogonality {w['after']:.1f} deg (before {w['before']:.1f}) "
+                         f"at {_xyz(w['point'])}")
         return "\n".join(lines)
+
+    def failure_message(self) -> str:
+        """What failed, the rule and the worst place, in one line (for the exit-3 message)."""
+        what = []
+        if self.n_new_inverted:
+            what.append(f"{self.n_new_inverted} cells inverted by the design")
+        if self.n_worse:
+            what.append(f"{self.n_worse} cells made worse")
+        if self.n_ortho_failed:
+            what.append(f"{self.n_ortho_failed} nodes lost orthogonality")
+        worst = self.describe_worst(1).strip().splitlines()
+        where = f"; worst: {worst[0].strip()}" if worst else ""
+        return f"{', '.join(what) or 'no failure'} of {self.count} cells ({self.rule()}){where}"
+
+
+def _g(v, spec: str = ".3g") -> str:
+    return "n/a" if v is None else format(v, spec)
+
+
+def _xyz(p) -> str:
+    return "(" + ", ".join(f"{v:.6g}" for v in p) + ")"
 
 
 def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold: float = DEFAULT_THRESHOLD,
                   points_before: np.ndarray | None = None, *, relative: float = DEFAULT_RELATIVE,
-                  n_worst: int = 10) -> QualityReport:
-    """Check the cells of ``mesh`` at ``points_after`` (default: its own points).
+                  ortho_min: float = DEFAULT_ORTHO_MIN, ortho_loss: float = DEFAULT_ORTHO_LOSS,
+                  orthogonality: bool = True, n_worst: int = 10) -> QualityReport:
+    """The counts of the gate for the cells of ``mesh`` at ``points_after`` (default: its own points).
 
-    ``points_before`` (default: ``mesh.points`` when ``points_after`` is given, else nothing)
-    gives the reference quality and orientation; without it a cell fails when q <= 0 or
-    q < threshold. A mesh without interior cells (surface only) gives an empty report that passes.
+    Parameters
+    ----------
+    mesh
+        The mesh (its cells; ``mesh.points`` is the input geometry).
+    points_after
+        (N, 3) coordinates to judge. Default: ``mesh.points``, and then there is no "before"
+        (``ffd check``) unless ``points_before`` is given.
+    threshold, relative, ortho_min, ortho_loss
+        The rules of the module docstring.
+    points_before
+        (N, 3) the reference (default ``mesh.points`` when ``points_after`` is given).
+    orthogonality
+        Also compute the node orthogonality (the dual grid; about as costly as the scaled Jacobian).
+    n_worst
+        How many of the worst cells / nodes to list.
+
+    Returns
+    -------
+    QualityReport. A mesh without interior cells (surface only) gives an empty report that passes.
     """
     if points_after is None:
         after, before = mesh.points, points_before
@@ -237,31 +679,121 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     cells = [b for b in mesh.cells if len(b)]
     ref = after if before is None else before
     _check_types(cells, mesh.dim)
+    kw = {"threshold": float(threshold), "relative": float(relative), "ortho_min": float(ortho_min),
+          "ortho_loss_max": float(ortho_loss)}
+    if not cells:
+        return QualityReport(0, 0, 0, min_before=None, min_after=None, **{k: kw[k] for k in ("threshold", "relative")},
+                             ortho_min=kw["ortho_min"], ortho_loss_max=kw["ortho_loss_max"])
     # one pass over the reference points gives both the orientation and the quality before
     normal = cell_orientation(ref, cells, 2).normal if mesh.dim == 2 else None
     raws = [_raw_quality(ref, b.data, b.type, normal) for b in cells]
     signs = np.ones(len(cells)) if mesh.dim == 2 else _majority_signs(raws)
-    q_ref = (np.concatenate([np.clip(sg * r, -1.0, 1.0) for sg, r in zip(signs, raws, strict=True)])
-             if raws else np.zeros(0))
+    orientation = Orientation(signs, normal)
+    q_ref = np.concatenate([np.clip(sg * r, -1.0, 1.0) for sg, r in zip(signs, raws, strict=True)])
     del raws
-    q = q_ref if before is None else cell_quality(after, cells, mesh.dim,
-                                                   orientation=Orientation(signs, normal))
-    qb = None if before is None else q_ref
-    if len(q) == 0:
-        return QualityReport(0, 0, 0, float(threshold), float(relative), None, None, [])
+    has_before = before is not None
+    q = q_ref if not has_before else cell_quality(after, cells, mesh.dim, orientation=orientation)
+    qb = q_ref if has_before else None
+    starts = np.cumsum([0] + [len(b) for b in cells])
+
+    def cell_rows(index, values, with_failed=None, coords=after):
+        blk = np.searchsorted(starts, index, side="right") - 1
+        rows = []
+        for w, k in zip(index.tolist(), blk.tolist(), strict=True):
+            ids = cells[k].data[w - starts[k]]
+            row = {"cell": int(w), "type": cells[k].type, "quality": float(values[w])}
+            if with_failed is not None:
+                row["quality_before"] = None if qb is None else float(qb[w])
+            row["centroid"] = coords[ids].mean(axis=0).tolist()
+            if with_failed is not None:
+                row["failed"] = bool(with_failed[w])
+            rows.append(row)
+        return rows
+
     inverted = q <= 0
     below = ~inverted & (q < threshold)
-    if qb is not None:
-        below &= q < relative * qb
-    failed = inverted | below
+    out = {"n_inverted": int(inverted.sum()), "n_below": int(below.sum()), "min_after": float(q.min())}
+    failed = np.zeros(len(q), dtype=bool)
+    if has_before:
+        bad_in = qb <= 0
+        valid = ~bad_in
+        floor = float(qb[valid].min()) if valid.any() else 0.0
+        new_inv = inverted & valid
+        worse = valid & ~inverted & (q < threshold) & (q < relative * qb) & (q < floor)
+        failed = new_inv | worse
+        out.update(n_inverted_before=int(bad_in.sum()), n_below_before=int((valid & (qb < threshold)).sum()),
+                   n_input_bad=int(bad_in.sum()), n_new_inverted=int(new_inv.sum()), n_worse=int(worse.sum()),
+                   min_before=float(qb.min()))
+        if bad_in.any():
+            idx = np.flatnonzero(bad_in)
+            out["input_bad"] = cell_rows(idx[np.argsort(qb[idx], kind="stable")][:n_worst], qb, coords=ref)
+    else:
+        out["min_before"] = None
+        failed = inverted
     worst = np.argsort(q, kind="stable")[:n_worst]
-    starts = np.cumsum([0] + [len(b) for b in cells])
-    blk = np.searchsorted(starts, worst, side="right") - 1
-    rows = []
-    for w, k in zip(worst.tolist(), blk.tolist(), strict=True):
-        ids = cells[k].data[w - starts[k]]
-        rows.append({"cell": int(w), "type": cells[k].type, "quality": float(q[w]),
-                     "quality_before": None if qb is None else float(qb[w]),
-                     "centroid": after[ids].mean(axis=0).tolist(), "failed": bool(failed[w])})
-    return QualityReport(len(q), int(inverted.sum()), int(below.sum()), float(threshold), float(relative),
-                         None if qb is None else float(qb.min()), float(q.min()), rows)
+    out["worst"] = cell_rows(worst, q, failed)
+    if orthogonality:
+        out.update(_orthogonality_counts(ref, after if has_before else None, cells, mesh.dim, orientation,
+                                         ortho_min, ortho_loss, n_worst))
+    return QualityReport(len(q), **out, **kw)
+
+
+def _orthogonality_counts(ref, after, cells, dim, orientation, ortho_min, ortho_loss, n_worst) -> dict:
+    """The orthogonality fields of the report (``after`` None: only the mesh ``ref`` itself)."""
+    topo = edge_topology(cells, len(ref))
+    o_ref = node_orthogonality(ref, cells, dim, orientation=orientation, topology=topo)
+    has = np.isfinite(o_ref)
+    if not has.any():
+        return {}
+    if after is None:
+        o = o_ref
+        low = has & (o < ortho_min)
+        idx = np.flatnonzero(has)
+        worst = idx[np.argsort(o[idx], kind="stable")][:n_worst]
+        rows = [{"node": int(i), "before": None, "after": float(o[i]), "point": ref[i].tolist(), "failed": False}
+                for i in worst.tolist()]
+        return {"n_nodes": int(has.sum()), "ortho_after": float(np.min(o[has])), "n_ortho_low": int(low.sum()),
+                "worst_nodes": rows}
+    o = node_orthogonality(after, cells, dim, orientation=orientation, topology=topo)
+    loss = np.where(has, o_ref - o, 0.0)
+    fail = has & (o < ortho_min) & (loss > ortho_loss)
+    idx = np.flatnonzero(has)
+    worst = idx[np.lexsort((o[idx], ~fail[idx]))][:n_worst]          # failing first, then lowest after
+    rows = [{"node": int(i), "before": float(o_ref[i]), "after": float(o[i]), "point": after[i].tolist(),
+             "failed": bool(fail[i])} for i in worst.tolist()]
+    return {"n_nodes": int(has.sum()), "ortho_before": float(np.min(o_ref[has])), "ortho_after": float(np.min(o[has])),
+            "ortho_loss": float(loss.max()), "n_ortho_low": int((has & (o < ortho_min)).sum()),
+            "n_ortho_low_before": int((has & (o_ref < ortho_min)).sum()), "n_ortho_failed": int(fail.sum()),
+            "worst_nodes": rows}
+
+
+def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, force: bool = False) -> list[str]:
+    """Apply the gate to a report of ``ffd deform``: raise, or return warnings for ``--force``.
+
+    Raises :class:`~ffdcli.errors.InputError` (exit 2) when the input mesh already has inverted or
+    degenerate cells, naming the first and where it is; :class:`~ffdcli.errors.QualityError` (exit 3)
+    when the design fails the gate, with the counts, the rule and the worst place. With ``force``
+    neither is raised and the warnings say what would have been.
+    """
+    from ffdcli.errors import InputError, QualityError
+
+    if report is None:
+        return []
+    warnings = []
+    if report.n_input_bad:
+        w = report.input_bad[0]
+        more = f" (and {report.n_input_bad - 1} more)" if report.n_input_bad > 1 else ""
+        msg = (f"cell {w['cell']} ({w['type']}) at {_xyz(w['centroid'])} is already "
+               f"{'inverted' if w['quality'] < 0 else 'degenerate'} in the input mesh (scaled Jacobian "
+               f"{w['quality']:.3g}){more}: a problem of the mesh, not of the design; repair or regenerate "
+               f"the mesh (ffd check MESH lists such cells)")
+        if not force:
+            raise InputError(msg + ", or give --force to deform it anyway", path=mesh_path)
+        warnings.append(msg)
+    if not report.ok:
+        msg = f"the deformed mesh fails the quality gate: {report.failure_message()}"
+        if not force:
+            raise QualityError(msg + "; nothing was written (--force writes it anyway)", path=design_path,
+                               report=report.to_dict())
+        warnings.append(msg + "; written anyway (--force)")
+    return warnings

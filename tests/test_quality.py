@@ -134,12 +134,178 @@ def test_already_poor_cells_do_not_block_unless_they_get_much_worse():
     poor = Mesh(points=sheared(30), dim=3, cells=[CellBlock("hexahedron", [list(range(8))])])
     assert cell_quality(poor.points, poor.cells)[0] == pytest.approx(1 / np.sqrt(901), rel=1e-14)
     r = check_quality(poor, sheared(31), threshold=0.05)      # 0.0333 -> 0.0322: below 0.05, not halved
-    assert r.ok and r.n_below == 0 and r.min_after < 0.05
-    r = check_quality(poor, sheared(70), threshold=0.05)      # 0.0333 -> 0.0143: halved
-    assert not r.ok and r.n_inverted == 0 and r.n_below == 1
-    # without a "before" the threshold alone decides (ffd check)
+    # (orthogonality 4.66 -> 4.52 deg: below 20 but lost less than 10)
+    assert r.ok and r.n_worse == 0 and r.n_below == 1 and r.n_below_before == 1 and r.min_after < 0.05
+    r = check_quality(poor, sheared(70), threshold=0.05)      # 0.0333 -> 0.0143: halved, under the worst
+    assert not r.ok and r.n_inverted == 0 and r.n_worse == 1 and r.n_failed == 1
+    assert "1 cells made worse" in r.failure_message() and "below 0.5 x its value before" in r.failure_message()
+    # without a "before" the threshold alone counts (ffd check)
     r = check_quality(poor, threshold=0.05)
-    assert r.n_below == 1 and r.min_before is None
+    assert r.n_below == 1 and r.min_before is None and r.ok
+
+
+def _two_hexes(top_shift):
+    """Two hexahedra side by side: the first sheared by 30 (q 0.0333, the input's worst), the second a
+    unit cube whose top face moves by ``top_shift`` along x (its own nodes only)."""
+    a = CUBE + np.outer(CUBE[:, 2], [30.0, 0, 0])
+    b = CUBE + [40.0, 0, 0]
+    pts = np.vstack([a, b])
+    mesh = Mesh(points=pts, dim=3, cells=[CellBlock("hexahedron", [list(range(8)), list(range(8, 16))])])
+    moved = pts.copy()
+    moved[12:16, 0] += top_shift
+    return mesh, moved
+
+
+def test_a_mesh_whose_worst_cell_did_not_get_worse_is_not_refused():
+    # the good cube sheared by 20: q = 1/sqrt(401) = 0.0499 (< 0.05, < half of 1) but still above the
+    # input's worst cell (0.0333): the solver already ran on worse, so the scaled Jacobian does not
+    # refuse it (its orthogonality does, 90 -> 3 deg: checked apart here)
+    mesh, moved = _two_hexes(20.0)
+    r = check_quality(mesh, moved, orthogonality=False)
+    assert r.min_after == pytest.approx(1 / np.sqrt(901)) and r.min_after == r.min_before
+    assert r.n_below == 2 and r.n_below_before == 1 and r.n_worse == 0 and r.ok
+    # below the input's worst (shift 40: 0.025): refused
+    mesh, moved = _two_hexes(40.0)
+    r = check_quality(mesh, moved, orthogonality=False)
+    assert r.n_worse == 1 and not r.ok and r.worst[0]["cell"] == 1 and r.worst[0]["failed"]
+
+
+def test_a_cell_degenerate_in_the_input_is_an_input_problem():
+    from ffdcli.errors import InputError, QualityError
+    from ffdcli.quality import enforce
+
+    mesh = _hex_grid(3)
+    pts = mesh.points.copy()
+    corner = np.flatnonzero(np.all(np.isclose(pts, [1, 1, 1]), axis=1))[0]
+    pts[corner] = pts[np.flatnonzero(np.all(np.isclose(pts, [2 / 3, 1, 1]), axis=1))[0]]   # a zero edge
+    bad_mesh = mesh.with_points(pts)
+    r = check_quality(bad_mesh, pts + 0.01)                  # the design (a translation) changes nothing
+    assert r.n_input_bad == 1 and r.n_inverted == 1 and r.n_new_inverted == 0 and r.ok
+    w = r.input_bad[0]
+    assert w["cell"] == len(bad_mesh.cells[0]) - 1 and w["quality"] == 0.0
+    with pytest.raises(InputError) as e:
+        enforce(r, mesh_path="m.su2", design_path="d.yaml")
+    msg = str(e.value)
+    assert e.value.exit_code == 2 and "m.su2" in msg and f"cell {w['cell']} (hexahedron)" in msg
+    assert "degenerate in the input mesh" in msg and "at (0.791667, 0.833333, 0.833333)" in msg and "--force" in msg
+    assert len(enforce(r, force=True)) == 1
+    # a cell the design inverts is exit 3, with the rule in the message
+    moved = mesh.points.copy()
+    moved[corner] = [0.5, 0.5, 0.5]
+    r = check_quality(mesh, moved)
+    assert r.n_new_inverted >= 1 and r.n_input_bad == 0
+    with pytest.raises(QualityError) as e:
+        enforce(r, design_path="d.yaml")
+    assert "inverted by the design" in str(e.value) and "a cell fails when the design inverts it" in str(e.value)
+    assert "nothing was written" in str(e.value) and e.value.report["inverted_by_design"] == r.n_new_inverted
+
+
+# ---------------------------------------------------------------------------------------------
+# Orthogonality (SU2's dual-grid measure)
+
+
+def _sheared_grid(n, s):
+    """A hexahedral grid of n^3 unit cells whose z-layers slide along x by s per unit z."""
+    mesh = _hex_grid(n)
+    pts = mesh.points * n
+    return mesh.with_points(pts + np.outer(pts[:, 2], [s, 0, 0]))
+
+
+@pytest.mark.parametrize("s", [0.0, 0.3, 1.0, 2.5])
+def test_orthogonality_of_a_sheared_grid_is_known_exactly(s):
+    from ffdcli.quality import edge_orthogonality, node_orthogonality
+
+    mesh = _sheared_grid(3, s)
+    theta = np.degrees(np.arctan(s))
+    ortho, area, topo = edge_orthogonality(mesh.points, mesh.cells)
+    d = np.abs(mesh.points[topo.edges[:, 1]] - mesh.points[topo.edges[:, 0]])
+    along_y = d[:, 1] > 0.5
+    # the dual face of an x edge is turned by the shear, a z edge is turned against its dual face,
+    # y edges keep 90 degrees (1e-12: arccos near 1 loses half the digits)
+    np.testing.assert_allclose(ortho[along_y], 90.0, atol=1e-6)
+    np.testing.assert_allclose(ortho[~along_y], 90.0 - theta, atol=1e-6)
+    # an interior node: area-weighted mean over 2 x, 2 y, 2 z edges; x faces have area sqrt(1 + s^2)
+    o = node_orthogonality(mesh.points, mesh.cells)
+    inner = np.flatnonzero(np.all(np.isclose(mesh.points[:, 1:], [1, 1]), axis=1)
+                           & np.isclose(mesh.points[:, 0], 1 + mesh.points[:, 2] * s))[0]
+    ax = np.sqrt(1 + s * s)
+    expected = (ax * (90 - theta) + 90 + (90 - theta)) / (ax + 2)
+    assert o[inner] == pytest.approx(expected, abs=1e-6)
+    # every node of a uniformly sheared grid sees the same proportions (corners and faces too)
+    np.testing.assert_allclose(o, expected, atol=1e-6)
+
+
+def test_orthogonality_is_invariant_under_similarity_and_mirrored_order():
+    from ffdcli.quality import node_orthogonality
+
+    rng = np.random.default_rng(3)
+    mesh = _sheared_grid(2, 0.7)
+    pts = mesh.points + rng.uniform(-0.15, 0.15, mesh.points.shape)
+    o = node_orthogonality(pts, mesh.cells)
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    q *= np.sign(np.linalg.det(q))
+    moved = 3.7 * pts @ q.T + [10.0, -4.0, 2.0]
+    np.testing.assert_allclose(node_orthogonality(moved, mesh.cells), o, atol=1e-9)
+    # the same cells written in the mirrored node order (a mirrored mesh of mirrored cells)
+    mirror = pts * [1, 1, -1]
+    flipped = [CellBlock("hexahedron", mesh.cells[0].data[:, [4, 5, 6, 7, 0, 1, 2, 3]])]
+    np.testing.assert_allclose(node_orthogonality(mirror, flipped), o, atol=1e-9)
+    np.testing.assert_allclose(node_orthogonality(mirror, mesh.cells), o, atol=1e-9)
+
+
+def test_orthogonality_numba_matches_numpy_on_mixed_cells():
+    from ffdcli.quality import edge_topology, node_orthogonality
+
+    rng = np.random.default_rng(5)
+    # a hex grid, each hex also cut into 2 wedges and into 5 tets (a mixed mesh with shared edges)
+    mesh = _hex_grid(3)
+    pts = mesh.points + rng.uniform(-0.03, 0.03, mesh.points.shape)
+    h = mesh.cells[0].data
+    wedges = np.concatenate([h[:, [0, 1, 3, 4, 5, 7]], h[:, [1, 2, 3, 5, 6, 7]]])
+    tets = np.concatenate([h[:, [0, 1, 3, 4]], h[:, [1, 2, 3, 6]], h[:, [1, 4, 5, 6]], h[:, [3, 6, 7, 4]],
+                           h[:, [1, 3, 4, 6]]])
+    pyr = h[:, [0, 1, 2, 3, 4]]
+    for cells in ([CellBlock("wedge", wedges)], [CellBlock("tetra", tets)], [CellBlock("pyramid", pyr)],
+                  [CellBlock("hexahedron", h)]):
+        assert cell_quality(pts, cells).min() > 0
+        a = node_orthogonality(pts, cells)
+        b = node_orthogonality(pts, cells, use_numba=False)
+        np.testing.assert_allclose(a, b, atol=1e-9)
+        t1, t2 = edge_topology(cells, len(pts)), edge_topology(cells, len(pts), use_numba=False)
+        assert {tuple(e) for e in t1.edges.tolist()} == {tuple(e) for e in t2.edges.tolist()}
+        assert np.nanmin(a) > 0 and np.nanmax(a) <= 90.0
+    # a node no cell uses has no orthogonality
+    assert np.isnan(node_orthogonality(np.vstack([pts, [[9, 9, 9]]]), [CellBlock("tetra", tets)])[-1])
+
+
+def test_orthogonality_in_2d():
+    from ffdcli.quality import node_orthogonality
+
+    g = np.arange(4.0)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    pts = np.column_stack([X.ravel(), Y.ravel(), np.zeros(16)])
+    idx = np.arange(16).reshape(4, 4)
+    i, j = (a.ravel() for a in np.meshgrid(np.arange(3), np.arange(3), indexing="ij"))
+    quads = CellBlock("quad", np.column_stack([idx[i, j], idx[i + 1, j], idx[i + 1, j + 1], idx[i, j + 1]]))
+    np.testing.assert_allclose(node_orthogonality(pts, [quads], 2), 90.0, atol=1e-9)
+    s = 0.5
+    sheared = pts + np.outer(pts[:, 1], [s, 0, 0])
+    # 2D: x edges (dual face length sqrt(1+s^2)... turned) and y edges both at 90 - atan(s)
+    np.testing.assert_allclose(node_orthogonality(sheared, [quads], 2), 90 - np.degrees(np.arctan(s)), atol=1e-9)
+
+
+def test_the_gate_refuses_a_node_that_loses_orthogonality():
+    # a sheared stack of thin cells keeps its scaled Jacobian above the threshold but its dual grid
+    # turns: the node value (see the sheared-grid oracle) goes 90 -> 15.4 deg (below 20, lost 74.6)
+    mesh = _hex_grid(2)
+    moved = _sheared_grid(2, 8.0).points / 2
+    r = check_quality(mesh, moved)
+    assert r.n_new_inverted == 0 and r.n_worse == 0 and r.min_after == pytest.approx(1 / np.sqrt(65))
+    assert r.n_ortho_failed == r.n_nodes == 27 and not r.ok
+    assert r.ortho_before == pytest.approx(90) and r.ortho_after < 20 and r.ortho_loss > 70
+    assert "27 nodes lost orthogonality" in r.failure_message() and "node " in r.describe_worst()
+    # thresholds are parameters: a looser gate passes it
+    assert check_quality(mesh, moved, ortho_min=10.0).ok
 
 
 def test_surface_only_mesh_passes():

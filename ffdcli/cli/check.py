@@ -18,11 +18,20 @@ from ffdcli.cli import cli, common_options
               help="How many of the worst cells to list.")
 @common_options
 def check_cmd(mesh, threshold, n_worst, console):
-    """Cell quality of MESH: scaled Jacobian of every cell (1 ideal, <= 0 inverted or degenerate).
+    """Cell quality of MESH: scaled Jacobian of every cell and SU2's orthogonality of every node.
 
-    Prints the number of cells, the minimum quality, the number of inverted cells and those below
-    the threshold, and where the worst cells are. Exit status 3 when a cell is inverted or
-    degenerate (or below --threshold when given), 0 otherwise.
+    \b
+    Prints, in the words of `ffd deform`'s summary: the number of cells, the minimum scaled
+    Jacobian (1 ideal, <= 0 inverted or degenerate), the cells inverted or degenerate and those
+    below 0.05, the minimum orthogonality (degrees; SU2's dual-grid measure, 90 ideal) and the nodes
+    below 20 degrees, and where the worst are. `ffd check` of a mesh written by `ffd deform` repeats
+    the "after" numbers of that deform. Exit status 3 when a cell is inverted or degenerate (or
+    below --threshold when given), 0 otherwise.
+
+    \b
+    Examples:
+      ffd check out/wing_twist.su2
+      ffd check mesh.su2 --threshold 0.01 --worst 10 --json
     """
     from ffdcli.errors import InputError, QualityError
     from ffdcli.formats import read_mesh
@@ -36,26 +45,29 @@ def check_cmd(mesh, threshold, n_worst, console):
                            n_worst=max(n_worst, 1))
     summary = {"mesh": str(mesh), **report.to_dict(), "seconds": time.perf_counter() - t0}
     summary["worst"] = summary["worst"][:n_worst]
+    summary["worst_nodes"] = summary["worst_nodes"][:n_worst]
     if report.count == 0:
         console.result(summary, f"{mesh}: no volume cells (surface-only mesh): nothing to check")
         return
     failed = report.n_inverted + (report.n_below if threshold is not None else 0)
     if failed:
-        what = [f"{report.n_inverted} inverted or degenerate"]
-        if threshold is not None:
-            what.append(f"{report.n_below} below {threshold:g}")
         worst = report.worst[0]
         where = ", ".join(f"{v:.6g}" for v in worst["centroid"])
-        raise QualityError(f"{' and '.join(what)} of {report.count} cells; worst: cell {worst['cell']} "
-                           f"({worst['type']}) quality {worst['quality']:.3g} at ({where})",
-                           path=mesh, report=summary)
+        what = "inverted or degenerate cells" if report.n_inverted else f"cells below {threshold:g}"
+        raise QualityError(f"{what}: {report.summary()}; worst: cell {worst['cell']} ({worst['type']}) "
+                           f"quality {worst['quality']:.3g} at ({where})", path=mesh, report=summary)
     text = f"{mesh}: {report.summary()}"
-    if report.n_below and n_worst:
+    if n_worst:
         rows = [w for w in report.worst[:n_worst] if w["quality"] < report.threshold]
-        text += "\n" + _rows(rows)
+        nodes = [w for w in report.worst_nodes[:n_worst] if w["after"] < report.ortho_min]
+        if rows or nodes:
+            text += "\n" + _rows(rows, nodes)
     console.result(summary, text)
 
 
-def _rows(worst: list[dict]) -> str:
-    return "\n".join(f"  cell {w['cell']} ({w['type']}): quality {w['quality']:.3g} at "
-                     f"({', '.join(f'{v:.6g}' for v in w['centroid'])})" for w in worst)
+def _rows(worst: list[dict], nodes: list[dict]) -> str:
+    lines = [f"  cell {w['cell']} ({w['type']}): quality {w['quality']:.3g} at "
+             f"({', '.join(f'{v:.6g}' for v in w['centroid'])})" for w in worst]
+    lines += [f"  node {w['node']}: orthogonality {w['after']:.1f} deg at "
+              f"({', '.join(f'{v:.6g}' for v in w['point'])})" for w in nodes]
+    return "\n".join(lines)

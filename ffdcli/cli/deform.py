@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 
 from ffdcli.cli import cli, common_options
-from ffdcli.errors import InputError, QualityError
+from ffdcli.errors import InputError
 
 
 @cli.command("deform")
@@ -39,8 +39,11 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     The box (lattice and embedding) is loaded from its cache, or built and cached. The changes
     (twist, span, sweep, dihedral, chord, shape) are applied in file order to the lattice; the wing
     surface follows exactly (X = X0 + B (P' - P0)), the rest of the mesh by inverse-distance
-    warping (volume.method: idw) or not at all (none). Every cell is checked: if one inverts, nothing
-    is written and the exit status is 3 (--force writes anyway).
+    warping (volume.method: idw) or not at all (none). Every cell and node is checked (the gate of
+    `ffd check`, same words): if the design inverts a cell, makes one markedly worse (below 0.05,
+    under half its quality and under the input's worst) or drops a node's orthogonality below 20
+    degrees by more than 10, nothing is written and the exit status is 3; a cell already inverted or
+    degenerate in the input mesh is exit 2 (--force writes anyway in both cases).
 
     \b
     Examples:
@@ -51,6 +54,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     """
     from ffdcli.design import load_design
     from ffdcli.pipeline import deform, load_run, write_outputs
+    from ffdcli.quality import enforce
 
     t0 = time.perf_counter()
     design = load_design(design_file, overrides=overrides)
@@ -89,14 +93,9 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     result = deform(run, progress=console.progress)
     q = result.quality
     qd = q.to_dict() if q is not None else None
-    if q is not None and not q.ok and not force:
-        worst = q.describe_worst(3).strip().splitlines()
-        where = f"; worst: {worst[0].strip()}" if worst else ""
-        raise QualityError(f"the deformed mesh fails the quality check: {q.n_inverted} inverted and "
-                           f"{q.n_below} poor cells of {q.count}{where}; nothing was written (--force "
-                           "writes it anyway)", path=design.path, report=qd)
-    if q is not None and not q.ok:
-        console.warn(f"quality check failed but --force given: {q.summary()}")
+    # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
+    for w in enforce(q, mesh_path=design.mesh, design_path=design.path, force=force):
+        console.warn(w)
 
     def write():             # every output once: rank 0 of an MPI run
         out = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
