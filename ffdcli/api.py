@@ -409,13 +409,10 @@ class DesignModel:
             return self.surface_vjp(g[ids])
         from ffdcli.warp import warp_vjp
 
-        P1 = self.lattice()
-        disp = self.run.surface_displacement(P1)
-        rot = self.run.surface_rotations(P1)
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
         comm = self.comm if self.comm.size > 1 else None      # each rank sums its share of the volume
-        g_b, g_M = warp_vjp(self._warp_model(progress), gs, disp, rot, progress=progress, comm=comm)
+        g_b, g_M = warp_vjp(self._warp_model(progress), gs, progress=progress, comm=comm)
         g_b = g_b + g[ids] - gs[ids]
         out = self.surface_vjp(g_b)
         dR = self._rotation_jacobian()

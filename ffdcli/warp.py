@@ -6,19 +6,29 @@ blend of the boundary motion, in the manner of IDWarp (Secco et al., AIAA J. 59(
 ``i`` at ``x_i`` with area weight ``A_i`` has a translation ``b_i`` and a frame rotation ``R_i``
 (``M_i = R_i - I``; zero for fixed sources). A target node at ``x`` moves by::
 
-    d(x) = sum_i w_i(x) [b_i + M_i (x - x_i)] / sum_i w_i(x)
+    d(x) = sum_i w_i(x) [b_i + g(r_i) M_i (x - x_i)] / sum_i w_i(x)
     w_i(x) = A_i [ (L/r_i)^a + (alpha L/r_i)^b ],   r_i = |x - x_i|
+    g(r) = 1 / (1 + (r / rho)^4)
 
 The rotation term carries each surface node's local frame along, so cells near a twisted wing
 rotate with it instead of shearing (boundary-layer cells stay orthogonal). Because the weights are
-normalised, a rigid translation or rotation of all sources moves every node rigidly. The fixed
-sources hold the far field still: without them a far node would move with the average surface
-motion.
+normalised, a rigid translation moves every node rigidly, and so does a rigid rotation near the
+surface. The *rotation fade* ``g`` keeps the rotation term from carrying nodes far from the surface
+round with it: ``|g(r) M (x - x_i)| <= 0.57 rho |M|`` whatever the distance, so a node outboard of
+a twisted tip or behind a root whose frame turns (a shear's polar rotation) moves no further than
+the surface motion near it explains. ``rho = rotation_reach x`` the mean chord
+(:attr:`WarpModel.rotation_length`; ``rotation_reach`` 0.3; null: no fade, IDWarp's form, which reproduces any rigid
+motion exactly). The fixed sources hold the far field still: without them a far node would move
+with the average surface motion.
 
 Settings (``volume:`` in the design file, :class:`WarpSettings`): ``a`` = 3, ``b`` = 5,
-``alpha`` = 0.25 and ``ldef`` = L. Only the ratio of the two terms depends on L (the common factor
+``alpha`` = 1 and ``ldef`` = L. Only the ratio of the two terms depends on L (the common factor
 cancels), so L sets where the short-range ``b`` term takes over: closer than ``alpha^(b/(b-a)) L``
-(3 % of L with the defaults). Default L: the diagonal of the bounding box of the surface nodes.
+(L itself with the defaults: the whole wing's neighbourhood follows its nearest surface, the way
+IDWarp is run for planform changes with ``LdefFact`` 50-100; IDWarp's own default, the equivalent
+of alpha 0.25 here, hands over at 3 % of L and lets a far surface's average motion shear the cells
+behind a tip that moves, which inverted cells of swept wings). Default L: the diagonal of the
+bounding box of the surface nodes.
 Area weights are vertex areas: each boundary face (a line in 2D) gives an equal share of its area
 (length) to each of its nodes (:func:`vertex_areas`).
 
@@ -43,23 +53,23 @@ tree (median splits on the widest coordinate, leaves of up to 16 sources; the su
 the fixed sources in separate subtrees under the root). For each tree node C the warp keeps the
 area, the area-weighted centroid ``c_C``, the radius ``r`` (largest distance of a source from
 ``c_C``) and the moments ``sum A_i v_i`` and ``sum A_i (x_i - c_C) v_i^T`` of the votes
-``v_i = (b_i - M_i x_i, M_i)``. A group at distance ``D = |x - c_C| > r`` contributes its monopole
+``v_i = (b_i, -M_i x_i, M_i)``. A group at distance ``D = |x - c_C| > r`` contributes its monopole
 and dipole terms: ``phi(D) sum A_i v_i + psi(D) sum A_i ((x - c_C).(x_i - c_C)) v_i`` to the
 numerator and ``A_C phi(D)`` to W (the dipole of the weights is zero about the centroid), with
-``phi(D) = (L/D)^a + (alpha L/D)^b`` and ``psi = -phi'(D)/D``. Each target walks the tree nearest
-groups first and aggregates a group when the bound of the second-order remainder of its weights
+``phi(D) = (L/D)^a + (alpha L/D)^b`` and ``psi = -phi'(D)/D`` for the translation votes, and
+``phi g``, ``-(phi g)'/D`` for the rotation votes. Each target walks the tree nearest groups first
+and aggregates a group when the bound of the second-order remainder of its weights
 
     A_C (t^2 / 2) [a (a+1) (L/D)^a (1-t)^-(a+2) + b (b+1) (alpha L/D)^b (1-t)^-(b+2)],  t = r/D
 
-is at most ``tolerance * W / s(x)``, W the weight the target has summed so far and
-``s(x) = 2 (max_i |b_i - M_i x_i| + |x| max_i ||M_i||) / max_i |b_i|`` a bound of the spread of the
-votes at x (relative to the largest surface displacement). This is a per-group criterion, not a
-bound on the total: the error measured against the exact sum is about ``tolerance x max |b|``
-(``benchmarks/bench_warp.py``: 0.9e-3 at tolerance 1e-3 on a 1M-node mesh; the largest errors are
-far from the wall where the rotation votes are large); the tests check ``<= tolerance x max |b|``
-on small meshes. The decisions depend on geometry and on ``s`` only, so with ``s`` taken from a
-fixed base motion (``decide_for``), ``d`` is linear in (b, M) and :func:`warp_vjp` is its exact
-transpose.
+is at most ``tolerance * W / 2``, W the weight the target has summed so far (2 bounds the spread
+of translation votes relative to the largest displacement). The decisions depend on the undeformed
+geometry only, never on the motion: the approximate warp is one fixed linear map of (b, M), so
+:func:`warp_vjp` (its exact transpose) is the exact derivative, and ``ffd grad`` / ``mesh_vjp``
+match central differences of the written mesh at the default tolerance. This is a per-group
+criterion, not a bound on the total: the error measured against the exact sum is about
+``tolerance x max |b|`` (``benchmarks/bench_warp.py``); the tests check
+``<= tolerance x max |b|`` on small meshes.
 
 Numba kernels (``prange`` over blocks of targets, explicit stack traversal) have NumPy references
 (:func:`idw_reference`) used by the tests.
@@ -111,10 +121,16 @@ class WarpSettings:
         "exponent of the long-range weight term (L/d)^a"))
     b: float = field(default=5.0, metadata=_doc(
         "exponent of the short-range weight term (alpha L/d)^b; must be at least a"))
-    alpha: float = field(default=0.25, metadata=_doc(
+    alpha: float = field(default=1.0, metadata=_doc(
         "scale of the short-range term: it dominates closer than alpha^(b/(b-a)) L"))
     ldef: float | None = field(default=None, metadata=_doc(
         "reference length L in mesh units; default: diagonal of the surface's bounding box"))
+    rotation_reach: float | None = field(default=0.3, metadata=_doc(
+        "the rotation part of the motion fades with distance r from each surface node as "
+        "1 / (1 + (r / rho)^4), rho = rotation_reach x the mean chord (surface area / (2 x the "
+        "diagonal of its bounding box)), "
+        "so no node is carried further than the surface motion near it explains; null: no fade "
+        "(IDWarp)"))
     tolerance: float = field(default=1e-3, metadata=_doc(
         "tree approximation: groups of far surface nodes are aggregated so that the error is about "
         "tolerance x the largest surface displacement (0 = exact sum over every surface node)"))
@@ -152,6 +168,11 @@ class WarpSettings:
         if self.ldef is not None and (not isinstance(self.ldef, (int, float))
                                       or not math.isfinite(self.ldef) or self.ldef <= 0):
             raise InputError(f"expected a positive length, got {self.ldef!r}", key="volume.ldef")
+        rr = self.rotation_reach
+        if rr is not None and (isinstance(rr, bool) or not isinstance(rr, (int, float))
+                               or not math.isfinite(rr) or rr <= 0):
+            raise InputError(f"expected a positive number or null, got {rr!r}",
+                             key="volume.rotation_reach")
         t = self.tolerance
         if not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
             raise InputError(f"expected a number >= 0, got {t!r}", key="volume.tolerance")
@@ -194,7 +215,7 @@ class WarpSettings:
                 if not isinstance(v, (list, tuple)) or not all(isinstance(s, str) for s in v):
                     raise InputError(f"expected a list of marker names, got {v!r}", path=path,
                                      key=f"{key}.{k}")
-            if k in ("a", "b", "alpha", "ldef", "tolerance") and isinstance(v, int):
+            if k in ("a", "b", "alpha", "ldef", "rotation_reach", "tolerance") and isinstance(v, int):
                 v = float(v)
             kw[k] = v
         try:
@@ -213,8 +234,9 @@ class WarpSettings:
             "method": {"enum": list(METHODS), "default": "idw"},
             "a": {**pos, "default": 3},
             "b": {**pos, "default": 5},
-            "alpha": {**pos, "default": 0.25},
+            "alpha": {**pos, "default": 1.0},
             "ldef": {**pos},
+            "rotation_reach": {"type": ["number", "null"], "exclusiveMinimum": 0, "default": 0.3},
             "tolerance": {"type": "number", "minimum": 0, "default": 1e-3},
             "fixed": names,
             "sliding": names,
@@ -431,6 +453,7 @@ class WarpModel:
     slide_proj: np.ndarray          # (K, 3, 3) symmetric projectors
     origin: np.ndarray
     ldef: float
+    chord: float                    # mean chord estimate of the surface (see rotation_length)
     src_pos: np.ndarray             # (Ms, 3) relative to origin, tree order
     src_area: np.ndarray
     src_index: np.ndarray
@@ -455,7 +478,17 @@ class WarpModel:
         fast = s.a == 3.0 and s.b == 5.0
         eps2 = (1e-12 * self.ldef) ** 2
         return (self.ldef ** 2, 0.5 * s.a, 0.5 * s.b, s.a, s.b, s.alpha ** s.b, fast, eps2,
-                float(s.tolerance))
+                0.5 * float(s.tolerance), self.rotation_length ** 2 if self.rotation_length else 0.0)
+
+    @property
+    def rotation_length(self) -> float | None:
+        """rho of the rotation fade: ``rotation_reach`` x the mean chord (None: no fade).
+
+        The mean chord is estimated from the surface alone: its area over twice the diagonal of
+        its bounding box (a wing's wetted area is about 2 x span x mean chord, its diagonal about
+        the span); for a 2D mesh half the length of the airfoil's outline."""
+        rr = self.settings.rotation_reach
+        return None if rr is None else float(rr) * self.chord
 
 
 def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
@@ -499,9 +532,11 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     lo, hi = ((pts[surface_ids].min(axis=0), pts[surface_ids].max(axis=0)) if surface_ids.size
               else (pts.min(axis=0), pts.max(axis=0)) if n else (np.zeros(3), np.zeros(3)))
     origin = 0.5 * (lo + hi)
-    ldef = float(settings.ldef) if settings.ldef is not None else float(np.linalg.norm(hi - lo))
-    if ldef <= 0:
-        ldef = max(_diagonal(pts), 1.0)
+    size = float(np.linalg.norm(hi - lo))
+    if size <= 0:
+        size = max(_diagonal(pts), 1.0)
+    ldef = float(settings.ldef) if settings.ldef is not None else size
+    chord = size
     surface_pos = pts[surface_ids] - origin
 
     # sliding projectors, per target row
@@ -514,7 +549,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
                       node_center=np.zeros((0, 3)), node_radius=np.zeros(0), node_area=np.zeros(0))
     if settings.method == "none":
         return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, np.zeros((0, 3)),
-                         np.zeros(0, np.int64), np.zeros((0, 3, 3)), origin, ldef, **empty_tree)
+                         np.zeros(0, np.int64), np.zeros((0, 3, 3)), origin, ldef, chord, **empty_tree)
 
     # sources and their areas
     src_ids = np.concatenate([surface_ids, fixed_ids])
@@ -531,6 +566,13 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     if a.size and np.any(a == 0):
         pos = a[a > 0]
         a[a == 0] = np.median(pos) if pos.size else 1.0
+    ns = len(surface_ids)
+    if ns:
+        flat = np.ptp(pts[surface_ids], axis=0).min() <= 1e-12 * size    # a 2D mesh: areas are lengths
+        total = float(a[:ns].sum())
+        chord = total / 2 if flat else total / (2 * size)
+        if not (chord > 0 and math.isfinite(chord)):
+            chord = size
 
     # targets in Morton order: neighbours in memory walk the same tree nodes
     tpos = pts[target_ids] - origin
@@ -551,10 +593,10 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
             center, radius, narea = _node_geometry(spos_t, a_t, nlo, nhi)
         else:
             return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos,
-                             slide_rows, slide_proj, origin, ldef, **empty_tree)
+                             slide_rows, slide_proj, origin, ldef, chord, **empty_tree)
         bar.update(1)
     return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos, slide_rows,
-                     slide_proj, origin, ldef, spos_t, a_t, perm.astype(np.int64), nlo, nhi, nleft, nright,
+                     slide_proj, origin, ldef, chord, spos_t, a_t, perm.astype(np.int64), nlo, nhi, nleft, nright,
                      center, radius, narea)
 
 
@@ -740,6 +782,13 @@ def _node_geometry(pos, area, lo, hi):
 
 # ----------------------------------------------------------------------------------------------
 # Kernels
+#
+# Votes per source (NV = 15 columns): [0:3] b (translation channel, weight w), [3:6] c = -M x_i and
+# [6:15] M row-major (rotation channel, weight w g). Node moments (60 columns): [0:15] sum A v,
+# [15 + 15 k + p] sum A (x_i - c_C)_k v_p.
+
+NV = 15
+NM = 60
 
 
 @njit(cache=True, inline="always")
@@ -752,19 +801,29 @@ def _terms(q, ha, hb, ab, fast):
     return q ** ha, ab * q ** hb
 
 
+@njit(cache=True, inline="always")
+def _fade(r2, rho2):
+    """Rotation fade g = 1 / (1 + (r / rho)^4) (1 when rho2 <= 0: no fade)."""
+    if rho2 <= 0.0:
+        return 1.0
+    q = r2 / rho2
+    return 1.0 / (1.0 + q * q)
+
+
 @njit(cache=True)
 def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left, node_right,
               node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab,
-              fast, eps2, tol, rot, stack_n, stack_d, acc_node, acc_src, res):
+              fast, eps2, tol, rho2, rot, stack_n, stack_d, acc_node, acc_src, res):
     """Walk the tree for one target. Returns the total weight W.
 
-    mode 0: res[:12] = the numerator sums (beta part, M part) of the forward map.
+    mode 0: res[:15] = the numerator sums (b channel, c and M channels) of the forward map.
     mode 1: weight only.
     mode 2: adjoint: add the target's share of g into acc_node (per node, see :func:`warp_vjp`)
     and acc_src (per source), scaled by 1 / wfinal.
-    The decisions use only geometry and the running weight, identically in every mode.
+    The decisions use only geometry and the running weight, identically in every mode: the map
+    from the votes to the displacement is fixed by the undeformed mesh.
     """
-    nv = 12 if rot else 3
+    nv = NV if rot else 3
     if mode == 0:
         for j in range(nv):
             res[j] = 0.0
@@ -806,16 +865,24 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                 u0 = x0 - node_c[k, 0]
                 u1 = x1 - node_c[k, 1]
                 u2 = x2 - node_c[k, 2]
+                phr = phi
+                psr = psi
+                if rot and rho2 > 0.0:
+                    # g(D) = 1 / (1 + q^2), q = D^2 / rho^2: -g'(D) / D = 4 q g^2 / rho^2
+                    q = dist2 / rho2
+                    gf = 1.0 / (1.0 + q * q)
+                    phr = phi * gf
+                    psr = gf * (psi + 4.0 * phi * q * gf / rho2)
             if mode == 0:
                 for p in range(3):
-                    res[p] += phi * node_bm[k, p] + psi * (u0 * node_bm[k, 12 + p]
-                                                           + u1 * node_bm[k, 15 + p]
-                                                           + u2 * node_bm[k, 18 + p])
+                    res[p] += phi * node_bm[k, p] + psi * (u0 * node_bm[k, 15 + p]
+                                                           + u1 * node_bm[k, 30 + p]
+                                                           + u2 * node_bm[k, 45 + p])
                 if rot:
-                    for p in range(9):
-                        res[3 + p] += phi * node_bm[k, 3 + p] + psi * (u0 * node_bm[k, 21 + p]
-                                                                       + u1 * node_bm[k, 30 + p]
-                                                                       + u2 * node_bm[k, 39 + p])
+                    for p in range(3, NV):
+                        res[p] += phr * node_bm[k, p] + psr * (u0 * node_bm[k, 15 + p]
+                                                               + u1 * node_bm[k, 30 + p]
+                                                               + u2 * node_bm[k, 45 + p])
             elif mode == 2:
                 cf = phi / wfinal
                 cs = psi / wfinal
@@ -824,28 +891,20 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                 acc_node[k, 2] += cf * g2
                 _outer_add(acc_node, k, 3, cs, g0, g1, g2, u0, u1, u2)
                 if rot:
-                    _outer_add(acc_node, k, 12, cf, g0, g1, g2, x0, x1, x2)
-                    _outer_add(acc_node, k, 21, cs * u0, g0, g1, g2, x0, x1, x2)
-                    _outer_add(acc_node, k, 30, cs * u1, g0, g1, g2, x0, x1, x2)
-                    _outer_add(acc_node, k, 39, cs * u2, g0, g1, g2, x0, x1, x2)
+                    crf = phr / wfinal
+                    crs = psr / wfinal
+                    acc_node[k, 12] += crf * g0
+                    acc_node[k, 13] += crf * g1
+                    acc_node[k, 14] += crf * g2
+                    _outer_add(acc_node, k, 15, crs, g0, g1, g2, u0, u1, u2)
+                    _outer_add(acc_node, k, 24, crf, g0, g1, g2, x0, x1, x2)
+                    _outer_add(acc_node, k, 33, crs * u0, g0, g1, g2, x0, x1, x2)
+                    _outer_add(acc_node, k, 42, crs * u1, g0, g1, g2, x0, x1, x2)
+                    _outer_add(acc_node, k, 51, crs * u2, g0, g1, g2, x0, x1, x2)
         elif node_left[k] < 0:
             for j in range(node_lo[k], node_hi[k]):
-                e0 = x0 - src_x[j, 0]
-                e1 = x1 - src_x[j, 1]
-                e2 = x2 - src_x[j, 2]
-                ta, tb = _terms(l2 / (e0 * e0 + e1 * e1 + e2 * e2 + eps2), ha, hb, ab, fast)
-                w = src_a[j] * (ta + tb)
-                W += w
-                if mode == 0:
-                    for i in range(nv):
-                        res[i] += w * src_bm[j, i]
-                elif mode == 2:
-                    c = w / wfinal
-                    acc_src[j, 0] += c * g0
-                    acc_src[j, 1] += c * g1
-                    acc_src[j, 2] += c * g2
-                    if rot:
-                        _outer_add(acc_src, j, 3, c, g0, g1, g2, x0, x1, x2)
+                W += _leaf_source(x0, x1, x2, j, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2,
+                                  ha, hb, ab, fast, eps2, rho2, rot, acc_src, res)
         else:
             lc = node_left[k]
             rc = node_right[k]
@@ -868,6 +927,37 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
 
 
 @njit(cache=True, inline="always")
+def _leaf_source(x0, x1, x2, j, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2, ha, hb, ab,
+                 fast, eps2, rho2, rot, acc_src, res):
+    """One source summed directly (same modes as :func:`_traverse`); returns its weight."""
+    e0 = x0 - src_x[j, 0]
+    e1 = x1 - src_x[j, 1]
+    e2 = x2 - src_x[j, 2]
+    r2 = e0 * e0 + e1 * e1 + e2 * e2
+    ta, tb = _terms(l2 / (r2 + eps2), ha, hb, ab, fast)
+    w = src_a[j] * (ta + tb)
+    if mode == 0:
+        for i in range(3):
+            res[i] += w * src_bm[j, i]
+        if rot:
+            wr = w * _fade(r2, rho2)
+            for i in range(3, NV):
+                res[i] += wr * src_bm[j, i]
+    elif mode == 2:
+        c = w / wfinal
+        acc_src[j, 0] += c * g0
+        acc_src[j, 1] += c * g1
+        acc_src[j, 2] += c * g2
+        if rot:
+            cr = c * _fade(r2, rho2)
+            acc_src[j, 3] += cr * g0
+            acc_src[j, 4] += cr * g1
+            acc_src[j, 5] += cr * g2
+            _outer_add(acc_src, j, 6, cr, g0, g1, g2, x0, x1, x2)
+    return w
+
+
+@njit(cache=True, inline="always")
 def _outer_add(acc, k, off, c, g0, g1, g2, y0, y1, y2):
     """acc[k, off + 3 p + q] += c g_p y_q."""
     acc[k, off] += c * g0 * y0
@@ -883,30 +973,16 @@ def _outer_add(acc, k, off, c, g0, g1, g2, y0, y1, y2):
 
 @njit(cache=True)
 def _exact_one(x0, x1, x2, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2, ha, hb, ab, fast,
-               eps2, rot, acc_src, res):
+               eps2, rho2, rot, acc_src, res):
     """The direct sum over every source for one target (same modes as :func:`_traverse`)."""
-    nv = 12 if rot else 3
+    nv = NV if rot else 3
     if mode == 0:
         for j in range(nv):
             res[j] = 0.0
     W = 0.0
     for j in range(src_x.shape[0]):
-        e0 = x0 - src_x[j, 0]
-        e1 = x1 - src_x[j, 1]
-        e2 = x2 - src_x[j, 2]
-        ta, tb = _terms(l2 / (e0 * e0 + e1 * e1 + e2 * e2 + eps2), ha, hb, ab, fast)
-        w = src_a[j] * (ta + tb)
-        W += w
-        if mode == 0:
-            for i in range(nv):
-                res[i] += w * src_bm[j, i]
-        elif mode == 2:
-            c = w / wfinal
-            acc_src[j, 0] += c * g0
-            acc_src[j, 1] += c * g1
-            acc_src[j, 2] += c * g2
-            if rot:
-                _outer_add(acc_src, j, 3, c, g0, g1, g2, x0, x1, x2)
+        W += _leaf_source(x0, x1, x2, j, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2, ha, hb,
+                          ab, fast, eps2, rho2, rot, acc_src, res)
     return W
 
 
@@ -915,9 +991,9 @@ def _finish(res, W, x0, x1, x2, rot, out, i):
     if W > 0:
         v0, v1, v2 = res[0], res[1], res[2]
         if rot:
-            v0 += res[3] * x0 + res[4] * x1 + res[5] * x2
-            v1 += res[6] * x0 + res[7] * x1 + res[8] * x2
-            v2 += res[9] * x0 + res[10] * x1 + res[11] * x2
+            v0 += res[3] + res[6] * x0 + res[7] * x1 + res[8] * x2
+            v1 += res[4] + res[9] * x0 + res[10] * x1 + res[11] * x2
+            v2 += res[5] + res[12] * x0 + res[13] * x1 + res[14] * x2
         out[i, 0] = v0 / W
         out[i, 1] = v1 / W
         out[i, 2] = v2 / W
@@ -925,45 +1001,34 @@ def _finish(res, W, x0, x1, x2, rot, out, i):
         out[i, 0] = out[i, 1] = out[i, 2] = 0.0
 
 
-@njit(cache=True, inline="always")
-def _target_tol(x0, x1, x2, tol, scale):
-    """The tolerance on misplaced weight for one target: tol * max|b| / (bound of |s_i(x) - d(x)|).
-
-    scale = (v0, m) / max|b| with v0 = max |s_i(origin)|, m = max ||M_i||_2, so that
-    |s_i(x) - d(x)| <= 2 (v0 + m |x|) for every source (d is a weighted mean of the s_i).
-    """
-    s = 2.0 * (scale[0] + scale[1] * math.sqrt(x0 * x0 + x1 * x1 + x2 * x2))
-    return tol / s if s > 0 else np.inf
-
-
 @njit(parallel=True, cache=True)
 def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right, node_c, node_r,
                  node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
-                 scale, rot):
+                 rho2, rot):
     n = tx.shape[0]
-    dummy = np.zeros((1, 48))
+    dummy = np.zeros((1, NM))
     for bi in prange(blocks.shape[0]):
         b = blocks[bi]
         stack_n = np.empty(_STACK, np.int64)
         stack_d = np.empty(_STACK)
-        res = np.empty(12)
+        res = np.empty(NV)
         for i in range(b * _BLOCK, min(n, (b + 1) * _BLOCK)):
             x0, x1, x2 = tx[i, 0], tx[i, 1], tx[i, 2]
             if exact:
                 W = _exact_one(x0, x1, x2, 0, 1.0, 0.0, 0.0, 0.0, src_x, src_a, src_bm, l2, ha, hb,
-                               ab, fast, eps2, rot, dummy, res)
+                               ab, fast, eps2, rho2, rot, dummy, res)
             else:
                 W = _traverse(x0, x1, x2, 0, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
                               node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2,
-                              ha, hb, pa, pb, ab, fast, eps2, _target_tol(x0, x1, x2, tol, scale),
-                              rot, stack_n, stack_d, dummy, dummy, res)
+                              ha, hb, pa, pb, ab, fast, eps2, tol, rho2, rot, stack_n, stack_d,
+                              dummy, dummy, res)
             _finish(res, W, x0, x1, x2, rot, out, i)
 
 
 @njit(parallel=True, cache=True)
 def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, node_right, node_c,
                 node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
-                tol, scale):
+                tol, rho2):
     """Per-thread accumulators acc_node[t], acc_src[t]; thread t takes every T-th block."""
     n = tx.shape[0]
     nthreads = acc_node.shape[0]
@@ -971,7 +1036,7 @@ def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, no
     for t in prange(nthreads):
         stack_n = np.empty(_STACK, np.int64)
         stack_d = np.empty(_STACK)
-        res = np.empty(12)
+        res = np.empty(NV)
         an = acc_node[t]
         asrc = acc_src[t]
         for b in range(t, nblocks, nthreads):
@@ -982,32 +1047,31 @@ def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, no
                 x0, x1, x2 = tx[i, 0], tx[i, 1], tx[i, 2]
                 if exact:
                     W = _exact_one(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, src_x, src_a, src_bm, l2, ha,
-                                   hb, ab, fast, eps2, True, asrc, res)
+                                   hb, ab, fast, eps2, rho2, True, asrc, res)
                     if W > 0:
                         _exact_one(x0, x1, x2, 2, W, g0, g1, g2, src_x, src_a, src_bm, l2, ha, hb,
-                                   ab, fast, eps2, True, asrc, res)
+                                   ab, fast, eps2, rho2, True, asrc, res)
                 else:
-                    tolx = _target_tol(x0, x1, x2, tol, scale)
                     W = _traverse(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
                                   node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
-                                  l2, ha, hb, pa, pb, ab, fast, eps2, tolx, True, stack_n, stack_d,
-                                  an, asrc, res)
+                                  l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, stack_n,
+                                  stack_d, an, asrc, res)
                     if W > 0:
                         _traverse(x0, x1, x2, 2, W, g0, g1, g2, node_lo, node_hi, node_left,
                                   node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
-                                  l2, ha, hb, pa, pb, ab, fast, eps2, tolx, True, stack_n, stack_d,
-                                  an, asrc, res)
+                                  l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, stack_n,
+                                  stack_d, an, asrc, res)
 
 
 @njit(cache=True)
 def _node_moments(src_bm, src_x, src_a, node_c, lo, hi, rot):
-    """Per node, over its sources (A = area, v = (beta, M), delta = x_i - centroid):
+    """Per node, over its sources (A = area, v = the NV votes, delta = x_i - centroid):
 
-    [0:12] sum A v; [12 + 3k + p] sum A delta_k beta_p; [21 + 9k + j] sum A delta_k M_j.
+    [0:NV] sum A v; [NV + NV k + p] sum A delta_k v_p.
     """
     nn = lo.shape[0]
-    nv = 12 if rot else 3
-    out = np.zeros((nn, 48))
+    nv = NV if rot else 3
+    out = np.zeros((nn, NM))
     for k in range(nn):
         for j in range(lo[k], hi[k]):
             a = src_a[j]
@@ -1015,11 +1079,8 @@ def _node_moments(src_bm, src_x, src_a, node_c, lo, hi, rot):
                 out[k, i] += a * src_bm[j, i]
             for c in range(3):
                 ad = a * (src_x[j, c] - node_c[k, c])
-                for p in range(3):
-                    out[k, 12 + 3 * c + p] += ad * src_bm[j, p]
-                if rot:
-                    for p in range(9):
-                        out[k, 21 + 9 * c + p] += ad * src_bm[j, 3 + p]
+                for p in range(nv):
+                    out[k, NV + NV * c + p] += ad * src_bm[j, p]
     return out
 
 
@@ -1038,13 +1099,13 @@ def _push_down(acc_node, left, right):
 
 
 def _source_motion(model: WarpModel, disp, rot):
-    """Per source in tree order: (beta = b - M x_i, M) as (Ms, 12), and whether M is used."""
+    """Per source in tree order: the NV votes (b, -M x_i, M), and whether M is used."""
     ns = model.n_surface
     b = np.asarray(disp, dtype=np.float64)
     if b.shape != (ns, 3):
         raise ValueError(f"surface displacement must be ({ns}, 3), got {b.shape}")
     ms = len(model.src_index)
-    bm = np.zeros((ms, 12))
+    bm = np.zeros((ms, NV))
     moving = model.src_index < ns
     sid = model.src_index[moving]
     bm[moving, :3] = b[sid]
@@ -1054,31 +1115,9 @@ def _source_motion(model: WarpModel, disp, rot):
         if R.shape != (ns, 3, 3):
             raise ValueError(f"surface rotation must be ({ns}, 3, 3), got {R.shape}")
         M = R[sid] - np.eye(3)
-        bm[moving, :3] -= np.einsum("nij,nj->ni", M, model.src_pos[moving])
-        bm[moving, 3:] = M.reshape(-1, 9)
+        bm[moving, 3:6] = -np.einsum("nij,nj->ni", M, model.src_pos[moving])
+        bm[moving, 6:] = M.reshape(-1, 9)
     return bm, use_rot
-
-
-def _decision_scale(model: WarpModel, disp, rot) -> np.ndarray:
-    """(v0, m) / max|b| of :func:`_target_tol`, from the motion the tree decisions are made for.
-
-    v0 = max |b_i - M_i x_i| (the vote of source i at the origin), m = max ||M_i||_2.
-    """
-    b = np.asarray(disp, dtype=np.float64)
-    bref = float(np.sqrt((b * b).sum(axis=1).max())) if len(b) else 0.0
-    if rot is None:
-        v0, m = bref, 0.0
-    else:
-        M = np.asarray(rot, dtype=np.float64) - np.eye(3)
-        x = model.surface_pos
-        v0 = float(np.linalg.norm(b - np.einsum("nij,nj->ni", M, x), axis=1).max()) if len(b) else 0.0
-        m = float(np.linalg.norm(M, 2, axis=(1, 2)).max()) if len(b) else 0.0
-    if bref == 0.0:
-        # no translation at all: the tolerance is relative to the largest vote instead
-        bref = max(v0, m * model.ldef)
-    if bref == 0.0:
-        return np.zeros(2)
-    return np.array([v0 / bref, m / bref])
 
 
 def _blocks(n: int) -> np.ndarray:
@@ -1089,8 +1128,7 @@ def _blocks(n: int) -> np.ndarray:
 
 
 def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: np.ndarray | None = None,
-         *, exact: bool = False, progress=None, decide_for=None, rows: tuple[int, int] | None = None
-         ) -> np.ndarray:
+         *, exact: bool = False, progress=None, rows: tuple[int, int] | None = None) -> np.ndarray:
     """Displacement (N, 3) of every mesh node given the motion of the surface nodes.
 
     Parameters
@@ -1106,9 +1144,6 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         Evaluate the direct O(N x Ns) sum instead of the tree (tests, error reports).
     progress
         Progress factory (:mod:`ffdcli.progress`).
-    decide_for
-        ``(b0, R0)``: make the tree decisions for this motion instead of (b, R). With it fixed,
-        ``warp`` is linear in (b, R - I): the map whose transpose is ``warp_vjp(model, g, b0, R0)``.
     rows
         ``(lo, hi)``: compute only the volume nodes ``model.target_ids[lo:hi]`` (one MPI rank's
         share, :func:`ffdcli.parallel.share`) and return their (hi - lo, 3) displacements; each
@@ -1118,6 +1153,8 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     -------
     (N, 3) displacement: surface nodes get ``surface_displacement`` exactly, fixed nodes zero,
     sliding nodes the IDW displacement projected on their plane, every other node the IDW value.
+    The tree's decisions depend on the undeformed mesh only, so this is a fixed linear map of
+    (b, M = R - I) whose transpose is :func:`warp_vjp`.
     """
     progress = progress or no_progress
     b = np.asarray(surface_displacement, dtype=np.float64)
@@ -1133,17 +1170,17 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         out[model.surface_ids] = b
         return out
     bm, use_rot = _source_motion(model, b, surface_rotation)
-    scale = _decision_scale(model, *(decide_for if decide_for is not None else (b, surface_rotation)))
     node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
-    l2, ha, hb, pa, pb, ab, fast, eps2, tol = model.params()
+    l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = model.params()
     d = np.empty((t_hi - t_lo, 3))
     with progress("volume mesh", t_hi - t_lo) as bar:
         for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
             _warp_kernel(model.target_pos[t_lo + lo:t_lo + hi], _blocks(hi - lo), d[lo:hi], exact,
-                         model.node_lo, model.node_hi, model.node_left, model.node_right, model.node_center,
-                         model.node_radius, model.node_area, node_bm, model.src_pos, model.src_area,
-                         bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol, scale, use_rot)
+                         model.node_lo, model.node_hi, model.node_left, model.node_right,
+                         model.node_center, model.node_radius, model.node_area, node_bm,
+                         model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
+                         rho2, use_rot)
             bar.update(hi - lo)
     if len(model.slide_rows):
         mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)
@@ -1156,26 +1193,22 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     return out
 
 
-def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
-             surface_rotation: np.ndarray | None = None, *, exact: bool = False,
+def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
              progress=None, comm=None) -> tuple[np.ndarray, np.ndarray]:
     """Transpose of :func:`warp`: ``g`` (N, 3) = dJ/d(displacement) -> (dJ/db (Ns, 3), dJ/dM (Ns, 3, 3)).
 
-    With the tree decisions that ``warp(model, b, R)`` makes (pass the same ``b``, ``R`` here),
-    the warp is a linear map of (b, M = R - I); this is its exact transpose, tree and all:
-    ``sum(g * warp(model, v, I + V, decide_for=(b, R))) == sum(g_b * v) + sum(g_M * V)`` to
-    rounding. It is the derivative of ``warp`` at (b, R) (the decisions change only at isolated
-    thresholds). The pass-through of surface nodes, the zero of fixed nodes and the sliding
-    projections are included. ``exact`` must match the :func:`warp` call being differentiated.
+    :func:`warp` is a fixed linear map of (b, M = R - I) (its tree decisions are made on the
+    undeformed mesh); this is its exact transpose, tree and all:
+    ``sum(g * warp(model, v, I + V)) == sum(g_b * v) + sum(g_M * V)`` to rounding, so it is also
+    the exact derivative of :func:`warp` at every (b, R). The pass-through of surface nodes, the
+    zero of fixed nodes and the sliding projections are included. ``exact`` must match the
+    :func:`warp` call being differentiated.
     ``comm`` (:mod:`ffdcli.parallel`, a collective): each rank sums over its share of the volume
     nodes and the sums are added over the ranks; every rank passes the whole ``g`` and gets the
     whole result (equal to the serial one to rounding: the sums are added in another order).
 
-    Linearisations: with the rotations held fixed (not depending on the design) dJ/db is ``g_b``
-    alone, and ``g_b`` is the same whatever ``R`` is (for fixed decisions d is a sum of a part
-    linear in b and a part linear in M). With rotations that follow the design (R from the FFD's
-    deformation gradient), chain ``g_M`` through dR/d(design) as well; ``ffdcli.warp`` does not
-    differentiate the polar decomposition.
+    With rotations that follow the design (R from the FFD's deformation gradient), chain ``g_M``
+    through dR/d(design) (:mod:`ffdcli.rotations`).
     """
     progress = progress or no_progress
     g = np.asarray(g, dtype=np.float64)
@@ -1186,27 +1219,26 @@ def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
     g_M = np.zeros((ns, 3, 3))
     if model.settings.method == "none" or model.n_targets == 0 or len(model.src_index) == 0:
         return g_b, g_M
-    scale = _decision_scale(model, surface_displacement, surface_rotation)
     gt = g[model.target_ids]
     if len(model.slide_rows):
         gt[model.slide_rows] = np.einsum("nij,nj->ni", model.slide_proj, gt[model.slide_rows])
-    l2, ha, hb, pa, pb, ab, fast, eps2, tol = model.params()
+    l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = model.params()
     nthreads = numba.get_num_threads()
     nn, ms = len(model.node_lo), len(model.src_index)
-    acc_node = np.zeros((nthreads, nn, 48))
-    acc_src = np.zeros((nthreads, ms, 12))
-    dummy_bm = np.zeros((1, 48))
+    acc_node = np.zeros((nthreads, nn, NM))
+    acc_src = np.zeros((nthreads, ms, NV))
+    dummy_bm = np.zeros((1, NM))
     t_lo, t_hi = (0, model.n_targets) if comm is None else comm.share(model.n_targets)
 
     def accumulate():
         with progress("volume mesh (transpose)", t_hi - t_lo) as bar:
             for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
                 lo, hi = lo + t_lo, hi + t_lo
-                _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node, acc_src,
-                            exact, model.node_lo, model.node_hi, model.node_left, model.node_right,
-                            model.node_center, model.node_radius, model.node_area, dummy_bm,
-                            model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
-                            tol, scale)
+                _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node,
+                            acc_src, exact, model.node_lo, model.node_hi, model.node_left,
+                            model.node_right, model.node_center, model.node_radius, model.node_area,
+                            dummy_bm, model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab,
+                            fast, eps2, tol, rho2)
                 bar.update(hi - lo)
 
     if comm is None:
@@ -1215,47 +1247,54 @@ def warp_vjp(model: WarpModel, g: np.ndarray, surface_displacement: np.ndarray,
         comm.run(accumulate)
         acc_node = comm.allreduce_sum(acc_node.sum(axis=0, keepdims=True))
         acc_src = comm.allreduce_sum(acc_src.sum(axis=0, keepdims=True))
-    # Node accumulators, per node C over the targets that aggregated it (u = x - c_C):
-    # [0:3] G_f = sum phi/W g; [3 + 3p + k] G_s = sum psi/W g_p u_k; [12:21] sum phi/W g x^T;
-    # [21 + 9k + 3p + q] sum psi/W u_k g_p x_q. Source i of C gets A_i (G_f + G_s (x_i - c_C))
-    # for beta and the same with x for M: fold the -c_C parts into G_f so that the sums can be
-    # pushed down the tree unchanged.
+    # Node accumulators, per node C over the targets that aggregated it (u = x - c_C; phi, psi of
+    # the b channel, phi_r, psi_r of the rotation channels):
+    # [0:3] sum phi/W g; [3 + 3p + k] sum psi/W g_p u_k; [12:15] sum phi_r/W g;
+    # [15 + 3p + k] sum psi_r/W g_p u_k; [24 + 3p + q] sum phi_r/W g_p x_q;
+    # [33 + 9k + 3p + q] sum psi_r/W u_k g_p x_q. Source i of C gets A_i (G_f + G_s (x_i - c_C))
+    # per channel: fold the -c_C parts into G_f so that the sums can be pushed down the tree.
     an = acc_node.sum(axis=0)
     asrc = acc_src.sum(axis=0)
     c = model.node_center
-    gs = an[:, 3:12].reshape(-1, 3, 3)
-    gsx = an[:, 21:48].reshape(-1, 3, 3, 3)
-    an[:, 0:3] -= np.einsum("npk,nk->np", gs, c)
-    an[:, 12:21] -= np.einsum("nk,nkpq->npq", c, gsx).reshape(-1, 9)
+    for f, s in ((0, 3), (12, 15)):
+        an[:, f:f + 3] -= np.einsum("npk,nk->np", an[:, s:s + 9].reshape(-1, 3, 3), c)
+    an[:, 24:33] -= np.einsum("nk,nkpq->npq", c, an[:, 33:60].reshape(-1, 3, 3, 3)).reshape(-1, 9)
     _push_down(an, model.node_left, model.node_right)
     leaves = np.flatnonzero(model.node_left < 0)
     leaves = leaves[np.argsort(model.node_lo[leaves])]      # leaf ranges partition the sources
     leaf = an[np.repeat(leaves, model.node_hi[leaves] - model.node_lo[leaves])]
     x = model.src_pos
-    a = model.src_area
-    gbeta = asrc[:, :3] + a[:, None] * (leaf[:, 0:3] + np.einsum("npk,nk->np",
-                                                                 leaf[:, 3:12].reshape(-1, 3, 3), x))
-    gx = asrc[:, 3:12].reshape(-1, 3, 3) + a[:, None, None] * (
-        leaf[:, 12:21].reshape(-1, 3, 3) + np.einsum("nk,nkpq->npq", x, leaf[:, 21:48].reshape(-1, 3, 3, 3)))
+    a = model.src_area[:, None]
+    gb = asrc[:, 0:3] + a * (leaf[:, 0:3] + np.einsum("npk,nk->np", leaf[:, 3:12].reshape(-1, 3, 3), x))
+    gc = asrc[:, 3:6] + a * (leaf[:, 12:15] + np.einsum("npk,nk->np", leaf[:, 15:24].reshape(-1, 3, 3), x))
+    gx = asrc[:, 6:15].reshape(-1, 3, 3) + a[:, :, None] * (
+        leaf[:, 24:33].reshape(-1, 3, 3) + np.einsum("nk,nkpq->npq", x, leaf[:, 33:60].reshape(-1, 3, 3, 3)))
     moving = model.src_index < ns
     sid = model.src_index[moving]
-    g_b[sid] += gbeta[moving]
-    g_M[sid] = gx[moving] - gbeta[moving][:, :, None] * model.src_pos[moving][:, None, :]
+    g_b[sid] += gb[moving]
+    # c = -M x_i: its gradient reaches M as -g_c x_i^T
+    g_M[sid] = gx[moving] - gc[moving][:, :, None] * x[moving][:, None, :]
     return g_b, g_M
 
 
 def idw_reference(points_src: np.ndarray, areas: np.ndarray, disp: np.ndarray, rot: np.ndarray | None,
-                  targets: np.ndarray, settings: WarpSettings, ldef: float) -> np.ndarray:
-    """Plain NumPy direct sum (the formula of the module docstring) for checking the kernels."""
+                  targets: np.ndarray, settings: WarpSettings, ldef: float,
+                  rotation_length: float | None = None) -> np.ndarray:
+    """Plain NumPy direct sum (the formula of the module docstring) for checking the kernels.
+
+    ``rotation_length``: rho of the rotation fade (None: no fade)."""
     s = settings
     e = targets[:, None, :] - points_src[None, :, :]
-    r2 = np.einsum("tsk,tsk->ts", e, e) + (1e-12 * ldef) ** 2
+    r2raw = np.einsum("tsk,tsk->ts", e, e)
+    r2 = r2raw + (1e-12 * ldef) ** 2
     q = ldef ** 2 / r2
     w = areas[None, :] * (q ** (s.a / 2) + s.alpha ** s.b * q ** (s.b / 2))
     v = np.broadcast_to(disp[None, :, :], e.shape).copy()
     if rot is not None:
-        v += np.einsum("sij,tsj->tsi", rot - np.eye(3), e)
+        gf = 1.0 if rotation_length is None else 1.0 / (1.0 + (r2raw / rotation_length ** 2) ** 2)
+        v += np.broadcast_to(gf, w.shape)[:, :, None] * np.einsum("sij,tsj->tsi", rot - np.eye(3), e)
     return np.einsum("ts,tsi->ti", w, v) / w.sum(axis=1)[:, None]
+
 
 
 # ----------------------------------------------------------------------------------------------

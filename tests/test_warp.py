@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import jsonschema
 import numpy as np
 import pytest
@@ -145,14 +147,15 @@ def test_vertex_areas_share_faces_equally():
 # the warp itself
 
 
-@pytest.mark.parametrize("rotate", [False, True])
-def test_kernels_match_numpy_reference(rotate):
+@pytest.mark.parametrize("rotate,reach", [(False, 0.25), (True, 0.25), (True, None), (True, 0.05)])
+def test_kernels_match_numpy_reference(rotate, reach):
     pts, sid, areas, rng = sphere_cloud()
-    st = WarpSettings(tolerance=1e-3)
+    st = WarpSettings(tolerance=1e-3, rotation_reach=reach)
     m = prepare_warp(pts, sid, settings=st, areas=areas)
     b = 0.05 * rng.normal(size=(len(sid), 3))
     R = np.stack([rot_z(a) for a in rng.uniform(-0.2, 0.2, len(sid))]) if rotate else None
-    ref = idw_reference(m.surface_pos, areas[sid], b, R, pts[len(sid):] - m.origin, st, m.ldef)
+    ref = idw_reference(m.surface_pos, areas[sid], b, R, pts[len(sid):] - m.origin, st, m.ldef,
+                        m.rotation_length)
     exact = warp(m, b, R, exact=True)
     tree = warp(m, b, R)
     # the exact kernel is the same sum in another order: rounding only (|d| ~ 0.1)
@@ -163,7 +166,7 @@ def test_kernels_match_numpy_reference(rotate):
     assert err <= st.tolerance * bmax, err / bmax
     assert err > 0        # it really approximated (a tree that never aggregates would pass above)
     # and tolerance 0 is the exact sum up to summation order
-    m0 = prepare_warp(pts, sid, settings=WarpSettings(tolerance=0), areas=areas)
+    m0 = prepare_warp(pts, sid, settings=WarpSettings(tolerance=0, rotation_reach=reach), areas=areas)
     np.testing.assert_allclose(warp(m0, b, R), exact, rtol=0, atol=1e-13)
 
 
@@ -192,9 +195,11 @@ def test_method_none_moves_only_the_surface(mesh):
 
 
 def test_rigid_motion_without_fixed_sources_is_reproduced_exactly(mesh):
-    """With only the surface as source, the normalised weights reproduce any rigid motion."""
+    """With only the surface as source, the normalised weights reproduce any rigid motion (without
+    the rotation fade: with it, the rotation part is only carried near the surface)."""
     roles = marker_roles(mesh.points, mesh.markers, "wing", 3)
-    model = prepare_warp(mesh.points, roles.surface_ids, faces=roles.faces)
+    model = prepare_warp(mesh.points, roles.surface_ids, faces=roles.faces,
+                         settings=WarpSettings(rotation_reach=None))
     x = mesh.points
     t = np.array([0.03, -0.01, 0.02])
     d = warp(model, np.tile(t, (model.n_surface, 1)))
@@ -227,9 +232,9 @@ def test_fixed_farfield_near_surface_moves_almost_rigidly():
     assert near.sum() > 50 and far.sum() > 100
     t = np.array([0.0, 0.0, 0.05])
     d = warp(model, np.tile(t, (model.n_surface, 1)))
-    # measured: 0.99978..0.99992 of t near, at most 0.26 t at 1.5 chords (the farfield is at 2)
+    # measured (alpha 1): at least 0.999 t near, at most 0.33 t at 1.5 chords (the farfield is at 2)
     assert np.all(d[near, 2] >= 0.999 * t[2]) and np.all(d[near, 2] <= t[2] * (1 + 1e-12))
-    assert np.abs(d[far]).max() <= 0.3 * t[2]
+    assert np.abs(d[far]).max() <= 0.4 * t[2]
     # the wing rotates 0.1 rad about its trailing edge: the first layer rotates with it
     p = np.array([0.5, 0.0, 0.0])
     R = np.array([[np.cos(0.1), 0, np.sin(0.1)], [0, 1, 0], [-np.sin(0.1), 0, np.cos(0.1)]])
@@ -237,8 +242,9 @@ def test_fixed_farfield_near_surface_moves_almost_rigidly():
     rigid = (x[near] - p) @ (R - np.eye(3)).T
     d = warp(model, b, np.tile(R, (model.n_surface, 1, 1)))
     rel = np.linalg.norm(d[near] - rigid, axis=1) / np.linalg.norm(rigid, axis=1)
-    # measured 2.2e-4 at worst with the rotation term, 0.2 without it (translations only)
-    assert rel.max() < 1e-3
+    # measured 1.7e-3 at worst with the (faded) rotation term, 2.2e-4 without the fade, 0.2
+    # without rotations (translations only)
+    assert rel.max() < 3e-3
     d0 = warp(model, b)
     rel0 = np.linalg.norm(d0[near] - rigid, axis=1) / np.linalg.norm(rigid, axis=1)
     assert rel0.max() > 0.1
@@ -254,29 +260,27 @@ def test_vjp_is_the_transpose(mesh, rotate, exact):
     v = rng.normal(size=(ns, 3))
     V = rng.normal(size=(ns, 3, 3))
     g = rng.normal(size=(mesh.n_points, 3))
-    gb, gM = warp_vjp(model, g, b0, R0, exact=exact)
-    # the map (b, M) -> d with the tree decisions made for (b0, R0); g_M is its M part even when
-    # the base point has no rotation (R0 = None means M0 = 0)
-    lhs = np.sum(g * warp(model, v, np.eye(3) + V, decide_for=(b0, R0), exact=exact))
+    gb, gM = warp_vjp(model, g, exact=exact)
+    # the warp is one fixed linear map (b, M) -> d: its tree decisions depend on the mesh only
+    lhs = np.sum(g * warp(model, v, np.eye(3) + V, exact=exact))
     rhs = np.sum(gb * v) + np.sum(gM * V)
     # both sides are the same bilinear form summed in a different order: rounding, ~1e-16 relative
     assert abs(lhs - rhs) <= 1e-12 * (abs(lhs) + np.abs(g).sum() * np.abs(v).max()), (lhs, rhs)
-    lhs_b = np.sum(g * warp(model, v, decide_for=(b0, R0), exact=exact))
+    lhs_b = np.sum(g * warp(model, v, exact=exact))
     assert abs(lhs_b - np.sum(gb * v)) <= 1e-12 * np.abs(g).sum() * np.abs(v).max()
 
 
 def test_vjp_is_the_derivative_away_from_thresholds(mesh):
-    """Finite differences of warp (tree decisions fixed at the base point) agree with the vjp."""
+    """Finite differences of warp (the tree decisions do not depend on the motion) agree with the vjp."""
     model, _ = prepare_mesh_warp(mesh, "wing")
     rng = np.random.default_rng(3)
     ns = model.n_surface
     b0 = 0.02 * rng.normal(size=(ns, 3))
     g = rng.normal(size=(mesh.n_points, 3))
     v = rng.normal(size=(ns, 3))
-    gb, _ = warp_vjp(model, g, b0)
+    gb, _ = warp_vjp(model, g)
     h = 1e-3
-    fd = (np.sum(g * warp(model, b0 + h * v, decide_for=(b0, None)))
-          - np.sum(g * warp(model, b0 - h * v, decide_for=(b0, None)))) / (2 * h)
+    fd = (np.sum(g * warp(model, b0 + h * v)) - np.sum(g * warp(model, b0 - h * v))) / (2 * h)
     # warp is linear in b with the decisions fixed: central differences are exact up to rounding
     np.testing.assert_allclose(fd, np.sum(gb * v), rtol=1e-10)
 
@@ -338,8 +342,45 @@ def test_2d_mesh_rotation_stays_in_plane():
     r = np.linalg.norm(x[:, :2], axis=1)
     first = np.isclose(r, r[model.surface_ids].max() * (10 / 0.5) ** (1 / 11))
     rigid = x[first] @ (Rz - np.eye(3)).T
-    # the first ring (0.66 radius) rotates with the airfoil: measured 8.3e-4 of the rigid motion
-    # with the frame rotations, 0.30 without them
-    assert np.linalg.norm(d[first] - rigid, axis=1).max() <= 2e-3 * np.linalg.norm(rigid, axis=1).min()
+    # the first ring (0.66 radius, 0.16 off the disc) rotates with it: measured 0.012 of the rigid
+    # motion with the faded frame rotations (rotation_reach 0.3: rho = 0.3 x pi / 2), 8.3e-4
+    # without the fade, 0.30 without rotations
+    err = np.linalg.norm(d[first] - rigid, axis=1).max() / np.linalg.norm(rigid, axis=1).min()
+    assert err <= 0.02
+    nofade, _ = prepare_mesh_warp(mesh, "airfoil", WarpSettings(rotation_reach=None))
+    d1 = warp(nofade, xs @ (Rz - np.eye(3)).T, R)
+    assert np.all(d1[:, 2] == 0.0)
+    assert np.linalg.norm(d1[first] - rigid, axis=1).max() <= 2e-3 * np.linalg.norm(rigid, axis=1).min()
     d0 = warp(model, xs @ (Rz - np.eye(3)).T)
     assert np.linalg.norm(d0[first] - rigid, axis=1).max() >= 0.1 * np.linalg.norm(rigid, axis=1).min()
+
+
+@pytest.mark.slow
+def test_rotation_fade_bounds_the_overshoot(tmp_path):
+    """A tip that twists: no volume node moves further than the surface motion near it explains.
+
+    The bundled CRM-like wing (tip chord 0.3 inside the domain) twisted 10 degrees at the tip.
+    Without the fade the rotation term carries the nodes a tip chord behind and above the tip
+    round as a rigid body, 3.0 x further than any surface node moves; with it (the default
+    rotation_reach 0.3), 1.09 x.
+    """
+    import yaml
+
+    from ffdcli.design import load_design
+    from ffdcli.pipeline import load_run
+
+    root = Path(__file__).resolve().parents[1]
+    design = tmp_path / "d.yaml"
+    design.write_text(yaml.safe_dump({"mesh": str(root / "samples" / "crm_wing.su2"), "surface": "wing",
+                                      "box": {"points": [6, 8, 2], "sections": "xz"},
+                                      "changes": [{"twist": {"tip": 10}}]}))
+    run = load_run(load_design(design), cache_dir=tmp_path)
+    P = run.lattice_after()
+    b, R = run.surface_displacement(P), run.surface_rotations(P)
+    bmax = np.linalg.norm(b, axis=1).max()
+    out = {}
+    for reach in (None, 0.3):
+        model, _ = prepare_mesh_warp(run.prep.mesh, "wing", WarpSettings(rotation_reach=reach))
+        out[reach] = np.linalg.norm(warp(model, b, R), axis=1).max() / bmax
+    assert out[None] > 1.5, out
+    assert out[0.3] <= 1.1, out
