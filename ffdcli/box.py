@@ -260,7 +260,8 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
     Returns
     -------
     (box, embedding, report)
-        ``report`` has ``rebuilds``, ``warnings`` (list of str), ``outside`` (count after the last
+        ``report`` has ``rebuilds``, ``warnings`` and ``notes`` (lists of str: notes are what went as
+        designed, e.g. a rounded tip cap repaired), ``outside`` (count after the last
         rebuild: 0 unless the surface could not be contained).
     """
     progress = progress or no_progress
@@ -273,12 +274,13 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
         raise InputError("the surface has non-finite coordinates", path=path)
     axes = detect_axes(pts, dim, sections=settings.sections, root=settings.root, path=path, faces=faces)
     warnings: list[str] = []
+    notes: list[str] = []
     if axes.guessed and settings.sections is None:
         warnings.append(f"the surface is not clearly wing-shaped: axes guessed as {axes.as_dict()} "
                         f"(chord, thickness, span); set box.sections / --sections to choose")
     if dim == 3:
-        sections, stations, chord_sign, sign_clear, extra = _fit_sections_3d(pts, faces, axes, settings,
-                                                                          path)
+        sections, stations, chord_sign, sign_clear, extra, notes = _fit_sections_3d(pts, faces, axes, settings,
+                                                                                 path)
         warnings += extra
     else:
         chord_sign, sign_clear = leading_edge_sign([pts[:, [axes.chord, axes.thickness]]])
@@ -297,7 +299,7 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
     m = len(sections)
     margins = np.tile(np.full(4, settings.margin, dtype=np.float64), (m, 1))
     core = None
-    report = {"rebuilds": 0, "warnings": warnings, "outside": 0}
+    report = {"rebuilds": 0, "warnings": warnings, "notes": notes, "outside": 0}
     with progress("fitting the box", MAX_REBUILDS + 1) as bar:
         for attempt in range(MAX_REBUILDS + 1):
             P = _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim)
@@ -321,7 +323,7 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
 
 
 def _fit_sections_3d(pts, faces, axes: Axes, settings: BoxSettings, path):
-    """Sections (list of Section), stations (m,), chord sign, whether it was clear, warnings."""
+    """Sections (list of Section), stations (m,), chord sign, whether it was clear, warnings, notes."""
     m = settings.points[1]
     eta = axes.span_sign * pts[:, axes.span]
     root, tip = float(eta.min()), float(eta.max())
@@ -334,12 +336,13 @@ def _fit_sections_3d(pts, faces, axes: Axes, settings: BoxSettings, path):
     chord_sign, clear = cutter.chord_sign()
     sections = cutter.sections(etas, chord_sign)
     warnings: list[str] = []
-    repair_ends(sections, etas, cutter, chord_sign, span, warnings)
+    notes: list[str] = []
+    repair_ends(sections, etas, cutter, chord_sign, span, warnings, notes)
     if any(s is None for s in sections):
         bad = [j for j, s in enumerate(sections) if s is None]
         raise InputError(f"could not find the airfoil at sections {bad} of the surface; is it a wing? "
                          "(try box.sections / --sections to set the axes)", path=path)
-    return sections, etas, chord_sign, clear, warnings
+    return sections, etas, chord_sign, clear, warnings, notes
 
 
 def _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim):

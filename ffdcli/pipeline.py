@@ -54,6 +54,7 @@ class PreparedBox:
             "from_cache": self.from_cache,
             "seconds": round(self.seconds, 3),
             "warnings": list(self.warnings),
+            "notes": list(self.report.get("notes", [])),
         }
         if out["outside"]:
             idx = np.flatnonzero(~inside)

@@ -21,6 +21,10 @@ from ffdcli.axes import Axes
 
 #: Where the first cut inboard of a degenerate tip cut is searched, as fractions of the span.
 TIP_SEARCH = (0.0025, 0.005, 0.01, 0.02, 0.04, 0.08, 0.16)
+#: A repaired end section is only worth a warning when the good cut was farther inboard than this
+#: fraction of the span (a large rounded region whose end section is a guess); a usual rounded cap,
+#: repaired from a cut a few per cent inboard, is a note (``ffd box -v``, ``--json`` ``notes``).
+TIP_WARN_FRACTION = 0.05
 #: Fractions of the span where the leading-edge side is probed (the ends are skipped: caps, roots).
 PROBE_FRACTIONS = (0.2, 0.35, 0.5, 0.65, 0.8)
 
@@ -244,9 +248,11 @@ def _predict(sections, etas, j, toward):
     return le, te, float(np.hypot(*(te - le)))
 
 
-def repair_ends(sections, etas, cutter: Cutter, chord_sign: float, span: float, warnings: list[str]):
+def repair_ends(sections, etas, cutter: Cutter, chord_sign: float, span: float, warnings: list[str],
+                notes: list[str] | None = None):
     """Replace (in the list ``sections``) a root/tip section whose cut misses the airfoil (a rounded
-    cap) by the planform extrapolated from the nearest good cut inboard; say so in ``warnings``."""
+    cap) by the planform extrapolated from the nearest good cut inboard; say so in ``notes``, or in
+    ``warnings`` when that cut lies more than :data:`TIP_WARN_FRACTION` of the span inboard."""
     m = len(sections)
     for j, toward in ((m - 1, -1), (0, +1)):
         pred = _predict(sections, etas, j, toward)
@@ -278,9 +284,13 @@ def repair_ends(sections, etas, cutter: Cutter, chord_sign: float, span: float, 
         sections[j] = Section(le=le, te=te, upper=s2.upper * scale, lower=s2.lower * scale,
                               front=min(0.0, s2.front * scale), back=max(chord, s2.back * scale),
                               extrapolated=True)
-        warnings.append(f"the {'tip' if j else 'root'} cut misses the airfoil (rounded cap?): "
-                        f"section {j} extrapolated from the planform at {abs(e - etas[j]) / span:.1%} "
-                        "span inboard")
+        depth = abs(e - etas[j]) / span
+        message = (f"the {'tip' if j else 'root'} cut misses the airfoil (rounded cap?): section {j} "
+                   f"extrapolated from the planform at {depth:.1%} span inboard")
+        if depth > TIP_WARN_FRACTION or notes is None:
+            warnings.append(message)
+        else:
+            notes.append(message)
 
 
 def _interp_chord(pred, nb, etas, j, toward, e):

@@ -121,6 +121,8 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
     s["lattice_file"] = str(out)
     for w in prep.warnings:
         console.warn(w)
+    for note in prep.report.get("notes", []):
+        console.detail(f"note: {note}")
     a = s["axes"]
     res = s["residual"]
     text = "\n".join([
