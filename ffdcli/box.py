@@ -173,7 +173,8 @@ class Box:
         """The :class:`ffdcli.changes.LatticeFrame` the design changes act in."""
         return LatticeFrame(chord_dir=self.chord_dir, thickness_dir=self.thickness_dir,
                             span_dir=self.span_dir, ref_weights=self.ref_weights,
-                            le_rows=self.le_rows, dim=self.dim)
+                            le_rows=self.le_rows, dim=self.dim,
+                            le_weights=section_weights(self, self.le_points))
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         """Every field as named arrays (for ``numpy.savez``); :meth:`from_arrays` is the inverse."""
@@ -452,6 +453,24 @@ def le_basis_rows(box: Box, points: np.ndarray) -> tuple[np.ndarray, bool]:
     whether both are inside it."""
     e = embed(box.lattice(), box.core_points(points))
     return e.basis_matrix().toarray(), bool(e.inside.all())
+
+
+def section_weights(box: Box, points: np.ndarray) -> np.ndarray:
+    """(m, n, l) weights w with ``points[j] = sum_ik w[j, i, k] P[i, j, k]`` (P the box's control
+    points): bilinear in the four corner points of section j, as the trailing-edge reference
+    weights are, so the point follows its section under every change exactly (an affine combination).
+
+    ``points`` (m, 3) lie in their sections' planes (e.g. ``box.le_points``)."""
+    P = box.control_points
+    n, m, l, _ = P.shape
+    c, t = box.axes.chord, box.axes.thickness
+    w = np.zeros((m, n, l))
+    for j in range(m):              # m sections: tens at most
+        corners = P[[0, -1, 0, -1], j, [0, 0, -1, -1]]
+        a, b = _bilinear_inverse(corners[:, [c, t]], np.asarray(points[j])[[c, t]])
+        w[j, 0, 0], w[j, -1, 0] = (1 - a) * (1 - b), a * (1 - b)
+        w[j, 0, -1], w[j, -1, -1] = (1 - a) * b, a * b
+    return w
 
 
 def _bilinear_inverse(c: np.ndarray, x: np.ndarray) -> tuple[float, float]:

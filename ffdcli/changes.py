@@ -67,6 +67,11 @@ class LatticeFrame:
     le_offset
         (2, 3) or None: added to ``le_rows @ P`` (``X0 - B P0`` of those two surface points, so
         that the angle is that of the surface even where the embedding residual is not zero).
+    le_weights
+        (m, n, l) or None: section ``j``'s leading-edge point on its chord line is
+        ``sum_ik le_weights[j, i, k] * P[i, j, k]``; None: the midpoint of ``P[0, j, 0]`` and
+        ``P[0, j, l-1]``. With the trailing-edge points it gives the points at a chord fraction
+        (:meth:`chord_points`, the twist axis).
     """
 
     chord_dir: np.ndarray
@@ -76,6 +81,7 @@ class LatticeFrame:
     le_rows: np.ndarray | None = None
     dim: int = 3
     le_offset: np.ndarray | None = None
+    le_weights: np.ndarray | None = None
 
     def __post_init__(self):
         for name in ("chord_dir", "thickness_dir", "span_dir"):
@@ -93,6 +99,15 @@ class LatticeFrame:
             object.__setattr__(self, "le_rows", np.asarray(self.le_rows, dtype=float))
         if self.le_offset is not None:
             object.__setattr__(self, "le_offset", np.asarray(self.le_offset, dtype=float).reshape(2, 3))
+        if self.le_weights is None:
+            m, n, l = self.ref_weights.shape
+            w = np.zeros((m, n, l))
+            w[:, 0, 0] += 0.5
+            w[:, 0, l - 1] += 0.5
+            object.__setattr__(self, "le_weights", w)
+        object.__setattr__(self, "le_weights", np.asarray(self.le_weights, dtype=float))
+        if self.le_weights.shape != self.ref_weights.shape:
+            raise ValueError("LatticeFrame.le_weights must have the shape of ref_weights (m, n, l)")
         if self.dim not in (2, 3):
             raise ValueError(f"LatticeFrame.dim must be 2 or 3, got {self.dim}")
 
@@ -121,6 +136,15 @@ class LatticeFrame:
     def ref_points(self, P: np.ndarray) -> np.ndarray:
         """(..., m, 3) trailing-edge reference points of the sections of ``P`` (..., n, m, l, 3)."""
         return np.einsum("jik,...ijkd->...jd", self.ref_weights, P)
+
+    def chord_points(self, P: np.ndarray, fraction: float = 1.0) -> np.ndarray:
+        """(..., m, 3) the point at chord ``fraction`` of each section's chord line (0 leading edge,
+        1 trailing edge: :meth:`ref_points`); linear in ``P``, so also the map of a ``dP``."""
+        te = self.ref_points(P)
+        if fraction == 1.0:
+            return te
+        le = np.einsum("jik,...ijkd->...jd", self.le_weights, P)
+        return te + (1.0 - fraction) * (le - te)
 
     def le_lin(self, P: np.ndarray) -> np.ndarray:
         """(..., 2, 3) ``le_rows @ P``: the linear part of the leading-edge points."""
@@ -402,30 +426,59 @@ class _SectionMap(Change):
 
 @dataclass(frozen=True, eq=False)
 class Twist(_SectionMap):
-    """Rotate section j by ``values[j]`` degrees about the span axis through its trailing-edge point.
+    """Rotate section j by ``values[j]`` degrees about the span axis through its axis point.
 
     ``law`` is a :class:`SectionLaw` or a sequence of degrees per section (root first).
     P' = T(p_j) R(theta_j) T(-p_j) P; positive = nose up (the leading edge moves in +thickness).
+    ``axis`` is the chord fraction of p_j on the section's chord line: 1 (default) the
+    trailing-edge point (the paper's axis), 0.25 the quarter chord, 0 the leading edge. It is a
+    setting, not a design variable.
     """
 
+    axis: float = 1.0
     kind = "twist"
     unit = "deg"
+
+    @classmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> Twist:
+        """The forms of :meth:`_SectionMap.from_spec`, and with an axis: ``{tip, axis}``,
+        ``{root, tip, axis}``, ``{values: [...], axis}`` (the list form) and in 2D
+        ``{angle: A, axis}`` (the one-number form)."""
+        if not isinstance(spec, dict):
+            return super().from_spec(spec, ctx)
+        spec = dict(spec)
+        axis = float(spec.pop("axis", 1.0))
+        if "values" in spec:
+            spec, ctx = spec["values"], replace(ctx, key=ctx.key + ".values")
+        elif "angle" in spec:
+            if ctx.dim == 3:
+                raise ctx.fail("{angle: A} is the 2D form; in 3D give {tip: T} or {values: [...]} with "
+                               "the axis")
+            spec, ctx = spec["angle"], replace(ctx, key=ctx.key + ".angle")
+        return replace(super().from_spec(spec, ctx), axis=axis)
+
+    def __post_init__(self):
+        super().__post_init__()
+        a = float(self.axis)
+        if not math.isfinite(a):
+            raise InputError(f"twist axis must be a finite chord fraction, got {self.axis!r}")
+        object.__setattr__(self, "axis", a)
 
     def maps(self, P, frame) -> np.ndarray:
         """(m, 4, 4) homogeneous maps of the sections."""
         _check_sections(P, self.law.base.size, "twist")
-        return about(frame.ref_points(P), rotation(frame, self.values * DEG))
+        return about(frame.chord_points(P, self.axis), rotation(frame, self.values * DEG))
 
     def jacobian_own(self, P, frame):
         _check_sections(P, self.law.base.size, "twist")
-        p = frame.ref_points(P)
+        p = frame.chord_points(P, self.axis)
         dR = rotation_derivative(frame, self.values * DEG)
         Y = np.einsum("jab,ijkb->ijka", dR, P - _section(p))
         return np.einsum("jq,ijkd->qijkd", self.law.basis * DEG, Y)
 
     def jvp_P(self, P, frame, dP):
         R = rotation(frame, self.values * DEG)
-        dp = _section(frame.ref_points(dP))
+        dp = _section(frame.chord_points(dP, self.axis))
         return np.einsum("jab,...ijkb->...ijka", R, dP - dp) + dp
 
 

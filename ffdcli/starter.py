@@ -194,6 +194,7 @@ def _change_examples(dim: int, points, chord: float) -> list[tuple[str, str]]:
     if dim == 2:
         return [
             ("- twist: 2", "degrees, the whole airfoil about its trailing edge (nose up +)"),
+            ("- twist: {angle: 2, axis: 0.25}", "the same about the quarter chord (chord fraction)"),
             ("- chord: 1.1", "scale factor of the airfoil about its trailing edge"),
             (f"- shape: {{upper: {_flow(up)}, lower: {_flow(low)}}}",
              "thickness-wise moves of the upper/lower control points, mesh units"),
@@ -205,7 +206,9 @@ def _change_examples(dim: int, points, chord: float) -> list[tuple[str, str]]:
         ("- twist: {tip: 5}", "degrees, linear from 0 at the root to 5 at the tip, nose up +"),
         ("- twist: {root: -1, tip: 3}", "degrees, linear from root to tip"),
         (f"- twist: {_flow(ramp)}", f"degrees per section, root first ({m} sections)"),
-        ("", "twist rotates each section about its trailing edge (the root stays unless named)"),
+        ("- twist: {tip: 5, axis: 0.25}", "the same about the quarter chord (axis: chord fraction)"),
+        ("", "twist rotates each section about its trailing edge (axis: 1, the default); the root "
+             "stays unless named"),
         ("- span: 1.1", "span scale factor about the root section (chords unchanged)"),
         ("- sweep: 5", "degrees added to the leading-edge sweep"),
         ("- dihedral: 3", "degrees added to the dihedral (tip up +)"),

@@ -64,9 +64,18 @@ def _shear(what: str) -> dict:
 # --------------------------------------------------------------------------------------------------
 
 def twist_schema() -> dict:
+    axis = {"type": "number", "description": "chord fraction of the twist axis on each section's chord "
+                                             "line: 1 trailing edge (default), 0.25 quarter chord, 0 "
+                                             "leading edge"}
+    # one object form; which keys go together ({root, tip} | values | angle) is checked by validate
+    form = {"type": "object", "additionalProperties": False,
+            "properties": {"root": number(), "tip": number(), "values": number_list(), "angle": number(),
+                           "axis": axis}}
     return {"description": "degrees: a list (one per section, root first), {tip: T} or "
-                           "{root: R, tip: T}; in 2D one number",
-            "anyOf": [number(), number_list(), root_tip(number())]}
+                           "{root: R, tip: T}; in 2D one number. About another axis than the trailing "
+                           "edge: {tip: T, axis: 0.25}, {values: [...], axis: 0.25}, 2D {angle: A, "
+                           "axis: 0.25}",
+            "anyOf": [number(), number_list(), form]}
 
 
 def span_schema() -> dict:

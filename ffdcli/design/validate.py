@@ -112,6 +112,16 @@ def validate(data, path=None, lines: dict | None = None) -> None:
         if problem is not None:
             fail(("box", "degree", problem[0]), problem[1])
     for i, item in enumerate(data.get("changes") or []):
+        tw = item.get("twist")
+        if isinstance(tw, dict):
+            forms = [k for k in ("tip", "values", "angle") if k in tw]
+            if not forms:
+                fail(("changes", i, "twist"), "missing key 'tip' (or values: [one per section], or in 2D "
+                                              "angle: A), e.g. {tip: 5, axis: 0.25}")
+            if len(forms) > 1 or ("root" in tw and "tip" not in tw):
+                other = forms[1] if len(forms) > 1 else "root"
+                fail(("changes", i, "twist", other), f"{forms[0]} and {other} are two forms of twist; "
+                                                     "give one: {root, tip}, {values} or (2D) {angle}")
         spec = item.get("shape")
         if isinstance(spec, dict) and "random" in spec:
             clash = [k for k in ("upper", "lower", "sections") if k in spec]
