@@ -60,7 +60,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ffdcli.mesh import CellBlock, Mesh
 
@@ -106,9 +106,17 @@ class Orientation:
     normal: np.ndarray | None = None
 
 
-def _raw_quality(points: np.ndarray, data: np.ndarray, ctype: str, normal: np.ndarray | None) -> np.ndarray:
-    """Scaled Jacobian of cells of one type in VTK order, unflipped and unclipped (vectorised)."""
+def _raw_quality(points: np.ndarray, data: np.ndarray, ctype: str, normal: np.ndarray | None, *,
+                 use_numba: bool = True) -> np.ndarray:
+    """Scaled Jacobian of cells of one type in VTK order, unflipped and unclipped: a parallel numba
+    kernel, or (``use_numba=False``) its NumPy reference, vectorised in chunks."""
     corners = _CORNERS[ctype]
+    if use_numba:
+        out = np.empty(len(data))
+        plane = np.zeros(3) if normal is None else np.asarray(normal, dtype=np.float64)
+        _raw_quality_nb(np.ascontiguousarray(points, dtype=np.float64), np.ascontiguousarray(data), corners,
+                        float(_SCALE[ctype]), plane, out)
+        return out
     out = np.empty(len(data))
     for lo in range(0, len(data), CHUNK):
         c = data[lo:lo + CHUNK]
@@ -123,6 +131,41 @@ def _raw_quality(points: np.ndarray, data: np.ndarray, ctype: str, normal: np.nd
             q = np.where(lengths > 0, det / np.where(lengths > 0, lengths, 1.0), 0.0)
         out[lo:lo + CHUNK] = q.min(axis=1) * _SCALE[ctype]
     return out
+
+
+@njit(cache=True, parallel=True)
+def _raw_quality_nb(points, data, corners, scale, plane, out):
+    """Numba twin of the NumPy branch of :func:`_raw_quality` (3 edges per corner in 3D, 2 in 2D)."""
+    n_corners, width = corners.shape
+    for c in prange(data.shape[0]):
+        best = np.inf
+        for k in range(n_corners):
+            p = data[c, corners[k, 0]]
+            a = data[c, corners[k, 1]]
+            b = data[c, corners[k, 2]]
+            e10 = points[a, 0] - points[p, 0]
+            e11 = points[a, 1] - points[p, 1]
+            e12 = points[a, 2] - points[p, 2]
+            e20 = points[b, 0] - points[p, 0]
+            e21 = points[b, 1] - points[p, 1]
+            e22 = points[b, 2] - points[p, 2]
+            x0 = e11 * e22 - e12 * e21
+            x1 = e12 * e20 - e10 * e22
+            x2 = e10 * e21 - e11 * e20
+            length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
+            if width == 4:
+                d = data[c, corners[k, 3]]
+                e30 = points[d, 0] - points[p, 0]
+                e31 = points[d, 1] - points[p, 1]
+                e32 = points[d, 2] - points[p, 2]
+                det = x0 * e30 + x1 * e31 + x2 * e32
+                length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
+            else:
+                det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+            q = det / length if length > 0 else 0.0
+            if q < best:
+                best = q
+        out[c] = best * scale
 
 
 def _check_types(cells: list[CellBlock], dim: int):
@@ -284,16 +327,22 @@ class EdgeTopology:
 
 def edge_topology(cells: list[CellBlock], n_points: int, *, use_numba: bool = True) -> EdgeTopology:
     """Number the edges of ``cells`` (shared by the cells around them). Linear time with numba."""
-    lo_parts, hi_parts, sign_parts, shapes = [], [], [], []
-    for blk in cells:
+    shapes = [(len(blk), len(_EDGES[blk.type])) for blk in cells]
+    total = sum(a * b for a, b in shapes)
+    lo, hi = np.empty(total, np.int64), np.empty(total, np.int64)
+    sign_parts, start = [], 0
+    for blk, (n, ne) in zip(cells, shapes, strict=True):
         t = _EDGES[blk.type]
-        a, b = blk.data[:, t[:, 0]], blk.data[:, t[:, 1]]
-        lo_parts.append(np.minimum(a, b).ravel())
-        hi_parts.append(np.maximum(a, b).ravel())
-        sign_parts.append(np.where(a < b, 1, -1).astype(np.int8))
-        shapes.append(a.shape)
-    lo = np.concatenate(lo_parts) if lo_parts else np.zeros(0, np.int64)
-    hi = np.concatenate(hi_parts) if hi_parts else np.zeros(0, np.int64)
+        sign = np.empty((n, ne), np.int8)
+        if use_numba:
+            _edge_pairs_nb(np.ascontiguousarray(blk.data), t, lo[start:start + n * ne], hi[start:start + n * ne], sign)
+        else:
+            a, b = blk.data[:, t[:, 0]], blk.data[:, t[:, 1]]
+            lo[start:start + n * ne] = np.minimum(a, b).ravel()
+            hi[start:start + n * ne] = np.maximum(a, b).ravel()
+            sign[:] = np.where(a < b, 1, -1)
+        sign_parts.append(sign)
+        start += n * ne
     if use_numba:
         eid, elo, ehi = _number_edges_nb(lo, hi, int(n_points))
     else:
@@ -305,6 +354,19 @@ def edge_topology(cells: list[CellBlock], n_points: int, *, use_numba: bool = Tr
         ids.append(eid[start:start + size].reshape(shape))
         start += size
     return EdgeTopology(np.column_stack([elo, ehi]), tuple(ids), tuple(sign_parts))
+
+
+@njit(cache=True, parallel=True)
+def _edge_pairs_nb(data, table, lo, hi, sign):
+    """(lo, hi) node pairs of the local edges of every cell (flat, cell-major) and their direction."""
+    ne = table.shape[0]
+    for c in prange(data.shape[0]):
+        for e in range(ne):
+            a = data[c, table[e, 0]]
+            b = data[c, table[e, 1]]
+            lo[c * ne + e] = min(a, b)
+            hi[c * ne + e] = max(a, b)
+            sign[c, e] = 1 if a < b else -1
 
 
 @njit(cache=True)
@@ -473,10 +535,18 @@ def node_orthogonality(points: np.ndarray, cells: list[CellBlock], dim: int = 3,
     (N,) float64 degrees.
     """
     pts = np.asarray(points, dtype=np.float64)
-    ortho, area, topology = edge_orthogonality(pts, cells, dim, orientation=orientation, topology=topology,
-                                               use_numba=use_numba)
-    e = topology.edges
     n = len(pts)
+    if use_numba:
+        _check_types(cells, dim)
+        orientation = orientation or cell_orientation(pts, cells, dim)
+        topology = topology or edge_topology(cells, n)
+        nrm = edge_normals(pts, cells, topology, orientation)
+        out = np.empty(n)
+        _node_orthogonality_nb(np.ascontiguousarray(pts), topology.edges, nrm, out)
+        return out
+    ortho, area, topology = edge_orthogonality(pts, cells, dim, orientation=orientation, topology=topology,
+                                               use_numba=False)
+    e = topology.edges
     wsum = np.bincount(e[:, 0], weights=area * ortho, minlength=n) + np.bincount(e[:, 1], weights=area * ortho,
                                                                                  minlength=n)
     asum = np.bincount(e[:, 0], weights=area, minlength=n) + np.bincount(e[:, 1], weights=area, minlength=n)
@@ -486,6 +556,42 @@ def node_orthogonality(points: np.ndarray, cells: list[CellBlock], dim: int = 3,
         out = np.where(asum > 0, wsum / np.where(asum > 0, asum, 1.0), -90.0)
     out[~touched] = np.nan
     return out
+
+
+@njit(cache=True)
+def _node_orthogonality_nb(points, edges, nrm, out):
+    """Numba twin of the NumPy branch of :func:`node_orthogonality` (edge angles and node means)."""
+    n = points.shape[0]
+    wsum = np.zeros(n)
+    asum = np.zeros(n)
+    touched = np.zeros(n, np.bool_)
+    for e in range(edges.shape[0]):
+        i = edges[e, 0]
+        j = edges[e, 1]
+        v0 = points[j, 0] - points[i, 0]
+        v1 = points[j, 1] - points[i, 1]
+        v2 = points[j, 2] - points[i, 2]
+        area = np.sqrt(nrm[e, 0] ** 2 + nrm[e, 1] ** 2 + nrm[e, 2] ** 2)
+        length = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        den = area * length
+        cos = (nrm[e, 0] * v0 + nrm[e, 1] * v1 + nrm[e, 2] * v2) / den if den > 0 else -1.0
+        if not np.isfinite(cos):
+            cos = -1.0
+        cos = min(1.0, max(-1.0, cos))
+        ortho = 90.0 - np.degrees(np.arccos(cos))
+        wsum[i] += area * ortho
+        wsum[j] += area * ortho
+        asum[i] += area
+        asum[j] += area
+        touched[i] = True
+        touched[j] = True
+    for i in range(n):
+        if not touched[i]:
+            out[i] = np.nan
+        elif asum[i] > 0:
+            out[i] = wsum[i] / asum[i]
+        else:
+            out[i] = -90.0
 
 
 # ----------------------------------------------------------------------------------------------

@@ -373,3 +373,24 @@ def test_ffd_check_reads_a_vtu(tmp_path):
     meshio.write(path, meshio.Mesh(bad, [("hexahedron", mesh.cells[0].data)]))
     proc = run_ffd("check", path)
     assert proc.returncode == 3 and "inverted" in proc.stderr
+
+
+def test_scaled_jacobian_kernel_matches_its_numpy_reference():
+    from ffdcli.quality import _raw_quality
+
+    rng = np.random.default_rng(11)
+    shapes = {"tetra": REGULAR_TET, "hexahedron": CUBE, "wedge": PRISM, "pyramid": PYRAMID}
+    for ctype, ref in shapes.items():
+        k = len(ref)
+        pts = np.concatenate([ref + rng.normal(scale=0.4 * np.ptp(ref), size=ref.shape) for _ in range(300)])
+        data = np.arange(300 * k).reshape(300, k)
+        data[7] = data[7][0]                                     # a fully collapsed cell: q = 0
+        a = _raw_quality(pts, data, ctype, None)
+        b = _raw_quality(pts, data, ctype, None, use_numba=False)
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
+        assert a[7] == 0.0 and (a < 0).any() and (a > 0).any()
+    pts = np.concatenate([CUBE[:4] + rng.normal(scale=0.3, size=(4, 3)) * [1, 1, 0] for _ in range(50)])
+    data = np.arange(200).reshape(50, 4)
+    n = np.array([0.0, 0.0, 1.0])
+    np.testing.assert_allclose(_raw_quality(pts, data, "quad", n), _raw_quality(pts, data, "quad", n, use_numba=False),
+                               atol=1e-14)
