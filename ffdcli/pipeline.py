@@ -446,37 +446,59 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
                        quality=quality, seconds=t)
 
 
-def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattice_path=None,
-                  surface_file=None, progress=None) -> dict:
-    """Write the deformed mesh, the lattice VTK and (``surface_file``) SU2's surface-positions file of the
-    deformed surface nodes, each atomically. Returns {what: path}, plus
-    ``"su2_ffd"``: what was done to SU2's own FFD section of an SU2 mesh, when it has one."""
-    from ffdcli.atomic import check_writable
+def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes: dict | None = None,
+                   target=None) -> dict:
+    """{output kind: writer(tmp_path)} for the outputs of one design (see :mod:`ffdcli.outputs`).
+
+    ``notes`` (a dict) receives what a writer reports: ``"su2_ffd"``, what was done to SU2's own FFD
+    section of an SU2 mesh, when it has one. ``target``: an airfoil (K, 2) drawn on the picture."""
     from ffdcli.formats import write_mesh
     from ffdcli.formats.lattice_vtk import write_lattice_vtk
     from ffdcli.formats.su2_surface import write_surface_file
 
-    mesh = run.prep.mesh
-    out = run.design.output
-    mesh_path = Path(mesh_path or out["mesh"])
-    lattice_path = Path(lattice_path or out["lattice"]) if (lattice_path or out.get("lattice")) else None
-    check_writable(mesh_path, inputs=(mesh.path, run.design.path))
-    if lattice_path is not None:
-        check_writable(lattice_path, inputs=(mesh.path, mesh_path, run.design.path))
-        if lattice_path.suffix.lower() != ".vtk":
-            raise InputError("the lattice is written as legacy VTK: give it a .vtk name", path=lattice_path)
-    if surface_file is not None:
-        surface_file = check_writable(surface_file, inputs=(mesh.path, mesh_path, lattice_path, run.design.path))
-    written = {}
-    notes = write_mesh(mesh, mesh_path, result.points, progress=progress)
-    written["mesh"] = str(mesh_path)
-    if "su2_ffd" in notes:           # SU2's own FFD section, brought up to date (or dropped): say so
-        written["su2_ffd"] = notes["su2_ffd"]
-    if lattice_path is not None:
-        write_lattice_vtk(lattice_path, result.lattice, original=run.P0)
-        written["lattice"] = str(lattice_path)
-    if surface_file is not None:     # SU2's DV_KIND= SURFACE_FILE: the surface for SU2's own volume motion
+    notes = {} if notes is None else notes
+
+    def mesh(tmp):
+        got = write_mesh(run.prep.mesh, tmp, result.points, progress=progress) or {}
+        if "su2_ffd" in got:         # SU2's own FFD section, brought up to date (or dropped): say so
+            notes["su2_ffd"] = got["su2_ffd"]
+
+    def lattice(tmp):
+        write_lattice_vtk(tmp, result.lattice, original=run.P0)
+
+    def surface_file(tmp):           # SU2's DV_KIND= SURFACE_FILE: the surface for SU2's own volume motion
         ids = run.prep.surface.ids
-        write_surface_file(surface_file, ids, result.points[ids], space_dim(mesh))
-        written["surface_file"] = str(surface_file)
+        write_surface_file(tmp, ids, result.points[ids], space_dim(run.prep.mesh))
+
+    def plot(tmp):
+        from ffdcli.plot import plot_design
+
+        plot_design(run, result, tmp, target=target)
+
+    def plot_3d(tmp):                # False: no pyvista or no off-screen OpenGL (nothing written)
+        from ffdcli.plot import plot_3d as render
+
+        return run.box.dim == 3 and render(run, result, tmp) is not None
+
+    return {"mesh": mesh, "lattice": lattice, "surface_file": surface_file, "plot": plot, "plot_3d": plot_3d}
+
+
+def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattice_path=None,
+                  surface_file=None, plot: bool = False, plan=None, progress=None, extra_writers=None) -> dict:
+    """Write the outputs of one design together (:meth:`ffdcli.outputs.OutputPlan.write`): the
+    deformed mesh, the lattice VTK, with ``surface_file`` SU2's surface-positions file of the deformed
+    surface nodes and with ``plot`` the picture. ``plan``: the plan made before the work (else one is
+    made here from ``mesh_path`` (``-o``), ``lattice_path``, ``surface_file``, ``plot``).
+    ``extra_writers``: writers of more planned kinds. Returns {kind: path}, plus ``"su2_ffd"``: what
+    was done to SU2's own FFD section of an SU2 mesh, when it has one."""
+    from ffdcli.outputs import plan_deform
+
+    if plan is None:
+        plan = plan_deform(run.design, mesh=mesh_path, lattice=lattice_path, plot=plot,
+                           extra=[("surface_file", surface_file, False, "--surface-file")])
+    notes: dict = {}
+    writers = {k: w for k, w in deform_writers(run, result, progress=progress, notes=notes).items() if k in plan}
+    writers.update(extra_writers or {})
+    written = plan.write(writers)
+    written.update(notes)
     return written

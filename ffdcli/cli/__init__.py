@@ -8,15 +8,18 @@ line with exit code 1 (``-v`` shows the traceback).
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
+import os
 import sys
 import traceback
 
 import click
 
 from ffdcli import __version__
-from ffdcli.cli.console import Console
+from ffdcli.atomic import Terminated
+from ffdcli.cli.console import Console, StdoutError
 from ffdcli.errors import FfdError
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -105,9 +108,15 @@ def main(argv=None):
         sys.exit(e.exit_code)
     except (click.Abort, KeyboardInterrupt):
         _fail("interrupted; nothing was written", 130, as_json)
+    except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
+        _fail(f"{e}; nothing was written", 128 + e.signum, as_json)
+    except StdoutError as e:          # stdout full or closed: the outputs are complete; say it on stderr
+        _quiet_stdout()
+        _fail(str(e), 1, False)
     except FfdError as e:
         _fail(str(e), e.exit_code, as_json, extra=getattr(e, "report", None), show=comm.is_root)
-    except BrokenPipeError:
+    except BrokenPipeError:           # e.g. ffd ... --json | head -c 10
+        _quiet_stdout()
         sys.exit(1)
     except MemoryError:
         _fail("out of memory", 1, as_json, show=comm.is_root)
@@ -122,13 +131,25 @@ def main(argv=None):
 def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, show: bool = True):
     if not show:             # another MPI rank than 0: rank 0 reports the (agreed) error
         sys.exit(code)
-    click.echo(f"ffd: error: {message}", err=True)
+    with contextlib.suppress(OSError):
+        click.echo(f"ffd: error: {message}", err=True)
     if as_json:
         obj = {"ok": False, "exit_code": code, "error": message}
         if extra:
             obj["report"] = extra
-        click.echo(json.dumps(obj, default=_jsonable))
+        try:
+            click.echo(json.dumps(obj, default=_jsonable))
+            sys.stdout.flush()
+        except OSError:
+            _quiet_stdout()
     sys.exit(code)
+
+
+def _quiet_stdout() -> None:
+    """Point stdout at /dev/null so that the interpreter's last flush cannot fail a second time."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
 
 
 def _jsonable(o):

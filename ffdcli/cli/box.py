@@ -100,23 +100,26 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
         settings = replace(settings or BoxSettings(), **overrides)
         if "points" in overrides and "degree" not in overrides:
             settings = replace(settings, degree=None)
+    from ffdcli.formats import format_of
+    from ffdcli.inputs import check_input_file
+    from ffdcli.outputs import plan_outputs
+
+    mpath = Path(mesh_path)
+    format_of(mpath)
+    check_input_file(mpath, "mesh file")
+    out = lattice_out if lattice_out is not None else mpath.with_name(mpath.stem + "_lattice.vtk")
+    inputs = (mpath, mesh if is_design_file(mesh) else None, from_file, settings.file if settings else None)
+    plan = plan_outputs([("lattice", out, False, "--lattice"), ("plot3d", export_plot3d, False, "--export-plot3d")],
+                        inputs=inputs)          # every output checked before the work
     prep = prepare_box(mesh_path, surface, settings, cache_dir=cache_dir, rebuild=rebuild,
                        progress=console.progress, comm=console.comm)
-    mpath = Path(prep.mesh.path)
-    out = Path(lattice_out) if lattice_out else mpath.with_name(mpath.stem + "_lattice.vtk")
+    writers = {"lattice": lambda tmp: write_lattice_vtk(tmp, prep.box.control_points)}
+    if export_plot3d:
+        from ffdcli.formats.plot3d import write_plot3d
 
-    def write():             # once: rank 0 of an MPI run
-        from ffdcli.atomic import check_writable
-
-        check_writable(out, inputs=(mpath,))
-        write_lattice_vtk(out, prep.box.control_points)
-        if export_plot3d:
-            from ffdcli.formats.plot3d import write_plot3d
-
-            check_writable(export_plot3d, inputs=(mpath,))
-            write_plot3d(export_plot3d, [prep.box.control_points])
-
-    console.comm.root_then_bcast(write)
+        writers["plot3d"] = lambda tmp: write_plot3d(tmp, [prep.box.control_points])
+    console.comm.root_then_bcast(plan.write, writers)        # once: rank 0 of an MPI run
+    out = plan.path("lattice")
     s = prep.summary()
     s["lattice_file"] = str(out)
     for w in prep.warnings:

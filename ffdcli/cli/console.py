@@ -6,6 +6,7 @@ import json
 import sys
 from dataclasses import dataclass
 
+from ffdcli.errors import FfdError
 from ffdcli.progress import ProgressFactory, terminal_progress
 
 
@@ -30,7 +31,7 @@ class Console:
     def say(self, text: str) -> None:
         """Normal output (stdout); silent with --quiet or --json."""
         if not (self.quiet or self.json):
-            print(text, file=sys.stdout, flush=True)
+            _print(text)
 
     def detail(self, text: str) -> None:
         """Extra output with --verbose (stderr, so --json stays parseable)."""
@@ -45,13 +46,27 @@ class Console:
     def result(self, summary: dict, text: str) -> None:
         """The command's summary: JSON with --json, else ``text``."""
         if self.json and self.comm.is_root:
-            print(json.dumps(summary, default=_jsonable), file=sys.stdout, flush=True)
+            _print(json.dumps(summary, default=_jsonable))
         else:
             self.say(text)
 
     @property
     def progress(self) -> ProgressFactory:
         return terminal_progress(enabled=not (self.quiet or self.json))
+
+
+class StdoutError(FfdError):
+    """Standard output cannot be written (``> /dev/full``, a closed pipe): exit 1, one line on stderr."""
+
+
+def _print(text: str) -> None:
+    try:
+        print(text, file=sys.stdout, flush=True)
+    except BrokenPipeError:
+        raise
+    except OSError as e:
+        raise StdoutError(f"cannot write the summary to standard output: {e.strerror or e}; every file "
+                          "written by this run is complete", hint="check where stdout goes") from None
 
 
 def _jsonable(o):

@@ -8,7 +8,6 @@ from pathlib import Path
 import click
 
 from ffdcli.cli import cli, common_options
-from ffdcli.errors import InputError
 
 
 @cli.command("deform")
@@ -17,9 +16,11 @@ from ffdcli.errors import InputError
               help="Override one value of the design file, e.g. --set changes.0.twist.tip=12 "
                    "(repeatable; the key path uses list positions).")
 @click.option("--output", "-o", type=click.Path(dir_okay=False), metavar="FILE",
-              help="Write the deformed mesh here instead of the file's output.mesh.")
+              help="Write the deformed mesh here instead of the file's output.mesh; the lattice and the "
+                   "picture are named after it (out/t5.su2 -> out/t5_lattice.vtk, out/t5.png) unless "
+                   "--lattice is given.")
 @click.option("--lattice", "lattice_out", type=click.Path(dir_okay=False), metavar="FILE.vtk",
-              help="Write the lattice here instead of the file's output.lattice.")
+              help="Write the lattice here (a .vtk name) instead of the file's output.lattice.")
 @click.option("--surface-file", "surface_file", type=click.Path(dir_okay=False), metavar="FILE",
               help="Also write the deformed surface nodes as SU2's surface-positions file (DV_KIND= "
                    "SURFACE_FILE, DV_FILENAME= FILE), for SU2_DEF's own volume deformation. See docs/su2.md.")
@@ -53,36 +54,14 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
       for t in 5 10 15; do ffd deform design.yaml --set changes.0.twist.tip=$t -o out/t$t.su2; done
     """
     from ffdcli.design import load_design
+    from ffdcli.outputs import plan_deform
     from ffdcli.pipeline import deform, load_run, write_outputs
     from ffdcli.quality import enforce
 
     t0 = time.perf_counter()
     design = load_design(design_file, overrides=overrides)
-    out_mesh = Path(output) if output else design.output["mesh"]
-    from ffdcli.atomic import check_writable
-
-    given = set(design.data.get("output") or {})
-    want_plot = plot or "plot" in given
-    # Default outputs go to out/ beside the design file: create it. A folder the user named must exist.
-    for key, cli_value in (("mesh", output), ("lattice", lattice_out), ("plot", None)):
-        if cli_value is None and key not in given and (key != "plot" or want_plot):
-            Path(design.output[key]).parent.mkdir(parents=True, exist_ok=True)
-    # Every output is checked before minutes of work, not after.
-    check_writable(out_mesh, inputs=(design.mesh, design.path))
-    out_lattice = Path(lattice_out) if lattice_out else Path(design.output["lattice"])
-    check_writable(out_lattice, inputs=(design.mesh, out_mesh, design.path))
-    if out_lattice.suffix.lower() != ".vtk":
-        raise InputError("the lattice is written as legacy VTK: give it a .vtk name", path=out_lattice)
-    png = None
-    if want_plot:
-        png = Path(design.output["plot"]) if "plot" in given else Path(out_mesh).with_suffix(".png")
-        check_writable(png, inputs=(design.mesh, out_mesh, out_lattice, design.path))
-        if png.suffix.lower() != ".png":
-            raise InputError("pictures are written as PNG: give it a .png name", path=png)
-        check_writable(png.with_name(png.stem + "_3d.png"),
-                       inputs=(design.mesh, out_mesh, out_lattice, design.path))
-    if surface_file is not None:
-        check_writable(surface_file, inputs=(design.mesh, out_mesh, out_lattice, design.path))
+    plan = plan_deform(design, mesh=output, lattice=lattice_out, plot=plot,    # every output, before the work
+                       extra=[("surface_file", surface_file, False, "--surface-file")])
     comm = console.comm
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress, comm=comm)
     for w in run.prep.warnings:
@@ -96,32 +75,16 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
     for w in enforce(q, mesh_path=design.mesh, design_path=design.path, force=force):
         console.warn(w)
-
-    def write():             # every output once: rank 0 of an MPI run
-        out = write_outputs(run, result, mesh_path=out_mesh, lattice_path=lattice_out,
-                            surface_file=surface_file, progress=console.progress)
-        if png is not None:
-            from ffdcli.plot import plot_design
-
-            plot_design(run, result, png)
-            out["plot"] = str(png)
-            if run.box.dim == 3:
-                from ffdcli.plot import plot_3d
-
-                got = plot_3d(run, result, png.with_name(png.stem + "_3d.png"))
-                if got is None:
-                    console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
-                                 "(pip install 'ffdcli[viz]')")
-                else:
-                    out["plot_3d"] = str(got)
-        return out
-
-    written = comm.root_then_bcast(write)
+    # every output once, together: rank 0 of an MPI run
+    written = comm.root_then_bcast(write_outputs, run, result, plan=plan, progress=console.progress)
     su2_ffd = written.pop("su2_ffd", None)
     if su2_ffd is not None and su2_ffd.get("outside"):
         console.warn(f"{su2_ffd['outside']} surface nodes are now outside the mesh's own SU2 FFD box(es): "
                      "SU2's FFD design variables will not move them; enlarge the SU2 box "
                      "(FFD_DEFINITION, then DV_KIND= FFD_SETTING) before using SU2's FFD on this mesh")
+    if "plot_3d" in plan and "plot_3d" not in written and run.box.dim == 3:
+        console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
+                     "(pip install 'ffdcli[viz]')")
     secs = time.perf_counter() - t0
     summary = {
         "design": str(design.path),

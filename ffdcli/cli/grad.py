@@ -41,15 +41,16 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
 
     from ffdcli.api import DesignModel, read_sensitivity_for
 
-    t0 = time.perf_counter()
-    if output:
-        from ffdcli.atomic import check_writable
+    from ffdcli.design import load_design
+    from ffdcli.outputs import plan_outputs
+    from ffdcli.pipeline import load_run
 
-        check_writable(output)
-    model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress,
-                                  comm=console.comm)
-    if output:      # never over an input (the mesh, the design, the sensitivity file)
-        check_writable(output, inputs=(model.run.prep.mesh.path, design_file, sens))
+    t0 = time.perf_counter()
+    design = load_design(design_file, overrides=overrides)
+    # never over an input (the mesh, the design, the sensitivity file); checked before the work
+    plan = plan_outputs([("grad", output, False, "-o")], inputs=(design.mesh, design.path, sens))
+    model = DesignModel(load_run(design, cache_dir=cache_dir, progress=console.progress, comm=console.comm),
+                        comm=console.comm)
     sens_file = sens
     g, sens = read_sensitivity_for(model, sens_file)
     on_surface = np.isin(sens.ids, model.surface_ids)
@@ -74,13 +75,8 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
         "seconds": round(time.perf_counter() - t0, 3),
     }
     if output:
-        from ffdcli.atomic import atomic_write
-
-        def write():         # once: rank 0 of an MPI run
-            with atomic_write(output, "w") as fh:
-                json.dump(result, fh, indent=1)
-
-        console.comm.root_then_bcast(write)
+        # once: rank 0 of an MPI run
+        console.comm.root_then_bcast(plan.write, {"grad": lambda tmp: tmp.write_text(json.dumps(result, indent=1))})
         summary["output"] = str(output)
     lines = [f"ffd grad: {Path(design_file).name}, {len(sens.ids)} sensitivity rows matched by "
              f"{sens.matched_by}" + (f" (worst distance {sens.worst_distance:.2e})"
@@ -118,11 +114,13 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     import numpy as np
 
     from ffdcli.api import DesignModel
-    from ffdcli.atomic import atomic_path, check_writable
+    from ffdcli.design import load_design
+    from ffdcli.outputs import plan_outputs
+    from ffdcli.pipeline import load_run
 
-    check_writable(output)
-    model = DesignModel.from_file(design_file, overrides, progress=console.progress, comm=console.comm)
-    check_writable(output, inputs=(model.run.prep.mesh.path, design_file))
+    design = load_design(design_file, overrides=overrides)
+    plan = plan_outputs([("jacobian", output, False, "-o")], inputs=(design.mesh, design.path))
+    model = DesignModel(load_run(design, progress=console.progress, comm=console.comm), comm=console.comm)
     B, D = model.jacobian_factors()
     arrays = dict(names=np.array(model.names), point_ids=model.surface_ids, values=model.values,
                   B_data=B.data, B_indices=B.indices, B_indptr=B.indptr, B_shape=np.array(B.shape), D=D,
@@ -131,12 +129,10 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
         from ffdcli.derivatives import surface_jacobian
 
         arrays["J"] = surface_jacobian(B, D)
+    def write(tmp):
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
 
-    def write():             # once: rank 0 of an MPI run
-        with atomic_path(output) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays)
-
-    console.comm.root_then_bcast(write)
+    console.comm.root_then_bcast(plan.write, {"jacobian": write})        # once: rank 0 of an MPI run
     console.result({"output": str(output), "variables": len(model.names), "points": int(B.shape[0])},
                    f"ffd jacobian: {len(model.names)} variables x {B.shape[0]} surface points -> {output}")

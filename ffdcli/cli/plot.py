@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from ffdcli.cli import cli, common_options
@@ -38,18 +36,12 @@ def plot_cmd(design_file, output, overrides, view3d, target, console):
       ffd plot configs/rect_twist_linear.yaml -o out/twist.png
       ffd plot out/s1223.yaml --target samples/s1223.dat -o out/fit.png
     """
-    from ffdcli.atomic import check_writable
     from ffdcli.design import load_design
-    from ffdcli.pipeline import deform, load_run
-    from ffdcli.plot import plot_design
+    from ffdcli.outputs import plan_plot
+    from ffdcli.pipeline import deform, deform_writers, load_run
 
     design = load_design(design_file, overrides=overrides)
-    png = Path(output or design.output.get("plot") or Path(design.output["mesh"]).with_suffix(".png"))
-    check_writable(png, inputs=(design.mesh, design.path))
-    if png.suffix.lower() != ".png":
-        from ffdcli.errors import InputError
-
-        raise InputError("pictures are written as PNG: give the file a .png name", path=png)
+    plan = plan_plot(design, output, view3d=view3d)       # checked before the work
     coords = None
     if target is not None:
         from ffdcli.formats.airfoil import read_airfoil
@@ -61,18 +53,13 @@ def plot_cmd(design_file, output, overrides, view3d, target, console):
     if q is not None and not q.ok:
         console.warn(f"the quality gate would refuse this design (ffd deform writes nothing without "
                      f"--force): {q.summary()}")
-    plot_design(run, result, png, target=coords)
-    written = [str(png)]
-    if view3d and run.box.dim == 3:
-        from ffdcli.plot import plot_3d
-
-        got = plot_3d(run, result, png.with_name(png.stem + "_3d.png"))
-        if got is None:
-            console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
-                         "(pip install 'ffdcli[viz]'); the 2D views are written")
-        else:
-            written.append(str(got))
-    console.result({"plot": str(png), "plots": written, "max_displacement": result.max_displacement,
+    writers = {k: w for k, w in deform_writers(run, result, target=coords).items() if k in plan}
+    written = plan.write(writers)
+    if "plot_3d" in plan and "plot_3d" not in written and run.box.dim == 3:
+        console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
+                     "(pip install 'ffdcli[viz]'); the 2D views are written")
+    png = written["plot"]
+    console.result({"plot": png, "plots": list(written.values()), "max_displacement": result.max_displacement,
                     "refused": bool(q is not None and not q.ok),
                     "quality": q.to_dict() if q is not None else None},
-                   "ffd plot: wrote " + ", ".join(written))
+                   "ffd plot: wrote " + ", ".join(written.values()))

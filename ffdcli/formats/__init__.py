@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.inputs import check_input_file
 from ffdcli.mesh import Mesh
 
 #: extension -> format name
@@ -42,11 +43,23 @@ def read_mesh(path: str | Path, *, progress=None) -> Mesh:
     """Read a mesh (.su2, .cgns, .vtu, .vtk). Raises InputError naming the file on any problem."""
     p = Path(path)
     fmt = format_of(p)
-    if not p.exists():
-        raise InputError("no such file", path=p)
-    if p.is_dir():
-        raise InputError("is a folder, expected a mesh file", path=p)
-    return _module(fmt).read(p, progress=progress)
+    check_input_file(p, "mesh file")          # a FIFO or a device would block or never end in open()
+    mesh = _module(fmt).read(p, progress=progress)
+    check_finite_points(mesh)
+    return mesh
+
+
+def check_finite_points(mesh: Mesh) -> None:
+    """InputError naming the file and the first node (0-based, as in the file) with a NaN or infinite
+    coordinate; every reader's mesh passes here (SU2's reader also names the line)."""
+    pts = mesh.points
+    finite = np.isfinite(pts).all(axis=1)
+    if not finite.all():
+        bad = np.flatnonzero(~finite)
+        node = int(bad[0])
+        raise InputError(f"node {node} has a NaN or infinite coordinate ({', '.join(map(repr, pts[node].tolist()))})"
+                         f"{f' and {len(bad) - 1} more nodes' if len(bad) > 1 else ''}; a mesh needs finite "
+                         "coordinates", path=mesh.path)
 
 
 def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *,

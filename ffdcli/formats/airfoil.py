@@ -32,6 +32,7 @@ import numpy as np
 
 from ffdcli.atomic import atomic_write, check_writable
 from ffdcli.errors import InputError
+from ffdcli.inputs import check_input_file, existing_kind
 
 MIN_POINTS = 5
 
@@ -85,9 +86,9 @@ def read_airfoil(path: str | Path) -> Airfoil:
     single leading-edge turn, and back along the other).
     """
     p = Path(path)
-    if not p.is_file():
-        what = "no such airfoil file" if not p.exists() else "is a folder, expected an airfoil file"
-        raise InputError(what, path=p)
+    if existing_kind(p) is None:
+        raise InputError("no such airfoil file", path=p)
+    check_input_file(p, "airfoil file")
     try:
         lines = p.read_text(encoding="utf-8", errors="strict").splitlines()
     except UnicodeDecodeError:

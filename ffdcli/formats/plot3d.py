@@ -11,10 +11,12 @@ import numpy as np
 
 from ffdcli.atomic import atomic_write
 from ffdcli.errors import InputError
+from ffdcli.inputs import check_input_file
 
 
 def read_plot3d(path) -> list[np.ndarray]:
     """Blocks of a multi-block ASCII Plot3D file, each (ni, nj, nk, 3)."""
+    check_input_file(path, "Plot3D file")
     try:
         text = open(path).read()
     except (OSError, UnicodeDecodeError) as e:

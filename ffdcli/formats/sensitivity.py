@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.inputs import check_input_file, existing_kind
 
 ID_COLUMNS = ("pointid", "point", "global_index", "globalindex", "point_id")
 
@@ -106,8 +107,9 @@ def _parse_rows(text: str, p: Path):
 def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None) -> Sensitivity:
     """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3)."""
     p = Path(path)
-    if not p.exists():
+    if existing_kind(p) is None:
         raise InputError("no such sensitivity file", path=p)
+    check_input_file(p, "sensitivity file")
     try:
         text = p.read_text()
     except (OSError, UnicodeDecodeError) as e:
