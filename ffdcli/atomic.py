@@ -130,11 +130,19 @@ def make_temp(path: str | Path) -> Path:
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
     sweep_stale(p)
-    with signals_deferred():      # a signal right now would leave a file whose name we do not know
-        fd, tmp = tempfile.mkstemp(prefix=f"{_temp_prefix(p)}{_HOST}-{os.getpid()}-",
-                                   suffix=".part" + p.suffix, dir=folder)
-        os.close(fd)
-    return Path(tmp)
+    tmp = None
+    try:
+        with signals_deferred():      # a signal right now would leave a file whose name we do not know
+            fd, name = tempfile.mkstemp(prefix=f"{_temp_prefix(p)}{_HOST}-{os.getpid()}-",
+                                        suffix=".part" + p.suffix, dir=folder)
+            tmp = Path(name)
+            os.close(fd)
+    except BaseException:             # the signal held above, raised now: the file goes too
+        if tmp is not None:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        raise
+    return tmp
 
 
 def sweep_stale(path: str | Path, *, now: float | None = None) -> list[Path]:

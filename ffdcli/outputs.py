@@ -29,8 +29,16 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ffdcli.atomic import (check_not_input, check_writable, existing_kind, keep_mode, make_temp, output_error,
-                           signals_deferred, signals_raise)
+from ffdcli.atomic import (
+    check_not_input,
+    check_writable,
+    existing_kind,
+    keep_mode,
+    make_temp,
+    output_error,
+    signals_deferred,
+    signals_raise,
+)
 from ffdcli.errors import InputError
 from ffdcli.formats import FORMATS, format_of
 

@@ -40,7 +40,6 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     import numpy as np
 
     from ffdcli.api import DesignModel, read_sensitivity_for
-
     from ffdcli.design import load_design
     from ffdcli.outputs import plan_outputs
     from ffdcli.pipeline import load_run

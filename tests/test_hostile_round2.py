@@ -1,0 +1,404 @@
+"""Hostile input, round 2 (issue 18): faults of the machine and of the file system, and what a probe
+of about 300 more cases found. Each test names the item of the issue it covers.
+
+The same rules as ``test_hostile.py``: a bad input fails with exactly one ``ffd: error:`` line that
+names the file, exit 2 (1 for the machine's state), no traceback, nothing of the workspace created or
+modified, no ``.part`` file left.
+"""
+
+from __future__ import annotations
+
+import errno
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import REPO, assert_clean_failure, file_hash, run_ffd
+from test_hostile import assert_hostile, error_line, ffd, snapshot
+from wingcase import write_design, write_volume_wing
+
+GOOD = [{"twist": {"tip": 5}}, {"chord": {"tip": 0.8}}]
+
+
+@pytest.fixture(scope="module")
+def ws(tmp_path_factory):
+    """A small volume wing and a good design whose box is cached (one in-process run)."""
+    d = tmp_path_factory.mktemp("hostile2")
+    mesh = write_volume_wing(d)
+    write_design(d, mesh, GOOD, name="good.yaml")
+    proc = ffd("deform", "good.yaml", "--json", cwd=d)
+    assert proc.returncode == 0, proc.stderr
+    for p in ("out_good.su2", "out_good_lattice.vtk"):
+        (d / p).unlink()
+    return d
+
+
+def no_parts(folder: Path) -> list:
+    return sorted(str(p) for p in folder.rglob("*.part*"))
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 2: the outputs of a run appear together or not at all; OS errors name the file
+# ----------------------------------------------------------------------------------------------
+
+def test_disk_full_while_writing_the_lattice_leaves_no_output(ws, monkeypatch):
+    """Found: the mesh was renamed into place, then the lattice hit ENOSPC: exit 1 'a bug in ffd'."""
+    import ffdcli.formats.lattice_vtk as lv
+
+    def full(path, *a, **k):
+        Path(path).write_bytes(b"# vtk DataFile Version 3.0\n" * 100)    # some bytes, then the disk is full
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(lv, "write_lattice_vtk", full)
+    before = snapshot(ws)
+    proc = ffd("deform", "good.yaml", "-o", "full.su2", cwd=ws)
+    assert_clean_failure(proc, 1, "no space left", "full_lattice.vtk")
+    assert "bug" not in proc.stderr
+    assert not (ws / "full.su2").exists() and not (ws / "full_lattice.vtk").exists()
+    assert no_parts(ws) == []
+    assert snapshot(ws) == before
+
+
+def test_any_os_error_of_a_writer_names_the_file(ws, monkeypatch):
+    import ffdcli.formats as formats
+
+    def denied(mesh, path, *a, **k):
+        raise OSError(errno.EIO, "Input/output error")
+
+    monkeypatch.setattr(formats, "write_mesh", denied)
+    proc = ffd("deform", "good.yaml", "-o", "eio.su2", cwd=ws)
+    assert_clean_failure(proc, 1, "eio.su2", "input/output error")
+    assert not list(ws.glob("eio*")) and no_parts(ws) == []
+
+
+def test_output_name_too_long_is_refused_before_the_work(ws):
+    name = "n" * 300 + ".su2"
+    line = assert_hostile(ws, ["deform", "good.yaml", "-o", name], 2, "too long")
+    assert "bug" not in line
+
+
+def test_long_name_that_fits_is_written(ws):
+    """A name near the file system's limit: the temporary name is shortened, the output is written."""
+    name = "L" * 240 + ".su2"
+    proc = ffd("deform", "good.yaml", "-o", name, "--lattice", "long_lattice.vtk", "-q", cwd=ws)
+    assert proc.returncode == 0, proc.stderr
+    assert (ws / name).is_file() and no_parts(ws) == []
+    (ws / name).unlink()
+    (ws / "long_lattice.vtk").unlink()
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 3: an output path that exists and is not a regular file is refused
+# ----------------------------------------------------------------------------------------------
+
+def test_output_is_a_fifo(ws):
+    fifo = ws / "fifo_out.su2"
+    os.mkfifo(fifo)
+    try:
+        assert_hostile(ws, ["deform", "good.yaml", "-o", fifo.name], 2, "FIFO", names=["fifo_out.su2"])
+        assert fifo.is_fifo()
+    finally:
+        fifo.unlink()
+
+
+def test_output_is_a_character_device(ws):
+    link = ws / "devnull_lattice.vtk"
+    link.symlink_to("/dev/null")
+    try:
+        assert_hostile(ws, ["deform", "good.yaml", "--lattice", link.name], 2, "character device")
+        assert Path("/dev/null").is_char_device()
+    finally:
+        link.unlink()
+
+
+def test_output_is_a_symlink_loop(ws):
+    loop = ws / "loop_out.su2"
+    loop.symlink_to(loop.name)
+    try:
+        assert_hostile(ws, ["deform", "good.yaml", "-o", loop.name], 2, "symlink loop")
+    finally:
+        loop.unlink()
+
+
+# ----------------------------------------------------------------------------------------------
+# Items 12 and 13: checks before the work; -o ''
+# ----------------------------------------------------------------------------------------------
+
+def test_unsupported_output_extension_refused_before_reading_the_mesh(ws):
+    """Found: refused after 12 s of reading, deforming and checking a 280 MB mesh. Here the mesh is
+    garbage: a check made before reading it names the extension, not the mesh."""
+    (ws / "garbage.su2").write_bytes(b"NDIME= 3\nthis is not a mesh\n" * 10)
+    write_design(ws, ws / "garbage.su2", GOOD, name="garbage.yaml")
+    assert_hostile(ws, ["deform", "garbage.yaml", "-o", "out.xyz"], 2, "unsupported mesh extension", names=["out.xyz"])
+    assert_hostile(ws, ["deform", "garbage.yaml", "--lattice", "l.su2"], 2, ".vtk", names=["l.su2"])
+    assert_hostile(ws, ["plot", "garbage.yaml", "-o", "p.jpg"], 2, ".png", names=["p.jpg"])
+
+
+@pytest.mark.parametrize("args", [["deform", "good.yaml", "-o", ""], ["deform", "good.yaml", "--lattice", ""],
+                                  ["plot", "good.yaml", "-o", ""], ["jacobian", "good.yaml", "-o", ""],
+                                  ["box", "vwing.su2", "--surface", "wing", "--lattice", ""]],
+                         ids=["deform", "lattice", "plot", "jacobian", "box"])
+def test_empty_output_name(ws, args):
+    """Found: ``-o ''`` was ignored silently (the default output was written)."""
+    assert_hostile(ws, args, 2, "empty")
+
+
+# ----------------------------------------------------------------------------------------------
+# The plan: -o carries the lattice and picture names (the README's shell loop)
+# ----------------------------------------------------------------------------------------------
+
+def test_output_name_carries_lattice_and_picture(ws):
+    (ws / "loop").mkdir(exist_ok=True)
+    for t in (3, 6):
+        proc = ffd("deform", "good.yaml", "--set", f"changes.0.twist.tip={t}", "-o", f"loop/t{t}.su2", "--plot",
+                   "--json", cwd=ws)
+        assert proc.returncode == 0, proc.stderr
+        s = json.loads(proc.stdout)
+        assert ws / s["lattice_file"] == ws / "loop" / f"t{t}_lattice.vtk"
+        assert ws / s["plot"] == ws / "loop" / f"t{t}.png"
+    assert sorted(p.name for p in (ws / "loop").iterdir()) == [
+        "t3.png", "t3.su2", "t3_lattice.vtk", "t6.png", "t6.su2", "t6_lattice.vtk"]
+    assert file_hash(ws / "loop" / "t3_lattice.vtk") != file_hash(ws / "loop" / "t6_lattice.vtk")
+    proc = ffd("deform", "good.yaml", "-o", "loop/t9.su2", "--lattice", "loop/given.vtk", "-q", cwd=ws)
+    assert proc.returncode == 0, proc.stderr
+    assert (ws / "loop" / "given.vtk").is_file() and not (ws / "loop" / "t9_lattice.vtk").exists()
+
+
+def test_default_outputs_go_to_out_beside_the_design(tmp_path):
+    mesh = write_volume_wing(tmp_path)
+    (tmp_path / "d.yaml").write_text(f"mesh: {mesh.name}\nsurface: wing\nbox: {{points: [6, 8, 2]}}\n"
+                                     "changes: [{twist: {tip: 2}}]\n")
+    proc = ffd("deform", "d.yaml", "--plot", "-q", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["d.png", "d.su2", "d_lattice.vtk"]
+
+
+def test_plan_in_the_library():
+    """The rules are one library call (the API and every command use it)."""
+    from ffdcli.errors import InputError
+    from ffdcli.outputs import KINDS, OutputKind, plan_outputs, register
+
+    assert KINDS["lattice"].suffixes == (".vtk",) and KINDS["plot"].suffixes == (".png",)
+    with pytest.raises(InputError, match="would overwrite the deformed mesh"):
+        plan_outputs([("mesh", "/tmp/x.su2"), ("surface_file", "/tmp/x.su2")])
+    register(OutputKind("probe_kind", "the probe", (".dat",), "probes are .dat"))
+    with pytest.raises(InputError, match="probes are .dat"):
+        plan_outputs([("probe_kind", "/tmp/x.txt")])
+    del KINDS["probe_kind"]
+
+
+def test_plan_write_is_all_or_nothing(tmp_path):
+    from ffdcli.errors import FfdError
+    from ffdcli.outputs import plan_outputs
+
+    plan = plan_outputs([("grad", tmp_path / "a.json"), ("jacobian", tmp_path / "b.npz")])
+
+    def fail(tmp):
+        tmp.write_text("half")
+        raise OSError(errno.EDQUOT, "Disk quota exceeded")
+
+    with pytest.raises(FfdError, match="b.npz.*quota"):
+        plan.write({"grad": lambda tmp: tmp.write_text("{}"), "jacobian": fail})
+    assert sorted(os.listdir(tmp_path)) == []
+    assert plan.write({"grad": lambda tmp: tmp.write_text("{}"), "jacobian": lambda tmp: tmp.write_text("x")}) \
+        == {"grad": str(tmp_path / "a.json"), "jacobian": str(tmp_path / "b.npz")}
+    assert sorted(os.listdir(tmp_path)) == ["a.json", "b.npz"]
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 4: NaN / inf coordinates refused by every reader
+# ----------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def nan_meshes(tmp_path_factory):
+    from ffdcli.formats import write_mesh
+    from ffdcli.wings import Planform, extruded_wing_mesh
+
+    d = tmp_path_factory.mktemp("nan")
+    mesh = extruded_wing_mesh(Planform(), n_around=21, n_radial=5, n_span=4)
+    out = {}
+    for ext in ("vtu", "vtk", "cgns"):
+        p = d / f"nan.{ext}"
+        write_mesh(mesh, p)                    # our writers refuse NaN: damage the files afterwards
+        out[ext] = p
+    import h5py
+    import meshio
+
+    for ext in ("vtu", "vtk"):
+        m = meshio.read(out[ext])
+        m.points[17, 1] = np.nan
+        m.points[40, 2] = np.inf
+        meshio.write(out[ext], m, binary=False) if ext == "vtk" else meshio.write(out[ext], m)
+    with h5py.File(out["cgns"], "r+") as h5:
+        found = []
+        h5.visititems(lambda name, obj: found.append(name) if name.endswith("CoordinateY/ data") else None)
+        h5[found[0]][17] = np.nan
+    return d, out
+    return d, out
+
+
+@pytest.mark.parametrize("ext", ["vtu", "vtk", "cgns"])
+@pytest.mark.parametrize("command", ["inspect", "box"])
+def test_nan_coordinates_in_every_format(nan_meshes, ext, command):
+    """Found: accepted ('x nan .. nan'); box wrote a lattice and a cache; deform blamed the design."""
+    d, meshes = nan_meshes
+    args = [command, meshes[ext].name] + (["--surface", "wing"] if command == "box" else [])
+    line = assert_hostile(d, args, 2, "NaN or infinite", "node 17", names=[f"nan.{ext}"])
+    assert ext == "cgns" or "1 more" in line
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 5: non-regular input files never hang in open(); say what the path is
+# ----------------------------------------------------------------------------------------------
+
+@pytest.fixture()
+def odd_inputs(ws):
+    made = []
+    fifo = ws / "fifo_in.su2"
+    os.mkfifo(fifo)
+    made.append(fifo)
+    for name, target in (("zero.su2", "/dev/zero"), ("loop_in.su2", "loop_in.su2"), ("zero_sens.csv", "/dev/zero")):
+        (ws / name).symlink_to(target)
+        made.append(ws / name)
+    fifo_csv = ws / "fifo_sens.csv"
+    os.mkfifo(fifo_csv)
+    made.append(fifo_csv)
+    yield ws
+    for p in made:
+        p.unlink()
+
+
+@pytest.mark.parametrize("args,what", [
+    (["inspect", "fifo_in.su2"], "FIFO"), (["box", "fifo_in.su2", "--surface", "wing"], "FIFO"),
+    (["check", "fifo_in.su2"], "FIFO"), (["inspect", "zero.su2"], "character device"),
+    (["inspect", "loop_in.su2"], "symlink loop"),
+    (["grad", "good.yaml", "--sens", "fifo_sens.csv"], "FIFO"),
+    (["grad", "good.yaml", "--sens", "zero_sens.csv"], "character device"),
+], ids=["inspect-fifo", "box-fifo", "check-fifo", "inspect-zero", "inspect-loop", "grad-fifo", "grad-zero"])
+def test_non_regular_input(odd_inputs, args, what):
+    """Found: a FIFO as MESH or --sens hung forever in open(). Run in a subprocess with a timeout."""
+    before = snapshot(odd_inputs)
+    proc = run_ffd(*args, cwd=odd_inputs, timeout=120)
+    assert_clean_failure(proc, 2, what, args[-1] if args[0] != "box" else args[1])
+    assert snapshot(odd_inputs) == before
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 6: SIGTERM and SIGHUP during a write; stale partial files swept
+# ----------------------------------------------------------------------------------------------
+
+def _popen_ffd(*args, cwd):
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    return subprocess.Popen([sys.executable, "-m", "ffdcli", *map(str, args)], cwd=cwd, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.fixture(scope="module")
+def mid_wing(tmp_path_factory):
+    """A volume wing whose SU2 output takes a noticeable time to write, its box cached."""
+    from ffdcli.formats import write_mesh
+    from ffdcli.wings import Planform, extruded_wing_mesh
+
+    d = tmp_path_factory.mktemp("sigterm")
+    mesh = extruded_wing_mesh(Planform(), n_around=101, n_radial=25, n_span=20)
+    write_mesh(mesh, d / "mid.su2")
+    write_design(d, d / "mid.su2", [{"twist": {"tip": 3}}], name="mid.yaml", volume={"method": "none"})
+    proc = run_ffd("deform", "mid.yaml", "-q", "--force", cwd=d)
+    assert proc.returncode == 0, proc.stderr
+    (d / "out_mid.su2").rename(d / "ref.su2")
+    (d / "out_mid_lattice.vtk").unlink()
+    return d
+
+
+def _signal_inside_write(folder: Path, sig) -> tuple[subprocess.Popen, str]:
+    """Start a deform and send ``sig`` once its first temporary file exists; returns the finished
+    process and its stderr."""
+    p = _popen_ffd("deform", "mid.yaml", "-q", "--force", cwd=folder)
+    while p.poll() is None and not list(folder.glob(".out_mid*part*")):
+        time.sleep(0.002)
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=120)
+    return p, err
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=["SIGTERM", "SIGHUP"])
+def test_sigterm_and_sighup_during_a_write(mid_wing, sig):
+    """Found: SIGTERM/SIGHUP (timeout, SLURM, CI, docker stop) left an 80-90 MB hidden .part file."""
+    out = mid_wing / "out_mid.su2"
+    for _ in range(3):
+        p, err = _signal_inside_write(mid_wing, sig)
+        assert no_parts(mid_wing) == [], list(mid_wing.iterdir())
+        if p.returncode == 128 + sig:
+            break
+        assert p.returncode == 0            # the write ended between the poll and the signal
+        assert file_hash(out) == file_hash(mid_wing / "ref.su2")
+        out.unlink()
+        (mid_wing / "out_mid_lattice.vtk").unlink()
+    else:
+        pytest.fail("no signal landed inside a write")
+    assert "Traceback" not in err and f"terminated by {sig.name}; nothing was written" in err, err
+    assert not out.exists() and not (mid_wing / "out_mid_lattice.vtk").exists()
+
+
+def test_stale_partial_files_are_swept(mid_wing):
+    """A run killed outright (SIGKILL, the OOM killer) leaves its .part file; the next run of the same
+    output removes it, but never a live process's file, another host's fresh file or a stranger."""
+    host = socket.gethostname().replace(".", "_").replace("-", "_")[:32]
+    killed = None
+    for _ in range(3):
+        _signal_inside_write(mid_wing, signal.SIGKILL)
+        killed = no_parts(mid_wing)
+        if killed:
+            break
+        for f in ("out_mid.su2", "out_mid_lattice.vtk"):
+            (mid_wing / f).unlink(missing_ok=True)
+    assert killed, "SIGKILL did not land inside a write"
+    sleeper = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        live = mid_wing / f".out_mid.su2.{host}-{sleeper.pid}-abc123.part.su2"
+        other_host = mid_wing / ".out_mid.su2.otherhost-1-abc123.part.su2"
+        old_other = mid_wing / ".out_mid.su2.otherhost-2-abc123.part.su2"
+        stranger = mid_wing / ".out_mid.su2.notes.txt"
+        for f in (live, other_host, old_other, stranger):
+            f.write_text("x")
+        os.utime(old_other, (time.time() - 7200, time.time() - 7200))
+        proc = run_ffd("deform", "mid.yaml", "-q", "--force", cwd=mid_wing)
+        assert proc.returncode == 0, proc.stderr
+        left = sorted(p.name for p in mid_wing.glob(".out_mid*"))
+        assert left == sorted([live.name, other_host.name, stranger.name]), left
+        assert file_hash(mid_wing / "out_mid.su2") == file_hash(mid_wing / "ref.su2")
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+        for f in mid_wing.glob(".out_mid*"):
+            f.unlink()
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 9: --json with stdout full
+# ----------------------------------------------------------------------------------------------
+
+def test_json_to_a_full_stdout(ws):
+    """Found: two chained tracebacks, exit 1, after writing the outputs."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    with open("/dev/full", "w") as full:
+        proc = subprocess.run([sys.executable, "-m", "ffdcli", "deform", "good.yaml", "-o", "full_json.su2",
+                               "--json"], cwd=ws, env=env, stdout=full, stderr=subprocess.PIPE, text=True,
+                              timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    assert "Traceback" not in proc.stderr and "Exception ignored" not in proc.stderr, proc.stderr
+    line = error_line(proc)
+    assert "standard output" in line
+    assert (ws / "full_json.su2").is_file() and (ws / "full_json_lattice.vtk").is_file()
+    assert no_parts(ws) == []
+    for f in ("full_json.su2", "full_json_lattice.vtk"):
+        (ws / f).unlink()
