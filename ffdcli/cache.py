@@ -81,11 +81,14 @@ def load(path: str | Path, key: str, settings: BoxSettings):
     try:
         with np.load(p, allow_pickle=False) as z:
             header = json.loads(bytes(z["header"]).decode())
+            if not isinstance(header, dict):         # valid JSON, but not what we write: rebuild
+                return None
             if header.get("key") != key or header.get("format") != CACHE_FORMAT \
                     or header.get("version") != __version__:
                 return None
             a = {k: z[k] for k in z.files}
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError):
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError,
+            UnicodeDecodeError):
         return None
     if any(v.dtype.kind == "f" and not np.all(np.isfinite(v)) for v in a.values()):
         return None                  # a damaged file: no cache we write holds NaN or inf
@@ -103,3 +106,25 @@ def load(path: str | Path, key: str, settings: BoxSettings):
     except (KeyError, ValueError, TypeError, IndexError, InputError):    # arrays that do not fit together
         return None
     return box, ids, emb, header
+
+
+def embedding_matches(box: Box, embedding, points: np.ndarray) -> bool:
+    """Whether a cached embedding is the one of these surface ``points`` (S, 3) in this box.
+
+    Checked on every load (one evaluation of B @ P, as cheap as one deformation): every point's
+    stored residual against its re-evaluation ``|V(u) - X|``, inside points within the tolerance and
+    outside points beyond it. A cache whose arrays were edited under a valid header (control points
+    shifted, ``inside`` cleared, parameters moved) fails this and is rebuilt."""
+    points = np.asarray(points, dtype=np.float64)
+    if points.shape[0] != embedding.n_points:
+        return False
+    if not embedding.n_points:
+        return True
+    V = embedding.evaluate(box.core_control_points())
+    r = np.linalg.norm(V - box.core_points(points), axis=1)
+    size = box.lattice().size
+    slack = 1e-12 * size                       # re-evaluation agrees to ~1e-16 of the size
+    tol = embedding.tolerance
+    ins = embedding.inside
+    return bool(np.all(np.abs(r - embedding.residual) <= slack + 1e-9 * embedding.residual)
+                and np.all(r[ins] <= tol + slack) and np.all(r[~ins] > tol - slack))

@@ -19,6 +19,7 @@ from ffdcli.box import Box, fit_box
 from ffdcli.box_import import import_box
 from ffdcli.errors import InputError, QualityError
 from ffdcli.formats.plot3d import read_plot3d
+from ffdcli.limits import check_box_memory, check_lattice_size
 from ffdcli.mesh import Mesh
 from ffdcli.progress import no_progress
 from ffdcli.settings import BoxSettings
@@ -122,6 +123,8 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
 
     t0 = time.perf_counter()
     progress = progress or no_progress
+    if settings is not None:         # an absurd lattice is refused before minutes of reading
+        check_lattice_size(settings.points, path=None if isinstance(mesh, Mesh) else mesh)
     if not isinstance(mesh, Mesh):
         mesh = read_mesh(mesh, progress=progress)
     names = resolve_surface(mesh, surface)
@@ -132,6 +135,8 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     settings = settings or BoxSettings()
     if not settings.file:        # an imported lattice (box.file) has the file's size: checked on import
         settings = settings.checked(dim, path=mesh.path)
+        check_lattice_size(settings.points, path=mesh.path)
+        check_box_memory(settings.points, settings.degree, len(surf.ids), path=mesh.path)
     from ffdcli.extruded import one_cell_thick
 
     extrusion = one_cell_thick(mesh, names)
@@ -151,7 +156,7 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
             got = cache_mod.load(path, key, settings)
             if got is not None:
                 box, ids, emb, header = got
-                if np.array_equal(ids, surf.ids):
+                if np.array_equal(ids, surf.ids) and cache_mod.embedding_matches(box, emb, surf.points):
                     return PreparedBox(mesh=mesh, surface=surf, box=box, embedding=emb,
                                        report=header.get("report", {}), cache=path, from_cache=True,
                                        seconds=time.perf_counter() - t0,
@@ -205,7 +210,7 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
     if hit is not None and hit[0] is not None:
         (box, ids, emb, header), path = hit
         surf = comm.run(_surface_of, got_mesh, surface)
-        if np.array_equal(ids, surf.ids):
+        if np.array_equal(ids, surf.ids) and cache_mod.embedding_matches(box, emb, surf.points):
             return PreparedBox(mesh=got_mesh, surface=surf, box=box, embedding=emb,
                                report=header.get("report", {}), cache=path, from_cache=True,
                                seconds=time.perf_counter() - t0,

@@ -402,3 +402,166 @@ def test_json_to_a_full_stdout(ws):
     assert no_parts(ws) == []
     for f in ("full_json.su2", "full_json_lattice.vtk"):
         (ws / f).unlink()
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 1: the total lattice size is bounded and the memory estimated before work
+# ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("points", ["256,256,256", "64,64,16"])
+def test_lattice_total_refused_in_well_under_a_second(ws, points):
+    """Found: --points 256,256,256 (each within 'at most 256') grew to 23.8 GB and was OOM-killed."""
+    t0 = time.perf_counter()
+    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--points", points], 2, "at most", "in all",
+                   names=["vwing.su2"])
+    assert time.perf_counter() - t0 < 1.0
+
+
+def test_lattice_total_in_a_design_names_the_line(ws):
+    import yaml
+
+    data = yaml.safe_load((ws / "good.yaml").read_text())
+    data["box"]["points"] = [200, 200, 2]
+    (ws / "big_lattice.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    assert_hostile(ws, ["deform", "big_lattice.yaml"], 2, "at most", names=["big_lattice.yaml:", "box.points"])
+
+
+def test_box_memory_estimate():
+    from ffdcli.errors import InputError
+    from ffdcli.limits import box_memory, check_box_memory
+
+    small = box_memory((6, 8, 2), (3, 3, 1), 10_000)
+    assert small < 50 * 2**20
+    assert box_memory((6, 8, 2), (5, 5, 1), 10_000) > box_memory((6, 8, 2), (3, 3, 1), 10_000)
+    with pytest.raises(InputError, match="needs about .* GB of memory, and 1.0 GB is available"):
+        check_box_memory((30, 30, 30), (5, 5, 5), 10_000_000, available=2**30)
+    assert check_box_memory((6, 8, 2), (3, 3, 1), 10_000, available=2**30) == small
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 13: out-of-range ids quoted as written; MPLBACKEND; big lists
+# ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("block", ["NELEM", "MARKER_ELEMS= 200"])
+def test_huge_element_id_quoted_as_written(ws, block):
+    """Found: a 23-digit point id was quoted as 9223372036854775807 (int64's largest value)."""
+    lines = (ws / "vwing.su2").read_text().splitlines(keepends=True)
+    i = next(k for k, ln in enumerate(lines) if ln.startswith(block)) + 3
+    parts = lines[i].split()
+    parts[2] = "12345678901234567890123"
+    lines[i] = "\t".join(parts) + "\n"
+    (ws / "hugeid.su2").write_text("".join(lines))
+    line = assert_hostile(ws, ["inspect", "hugeid.su2"], 2, "12345678901234567890123", "out of range",
+                          names=["hugeid.su2:"])
+    assert "9223372036854775807" not in line
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 8: a cache edited under a valid header is rebuilt, never used
+# ----------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def cached(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cache2")
+    mesh = write_volume_wing(d)
+    write_design(d, mesh, GOOD, name="good.yaml")
+    proc = ffd("deform", "good.yaml", "-o", "ref.su2", "-q", cwd=d)
+    assert proc.returncode == 0, proc.stderr
+    caches = sorted(d.glob("vwing.su2.*.ffdcache.npz"))
+    assert len(caches) == 1
+    return d, caches[0]
+
+
+def _run_from_cache(d: Path) -> bool:
+    proc = ffd("deform", "good.yaml", "-o", "again.su2", "--json", cwd=d)
+    assert proc.returncode == 0, proc.stderr
+    assert file_hash(d / "again.su2") == file_hash(d / "ref.su2")
+    return json.loads(proc.stdout)["from_cache"]
+
+
+def _shift(v):
+    w = v.copy()
+    w[..., 1] += 1e-3
+    return w
+
+
+@pytest.mark.parametrize("array,damage", [
+    ("inside", lambda v: np.zeros_like(v)),                 # found: an unmoved wing, exit 0
+    ("control_points", _shift),                             # found: a different mesh, silently
+    ("params", lambda v: np.clip(v + 0.01, 0, 1)),
+    ("residual", lambda v: v + 0.5),
+    ("header", lambda v: np.frombuffer(b"[1, 2, 3]", dtype=np.uint8)),   # found: AttributeError, every run
+    ("header", lambda v: np.frombuffer(b'"just a string"', dtype=np.uint8)),
+    ("header", lambda v: np.frombuffer(b"\xff\xfe", dtype=np.uint8)),
+], ids=["inside_cleared", "control_points_shifted", "params_moved", "residual_edited", "header_list",
+        "header_string", "header_not_utf8"])
+def test_cache_edited_under_a_valid_header(cached, array, damage):
+    d, cache = cached
+    saved = cache.read_bytes()
+    try:
+        with np.load(cache, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+        arrays[array] = damage(arrays[array])
+        with open(cache, "wb") as fh:
+            np.savez(fh, **arrays)
+        assert _run_from_cache(d) is False          # rebuilt, the same mesh as the reference
+        assert _run_from_cache(d) is True           # and the rebuilt cache is used
+    finally:
+        cache.write_bytes(saved)
+
+
+@pytest.mark.parametrize("args", [["plot", "good.yaml", "-o", "mpl.png"],
+                                  ["deform", "good.yaml", "-o", "mpl.su2", "--plot"]], ids=["plot", "deform"])
+def test_bad_matplotlib_backend_in_the_environment(ws, args):
+    """Found: ``MPLBACKEND=Nonsense ffd plot`` was 'a bug in ffd'."""
+    before = snapshot(ws)
+    proc = run_ffd(*args, cwd=ws, env={"MPLBACKEND": "Nonsense"})
+    assert_clean_failure(proc, 2, "MPLBACKEND", "Nonsense", "environment")
+    assert "bug" not in proc.stderr
+    assert snapshot(ws) == before and no_parts(ws) == []
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 7: the Python API refuses what the command line refuses, and writes through the same plan
+# ----------------------------------------------------------------------------------------------
+
+def test_api_refuses_what_the_cli_refuses(ws):
+    from ffdcli.api import DesignModel
+    from ffdcli.errors import InputError
+
+    model = DesignModel.from_file(ws / "good.yaml")
+    v0 = model.values.copy()
+    chord = [i for i, n in enumerate(model.names) if ".chord" in n]
+    for bad in (np.nan, np.inf, -np.inf):
+        v = v0.copy()
+        v[0] = bad
+        with pytest.raises(InputError, match=model.names[0].replace("[", r"\[").replace("]", r"\]")):
+            model.set_values(v)
+    for bad in (0.0, -1.0):
+        v = v0.copy()
+        v[chord[-1]] = bad
+        with pytest.raises(InputError):
+            model.set_values(v)
+    assert np.array_equal(model.values, v0)              # unchanged after every refusal
+    with pytest.raises(InputError):
+        model.surface_jvp(np.ones(model.n_vars + 1))
+    with pytest.raises(InputError):
+        model.surface_vjp(np.ones((3, 3)))
+    with pytest.raises(InputError, match="list of KEY=VALUE"):
+        DesignModel.from_file(ws / "good.yaml", "changes.0.twist.tip=3")
+
+
+def test_api_writes_through_the_plan(ws):
+    from ffdcli.api import DesignModel
+    from ffdcli.errors import InputError
+
+    model = DesignModel.from_file(ws / "good.yaml")
+    with pytest.raises(InputError, match="overwrite the input mesh"):
+        model.write(ws / "vwing.su2")
+    with pytest.raises(InputError, match=".vtk"):
+        model.write(ws / "api.su2", lattice=ws / "api.txt")
+    assert not (ws / "api.su2").exists()
+    written = model.write(ws / "api.su2")
+    assert written == {"mesh": str(ws / "api.su2"), "lattice": str(ws / "api_lattice.vtk")}
+    for p in written.values():
+        Path(p).unlink()

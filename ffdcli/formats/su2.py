@@ -462,7 +462,8 @@ class _Parser:
                     if npoin is not None and (mn < 0 or mx >= npoin):
                         badrow = np.flatnonzero(((ids < 0) | (ids >= npoin)).any(axis=1))[0]
                         i = int(rows[badrow])
-                        pid = int(ids[badrow][(ids[badrow] < 0) | (ids[badrow] >= npoin)][0])
+                        k = int(np.flatnonzero((ids[badrow] < 0) | (ids[badrow] >= npoin))[0])
+                        pid = _token_as_written(buf, starts, ends, i, 1 + k, int(ids[badrow][k]))
                         raise self.error(f"point id {pid} is out of range; NPOIN= {npoin} "
                                          f"(line {self.seen['NPOIN']}) allows 0 to {npoin - 1}",
                                          line + i)
@@ -556,6 +557,16 @@ def _release(mm: mmap.mmap, start: int, length: int) -> None:
 def _show(s: bytes, limit: int = 40) -> str:
     t = s.decode("utf-8", errors="replace")
     return repr(t if len(t) <= limit else t[:limit] + "...")
+
+
+def _token_as_written(buf, starts, ends, row: int, index: int, parsed: int) -> str:
+    """Token ``index`` of row ``row`` of ``buf`` as the file has it (an integer too long for int64 is
+    read as its largest value; the message quotes what was written), else ``parsed``."""
+    try:
+        tok = bytes(buf[int(starts[row]):int(ends[row])]).split()[index]
+    except (IndexError, ValueError):
+        return str(parsed)
+    return _show(tok) if len(tok) > 40 else tok.decode("ascii", "replace")
 
 
 def _type_list() -> str:
