@@ -20,12 +20,14 @@ several components can pass one part per component.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ffdcli.atomic import atomic_path
+from ffdcli.errors import InputError
 
 BLACK, RED, GREY, VIOLET = "#000000", "#d62728", "#7f7f7f", "#9400d3"
 #: Colours of the root, mid and tip curves of the change panel.
@@ -330,14 +332,29 @@ def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110,
     return plot_parts(run_parts(run, result), path, title=title, dpi=dpi, target=target, note=note)
 
 
+def _pyplot():
+    """matplotlib.pyplot on the Agg backend; an unusable ``MPLBACKEND`` in the environment (which
+    matplotlib checks on import) is the user's environment, said so, not a bug."""
+    try:
+        import matplotlib
+    except ValueError as e:
+        backend = os.environ.get("MPLBACKEND")
+        if backend is not None and "backend" in str(e):
+            raise InputError(f"the environment variable MPLBACKEND={backend!r} is not a matplotlib backend; "
+                             "unset it (ffd draws off-screen with Agg whatever it says)",
+                             hint="env -u MPLBACKEND ffd ...") from None
+        raise
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
 def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=None,
                note: str | None = None) -> Path:
     """Write the PNG of ``parts`` (:class:`Part`): every part's outlines in the planform and front
     views (in the first part's axes), the first part's change panel and sections."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     part = parts[0]
     box = part.box
