@@ -372,15 +372,17 @@ class DesignModel:
         """Write the deformed mesh of the current values (and the lattice VTK, with ``plot`` the
         picture) as ``ffd deform -o MESH --lattice LATTICE [--plot] [--force]`` does: every output
         checked before the work (:func:`ffdcli.outputs.plan_deform`), the quality gate
-        (:class:`~ffdcli.errors.QualityError`, nothing written, unless ``force``), all outputs
+        (:func:`ffdcli.quality.enforce`: nothing written unless ``force``), all outputs
         written together or none. ``mesh=None``: the design file's ``output:``. Returns {kind: path}."""
         from ffdcli.outputs import plan_deform
-        from ffdcli.pipeline import deform, quality_gate, write_outputs
+        from ffdcli.pipeline import deform, write_outputs
+        from ffdcli.quality import enforce
 
-        plan = plan_deform(self.run.design, mesh=mesh, lattice=lattice, plot=plot)
+        design = self.run.design
+        plan = plan_deform(design, mesh=mesh, lattice=lattice, plot=plot)
         result = deform(self.run, P=self.lattice(), progress=progress)
-        quality_gate(self.run, result, force=force)
-        return write_outputs(self.run, result, plan=plan, progress=progress)
+        enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force)
+        return self.comm.root_then_bcast(write_outputs, self.run, result, plan=plan, progress=progress)
 
     def _rotation_jacobian(self):
         """dR/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice)."""
