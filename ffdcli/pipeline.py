@@ -252,7 +252,7 @@ class DesignRun:
         if self._warp is None:
             from ffdcli.warp import WarpSettings, prepare_mesh_warp
 
-            vol = {k: v for k, v in (self.design.volume or {}).items() if k != "threshold"}
+            vol = self.design.volume or {}      # the gate's keys are skipped by from_dict
             settings = WarpSettings.from_dict(vol, path=self.design.path)
             model, _ = prepare_mesh_warp(self.prep.mesh, list(self.prep.surface.names), settings,
                                          progress=progress)
@@ -377,6 +377,11 @@ class Deformation:
     volume_method: str
     quality: object | None       # ffdcli.quality.QualityReport
     seconds: dict
+    #: The recovery attempts when the design's own settings failed the gate (:mod:`ffdcli.recovery`):
+    #: ``[{"attempt": what, "failed": cells, "ok": bool}, ...]``, the design's settings first.
+    recovery: list = field(default_factory=list)
+    #: The attempt whose mesh this is (None: the design's own volume settings).
+    recovered_with: str | None = None
 
     @property
     def max_displacement(self) -> float:
@@ -393,22 +398,26 @@ def volume_method(run: DesignRun) -> str:
 
 
 @np.errstate(over="ignore", invalid="ignore", divide="ignore")    # absurd values end in the check below
-def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check: bool = True) -> Deformation:
+def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check: bool = True,
+           recover: bool = True) -> Deformation:
     """Apply the design's changes and move the mesh: the surface exactly, the volume by IDW.
 
     Returns a :class:`Deformation`; nothing is written. The quality report is computed when the
-    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides). A
+    mesh has interior cells (``deform`` does not raise on bad quality: the caller decides). When
+    the gate fails and ``recover`` is true, the attempts of :mod:`ffdcli.recovery` (a longer reach,
+    then the design in increments) are tried and the best one is returned, with what was tried in
+    ``Deformation.recovery``. A
     deformation that cannot be computed in floating point (design values so large that coordinates
     overflow) raises :class:`~ffdcli.errors.QualityError`.
     """
     try:
-        return _deform(run, progress=progress, P=P, check=check)
+        return _deform(run, progress=progress, P=P, check=check, recover=recover)
     except np.linalg.LinAlgError as e:
         raise QualityError(f"the deformation is numerically degenerate ({e}); are the design values far "
                            "too large? nothing was written", path=run.design.path) from None
 
 
-def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
+def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     progress = progress or no_progress
     t = {}
     t0 = time.perf_counter()
@@ -447,8 +456,31 @@ def _deform(run: DesignRun, *, progress, P, check) -> Deformation:
         kw = {} if threshold is None else {"threshold": float(threshold)}
         quality = check_quality(mesh, points, points_before=mesh.points, **kw)
         t["quality"] = time.perf_counter() - t2
+    tried, used = [], None
+    serial = run.comm is None or run.comm.size == 1
+    if (quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw"
+            and serial):
+        from ffdcli.quality import check_quality
+        from ffdcli.recovery import attempts, incremental_warp
+
+        t3 = time.perf_counter()
+        tried.append({"attempt": "the design's volume settings", "failed": quality.n_failed, "ok": False})
+        best = (quality.n_failed, points, quality, None)
+        for what, settings, steps in attempts(run.warp_model(progress).settings):
+            pts = incremental_warp(run, P1, settings, steps, progress=progress)
+            if not np.all(np.isfinite(pts)):
+                tried.append({"attempt": what, "failed": None, "ok": False})
+                continue
+            q = check_quality(mesh, pts, points_before=mesh.points, **kw)
+            tried.append({"attempt": what, "failed": q.n_failed, "ok": q.ok})
+            if q.n_failed < best[0]:
+                best = (q.n_failed, pts, q, what)
+            if q.ok:
+                break
+        _, points, quality, used = best
+        t["recovery"] = time.perf_counter() - t3
     return Deformation(points=points, lattice=P1, surface_displacement=disp, volume_method=method,
-                       quality=quality, seconds=t)
+                       quality=quality, seconds=t, recovery=tried, recovered_with=used)
 
 
 def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes: dict | None = None,

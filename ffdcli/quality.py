@@ -873,8 +873,12 @@ def _orthogonality_counts(ref, after, cells, dim, orientation, ortho_min, ortho_
             "worst_nodes": rows}
 
 
-def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, force: bool = False) -> list[str]:
+def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, force: bool = False,
+            recovery: list | None = None) -> list[str]:
     """Apply the gate to a report of ``ffd deform``: raise, or return warnings for ``--force``.
+
+    ``recovery``: the attempts of :mod:`ffdcli.recovery` (``Deformation.recovery``); the refusal
+    then says what was tried and what to try next.
 
     Raises :class:`~ffdcli.errors.InputError` (exit 2) when the input mesh already has inverted or
     degenerate cells, naming the first and where it is; :class:`~ffdcli.errors.QualityError` (exit 3)
@@ -898,6 +902,11 @@ def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, f
         warnings.append(msg)
     if not report.ok:
         msg = f"the deformed mesh fails the quality gate: {report.failure_message()}"
+        if recovery:
+            tried = ", ".join(f"{a['attempt']} ({'?' if a['failed'] is None else a['failed']} failing)"
+                              for a in recovery)
+            msg += (f"; tried: {tried}; try next: the change in smaller steps (several runs), "
+                    "volume.rotation_reach: null, or a finer surface mesh where the worst cell is")
         if not force:
             raise QualityError(msg + "; nothing was written (--force writes it anyway)", path=design_path,
                                report=report.to_dict())

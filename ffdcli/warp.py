@@ -78,7 +78,7 @@ Numba kernels (``prange`` over blocks of targets, explicit stack traversal) have
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numba
@@ -88,6 +88,7 @@ from numba import njit, prange
 from ffdcli.errors import InputError
 from ffdcli.mesh import CellBlock
 from ffdcli.progress import chunks, no_progress
+from ffdcli.settings import METHODS, WarpSettings  # noqa: F401  (WarpSettings: re-exported)
 
 #: A marker is planar when all its nodes are within this fraction of the mesh's bounding-box
 #: diagonal from one plane (2D: one line).
@@ -98,156 +99,6 @@ LEAF_SIZE = 16
 _BLOCK = 128
 #: Traversal stack size: the tree depth is at most log2(sources) + 1 < 64.
 _STACK = 160
-
-METHODS = ("idw", "none")
-
-
-def _doc(text: str) -> dict:
-    return {"doc": text}
-
-
-@dataclass(frozen=True)
-class WarpSettings:
-    """How the volume mesh follows the surface (``volume:`` in the design file).
-
-    Every field carries a one-line description in ``metadata["doc"]`` (the design-file schema
-    uses them).
-    """
-
-    method: str = field(default="idw", metadata=_doc(
-        "idw: every node follows the surface by inverse-distance weighting (default); "
-        "none: only the surface nodes move"))
-    a: float = field(default=3.0, metadata=_doc(
-        "exponent of the long-range weight term (L/d)^a"))
-    b: float = field(default=5.0, metadata=_doc(
-        "exponent of the short-range weight term (alpha L/d)^b; must be at least a"))
-    alpha: float = field(default=1.0, metadata=_doc(
-        "scale of the short-range term: it dominates closer than alpha^(b/(b-a)) L"))
-    ldef: float | None = field(default=None, metadata=_doc(
-        "reference length L in mesh units; default: diagonal of the surface's bounding box"))
-    rotation_reach: float | None = field(default=0.3, metadata=_doc(
-        "the rotation part of the motion fades with distance r from each surface node as "
-        "1 / (1 + (r / rho)^4), rho = rotation_reach x the mean chord (surface area / (2 x the "
-        "diagonal of its bounding box)), "
-        "so no node is carried further than the surface motion near it explains; null: no fade "
-        "(IDWarp)"))
-    tolerance: float = field(default=1e-3, metadata=_doc(
-        "tree approximation: groups of far surface nodes are aggregated so that the error is about "
-        "tolerance x the largest surface displacement (0 = exact sum over every surface node)"))
-    fixed: tuple[str, ...] | None = field(default=None, metadata=_doc(
-        "markers whose nodes never move (default: every marker that is not sliding)"))
-    sliding: tuple[str, ...] | None = field(default=None, metadata=_doc(
-        "planar markers whose nodes move only in their plane (default: planar markers that "
-        "touch the surface, e.g. a symmetry plane)"))
-    chunk: int = field(default=65536, metadata=_doc(
-        "volume nodes per chunk (progress and memory granularity)"))
-
-    def __post_init__(self):
-        for name in ("fixed", "sliding"):
-            v = getattr(self, name)
-            if v is None:
-                continue
-            if isinstance(v, str):
-                v = (v,)
-            try:
-                v = tuple(str(s) for s in v)
-            except TypeError:
-                raise InputError(f"expected a list of marker names, got {v!r}",
-                                 key=f"volume.{name}") from None
-            object.__setattr__(self, name, v)
-        if self.method not in METHODS:
-            raise InputError(f"expected one of {', '.join(METHODS)}, got {self.method!r}",
-                             key="volume.method")
-        for name in ("a", "b", "alpha"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                raise InputError(f"expected a positive number, got {v!r}", key=f"volume.{name}")
-        if self.b < self.a:
-            raise InputError(f"b ({self.b}) must be at least a ({self.a}): the b term is the "
-                             "short-range one", key="volume.b")
-        if self.ldef is not None and (not isinstance(self.ldef, (int, float))
-                                      or not math.isfinite(self.ldef) or self.ldef <= 0):
-            raise InputError(f"expected a positive length, got {self.ldef!r}", key="volume.ldef")
-        rr = self.rotation_reach
-        if rr is not None and (isinstance(rr, bool) or not isinstance(rr, (int, float))
-                               or not math.isfinite(rr) or rr <= 0):
-            raise InputError(f"expected a positive number or null, got {rr!r}",
-                             key="volume.rotation_reach")
-        t = self.tolerance
-        if not isinstance(t, (int, float)) or not math.isfinite(t) or t < 0:
-            raise InputError(f"expected a number >= 0, got {t!r}", key="volume.tolerance")
-        if not isinstance(self.chunk, int) or self.chunk < 1:
-            raise InputError(f"expected a positive integer, got {self.chunk!r}", key="volume.chunk")
-        both = set(self.fixed or ()) & set(self.sliding or ())
-        if both:
-            raise InputError(f"marker(s) {', '.join(sorted(both))} named both fixed and sliding",
-                             key="volume")
-
-    @classmethod
-    def field_docs(cls) -> dict[str, str]:
-        """``{field name: one-line description}`` for the design-file schema."""
-        return {f.name: f.metadata["doc"] for f in fields(cls)}
-
-    @classmethod
-    def from_dict(cls, d: dict | None, path=None, *, key: str = "volume") -> WarpSettings:
-        """Settings from the design file's ``volume:`` mapping (None or {} gives the defaults).
-
-        Raises InputError naming ``path`` and the key path (``volume.a``) for an unknown key or a
-        bad value. Integers are accepted for the float fields; booleans are not numbers here.
-        """
-        if d is None:
-            return cls()
-        if not isinstance(d, dict):
-            raise InputError(f"expected a mapping of volume-mesh settings, got {type(d).__name__}",
-                             path=path, key=key)
-        names = [f.name for f in fields(cls)]
-        kw = {}
-        for k, v in d.items():
-            if k not in names:
-                raise InputError(f"unknown key {k!r}; expected one of {', '.join(names)}",
-                                 path=path, key=f"{key}.{k}")
-            if isinstance(v, bool) and k not in ("fixed", "sliding"):
-                raise InputError(f"expected a {'name' if k == 'method' else 'number'}, got {v!r}",
-                                 path=path, key=f"{key}.{k}")
-            if k in ("fixed", "sliding") and v is not None:
-                if isinstance(v, str):
-                    v = [v]
-                if not isinstance(v, (list, tuple)) or not all(isinstance(s, str) for s in v):
-                    raise InputError(f"expected a list of marker names, got {v!r}", path=path,
-                                     key=f"{key}.{k}")
-            if k in ("a", "b", "alpha", "ldef", "rotation_reach", "tolerance") and isinstance(v, int):
-                v = float(v)
-            kw[k] = v
-        try:
-            return cls(**kw)
-        except InputError as e:
-            sub = e.key[len("volume"):] if e.key and e.key.startswith("volume") else ""
-            raise InputError(e.message, path=path, key=key + sub, hint=e.hint) from None
-
-    @classmethod
-    def schema(cls) -> dict:
-        """JSON-schema fragment of the design file's ``volume:`` block."""
-        doc = cls.field_docs()
-        names = {"type": "array", "items": {"type": "string"}}
-        pos = {"type": "number", "exclusiveMinimum": 0}
-        props = {
-            "method": {"enum": list(METHODS), "default": "idw"},
-            "a": {**pos, "default": 3},
-            "b": {**pos, "default": 5},
-            "alpha": {**pos, "default": 1.0},
-            "ldef": {**pos},
-            "rotation_reach": {"type": ["number", "null"], "exclusiveMinimum": 0, "default": 0.3},
-            "tolerance": {"type": "number", "minimum": 0, "default": 1e-3},
-            "fixed": names,
-            "sliding": names,
-            "chunk": {"type": "integer", "minimum": 1, "default": 65536},
-        }
-        for k, v in props.items():
-            v["description"] = doc[k]
-        return {"type": "object", "description": "How the volume mesh follows the surface "
-                "(inverse-distance weighting with rotations, IDWarp style).",
-                "properties": props, "additionalProperties": False}
-
 
 class SlidingPlane(NamedTuple):
     """Nodes that slide in a plane: mesh node ids, unit plane normal (3,), a point of the plane."""

@@ -384,3 +384,26 @@ def test_rotation_fade_bounds_the_overshoot(tmp_path):
         out[reach] = np.linalg.norm(warp(model, b, R), axis=1).max() / bmax
     assert out[None] > 1.5, out
     assert out[0.3] <= 1.1, out
+
+
+def test_one_schema_for_volume():
+    """The design file's volume: block is WarpSettings' schema, gate keys included, and agrees with
+    WarpSettings on every default (one home)."""
+    from ffdcli.design.schema import design_schema
+    from ffdcli.quality import DEFAULT_THRESHOLD
+    from ffdcli.settings import GATE_KEYS
+
+    vol = design_schema()["properties"]["volume"]
+    assert vol == WarpSettings.schema()
+    props = vol["properties"]
+    st = WarpSettings()
+    for name, doc in WarpSettings.field_docs().items():
+        assert props[name]["description"] == doc
+        if "default" in props[name]:
+            assert props[name]["default"] == getattr(st, name), name
+    assert set(props) == set(WarpSettings.field_docs()) | set(GATE_KEYS)
+    assert props["threshold"]["default"] == DEFAULT_THRESHOLD
+    # every key of the schema is accepted by from_dict, and a gate key is not the warp's
+    assert WarpSettings.from_dict({"threshold": 0.1, "rotation_reach": None, "chunk": 1000}).chunk == 1000
+    with pytest.raises(InputError, match="rotation_reach"):
+        WarpSettings.from_dict({"rotation_reach": -1})

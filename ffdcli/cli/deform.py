@@ -73,7 +73,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     q = result.quality
     qd = q.to_dict() if q is not None else None
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
-    for w in enforce(q, mesh_path=design.mesh, design_path=design.path, force=force):
+    for w in enforce(q, mesh_path=design.mesh, design_path=design.path, force=force,
+                     recovery=result.recovery):
         console.warn(w)
     # every output once, together: rank 0 of an MPI run
     written = comm.root_then_bcast(write_outputs, run, result, plan=plan, progress=console.progress)
@@ -99,6 +100,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         "surface_points": int(len(run.prep.surface.ids)),
         "max_displacement": result.max_displacement,
         "volume": result.volume_method,
+        "recovery": result.recovery,
+        "recovered_with": result.recovered_with,
         "quality": qd,
         "su2_ffd": su2_ffd,
         "cache": str(run.prep.cache) if run.prep.cache else None,
@@ -110,7 +113,9 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         f"({len(run.prep.surface.ids)} surface points, lattice {' x '.join(map(str, run.box.lattice_shape))}"
         f", box {'from cache' if run.prep.from_cache else 'built'})",
         f"  changes   {', '.join(summary['changes']) or '(none)'}",
-        f"  moved     max surface displacement {result.max_displacement:.4g}; volume: {result.volume_method}",
+        f"  moved     max surface displacement {result.max_displacement:.4g}; volume: {result.volume_method}"
+        + (f" (recovered: {result.recovered_with}, after the design's settings failed the gate)"
+           if result.recovered_with else ""),
     ]
     if q is not None:
         lines.append(f"  quality   {q.summary()}")

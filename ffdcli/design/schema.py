@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ffdcli.settings import ROOT_CHOICES, SECTION_CHOICES
+from ffdcli.settings import ROOT_CHOICES, SECTION_CHOICES, WarpSettings
 
 #: Objects whose known keys ``--set`` may add when the file does not have them.
 ADDABLE = ("output", "volume", "box")
@@ -159,21 +159,9 @@ def box_schema() -> dict:
 
 
 def volume_schema() -> dict:
-    num, pos = number(), positive()
-    return {
-        "type": "object", "additionalProperties": False,
-        "description": "how the rest of the mesh follows the surface",
-        "properties": {
-            "method": {"enum": ["idw", "none"]},
-            "a": num, "b": num, "alpha": num,
-            "ldef": pos,
-            "tolerance": {"type": "number", "minimum": 0,
-                          "description": "tree approximation of the IDW sum (0 = exact)"},
-            "threshold": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
-                          "description": "quality gate (scaled Jacobian, 0..1): cells below it "
-                                         "(and halved) fail; default 0.05"},
-            "fixed": marker_names(), "sliding": marker_names(),
-        }}
+    """The ``volume:`` block: the one schema of :meth:`ffdcli.settings.WarpSettings.schema` (the
+    warp's settings and the quality gate's keys)."""
+    return WarpSettings.schema()
 
 
 def changes_schema() -> dict:

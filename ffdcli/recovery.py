@@ -1,0 +1,72 @@
+"""Recovery before refusal: what an expert tries when the deformed volume mesh fails the gate.
+
+When :func:`ffdcli.pipeline.deform` finds cells that fail the quality gate (:mod:`ffdcli.quality`)
+with the design's own ``volume:`` settings, it tries, in this order, keeping the surface exactly
+where the FFD puts it (bit for bit) every time:
+
+1. **a longer reach**: ``alpha`` x :data:`REACH_FACTOR` (the short-range ``b`` term then rules
+   :data:`REACH_FACTOR` ^ (b / (b - a)) times further out: every node follows its nearest
+   surface more closely, which is what planform changes need);
+2. **the design in increments**: the lattice goes from P0 to P' in :data:`INCREMENTS` equal steps
+   and the volume is warped through every intermediate surface, with the warp rebuilt on the
+   mesh of the step before (so the weights see the cells where they are, not where they were),
+   with the longer reach. The rotation of each step is ``R_k R_(k-1)^T``.
+
+The first attempt that passes the gate is used; if none does, the one with the fewest failing cells
+is reported (and written only with ``--force``). Each attempt costs one warp and one quality check
+(the increments: :data:`INCREMENTS` tree builds and warps), and only a failing design pays it.
+
+The result is NOT a smooth function of the design (it switches between attempts), so the
+derivatives (``ffd grad``, ``mesh_vjp``) are those of the default warp; the summary says which was
+used. Recovery runs serially (an MPI run with ``comm.size > 1`` reports the failure directly).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ffdcli.progress import no_progress
+from ffdcli.settings import WarpSettings
+
+#: ``alpha`` is multiplied by this for the "longer reach" attempt.
+REACH_FACTOR = 4.0
+#: Steps of the incremental attempt.
+INCREMENTS = 4
+
+
+def attempts(settings: WarpSettings) -> list[tuple[str, WarpSettings, int]]:
+    """(description, settings, increments) of the recovery attempts, in order."""
+    longer = replace(settings, alpha=settings.alpha * REACH_FACTOR)
+    return [(f"longer reach (volume.alpha: {longer.alpha:g})", longer, 1),
+            (f"{INCREMENTS} increments with volume.alpha: {longer.alpha:g}", longer, INCREMENTS)]
+
+
+def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *, progress=None
+                     ) -> np.ndarray:
+    """(N, 3) mesh points after warping the volume through ``steps`` intermediate surfaces.
+
+    Step k moves the lattice to ``P0 + k/steps (P1 - P0)``; the warp of each step is prepared on
+    the points of the step before. Surface nodes end exactly at ``X0 + B (P1 - P0)``.
+    """
+    from ffdcli.warp import prepare_mesh_warp, warp
+
+    progress = progress or no_progress
+    mesh = run.prep.mesh
+    names = list(run.prep.surface.names)
+    sid = run.prep.surface.ids
+    P0 = run.P0
+    pts = mesh.points.copy()
+    b_prev = np.zeros((len(sid), 3))
+    R_prev = None
+    for k in range(1, steps + 1):
+        Pk = P1 if k == steps else P0 + (k / steps) * (P1 - P0)
+        bk = run.surface_displacement(Pk)
+        Rk = run.surface_rotations(Pk)
+        dR = Rk if R_prev is None else Rk @ np.swapaxes(R_prev, 1, 2)
+        model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress)
+        pts = pts + warp(model, bk - b_prev, dR, progress=progress)
+        pts[sid] = mesh.points[sid] + bk
+        b_prev, R_prev = bk, Rk
+    return pts
