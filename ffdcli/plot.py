@@ -143,10 +143,16 @@ def section_change(box, j: int, q0: np.ndarray, q1: np.ndarray):
     """The change of one section as the panel draws it.
 
     Returns (x/c (K,), delta (K,), upper (K,) bool): each cut point's chord fraction on the original
-    section j's chord line (leading edge 0, trailing edge 1), its thickness-wise displacement in % of
-    that local chord, and whether it lies on the upper side of the chord line. Sorted by x/c."""
+    cut's own chord line (its leading edge, the cut point furthest forward, 0; its trailing edge,
+    the furthest aft, 1: the airfoil an aerodynamicist reads off that cut), its thickness-wise
+    displacement in % of that local chord, and whether it lies on the upper side of the chord line.
+    Sorted by x/c. ``j`` (the lattice section) gives the chord line when the cut has < 2 points."""
     c, t = box.axes.chord, box.axes.thickness
-    le, te = box.le_points[j][[c, t]], box.te_points[j][[c, t]]
+    if len(q0) >= 2:
+        fwd = box.chord_sign * q0[:, 0]
+        le, te = q0[int(np.argmin(fwd))], q0[int(np.argmax(fwd))]
+    else:
+        le, te = box.le_points[j][[c, t]], box.te_points[j][[c, t]]
     chord = float(np.hypot(*(te - le))) or 1.0
     e1 = (te - le) / chord
     e2 = np.array([-e1[1], e1[0]])
@@ -261,7 +267,7 @@ def _change_panel(ax, part: Part, curves: dict):
         ax.text(0.5, 0.6, "no thickness-wise change (a planform change: see the planform)",
                 transform=ax.transAxes, ha="center", color=GREY)
     t = AXIS[box.axes.thickness]
-    ax.set_xlabel("x/c (chord fraction of the original section)")
+    ax.set_xlabel("x/c (chord fraction of the original cut: its own leading and trailing edge)")
     ax.set_ylabel(f"\u0394{t} / c  (% of local chord)")
     ax.set_title(f"the change: thickness-wise ({t}) displacement of the surface, largest "
                  f"{big:.3g} % chord")

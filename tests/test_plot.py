@@ -132,8 +132,10 @@ def test_change_panel_is_the_exact_rigid_rotation_for_a_uniform_twist(tmp_path):
         rot_t = -np.sin(th) * r[:, 0] * sgn + np.cos(th) * r[:, 1]
         np.testing.assert_allclose(q1[:, 1] - te[1], rot_t, atol=1e-9)
         xc, d, up = section_change(box, j, q0, q1)
-        assert np.isclose(xc.min(), 0.0, atol=0.02) and np.isclose(xc.max(), 1.0, atol=0.02)
-        np.testing.assert_allclose(np.sort(d), np.sort(100 * (q1[:, 1] - q0[:, 1]) / chord))
+        assert xc.min() == 0.0 and np.isclose(xc.max(), 1.0)       # the cut's own LE and TE
+        assert np.isclose(np.ptp(q0[:, 0]), chord, rtol=0.02)
+        np.testing.assert_allclose(np.sort(d), np.sort(100 * (q1[:, 1] - q0[:, 1]) / np.ptp(q0[:, 0])),
+                                   rtol=1e-6)
         assert 0.9 * 100 * np.sin(th) < d.max() < 1.1 * 100 * np.sin(th), label   # LE: c sin(theta)
 
 
@@ -146,6 +148,20 @@ def test_a_one_percent_shape_change_shows_as_about_one_percent(tmp_path):
         assert 0.5 < d[up].max() <= 1.0 + 1e-9, label      # chord 1: 0.01 is 1 %
         assert d.min() >= -1e-12, label                     # nothing moves down
         assert d[~up].max() < 0.6 * d[up].max(), label      # the lower side (linear in l = 2) less
+
+
+def test_change_panel_chord_fraction_is_the_cut_own_on_a_swept_tapered_tip(tmp_path):
+    """Twist about the quarter chord on a swept, tapered wing: in every panel (the tip cut lies
+    inboard of the tip section, where LE and chord differ) the thickness-wise change crosses zero
+    near x/c = 0.25 of that cut."""
+    from ffdcli.plot import section_change, section_curves
+
+    run, result = _run(tmp_path, [{"twist": {"values": [4.0] * 8, "axis": 0.25}}], taper=0.3,
+                       le_sweep_deg=35.0, sections="xz")
+    for label, (_v, j, q0, q1) in section_curves(run, result).items():
+        xc, d, up = section_change(run.box, j, q0, q1)
+        zero = xc[up][np.argmin(np.abs(d[up]))]
+        assert abs(zero - 0.25) < 0.03, (label, zero)
 
 
 def test_section_labels_are_lattice_index_and_span_fraction(tmp_path):
