@@ -198,7 +198,8 @@ def test_plot_says_when_the_gate_would_refuse(tmp_path):
     assert proc.returncode == 0, proc.stderr
     assert "quality gate would refuse" in proc.stderr
     assert json.loads(proc.stdout)["refused"] is True
-    proc = run_ffd("plot", design, "-o", tmp_path / "ok.png", "--no-3d", "--json")
+    proc = run_ffd("plot", REPO / "configs" / "rect_twist_linear.yaml", "-o", tmp_path / "ok.png",
+                   "--no-3d", "--json", "--set", "changes.0.twist=[0, 0.5, 1, 1.5, 2, 2.5, 3, 3.5]")
     assert "quality gate" not in proc.stderr and json.loads(proc.stdout)["refused"] is False
 
 
