@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import REPO, SAMPLES, run_ffd
 
-from ffdcli.parallel import RankError, SerialComm, launched_size, share, world
+from ffdcli.parallel import SerialComm, launched_size, share, world
 
 BIN = Path(sys.executable).parent
 MPIEXEC = shutil.which("mpiexec", path=str(BIN)) or shutil.which("mpiexec")
