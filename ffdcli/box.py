@@ -243,7 +243,7 @@ class Box:
 # ----------------------------------------------------------------------------------------------
 
 def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *, dim: int = 3,
-            path=None, progress=None):
+            path=None, progress=None, comm=None):
     """Fit a lattice to a wing surface and embed the surface points in it.
 
     Parameters
@@ -257,6 +257,9 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
         :class:`BoxSettings`; checked against ``dim``.
     dim
         3 for a wing, 2 for an airfoil mesh.
+    comm
+        :mod:`ffdcli.parallel` communicator: every rank fits the same box, each embeds its block of
+        the points (a collective; the result is the serial one on every rank).
 
     Returns
     -------
@@ -305,7 +308,7 @@ def fit_box(points: np.ndarray, faces=(), settings: BoxSettings | None = None, *
         for attempt in range(MAX_REBUILDS + 1):
             P = _lattice_points(sections, stations, margins, axes, chord_sign, n, l, dim)
             box = assemble_box(P, settings, axes, dim, chord_sign, stations, sections, margins=margins)
-            core = embed(box.lattice(), box.core_points(pts), progress=progress)
+            core = embed(box.lattice(), box.core_points(pts), progress=progress, comm=comm)
             bar.update(1)
             outside = ~core.inside
             if not outside.any():

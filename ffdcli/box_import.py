@@ -22,7 +22,7 @@ from ffdcli.settings import BoxSettings
 
 
 def import_box(block: np.ndarray, points: np.ndarray, faces=(), settings: BoxSettings | None = None, *,
-               dim: int = 3, path=None, source=None, progress=None):
+               dim: int = 3, path=None, source=None, progress=None, comm=None):
     """Use a lattice block (ni, nj, nk, 3) (a pyGeo FFD file's) as the box, and embed the surface in it.
 
     The block's index directions are matched to chord, span and thickness by their alignment with
@@ -41,6 +41,8 @@ def import_box(block: np.ndarray, points: np.ndarray, faces=(), settings: BoxSet
         :class:`BoxSettings` (``points``, if given, must match the block).
     source
         The lattice file, named in messages and warnings.
+    comm
+        As :func:`ffdcli.box.fit_box`: each rank embeds its block of the points.
 
     Returns
     -------
@@ -113,7 +115,7 @@ def import_box(block: np.ndarray, points: np.ndarray, faces=(), settings: BoxSet
     if any(s is None for s in secs):
         raise InputError("could not find an airfoil in the surface (it has no chordwise extent)", path=path)
     box = assemble_box(P, settings, axes, dim, chord_sign, stations, secs, imported=True)
-    core = embed(box.lattice(), box.core_points(pts), progress=progress)
+    core = embed(box.lattice(), box.core_points(pts), progress=progress, comm=comm)
     n_out = int((~core.inside).sum())
     if n_out:
         warnings.append(f"{n_out} surface points are outside the imported lattice {source}; they will "

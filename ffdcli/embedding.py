@@ -30,7 +30,7 @@ NumPy versions the tests compare the kernels with.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -742,10 +742,11 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
         pts = np.asarray(points, dtype=np.float64)
         lo, hi = comm.share(pts.shape[0] if pts.ndim == 2 else 0)
         part = comm.run(embed, lattice, pts[lo:hi] if pts.ndim == 2 else pts, **kw)
-        params = comm.allgather_rows(part.params)
-        residual = comm.allgather_rows(part.residual)
-        return Embedding.from_params(lattice, params, residual <= part.tolerance, residual,
-                                     tolerance=part.tolerance)
+        # the blocks' basis values are gathered too (not recomputed for every point on every rank)
+        return replace(part, params=comm.allgather_rows(part.params), inside=comm.allgather_rows(part.inside),
+                       residual=comm.allgather_rows(part.residual),
+                       first=tuple(comm.allgather_rows(f) for f in part.first),
+                       values=tuple(comm.allgather_rows(v) for v in part.values))
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != lattice.gdim:
         raise ValueError(f"points must have shape (N, {lattice.gdim}), got {pts.shape}")

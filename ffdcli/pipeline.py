@@ -117,6 +117,18 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     if comm.size > 1:
         return _prepare_box_mpi(mesh, surface, settings, cache_dir=cache_dir, use_cache=use_cache,
                                 rebuild=rebuild, progress=progress, mesh_hash=mesh_hash, comm=comm)
+    return _prepare_box(mesh, surface, settings, cache_dir=cache_dir, use_cache=use_cache, rebuild=rebuild,
+                        progress=progress, mesh_hash=mesh_hash)
+
+
+def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, progress, mesh_hash,
+                 comm=None) -> PreparedBox:
+    """:func:`prepare_box` with ``mesh`` read. ``comm`` (MPI, every rank with the same mesh): rank 0
+    reads the cache file and broadcasts it, rank 0 writes it, and a box fit embeds the surface in
+    blocks of points, one a rank."""
+    from ffdcli.parallel import SerialComm
+
+    comm = comm or SerialComm()
     from ffdcli import cache as cache_mod
     from ffdcli.formats import read_mesh
     from ffdcli.surface import extract_surface
@@ -153,7 +165,7 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
         key = cache_mod.cache_key(mh, names, settings, extra)
         path = cache_mod.cache_path(mesh.path, key, cache_dir)
         if use_cache and not rebuild:
-            got = cache_mod.load(path, key, settings)
+            got = comm.root_then_bcast(cache_mod.load, path, key, settings)
             if got is not None:
                 box, ids, emb, header = got
                 if np.array_equal(ids, surf.ids) and cache_mod.embedding_matches(box, emb, surf.points):
@@ -164,12 +176,13 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
 
     if settings.file:
         box, emb, report = import_box(read_lattice_block(settings.file), surf.points, surf.faces, settings,
-                                      dim=dim, path=mesh.path, source=settings.file, progress=progress)
+                                      dim=dim, path=mesh.path, source=settings.file, progress=progress,
+                                      comm=comm)
     else:
         box, emb, report = fit_box(surf.points, surf.faces, settings, dim=dim, path=mesh.path,
-                                   progress=progress)
+                                   progress=progress, comm=comm)
     warnings = notes + list(report.get("warnings", []))
-    if path is not None and use_cache:
+    if path is not None and use_cache and comm.is_root:
         try:
             cache_mod.save(path, key, box, surf.ids, emb, report,
                            meta={"mesh": str(mesh.path), "surface": names})
@@ -181,55 +194,25 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
 
 
 def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, progress, mesh_hash, comm):
-    """:func:`prepare_box` over ranks: rank 0 reads the mesh and looks the cache up, every rank gets
-    them by broadcast; on a miss every rank fits the box and rank 0 writes the cache."""
+    """:func:`prepare_box` over ranks: rank 0 reads (and hashes) the mesh, every rank gets it by
+    broadcast, then every rank runs :func:`_prepare_box` with the communicator (rank 0 reads and
+    writes the cache; on a miss every rank fits the box, each embedding its block of the surface)."""
     from ffdcli import cache as cache_mod
     from ffdcli.formats import read_mesh
 
-    t0 = time.perf_counter()
-    progress = progress or no_progress
-
     def read():
-        m = mesh if isinstance(mesh, Mesh) else read_mesh(mesh, progress=progress)
+        m = mesh if isinstance(mesh, Mesh) else read_mesh(mesh, progress=progress or no_progress)
         h = mesh_hash or (cache_mod.file_hash(m.path) if m.path is not None else None)
         return m, h
 
+    t0 = time.perf_counter()
+    if settings is not None:         # an absurd lattice is refused before minutes of reading
+        check_lattice_size(settings.points, path=None if isinstance(mesh, Mesh) else mesh)
     got_mesh, mh = comm.root_then_bcast(read)
-
-    def lookup():
-        if got_mesh.path is None or not use_cache or rebuild:
-            return None
-        names = resolve_surface(got_mesh, surface)
-        s = (settings or BoxSettings()).checked(space_dim(got_mesh), path=got_mesh.path)
-        extra = cache_mod.file_hash(s.file) if s.file and Path(s.file).is_file() else ""
-        key = cache_mod.cache_key(mh, names, s, extra)
-        path = cache_mod.cache_path(got_mesh.path, key, cache_dir)
-        return cache_mod.load(path, key, s), path
-
-    hit = comm.root_then_bcast(lookup)
-    if hit is not None and hit[0] is not None:
-        (box, ids, emb, header), path = hit
-        surf = comm.run(_surface_of, got_mesh, surface)
-        if np.array_equal(ids, surf.ids) and cache_mod.embedding_matches(box, emb, surf.points):
-            return PreparedBox(mesh=got_mesh, surface=surf, box=box, embedding=emb,
-                               report=header.get("report", {}), cache=path, from_cache=True,
-                               seconds=time.perf_counter() - t0,
-                               warnings=list(header.get("report", {}).get("warnings", [])))
-    # every rank fits the box (the same arithmetic on the same data); the cache is rank 0's to write
-    prep = comm.run(prepare_box, got_mesh, surface, settings, cache_dir=cache_dir,
-                    use_cache=use_cache and comm.is_root, rebuild=True, progress=progress, mesh_hash=mh)
-    if not comm.is_root and use_cache:
-        prep.cache = comm.bcast(None)
-    elif use_cache:
-        comm.bcast(prep.cache)
+    prep = _prepare_box(got_mesh, surface, settings, cache_dir=cache_dir, use_cache=use_cache, rebuild=rebuild,
+                        progress=progress, mesh_hash=mh, comm=comm)
     prep.seconds = time.perf_counter() - t0
     return prep
-
-
-def _surface_of(mesh: Mesh, surface):
-    from ffdcli.surface import extract_surface
-
-    return extract_surface(mesh, resolve_surface(mesh, surface))
 
 
 # ----------------------------------------------------------------------------------------------
