@@ -132,9 +132,6 @@ class DesignModel:
         from ffdcli.design import load_design
         from ffdcli.pipeline import load_run
 
-        if isinstance(overrides, (str, bytes)):      # iterating it would give one "override" per character
-            raise InputError(f"overrides must be a list of KEY=VALUE strings, got the string {str(overrides)[:40]!r}; "
-                             "write [\"changes.0.twist.tip=3\"]", path=path)
         design = load_design(path, overrides=overrides)
         return cls(load_run(design, cache_dir=cache_dir, use_cache=use_cache, progress=progress, comm=comm),
                    comm=comm)

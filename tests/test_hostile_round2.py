@@ -565,3 +565,96 @@ def test_api_writes_through_the_plan(ws):
     assert written == {"mesh": str(ws / "api.su2"), "lattice": str(ws / "api_lattice.vtk")}
     for p in written.values():
         Path(p).unlink()
+
+
+# ----------------------------------------------------------------------------------------------
+# Items 10, 11, 13 (design files): numbers as printf writes them, huge integers, a mesh as the
+# design file, a million-value list, FIFOs named in a design file
+# ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("text,value", [("1e-05", 1e-05), ("1e1", 10.0), ("-2E+1", -20.0), ("1.5e1", 15.0),
+                                        (".5", 0.5), ("7", 7)])
+def test_numbers_as_str_and_printf_write_them(ws, text, value):
+    """Found: --set changes.0.twist.tip=1e-05 (Python's str(), printf %g) was 'expected a number'."""
+    from ffdcli.design import load_design
+
+    d = load_design(ws / "good.yaml", overrides=[f"changes.0.twist.tip={text}"])
+    got = d.changes_spec[0]["twist"]["tip"]
+    assert got == value and type(got) is type(value)
+    proc = ffd("deform", "good.yaml", "--set", f"changes.0.twist.tip={text}", "-o", "num.su2", "-q", cwd=ws)
+    assert proc.returncode == 0, proc.stderr
+    for f in ("num.su2", "num_lattice.vtk"):
+        (ws / f).unlink()
+
+
+def test_exponent_numbers_in_the_design_file(ws):
+    text = (ws / "good.yaml").read_text().replace("tip: 5", "tip: 5e0").replace("tip: 0.8", "tip: 8e-1")
+    (ws / "exp.yaml").write_text(text + "volume: {method: idw, threshold: 1e-2}\n")
+    from ffdcli.design import load_design
+
+    d = load_design(ws / "exp.yaml")
+    assert d.changes_spec == [{"twist": {"tip": 5.0}}, {"chord": {"tip": 0.8}}] and d.volume["threshold"] == 0.01
+    big = (ws / "good.yaml").read_text().replace("points:", "margin: 1e6\n  points:")
+    (ws / "margin_big.yaml").write_text(big)
+    line = assert_hostile(ws, ["deform", "margin_big.yaml"], 2, names=["margin_big.yaml:", "box.margin"])
+    assert "expected a number" not in line          # a number, refused for its range
+
+
+@pytest.mark.parametrize("where", ["file", "set"])
+def test_huge_integer_names_the_key(ws, where):
+    """Found: a 400-digit integer was 'internal error: OverflowError'."""
+    huge = "9" * 400
+    if where == "file":
+        (ws / "huge.yaml").write_text((ws / "good.yaml").read_text().replace("tip: 5", f"tip: {huge}"))
+        line = assert_hostile(ws, ["deform", "huge.yaml"], 2, "400 digits", names=["huge.yaml:", "changes[0].twist.tip"])
+    else:
+        line = assert_hostile(ws, ["deform", "good.yaml", "--set", f"changes.0.twist.tip={huge}"], 2, "400 digits",
+                              names=["good.yaml", "changes[0].twist.tip"])
+    assert huge not in line and "Overflow" not in line
+
+
+@pytest.mark.parametrize("name", ["vwing.su2", "mesh_named.yaml"])
+def test_mesh_given_as_the_design_file(ws, name):
+    """Found: ``ffd deform wing.su2`` echoed the whole 11 MB mesh into the error message."""
+    if name.endswith(".yaml"):
+        (ws / name).write_bytes((ws / "vwing.su2").read_bytes())
+    line = assert_hostile(ws, ["deform", name], 2, "is a mesh (SU2)", "ffd init", names=[name])
+    assert len(line) < 300 and "NELEM" not in line
+
+
+def test_long_string_quoted_briefly(ws):
+    (ws / "longstr.yaml").write_text("mesh: " + "x" * 5000 + "\nchanges: 3\n")
+    line = assert_hostile(ws, ["deform", "longstr.yaml"], 2, names=["longstr.yaml"])
+    assert len(line) < 400
+
+
+def test_million_value_list_refused_quickly(ws):
+    """Found: refused after 38 s of parsing."""
+    text = (ws / "good.yaml").read_text() + "extra: [" + ", ".join(["0"] * 1_000_000) + "]\n"
+    (ws / "million.yaml").write_text(text)
+    t0 = time.perf_counter()
+    assert_hostile(ws, ["deform", "million.yaml"], 2, "more than", names=["million.yaml"])
+    assert_hostile(ws, ["deform", "good.yaml", "--set", "changes.0.twist.tip=[" + ",".join(["1"] * 300_000) + "]"],
+                   2, "more than")
+    assert time.perf_counter() - t0 < 5
+
+
+def test_fifo_named_in_the_design_file(ws):
+    """Found: a FIFO, /dev/zero or a symlink loop given in a design file was 'not found'."""
+    import yaml
+
+    fifo = ws / "fifo_mesh.su2"
+    os.mkfifo(fifo)
+    (ws / "zero_mesh.su2").symlink_to("/dev/zero")
+    try:
+        for target, what, named in (("fifo_mesh.su2", "FIFO", "fifo_mesh.su2"),
+                                    ("zero_mesh.su2", "character device", "/dev/zero")):
+            data = yaml.safe_load((ws / "good.yaml").read_text())
+            data["mesh"] = target
+            (ws / "odd_mesh.yaml").write_text(yaml.safe_dump(data))
+            line = assert_hostile(ws, ["deform", "odd_mesh.yaml"], 2, what, named, names=["odd_mesh.yaml:", "mesh"])
+            assert "not found" not in line
+        assert_hostile(ws, ["deform", "fifo_mesh.su2"], 2, "FIFO")
+    finally:
+        fifo.unlink()
+        (ws / "zero_mesh.su2").unlink()

@@ -38,8 +38,18 @@ from ffdcli.changes import Change, changes_from_spec
 from ffdcli.design.overrides import apply_overrides
 from ffdcli.design.schema import ADDABLE, CHANGE_KINDS, design_schema
 from ffdcli.design.validate import validate
-from ffdcli.design.yamlmap import MAX_YAML_DEPTH, MAX_YAML_VALUES, key_path, line_at, yaml_error, yaml_lines
+from ffdcli.design.yamlmap import (
+    MAX_YAML_DEPTH,
+    MAX_YAML_VALUES,
+    check_size,
+    key_path,
+    line_at,
+    load_yaml,
+    yaml_error,
+    yaml_lines,
+)
 from ffdcli.errors import InputError
+from ffdcli.inputs import check_input_file, existing_kind
 from ffdcli.settings import BoxSettings
 
 __all__ = ["ADDABLE", "CHANGE_KINDS", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "Design", "apply_overrides",
@@ -85,15 +95,18 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     ``check_files``: the mesh (and ``box.file``) must exist. Raises :class:`InputError`.
     """
     path = Path(path)
-    if not path.is_file():
-        raise InputError("design file not found" if not path.exists() else "not a file", path=path)
+    if existing_kind(path) is None:
+        raise InputError("design file not found", path=path)
+    check_input_file(path, "design file")             # a FIFO or a device: never open() it
+    _not_a_mesh(path)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read the design file: {e}", path=path) from None
+    check_size(text, path)
     lines = yaml_lines(text, path)
     try:
-        data = yaml.safe_load(text)
+        data = load_yaml(text)
     except yaml.YAMLError as e:
         raise yaml_error(e, path) from None
     if data is None:
@@ -107,8 +120,8 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
         return (base / p).resolve() if not Path(p).is_absolute() else Path(p)
 
     mesh = resolve(data["mesh"])
-    if check_files and not mesh.is_file():
-        raise InputError(f"mesh file {mesh} not found", path=path, key="mesh", line=line_at(lines, ("mesh",)))
+    if check_files:
+        check_input_file(mesh, "mesh file", design=path, key="mesh", line=line_at(lines, ("mesh",)))
     surface = data.get("surface")
     if isinstance(surface, str):
         surface = [surface]
@@ -116,8 +129,8 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     box_file = None
     if "file" in b:
         box_file = resolve(b["file"])
-        if check_files and not box_file.is_file():
-            raise InputError(f"lattice file {box_file} not found", path=path, key="box.file",
+        if check_files:
+            check_input_file(box_file, "lattice file", design=path, key="box.file",
                              line=line_at(lines, ("box", "file")))
     defaults = BoxSettings()
     box = BoxSettings(points=tuple(b["points"]) if b.get("points") is not None else defaults.points,
@@ -136,6 +149,34 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     return Design(path=path, mesh=mesh, surface=surface, box=box, volume=volume,
                   changes_spec=list(data.get("changes") or []), output=output, data=data,
                   lines={key_path(k): v for k, v in lines.items() if k})
+
+
+#: How each mesh format begins (the first bytes), for a mesh given where a design file belongs.
+_MESH_MAGIC = ((b"\x89HDF", "CGNS/HDF5"), (b"# vtk DataFile", "legacy VTK"), (b"<?xml", "VTK XML"),
+               (b"<VTKFile", "VTK XML"), (b"NDIME", "SU2"), (b"%", "SU2"))
+
+
+def _not_a_mesh(path: Path) -> None:
+    """InputError when ``path`` is a mesh (by its extension or its first bytes): say so and how to
+    start a design file, instead of quoting the mesh back as a YAML error."""
+    from ffdcli.formats import FORMATS
+
+    fmt = FORMATS.get(path.suffix.lower())
+    if fmt is None:
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(256).lstrip()
+        except OSError:
+            return
+        fmt = next((name for magic, name in _MESH_MAGIC if head.startswith(magic)), None)
+        if fmt == "SU2" and b"NDIME" not in head:      # a comment line alone is not enough
+            fmt = None
+        if fmt == "VTK XML" and b"VTKFile" not in head:
+            fmt = None
+    if fmt is not None:
+        raise InputError(f"is a mesh ({fmt.upper() if fmt in FORMATS.values() else fmt}), not a design file",
+                         path=path, hint=f"start a design file for it with: ffd init {path.name} -o design.yaml; "
+                                         "then ffd deform design.yaml")
 
 
 def build_changes(design: Design, n: int, m: int, l: int, dim: int) -> list[Change]:

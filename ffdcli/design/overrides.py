@@ -7,7 +7,7 @@ import copy
 import yaml
 
 from ffdcli.design.schema import ADDABLE, design_schema
-from ffdcli.design.yamlmap import key_path, yaml_lines
+from ffdcli.design.yamlmap import check_size, key_path, load_yaml, yaml_lines
 from ffdcli.errors import InputError
 
 
@@ -24,6 +24,9 @@ def apply_overrides(data: dict, overrides=(), path=None) -> dict:
     flow list ``[0, 5, 10]``). Only keys that exist can be set, except the known keys of ``output``,
     ``volume`` and ``box``, which may be added.
     """
+    if isinstance(overrides, (str, bytes)):      # iterating it would give one "override" per character
+        raise InputError(f"overrides must be a list of KEY=VALUE strings, got the string {str(overrides)[:40]!r}; "
+                         "write [\"changes.0.twist.tip=3\"]", path=path)
     data = copy.deepcopy(data)
     for item in overrides:
         if "=" not in item:
@@ -31,7 +34,8 @@ def apply_overrides(data: dict, overrides=(), path=None) -> dict:
         key, text = item.split("=", 1)
         key = key.strip()
         try:
-            value = yaml.safe_load(text)
+            check_size(text, path, what="the value")
+            value = load_yaml(text)
             yaml_lines(text)            # the limits of a design file (aliases, depth) hold for a value too
         except InputError as e:
             raise InputError(f"--set {key}: {e.message}", path=path, key=key) from None

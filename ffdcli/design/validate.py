@@ -25,7 +25,10 @@ def _shown(value) -> str:
         return "a mapping {" + ", ".join(map(str, value)) + "}"
     if isinstance(value, list):
         return f"a list of {len(value)}"
-    return repr(value)
+    if isinstance(value, int) and abs(value) > MAX_INT:
+        return f"an integer of {len(str(abs(value)))} digits"
+    text = repr(value)
+    return text if len(text) <= 40 else text[:36] + "...'"   # a few words, never a whole pasted file
 
 
 def _describe(error) -> tuple[tuple, str]:
@@ -73,8 +76,15 @@ def _describe(error) -> tuple[tuple, str]:
     return parts, error.message
 
 
+#: The largest integer a design value may be (int64): a 400-digit one overflowed deep inside.
+MAX_INT = 2**63 - 1
+
+
 def _walk_nonfinite(value, parts=()):
+    """(key path, value) of every NaN, infinity or integer too large for a number of the file."""
     if isinstance(value, float) and not math.isfinite(value):
+        yield parts, value
+    elif isinstance(value, int) and not isinstance(value, bool) and abs(value) > MAX_INT:
         yield parts, value
     elif isinstance(value, dict):
         for k, v in value.items():
@@ -96,7 +106,7 @@ def validate(data, path=None, lines: dict | None = None) -> None:
     if not isinstance(data, dict):
         fail((), f"a design file is a mapping (mesh:, box:, changes:, ...), got {_shown(data)}")
     for parts, value in _walk_nonfinite(data):
-        fail(parts, f"must be a finite number, got {value}")
+        fail(parts, f"must be a finite number, got {_shown(value)}")
     validator = jsonschema.Draft202012Validator(design_schema())
     problems = [_describe(e) for e in validator.iter_errors(data)]
     if problems:

@@ -7,9 +7,36 @@ that expands (through aliases) past :data:`MAX_YAML_VALUES` values or :data:`MAX
 
 from __future__ import annotations
 
+import re
+
 import yaml
 
 from ffdcli.errors import InputError
+
+
+class DesignLoader(yaml.SafeLoader):
+    """PyYAML's safe loader with YAML 1.2's numbers: ``1e-05`` (what Python's ``str()`` and printf's
+    ``%g`` write), ``1e1`` and ``1e6`` are floats. PyYAML follows YAML 1.1, whose float needs a dot
+    and a signed exponent, so it read them as the strings '1e-05', '1e1'."""
+
+
+DesignLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag != "tag:yaml.org,2002:float"]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()}
+DesignLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"""^(?:[-+]?(?:[0-9][0-9_]*)\.[0-9_]*(?:[eE][-+]?[0-9]+)?
+                  |[-+]?(?:[0-9][0-9_]*)(?:[eE][-+]?[0-9]+)
+                  |[-+]?\.[0-9_]+(?:[eE][-+]?[0-9]+)?
+                  |[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+\.[0-9_]*
+                  |[-+]?\.(?:inf|Inf|INF)
+                  |\.(?:nan|NaN|NAN))$""", re.X),
+    list("-+0123456789."))
+
+
+def load_yaml(text: str):
+    """The data of a design file's YAML (or of a ``--set`` value): :class:`DesignLoader`."""
+    return yaml.load(text, Loader=DesignLoader)  # noqa: S506 (a SafeLoader)
 
 
 def key_path(parts) -> str:
@@ -25,12 +52,22 @@ MAX_YAML_VALUES = 200_000
 MAX_YAML_DEPTH = 64
 
 
+def check_size(text: str, path=None, *, what: str = "the design file") -> None:
+    """Refuse, before parsing, a text with more separators (commas, new lines) than a design file's
+    :data:`MAX_YAML_VALUES`: PyYAML spends about 40 s composing a list of a million values before
+    the budget of :func:`yaml_lines` could say no."""
+    count = text.count(",") + text.count("\n")
+    if count > MAX_YAML_VALUES:
+        raise InputError(f"{what} has more than {MAX_YAML_VALUES} values ({count} commas and lines); "
+                         "a design file is small (is it a mesh or a data file?)", path=path)
+
+
 def yaml_lines(text: str, path=None) -> dict[tuple, int]:
     """Map key paths (tuples) to 1-based YAML lines (a mapping entry -> the line of its key).
 
     Also rejects a key written twice in one mapping (YAML would silently keep the last)."""
     try:
-        root = yaml.compose(text, Loader=yaml.SafeLoader)
+        root = yaml.compose(text, Loader=DesignLoader)
     except yaml.YAMLError as e:
         raise yaml_error(e, path) from None
     except RecursionError:
