@@ -39,7 +39,7 @@ from ffdcli.atomic import (
     signals_deferred,
     signals_raise,
 )
-from ffdcli.errors import InputError
+from ffdcli.errors import FfdError, InputError
 from ffdcli.formats import FORMATS, format_of
 
 
@@ -128,7 +128,14 @@ class OutputPlan:
                     _check_still_regular(out)
                     tmp = make_temp(out.path)
                     temps.append((out, tmp))
-                    if writers[out.kind](tmp) is False:
+                    try:
+                        done = writers[out.kind](tmp)
+                    except FfdError as e:     # a writer's message names the file the user knows
+                        if e.path is not None and Path(e.path) == tmp:
+                            e.path = str(out.path)
+                            e.args = (e.format(),)
+                        raise
+                    if done is False:
                         temps.pop()
                         tmp.unlink(missing_ok=True)
                 with signals_deferred():

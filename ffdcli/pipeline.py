@@ -101,6 +101,19 @@ def read_lattice_block(file) -> np.ndarray:
     return blocks[0]
 
 
+def check_sections_plane(mesh: Mesh, settings: BoxSettings, dim: int) -> None:
+    """A 2D mesh's sections are its own plane: ``box.sections: xz`` on an x-y airfoil mesh is refused
+    before the work (it was caught only when writing, about the output file)."""
+    if dim != 2 or not settings.sections or not len(mesh.points):
+        return
+    flat = int(np.argmin(np.ptp(mesh.points, axis=0)))
+    plane = "".join("xyz"[i] for i in range(3) if i != flat)
+    if set(settings.sections) != set(plane):
+        raise InputError(f"sections {settings.sections!r} are not the plane of this 2D mesh, which lies in "
+                         f"{plane} ({'xyz'[flat]} constant); give sections: {plane} or {plane[::-1]}, or leave "
+                         "it out (detected)", path=mesh.path, key="box.sections")
+
+
 def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | None = None, *,
                 cache_dir: str | Path | None = None, use_cache: bool = True, rebuild: bool = False,
                 progress=None, mesh_hash: str | None = None, comm=None) -> PreparedBox:
@@ -147,6 +160,7 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
     settings = settings or BoxSettings()
     if not settings.file:        # an imported lattice (box.file) has the file's size: checked on import
         settings = settings.checked(dim, path=mesh.path)
+        check_sections_plane(mesh, settings, dim)
         check_lattice_size(settings.points, path=mesh.path)
         check_box_memory(settings.points, settings.degree, len(surf.ids), path=mesh.path)
     from ffdcli.extruded import one_cell_thick

@@ -658,3 +658,29 @@ def test_fifo_named_in_the_design_file(ws):
     finally:
         fifo.unlink()
         (ws / "zero_mesh.su2").unlink()
+
+
+def test_sections_not_the_plane_of_a_2d_mesh(tmp_path):
+    """Found (item 12): box.sections: xz on a 2D x-y mesh was caught only at write time, with a
+    message about the (temporary) output file."""
+    import shutil
+
+    from conftest import SAMPLES
+
+    shutil.copy(SAMPLES / "naca0012_2d.su2", tmp_path / "a.su2")
+    (tmp_path / "s.yaml").write_text("mesh: a.su2\nbox: {sections: xz}\nchanges: [{twist: 2}]\n")
+    line = assert_hostile(tmp_path, ["deform", "s.yaml"], 2, "not the plane", "xy", names=["s.yaml:2", "box.sections"])
+    assert ".part" not in line
+
+
+def test_a_writer_error_names_the_output_not_its_temporary_file(ws, monkeypatch):
+    import ffdcli.formats as formats
+    from ffdcli.errors import InputError
+
+    def refuse(mesh, path, *a, **k):
+        raise InputError("cannot be written like this", path=path)
+
+    monkeypatch.setattr(formats, "write_mesh", refuse)
+    proc = ffd("deform", "good.yaml", "-o", "named.su2", cwd=ws)
+    assert_clean_failure(proc, 2, "named.su2: cannot be written")
+    assert ".part" not in proc.stderr and no_parts(ws) == []
