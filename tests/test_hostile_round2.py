@@ -606,7 +606,8 @@ def test_huge_integer_names_the_key(ws, where):
     huge = "9" * 400
     if where == "file":
         (ws / "huge.yaml").write_text((ws / "good.yaml").read_text().replace("tip: 5", f"tip: {huge}"))
-        line = assert_hostile(ws, ["deform", "huge.yaml"], 2, "400 digits", names=["huge.yaml:", "changes[0].twist.tip"])
+        line = assert_hostile(ws, ["deform", "huge.yaml"], 2, "400 digits",
+                              names=["huge.yaml:", "changes[0].twist.tip"])
     else:
         line = assert_hostile(ws, ["deform", "good.yaml", "--set", f"changes.0.twist.tip={huge}"], 2, "400 digits",
                               names=["good.yaml", "changes[0].twist.tip"])
