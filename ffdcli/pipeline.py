@@ -242,6 +242,16 @@ class DesignRun:
     changes: list                # ffdcli.changes change objects, in pipeline order
     _warp: object = field(default=None, repr=False)   # the volume warp model, built on first use
     comm: object = field(default=None, repr=False)    # ffdcli.parallel communicator (None: serial)
+    _quality_ref: object = field(default=None, repr=False)   # the gate's view of the input mesh, built once
+
+    def quality_reference(self):
+        """The quality gate's :class:`~ffdcli.quality.QualityReference` of the input mesh, computed
+        once: every design of a loop is judged against it without recomputing the input's quality."""
+        if self._quality_ref is None:
+            from ffdcli.quality import quality_reference
+
+            self._quality_ref = quality_reference(self.prep.mesh)
+        return self._quality_ref
 
     def warp_model(self, progress=None):
         """The IDW model of this mesh (``volume:`` settings of the design; the quality ``threshold``
@@ -451,7 +461,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         t2 = time.perf_counter()
         threshold = (run.design.volume or {}).get("threshold")
         kw = {} if threshold is None else {"threshold": float(threshold)}
-        quality = check_quality(mesh, points, points_before=mesh.points, **kw)
+        quality = check_quality(mesh, points, points_before=mesh.points, reference=run.quality_reference(), **kw)
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
     serial = run.comm is None or run.comm.size == 1
@@ -468,7 +478,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
             if not np.all(np.isfinite(pts)):
                 tried.append({"attempt": what, "failed": None, "ok": False})
                 continue
-            q = check_quality(mesh, pts, points_before=mesh.points, **kw)
+            q = check_quality(mesh, pts, points_before=mesh.points, reference=run.quality_reference(), **kw)
             tried.append({"attempt": what, "failed": q.n_failed, "ok": q.ok})
             if q.n_failed < best[0]:
                 best = (q.n_failed, pts, q, what)

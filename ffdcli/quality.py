@@ -752,7 +752,8 @@ def _xyz(p) -> str:
 def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold: float = DEFAULT_THRESHOLD,
                   points_before: np.ndarray | None = None, *, relative: float = DEFAULT_RELATIVE,
                   ortho_min: float = DEFAULT_ORTHO_MIN, ortho_loss: float = DEFAULT_ORTHO_LOSS,
-                  orthogonality: bool = True, n_worst: int = 10) -> QualityReport:
+                  orthogonality: bool = True, n_worst: int = 10,
+                  reference: QualityReference | None = None) -> QualityReport:
     """The counts of the gate for the cells of ``mesh`` at ``points_after`` (default: its own points).
 
     Parameters
@@ -770,6 +771,9 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
         Also compute the node orthogonality (the dual grid; about as costly as the scaled Jacobian).
     n_worst
         How many of the worst cells / nodes to list.
+    reference
+        :func:`quality_reference` of the reference geometry (``points_before``, or ``points_after``
+        without a before), to skip recomputing it (a design loop, a recovery).
 
     Returns
     -------
@@ -790,13 +794,9 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     if not cells:
         return QualityReport(0, 0, 0, min_before=None, min_after=None, **{k: kw[k] for k in ("threshold", "relative")},
                              ortho_min=kw["ortho_min"], ortho_loss_max=kw["ortho_loss_max"])
-    # one pass over the reference points gives both the orientation and the quality before
-    normal = cell_orientation(ref, cells, 2).normal if mesh.dim == 2 else None
-    raws = [_raw_quality(ref, b.data, b.type, normal) for b in cells]
-    signs = np.ones(len(cells)) if mesh.dim == 2 else _majority_signs(raws)
-    orientation = Orientation(signs, normal)
-    q_ref = np.concatenate([np.clip(sg * r, -1.0, 1.0) for sg, r in zip(signs, raws, strict=True)])
-    del raws
+    if reference is None or (orthogonality and reference.ortho is None):
+        reference = quality_reference(mesh, ref, orthogonality=orthogonality)
+    orientation, q_ref = reference.orientation, reference.q
     has_before = before is not None
     q = q_ref if not has_before else cell_quality(after, cells, mesh.dim, orientation=orientation)
     qb = q_ref if has_before else None
@@ -839,15 +839,47 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     worst = np.argsort(q, kind="stable")[:n_worst]
     out["worst"] = cell_rows(worst, q, failed)
     if orthogonality:
-        out.update(_orthogonality_counts(ref, after if has_before else None, cells, mesh.dim, orientation,
+        out.update(_orthogonality_counts(ref, after if has_before else None, cells, mesh.dim, reference,
                                          ortho_min, ortho_loss, n_worst))
     return QualityReport(len(q), **out, **kw)
 
 
-def _orthogonality_counts(ref, after, cells, dim, orientation, ortho_min, ortho_loss, n_worst) -> dict:
+@dataclass(frozen=True)
+class QualityReference:
+    """What the gate needs of the input mesh, computed once (:func:`quality_reference`) and reused
+    for every candidate geometry of a design loop or a recovery: the orientation convention, the
+    scaled Jacobian of every cell, the edges and the node orthogonality (None when not wanted)."""
+
+    orientation: Orientation
+    q: np.ndarray
+    topology: EdgeTopology | None = None
+    ortho: np.ndarray | None = None
+
+
+def quality_reference(mesh: Mesh, points: np.ndarray | None = None, *, orthogonality: bool = True
+                      ) -> QualityReference:
+    """The :class:`QualityReference` of ``mesh`` at ``points`` (default its own): pass it to
+    :func:`check_quality` as ``reference`` with the same ``points_before``."""
+    pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
+    cells = [b for b in mesh.cells if len(b)]
+    _check_types(cells, mesh.dim)
+    # one pass over the points gives both the orientation and the quality
+    normal = cell_orientation(pts, cells, 2).normal if mesh.dim == 2 else None
+    raws = [_raw_quality(pts, b.data, b.type, normal) for b in cells]
+    signs = np.ones(len(cells)) if mesh.dim == 2 else _majority_signs(raws)
+    orientation = Orientation(signs, normal)
+    q = (np.concatenate([np.clip(sg * r, -1.0, 1.0) for sg, r in zip(signs, raws, strict=True)]) if raws
+         else np.zeros(0))
+    topo = ortho = None
+    if orthogonality and cells:
+        topo = edge_topology(cells, len(pts))
+        ortho = node_orthogonality(pts, cells, mesh.dim, orientation=orientation, topology=topo)
+    return QualityReference(orientation, q, topo, ortho)
+
+
+def _orthogonality_counts(ref, after, cells, dim, reference, ortho_min, ortho_loss, n_worst) -> dict:
     """The orthogonality fields of the report (``after`` None: only the mesh ``ref`` itself)."""
-    topo = edge_topology(cells, len(ref))
-    o_ref = node_orthogonality(ref, cells, dim, orientation=orientation, topology=topo)
+    topo, o_ref, orientation = reference.topology, reference.ortho, reference.orientation
     has = np.isfinite(o_ref)
     if not has.any():
         return {}
