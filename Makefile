@@ -28,6 +28,10 @@ $(VENV)/.stamp-test: $(VENV)/.stamp-core
 	$(PIP) install -e '.[mpi]' || echo "mpi4py/mpich could not be installed: the MPI tests are skipped"
 	@touch $@
 
+$(VENV)/.stamp-openmdao: $(VENV)/.stamp-test
+	$(PIP) install -e '.[openmdao]' || echo "openmdao could not be installed: its tests and examples are skipped"
+	@touch $@
+
 $(VENV)/.stamp-viz: $(VENV)/.stamp-core
 	$(PIP) install -e '.[viz]' || echo "pyvista could not be installed: pictures use matplotlib only"
 	@touch $@
@@ -37,7 +41,7 @@ venv: $(VENV)/.stamp-test
 demo: $(VENV)/.stamp-viz
 	$(BIN)/python -m ffdcli.demo --out $(OUT)
 
-test: $(VENV)/.stamp-test
+test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao
 	$(BIN)/python -m pytest -q
 
 bench: $(VENV)/.stamp-test

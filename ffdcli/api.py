@@ -294,6 +294,36 @@ class DesignModel:
                                                             jacobian=True)
         return self._cache["cj"]
 
+    # -- reports (what ffd vars / ffd constraints print) ------------------------------------------
+    def variables_table(self) -> list[dict]:
+        """One ``{"name", "value", "unit", "lower", "upper"}`` per design variable (None: no bound)."""
+        lo, hi = self.lower, self.upper
+        return [{"name": n, "value": float(v), "unit": u, "lower": _finite_or_none(a), "upper": _finite_or_none(b)}
+                for n, v, u, a, b in zip(self.names, self.values, self.units, lo, hi, strict=True)]
+
+    def constraints_table(self) -> list[dict]:
+        """One ``{"name", "value", "lower", "upper", "satisfied"}`` per constraint item (None: no bound)."""
+        from ffdcli.constraints import satisfied
+
+        v = self.constraint_values()
+        lo, hi = self.constraint_lower, self.constraint_upper
+        ok = satisfied(v, lo, hi)
+        return [{"name": n, "value": float(x), "lower": _finite_or_none(a), "upper": _finite_or_none(b),
+                 "satisfied": bool(s)}
+                for n, x, a, b, s in zip(self.constraint_names, v, lo, hi, ok, strict=True)]
+
+    def write_constraint_jacobian(self, path) -> None:
+        """Write the constraints' exact Jacobian as ``.npz`` (whole or not at all): arrays ``names`` (C),
+        ``variables`` (V), ``values`` (C), ``lower`` (C), ``upper`` (C) (``-inf``/``inf``: none) and
+        ``jacobian`` (C x V)."""
+        from ffdcli.atomic import atomic_write
+
+        J = self.constraint_jacobian()
+        with atomic_write(path, "wb") as f:
+            np.savez(f, names=np.array(self.constraint_names, dtype=str), variables=np.array(self.names, dtype=str),
+                     values=self.constraint_values(), lower=self.constraint_lower, upper=self.constraint_upper,
+                     jacobian=J)
+
     # -- evaluation --------------------------------------------------------------------------
     @property
     def surface_ids(self) -> np.ndarray:
@@ -383,6 +413,11 @@ class DesignModel:
 
     def _rotation_jacobian(self):
         """dR/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice)."""
+        if "dR" not in self._cache:
+            self._cache["dR"] = self._rotation_jacobian_uncached()
+        return self._cache["dR"]
+
+    def _rotation_jacobian_uncached(self):
         from ffdcli.lattice import derivatives
         from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
         from ffdcli.warp import rotations_from_deformation_gradient
@@ -412,6 +447,27 @@ class DesignModel:
                 out[v, ins] = planar_rotation_derivative(Fs3, dFs3, box.axes.span)
         return out
 
+    def mesh_jvp(self, dv, progress=None) -> np.ndarray:
+        """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW.
+
+        The warp is linear in the surface translations and rotation parts ``M = R - I`` for fixed tree
+        decisions (those of the current design, as :meth:`mesh_vjp` uses), so the product is the warp
+        of ``(dX_s/dv dv, I + dR/dv dv)``; the surface nodes get ``dX_s/dv dv`` exactly."""
+        dv = self._check_dv(dv, "mesh_jvp")
+        ids = self.surface_ids
+        dXs = self.surface_jvp(dv)
+        out = np.zeros((self.run.prep.mesh.n_points, 3))
+        if self.uses_volume():
+            from ffdcli.warp import warp
+
+            P1 = self.lattice()
+            disp = self.run.surface_displacement(P1)
+            rot = self.run.surface_rotations(P1)
+            dR = np.tensordot(dv, self._rotation_jacobian(), axes=1)
+            out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, decide_for=(disp, rot), progress=progress)
+        out[ids] = dXs
+        return out
+
     def mesh_vjp(self, g, progress=None) -> np.ndarray:
         """dJ/dv for g = dJ/dX at every mesh node (N, 3), through the volume motion when it is IDW.
 
@@ -434,6 +490,15 @@ class DesignModel:
         dR = self._rotation_jacobian()
         out += np.einsum("sij,vsij->v", g_M, dR)
         return out
+
+
+def constraints_report(run) -> list[dict]:
+    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.pipeline.DesignRun` (``ffd deform --json``)."""
+    return DesignModel(run).constraints_table()
+
+
+def _finite_or_none(x: float) -> float | None:
+    return float(x) if np.isfinite(x) else None
 
 
 def read_sensitivity_for(model: DesignModel, path, *, points=None):

@@ -40,6 +40,7 @@ def test_baseline_is_one_and_names(tmp_path, wing):
     m = model_for(tmp_path, wing, [{"twist": {"tip": 0}}, {"shape": {"upper": [0] * 6, "lower": [0] * 6}}])
     v = m.constraint_values()
     names = m.constraint_names
+    assert len(v) == len(names)
     assert names[0] == "k0.thickness[0]" and names[19] == "k0.thickness[19]" and names[20] == "k1.thickness_to_chord[0]"
     assert "k2.volume" in names and "k4.fold_free" in names and "k3.le_te[0]" in names
     assert len([n for n in names if n.startswith("k3.")]) == 16        # LE and TE of 8 sections

@@ -10,5 +10,7 @@ from ffdcli.cli import deform  # noqa: F401, I001
 from ffdcli.cli import plot  # noqa: F401, I001
 from ffdcli.cli import fit  # noqa: F401, I001
 from ffdcli.cli import grad  # noqa: F401, I001
+from ffdcli.cli import vars  # noqa: F401, I001
+from ffdcli.cli import constraints  # noqa: F401, I001
 from ffdcli.cli import check  # noqa: F401, I001
 from ffdcli.cli import schema  # noqa: F401, I001

@@ -76,6 +76,11 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     for w in enforce(q, mesh_path=design.mesh, design_path=design.path, force=force,
                      recovery=result.recovery):
         console.warn(w)
+    constraints = None
+    if design.data.get("constraints"):     # evaluated before writing: a bad item is exit 2, nothing written
+        from ffdcli.api import constraints_report
+
+        constraints = constraints_report(run)
     # every output once, together: rank 0 of an MPI run
     written = comm.root_then_bcast(write_outputs, run, result, plan=plan, progress=console.progress)
     su2_ffd = written.pop("su2_ffd", None)
@@ -104,6 +109,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         "recovered_with": result.recovered_with,
         "quality": qd,
         "su2_ffd": su2_ffd,
+        "constraints": constraints,
         "cache": str(run.prep.cache) if run.prep.cache else None,
         "from_cache": run.prep.from_cache,
         "seconds": round(secs, 3),
@@ -119,6 +125,10 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     ]
     if q is not None:
         lines.append(f"  quality   {q.summary()}")
+    if constraints is not None:
+        bad = [c["name"] for c in constraints if not c["satisfied"]]
+        lines.append(f"  constraints {len(constraints)} items, " + (f"{len(bad)} not satisfied: {', '.join(bad[:5])}"
+                                                                    if bad else "all satisfied"))
     if su2_ffd is not None:
         from ffdcli.formats.su2_ffd import describe
 

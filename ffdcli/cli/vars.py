@@ -1,0 +1,46 @@
+"""``ffd vars``: the design variables of a design file with their values, units and bounds."""
+
+from __future__ import annotations
+
+import click
+
+from ffdcli.cli import cli, common_options
+
+
+def _num(x) -> str:
+    return "-" if x is None else f"{x:.6g}"
+
+
+@cli.command("vars")
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
+@click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
+@common_options
+def vars_cmd(design_file, overrides, cache_dir, console):
+    """The design variables of DESIGN.yaml: name, value, unit, lower and upper bound.
+
+    \b
+    Every number in changes: is a variable, named c<change index>.<kind>[<position>] (as ffd grad
+    and --jacobian name them). Units: deg (angles), factor (span and chord), length (mesh units:
+    offsets and shape moves). Natural bounds are open: a span or chord factor must be > 0, a sweep
+    or dihedral angle must keep the leading-edge line within 85 degrees of the span axis. The
+    design file's bounds: map narrows them (closed), by name or by the start of names:
+      bounds: {c0.twist: [-10, 10], c1.span: {lower: 0.8, upper: 1.2}, c3.shape.upper[2]: [null, 0.05]}
+    '-' means no bound.
+
+    \b
+    Examples:
+      ffd vars design.yaml
+      ffd vars design.yaml --json | jq '.variables[] | select(.unit == "deg")'
+    """
+    from ffdcli.api import DesignModel
+
+    model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
+    rows = model.variables_table()
+    width = max([len(r["name"]) for r in rows] + [8])
+    lines = [f"{'variable':<{width}}  {'value':>12}  {'unit':<6}  {'lower':>12}  {'upper':>12}"]
+    lines += [f"{r['name']:<{width}}  {r['value']:>12.6g}  {r['unit']:<6}  {_num(r['lower']):>12}  "
+              f"{_num(r['upper']):>12}" for r in rows]
+    if not rows:
+        lines.append("(no design variables: changes: is empty)")
+    console.result({"variables": rows}, "\n".join(lines))
