@@ -75,17 +75,6 @@ class Bounds:
         return f"{'(' if lo_open else '['}{lo:.6g}, {hi:.6g}{')' if hi_open else ']'}"
 
 
-def bounds_schema() -> dict:
-    """The JSON Schema of ``bounds:`` (a fresh dict; part of :func:`ffdcli.design.design_schema`)."""
-    bound = {"type": ["number", "null"]}
-    return {"type": "object",
-            "description": "bounds of design variables by name (c0.twist.tip) or name prefix (c0.twist: every "
-                           "variable of change 0): [lower, upper] or {lower: L, upper: U}, null for none",
-            "additionalProperties": {"anyOf": [
-                {"type": "array", "items": bound, "minItems": 2, "maxItems": 2},
-                {"type": "object", "properties": {"lower": bound, "upper": bound}, "additionalProperties": False}]}}
-
-
 def _matches(key: str, name: str) -> bool:
     return name == key or (name.startswith(key) and name[len(key)] in ".[")
 

@@ -63,42 +63,6 @@ SATISFIED_TOL = 1e-9
 FOLD_SAMPLES = 4
 
 
-def constraints_schema() -> dict:
-    """The JSON Schema of ``constraints:`` (a fresh dict; part of :func:`ffdcli.design.design_schema`)."""
-    frac = {"type": "number", "minimum": 0, "maximum": 1}
-    fracs = {"type": "array", "items": frac, "minItems": 1}
-    bound = {"type": ["number", "null"]}
-    common = {"lower": {**bound, "description": "smallest allowed value (null: none)"},
-              "upper": {**bound, "description": "largest allowed value (null: none)"}}
-
-    def obj(desc, props=None, required=()):
-        body = {"type": "object", "properties": {**(props or {}), **common}, "additionalProperties": False}
-        if required:
-            body["required"] = list(required)
-        return {"description": desc, "anyOf": [{"type": "null"}, body]}
-
-    grid = {"chord": {**fracs, "description": "chord fractions of the local section, 0 = leading edge"},
-            "span": {**fracs, "description": "span fractions, 0 = root, 1 = tip (3D only)"}}
-    kinds = {
-        "thickness": obj("thickness between the upper and lower surface along the thickness axis at a "
-                         "chord x span grid, as a ratio to the baseline", grid, ["chord"]),
-        "thickness_to_chord": obj("thickness over the local chord at a chord x span grid, as a ratio to "
-                                  "the baseline", grid, ["chord"]),
-        "volume": obj("volume enclosed by the surface (a half wing closed by its symmetry plane; 2D: the "
-                      "area), as a ratio to the baseline"),
-        "le_te": obj("upper + lower shape move of the first and last chordwise control points of each "
-                     "section (mesh units); lower and upper default to 0"),
-        "fold_free": obj("smallest Jacobian determinant of the lattice map over the box, as a ratio to "
-                         "the baseline (> 0: the box does not fold)",
-                         {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
-                                      "description": "samples per knot span and direction (default 4)"}}),
-    }
-    return {"type": "array",
-            "description": "geometric constraints for optimisation; named k<index>.<kind>[<j>]",
-            "items": {"type": "object", "minProperties": 1, "maxProperties": 1, "properties": kinds,
-                      "additionalProperties": False}}
-
-
 class ConstraintInputs:
     """What the constraints read of the current design, computed once and only when asked for.
 

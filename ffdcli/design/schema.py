@@ -186,10 +186,58 @@ def output_schema() -> dict:
         }}
 
 
+def constraints_schema() -> dict:
+    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints`)."""
+    frac = {"type": "number", "minimum": 0, "maximum": 1}
+    fracs = {"type": "array", "items": frac, "minItems": 1}
+    bound = {"type": ["number", "null"]}
+    common = {"lower": {**bound, "description": "smallest allowed value (null: none)"},
+              "upper": {**bound, "description": "largest allowed value (null: none)"}}
+
+    def obj(desc, props=None, required=()):
+        body = {"type": "object", "properties": {**(props or {}), **common}, "additionalProperties": False}
+        if required:
+            body["required"] = list(required)
+        return {"description": desc, "anyOf": [{"type": "null"}, body]}
+
+    grid = {"chord": {**fracs, "description": "chord fractions of the local section, 0 = leading edge"},
+            "span": {**fracs, "description": "span fractions, 0 = root, 1 = tip (3D only)"}}
+    kinds = {
+        "thickness": obj("thickness between the upper and lower surface along the thickness axis at a "
+                         "chord x span grid, as a ratio to the baseline", grid, ["chord"]),
+        "thickness_to_chord": obj("thickness over the local chord at a chord x span grid, as a ratio to "
+                                  "the baseline", grid, ["chord"]),
+        "volume": obj("volume enclosed by the surface (a half wing closed by its symmetry plane; 2D: the "
+                      "area), as a ratio to the baseline"),
+        "le_te": obj("upper + lower shape move of the first and last chordwise control points of each "
+                     "section (mesh units); lower and upper default to 0"),
+        "fold_free": obj("smallest Jacobian determinant of the lattice map over the box, as a ratio to "
+                         "the baseline (> 0: the box does not fold)",
+                         {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
+                                      "description": "samples per knot span and direction (default 4)"}}),
+    }
+    return {"type": "array",
+            "description": "geometric constraints for optimisation; named k<index>.<kind>[<j>]",
+            "items": {"type": "object", "minProperties": 1, "maxProperties": 1, "properties": kinds,
+                      "additionalProperties": False}}
+
+
+def bounds_schema() -> dict:
+    """The JSON Schema of ``bounds:`` (see :mod:`ffdcli.bounds`)."""
+    bound = {"type": ["number", "null"]}
+    return {"type": "object",
+            "description": "bounds of design variables by name (c0.twist.tip) or name prefix (c0.twist: every "
+                           "variable of change 0): [lower, upper] or {lower: L, upper: U}, null for none",
+            "additionalProperties": {"anyOf": [
+                {"type": "array", "items": bound, "minItems": 2, "maxItems": 2},
+                {"type": "object", "properties": {"lower": bound, "upper": bound}, "additionalProperties": False}]}}
+
+
 #: The top-level keys of a design file, in the order ``ffd schema`` lists them.
 SECTIONS: dict[str, Callable[[], dict]] = {
     "mesh": mesh_schema, "surface": surface_schema, "box": box_schema, "volume": volume_schema,
-    "changes": changes_schema, "output": output_schema,
+    "changes": changes_schema, "constraints": constraints_schema, "bounds": bounds_schema,
+    "output": output_schema,
 }
 #: Top-level keys a design file must have.
 REQUIRED = ("mesh",)
