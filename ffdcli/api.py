@@ -274,8 +274,10 @@ class DesignModel:
     def _constraint_inputs(self):
         from ffdcli.constraints import ConstraintInputs
 
+        emb = self.run.prep.embedding
+        rmatvec = emb.rmatvec if self.run.box.dim == 3 else None       # 3D: core = mesh coordinates
         return ConstraintInputs(self.lattice(), self.run.P0, self.values, self.lattice_jacobian,
-                                self.surface_points, lambda: self.basis)
+                                self.surface_points, lambda: self.basis, rmatvec)
 
     def constraint_values(self) -> np.ndarray:
         """(C,) the constraint items at the current values."""

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
+from numba import njit
 
 from ffdcli.errors import InputError
 
@@ -80,13 +81,22 @@ class ConstraintInputs:
         The deformed surface points.
     basis : callable () -> sparse (S, n_ctrl)
         The surface basis ``B``.
+    rmatvec : callable (G (S, 3)) -> (n_ctrl, 3), optional
+        ``B.T @ G`` by a faster route than ``basis`` (e.g. :meth:`ffdcli.embedding.Embedding.rmatvec`).
     """
 
-    def __init__(self, P, P0, values, lattice_jacobian: Callable, surface_points: Callable, basis: Callable):
+    def __init__(self, P, P0, values, lattice_jacobian: Callable, surface_points: Callable, basis: Callable,
+                 rmatvec: Callable | None = None):
         self.P = np.asarray(P, dtype=float)
         self.P0 = np.asarray(P0, dtype=float)
         self.values = np.asarray(values, dtype=float)
-        self._D, self._X, self._B = lattice_jacobian, surface_points, basis
+        self._D, self._X, self._B, self._rmatvec = lattice_jacobian, surface_points, basis, rmatvec
+
+    def rmatvec(self, G: np.ndarray) -> np.ndarray:
+        """(n_ctrl, 3) ``B.T @ G`` for ``G`` (S, 3) (a compiled product when one was given)."""
+        if self._rmatvec is not None:
+            return self._rmatvec(G)
+        return np.asarray(self.B.T @ G)
 
     @cached_property
     def dP(self) -> np.ndarray:
@@ -298,9 +308,44 @@ class Thickness(Constraint):
         return ((dt * c[:, None] - t[:, None] * dc) / (c * c)[:, None]) / self.base[:, None]
 
 
+@njit(cache=True)
+def _volume_nb(X, tri, o, want_grad, G):
+    """Compiled :func:`_enclosed`: the volume; the gradient is accumulated into ``G`` (zeroed) if asked."""
+    vol = 0.0
+    for t in range(tri.shape[0]):
+        i0, i1, i2 = tri[t, 0], tri[t, 1], tri[t, 2]
+        ax, ay, az = X[i0, 0] - o[0], X[i0, 1] - o[1], X[i0, 2] - o[2]
+        bx, by, bz = X[i1, 0] - o[0], X[i1, 1] - o[1], X[i1, 2] - o[2]
+        cx, cy, cz = X[i2, 0] - o[0], X[i2, 1] - o[1], X[i2, 2] - o[2]
+        bcx, bcy, bcz = by * cz - bz * cy, bz * cx - bx * cz, bx * cy - by * cx
+        vol += ax * bcx + ay * bcy + az * bcz
+        if want_grad:
+            G[i0, 0] += bcx
+            G[i0, 1] += bcy
+            G[i0, 2] += bcz
+            G[i1, 0] += cy * az - cz * ay
+            G[i1, 1] += cz * ax - cx * az
+            G[i1, 2] += cx * ay - cy * ax
+            G[i2, 0] += ay * bz - az * by
+            G[i2, 1] += az * bx - ax * bz
+            G[i2, 2] += ax * by - ay * bx
+    return vol / 6.0
+
+
+def enclosed_volume(X: np.ndarray, tri: np.ndarray, o: np.ndarray, grad: bool = False):
+    """Volume ``1/6 sum (a - o) . ((b - o) x (c - o))`` of triangles ``tri`` (T, 3) of points ``X`` (S, 3)
+    and, if ``grad``, its gradient (S, 3) with respect to the points (compiled; see :func:`_enclosed`)."""
+    X = np.ascontiguousarray(X, dtype=np.float64)
+    G = np.zeros_like(X) if grad else np.zeros((0, 3))
+    vol = _volume_nb(X, np.ascontiguousarray(tri, dtype=np.int64), np.asarray(o, dtype=np.float64), grad, G)
+    if grad:
+        G /= 6.0
+    return vol, (G if grad else None)
+
+
 def _enclosed(X: np.ndarray, cells: np.ndarray, o: np.ndarray, dim: int, grad: bool):
-    """Volume (3D, triangles (T, 3)) or area (2D, segments (E, 2)) relative to ``o``, and its gradient
-    (S, 3) with respect to the points if ``grad``."""
+    """NumPy reference of :func:`enclosed_volume`: volume of triangles (T, 3) relative to ``o``, and its
+    gradient (S, 3) with respect to the points if ``grad``."""
     if dim == 3:
         a, b, c = (X[cells[:, q]] - o for q in range(3))
         bc = np.cross(b, c)
@@ -360,7 +405,7 @@ class Volume(Constraint):
     def measure(self, X, grad=False):
         """(volume or area, gradient (S, 3) or None) of surface points ``X`` (S, 3)."""
         if self.dim == 3:
-            return _enclosed(X, self.cells, self.origin, 3, grad)
+            return enclosed_volume(X, self.cells, self.origin, grad)
         return _area(X, self.cells, self.origin, self.plane, grad)
 
     def value(self, inp):
@@ -368,7 +413,7 @@ class Volume(Constraint):
 
     def jacobian(self, inp):
         _, G = self.measure(inp.X, grad=True)
-        gP = np.asarray(inp.B.T @ G).reshape(-1)
+        gP = inp.rmatvec(G).reshape(-1)
         return (gP @ inp.D)[None, :] / self.base
 
 
@@ -435,19 +480,28 @@ class FoldFree(Constraint):
         return np.array([self.ratios(inp.P).min()])
 
     def jacobian(self, inp):
-        from ffdcli.lattice import derivatives
+        from ffdcli.lattice import _axis_tables, derivatives
 
+        box = self.box
         r = self.ratios(inp.P)
         q = int(np.argmin(r))
         u = self.params[q:q + 1]
-        J = derivatives(self.box.lattice(inp.P), u)[0]
-        Jinv = np.linalg.inv(J)
+        J = derivatives(box.lattice(inp.P), u)[0]                        # (gdim, pdim)
         nv = inp.D.shape[1]
-        D = inp.D.reshape(*inp.P.shape, nv)
-        out = np.zeros(nv)
-        for v in range(nv):
-            dJ = derivatives(self.box.lattice(D[..., v]), u)[0]
-            out[v] = r[q] * np.trace(Jinv @ dJ)
+        D = inp.D.reshape(*inp.P.shape, nv)                               # (n, m, l, 3, nv)
+        t = _axis_tables(box.lattice(), u, 1)                             # per axis (2, 1, n_axis)
+        if box.dim == 3:
+            a, b, c = (t[k][:, 0] for k in range(3))
+            dJ = np.stack([np.einsum("i,j,k,ijkdv->vd", a[1], b[0], c[0], D),
+                           np.einsum("i,j,k,ijkdv->vd", a[0], b[1], c[0], D),
+                           np.einsum("i,j,k,ijkdv->vd", a[0], b[0], c[1], D)], axis=-1)
+        else:
+            Dc = D[:, 0][:, :, box.plane_axes, :]                        # (n, l, 2, nv)
+            a, c = t[0][:, 0], t[1][:, 0]
+            dJ = np.stack([np.einsum("i,k,ikdv->vd", a[1], c[0], Dc),
+                           np.einsum("i,k,ikdv->vd", a[0], c[1], Dc)], axis=-1)
+        # d det J = det J tr(J^-1 dJ); as a ratio to det J0: r tr(J^-1 dJ)
+        out = r[q] * np.einsum("ab,vba->v", np.linalg.inv(J), dJ)
         return out[None, :]
 
 

@@ -19,6 +19,8 @@ WINGS = {
     "tapered_swept_y": dict(sections="xz", taper=0.5, le_sweep_deg=25, dihedral_deg=4),
     "left_y": dict(sections="xz", span_sign=-1, taper=0.7, le_sweep_deg=10),
     "span_x_blunt": dict(sections="yz", closed_te=False, taper=0.8),
+    "kinked_crm_like": dict(sections="xz", taper=0.3, le_sweep_deg=30, dihedral_deg=5, kink_eta=0.4,
+                            kink_te_extension=0.4, root_airfoil="2414", tip_airfoil="2410"),
 }
 
 
@@ -82,7 +84,7 @@ def test_affine_oracles(tmp_path, wing):
 
 def test_volume_is_the_closed_volume(tmp_path):
     """The half wing closed by its symmetry plane: the same volume as the wing with its root capped."""
-    from ffdcli.constraints import _enclosed, surface_triangles
+    from ffdcli.constraints import _enclosed, enclosed_volume, surface_triangles
     from ffdcli.wings import Planform, surface_mesh
 
     m = model_for(tmp_path, "tapered_swept_y", [{"span": 1.0}])
@@ -92,6 +94,12 @@ def test_volume_is_the_closed_volume(tmp_path):
     vol, _ = _enclosed(closed.points, tri, np.array([5.0, -3.0, 2.0]), 3, False)    # any point: closed
     (c,) = [c for c in m.constraints if c.kind == "volume"]
     assert c.base == pytest.approx(vol, rel=1e-12)
+    # the compiled kernel against the NumPy reference, value and gradient
+    X = closed.points + np.random.default_rng(0).normal(scale=1e-3, size=closed.points.shape)
+    ref_v, ref_g = _enclosed(X, tri, np.array([0.1, 0.2, 0.3]), 3, True)
+    v, g = enclosed_volume(X, tri, np.array([0.1, 0.2, 0.3]), grad=True)
+    assert v == pytest.approx(ref_v, rel=1e-13)
+    np.testing.assert_allclose(g, ref_g, rtol=1e-12, atol=1e-15)
 
 
 def central(m, k, h):
@@ -113,7 +121,7 @@ DESIGN = [{"twist": {"root": 1, "tip": 6}}, {"span": 1.1}, {"sweep": 5}, {"dihed
           {"twist": [0, 1, 2, 3, 4, 5, 6, 7]}, {"dihedral": {"offsets": [0, .01, .02, .03, .04, .05, .06, .07]}}]
 
 
-@pytest.mark.parametrize("wing", ["tapered_swept_y", "left_y", "rect_z"])
+@pytest.mark.parametrize("wing", ["tapered_swept_y", "left_y", "rect_z", "kinked_crm_like"])
 def test_jacobian_matches_central_differences(tmp_path, wing):
     m = model_for(tmp_path, wing, DESIGN)
     J = m.constraint_jacobian()
