@@ -169,20 +169,27 @@ def project_thickness(points, faces, box, Q) -> tuple[np.ndarray, np.ndarray, np
     k = len(Q)
     up = np.full(k, -np.inf)
     lo = np.full(k, np.inf)
+    P0 = box.control_points.reshape(-1, 3)
+    scale = float(np.ptp(P0, axis=0).max()) or 1.0          # the box's size (cheap: control points)
     if box.dim == 3:
         a_ax, s_ax = box.axes.chord, box.axes.span
         tri = surface_triangles(faces)
-        p = points[tri]                                     # (T, 3, 3)
-        ua, us, ut = p[..., a_ax], p[..., s_ax], p[..., t_ax]
+        us = points[:, s_ax][tri]                           # (T, 3) span coordinates only
         smin, smax = us.min(axis=1), us.max(axis=1)
-        scale = float(np.ptp(points, axis=0).max()) or 1.0
+        order = np.argsort(smin, kind="stable")
+        smin_sorted = smin[order]
+        width = float((smax - smin).max(initial=0.0))
         eps = 1e-9 * scale
         for s_val in np.unique(Q[:, s_ax]):
-            band = np.flatnonzero((smin <= s_val + eps) & (smax >= s_val - eps))
+            # triangles whose span interval holds s_val: smin in [s_val - width, s_val] (a sorted range)
+            a0, a1 = np.searchsorted(smin_sorted, [s_val - width - eps, s_val + eps], side="left")
+            cand = order[a0:a1]
+            band = cand[smax[cand] >= s_val - eps]
             rows = np.flatnonzero(Q[:, s_ax] == s_val)
             if not band.size:
                 continue
-            A, S, T = ua[band], us[band], ut[band]                       # (b, 3)
+            p = points[tri[band]]                                          # (b, 3, 3)
+            A, S, T = p[..., a_ax], p[..., s_ax], p[..., t_ax]
             det = (A[:, 1] - A[:, 0]) * (S[:, 2] - S[:, 0]) - (A[:, 2] - A[:, 0]) * (S[:, 1] - S[:, 0])
             keep = np.abs(det) > 1e-14 * scale * scale
             A, S, T, det = A[keep], S[keep], T[keep], det[keep]
@@ -210,8 +217,7 @@ def project_thickness(points, faces, box, Q) -> tuple[np.ndarray, np.ndarray, np
         tq = T[:, 0] + s * (T[:, 1] - T[:, 0])
         up = np.where(hit, tq, -np.inf).max(axis=1, initial=-np.inf)
         lo = np.where(hit, tq, np.inf).min(axis=1, initial=np.inf)
-    size = float(np.ptp(points, axis=0).max()) or 1.0
-    ok = np.isfinite(up) & np.isfinite(lo) & (up - lo > 1e-9 * size)
+    ok = np.isfinite(up) & np.isfinite(lo) & (up - lo > 1e-9 * scale)
     U, L = Q.copy(), Q.copy()
     U[:, t_ax] = np.where(ok, up, Q[:, t_ax])
     L[:, t_ax] = np.where(ok, lo, Q[:, t_ax])
@@ -252,6 +258,10 @@ class Constraint:
 
     def jacobian(self, inp: ConstraintInputs) -> np.ndarray:  # pragma: no cover
         raise NotImplementedError
+
+    def value_and_jacobian(self, inp: ConstraintInputs) -> tuple[np.ndarray, np.ndarray]:
+        """Both at once ((c,), (c, n_vars)); kinds that share the work override it."""
+        return self.value(inp), self.jacobian(inp)
 
 
 def _norm_jac(d: np.ndarray, Jd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -412,9 +422,12 @@ class Volume(Constraint):
         return np.array([self.measure(inp.X)[0] / self.base])
 
     def jacobian(self, inp):
-        _, G = self.measure(inp.X, grad=True)
+        return self.value_and_jacobian(inp)[1]
+
+    def value_and_jacobian(self, inp):
+        vol, G = self.measure(inp.X, grad=True)
         gP = inp.rmatvec(G).reshape(-1)
-        return (gP @ inp.D)[None, :] / self.base
+        return np.array([vol / self.base]), (gP @ inp.D)[None, :] / self.base
 
 
 @dataclass(frozen=True, eq=False)
@@ -623,7 +636,7 @@ def _volume(index, lower, upper, box, surface, key, error):
     vol = Volume(index=index, lower=lower, upper=upper, cells=cells, origin=origin, base=1.0, dim=box.dim,
                  plane=plane)
     v0 = vol.measure(X)[0]
-    size = float(np.ptp(X, axis=0).max()) or 1.0
+    size = float(np.ptp(box.control_points.reshape(-1, 3), axis=0).max()) or 1.0
     if not abs(v0) > 1e-12 * size ** box.dim:
         raise error("the surface encloses no volume (an open surface whose opening is not the root plane?)", key)
     return Volume(index=index, lower=lower, upper=upper, cells=cells, origin=origin, base=v0, dim=box.dim,
@@ -684,12 +697,13 @@ def constraint_bounds(constraints) -> tuple[np.ndarray, np.ndarray]:
 
 def evaluate(constraints, inp: ConstraintInputs, jacobian: bool = False):
     """(values (C,), jacobian (C, n_vars) or None) of every item."""
-    vals = [c.value(inp) for c in constraints]
-    v = np.concatenate(vals) if vals else np.zeros(0)
     if not jacobian:
-        return v, None
-    jac = [c.jacobian(inp) for c in constraints]
-    return v, (np.concatenate(jac, axis=0) if jac else np.zeros((0, len(inp.values))))
+        vals = [c.value(inp) for c in constraints]
+        return (np.concatenate(vals) if vals else np.zeros(0)), None
+    both = [c.value_and_jacobian(inp) for c in constraints]
+    if not both:
+        return np.zeros(0), np.zeros((0, len(inp.values)))
+    return np.concatenate([b[0] for b in both]), np.concatenate([b[1] for b in both], axis=0)
 
 
 def satisfied(values, lower, upper, tol: float = SATISFIED_TOL) -> np.ndarray:

@@ -20,7 +20,7 @@ def _num(x) -> str:
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
 @common_options
 def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
-    """Evaluate the constraints: of DESIGN.yaml at its values: name, value, lower, upper, satisfied.
+    """Evaluate the constraints of DESIGN.yaml at its values: name, value, lower, upper, satisfied.
 
     \b
     Values are ratios to the undeformed surface (le_te: mesh units):
