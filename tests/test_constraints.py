@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from wingcase import write_design, write_surface_wing
 
 from ffdcli.api import DesignModel
@@ -199,3 +201,21 @@ def test_2d_airfoil_constraints(tmp_path):
         np.testing.assert_allclose(J[rows, k], fd[rows], rtol=1e-6, atol=1e-7, err_msg=m.names[k])
     with pytest.raises(InputError, match="no meaning on a 2D"):
         m.set_constraints([{"thickness": {"chord": [0.5], "span": [0.5]}}])
+
+
+@settings(max_examples=4, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(taper=st.floats(0.3, 1.0), sweep=st.floats(-10, 35), dihedral=st.floats(-5, 8),
+       sections=st.sampled_from(["xy", "xz", "yz", "zx"]), left=st.booleans(),
+       s=st.floats(0.7, 1.4), c=st.floats(0.6, 1.3))
+def test_affine_oracles_on_random_wings(tmp_path_factory, taper, sweep, dihedral, sections, left, s, c):
+    """Generated wings of any axes and side: span s and uniform chord c give volume s c^2, thickness c,
+    t/c 1 and fold-free s c^2, to rounding."""
+    tmp = tmp_path_factory.mktemp("rand")
+    mesh = write_surface_wing(tmp, taper=taper, le_sweep_deg=sweep, dihedral_deg=dihedral, sections=sections,
+                              span_sign=-1 if left else 1)
+    m = DesignModel.from_file(write_design(tmp, mesh, [{"span": s}, {"chord": [c] * 8}]))
+    m.set_constraints(ALL)
+    np.testing.assert_allclose(by_kind(m, "volume"), s * c * c, rtol=1e-11)
+    np.testing.assert_allclose(by_kind(m, "thickness"), c, rtol=1e-11)
+    np.testing.assert_allclose(by_kind(m, "thickness_to_chord"), 1.0, rtol=1e-11)
+    np.testing.assert_allclose(by_kind(m, "fold_free"), s * c * c, rtol=1e-11)
