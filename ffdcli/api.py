@@ -452,9 +452,9 @@ class DesignModel:
     def mesh_jvp(self, dv, progress=None) -> np.ndarray:
         """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW.
 
-        The warp is linear in the surface translations and rotation parts ``M = R - I`` for fixed tree
-        decisions (those of the current design, as :meth:`mesh_vjp` uses), so the product is the warp
-        of ``(dX_s/dv dv, I + dR/dv dv)``; the surface nodes get ``dX_s/dv dv`` exactly."""
+        The warp is a fixed linear map of the surface translations and rotation parts ``M = R - I``
+        (:func:`ffdcli.warp.warp`), so the product is the warp of ``(dX_s/dv dv, I + dR/dv dv)``; the
+        surface nodes get ``dX_s/dv dv`` exactly. The transpose of :meth:`mesh_vjp`."""
         dv = self._check_dv(dv, "mesh_jvp")
         ids = self.surface_ids
         dXs = self.surface_jvp(dv)
@@ -462,11 +462,8 @@ class DesignModel:
         if self.uses_volume():
             from ffdcli.warp import warp
 
-            P1 = self.lattice()
-            disp = self.run.surface_displacement(P1)
-            rot = self.run.surface_rotations(P1)
             dR = np.tensordot(dv, self._rotation_jacobian(), axes=1)
-            out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, decide_for=(disp, rot), progress=progress)
+            out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, progress=progress)
         out[ids] = dXs
         return out
 
