@@ -98,7 +98,7 @@ def span_fraction(box, value: float) -> float:
     """Span fraction (0 root, 1 tip) of a span coordinate, measured on the lattice sections."""
     st = np.asarray(box.stations, dtype=np.float64)
     lo, hi = st[0], st[-1]
-    return float((value - lo) / (hi - lo)) if hi != lo else 0.0
+    return round(float((value - lo) / (hi - lo)), 12) + 0.0 if hi != lo else 0.0   # no "-0.00"
 
 
 def section_stations(box) -> list[tuple[str, int, float]]:
