@@ -123,8 +123,8 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     add = L.append
     add(f"# ffd design file for {mesh_path.name}: a starter written by `ffd init` (ffd {__version__}).")
     add("# As written it changes nothing: `ffd deform` of it writes the input mesh back. Uncomment a")
-    add("# change (delete the leading '# ') and edit its numbers; `ffd plot` draws the result and")
-    add("# `ffd schema` prints every key. Paths are relative to this file.")
+    add("# change (delete the leading '# ') and edit its numbers; `ffd plot` draws the result, `ffd vars`")
+    add("# lists the design variables, `ffd schema` prints every key. Paths are relative to this file.")
     if extrusion is not None:
         add("#")
         for w in textwrap.wrap("WARNING: " + extrusion.message() + " (box.sections below is set so).",
