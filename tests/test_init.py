@@ -156,3 +156,14 @@ def test_init_writes_the_axes_ffd_box_detects(tmp_path, planform):
     data = yaml.safe_load(starter_design(path, design_path=tmp_path / "w.yaml"))
     axes = prepare_box(path, use_cache=False).box.axes
     assert data["box"]["sections"] == axes.sections and data["box"]["root"] == axes.root
+
+
+def test_init_then_deform_unedited_multizone_cgns_surface_is_byte_identical(tmp_path):
+    import shutil
+
+    from conftest import shared_file
+
+    src = tmp_path / "w.cgns"
+    shutil.copy(shared_file("cgns/aero__meshing__volume__wing.cgns"), src)
+    out = _init_deform_roundtrip(tmp_path, src)
+    assert out.read_bytes() == src.read_bytes()
