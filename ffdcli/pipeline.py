@@ -440,12 +440,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
 
         model = run.warp_model(progress)
         rot = run.surface_rotations(P1)
-        comm = run.comm
-        if comm is not None and comm.size > 1:      # each rank warps its share of the volume nodes
-            part = comm.run(warp, model, disp, rot, progress=progress, rows=comm.share(model.n_targets))
-            points[model.target_ids] += comm.allgather_rows(part)
-        else:
-            points += warp(model, disp, rot, progress=progress)
+        points += warp(model, disp, rot, progress=progress, comm=run.comm)   # MPI: each rank its block
     else:
         points[surf.ids] += disp
     # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
@@ -464,9 +459,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         quality = check_quality(mesh, points, points_before=mesh.points, reference=run.quality_reference(), **kw)
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
-    serial = run.comm is None or run.comm.size == 1
-    if (quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw"
-            and serial):
+    if quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw":
         from ffdcli.quality import check_quality
         from ffdcli.recovery import attempts, incremental_warp
 

@@ -66,7 +66,7 @@ def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *,
         Rk = run.surface_rotations(Pk)
         dR = Rk if R_prev is None else Rk @ np.swapaxes(R_prev, 1, 2)
         model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress)
-        pts = pts + warp(model, bk - b_prev, dR, progress=progress)
+        pts = pts + warp(model, bk - b_prev, dR, progress=progress, comm=getattr(run, "comm", None))
         pts[sid] = mesh.points[sid] + bk
         b_prev, R_prev = bk, Rk
     return pts

@@ -979,7 +979,7 @@ def _blocks(n: int) -> np.ndarray:
 
 
 def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: np.ndarray | None = None,
-         *, exact: bool = False, progress=None, rows: tuple[int, int] | None = None) -> np.ndarray:
+         *, exact: bool = False, progress=None, rows: tuple[int, int] | None = None, comm=None) -> np.ndarray:
     """Displacement (N, 3) of every mesh node given the motion of the surface nodes.
 
     Parameters
@@ -999,6 +999,10 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         ``(lo, hi)``: compute only the volume nodes ``model.target_ids[lo:hi]`` (one MPI rank's
         share, :func:`ffdcli.parallel.share`) and return their (hi - lo, 3) displacements; each
         node's value is the same as in the whole run.
+    comm
+        :mod:`ffdcli.parallel` communicator (a collective): each rank warps its block of the volume
+        nodes (``rows``) and the blocks are gathered; every rank returns the whole result, equal bit
+        for bit to the serial one.
 
     Returns
     -------
@@ -1007,6 +1011,13 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     The tree's decisions depend on the undeformed mesh only, so this is a fixed linear map of
     (b, M = R - I) whose transpose is :func:`warp_vjp`.
     """
+    if comm is not None and comm.size > 1 and rows is None:
+        part = comm.run(warp, model, surface_displacement, surface_rotation, exact=exact, progress=progress,
+                        rows=comm.share(model.n_targets))
+        out = np.zeros((model.n_points, 3))
+        out[model.target_ids] = comm.allgather_rows(part)
+        out[model.surface_ids] = np.asarray(surface_displacement, dtype=np.float64)
+        return out
     progress = progress or no_progress
     b = np.asarray(surface_displacement, dtype=np.float64)
     out = np.zeros((model.n_points, 3))

@@ -245,6 +245,11 @@ def test_mpiexec_errors_end_every_rank_with_one_message_and_one_status(tmp_path)
     proc = mpi_ffd(2, "deform", bad, "-o", tmp_path / "bad.su2", "--no-cache", cwd=tmp_path)
     assert proc.returncode == 3, proc.stderr
     assert "fails the quality" in proc.stderr
+    # the same refusal as the serial run, recovery attempts (intermediate warps, shared) included
+    ser = run_ffd("deform", bad, "-o", tmp_path / "bad.su2", "--no-cache", "--json", cwd=tmp_path)
+    par = mpi_ffd(2, "deform", bad, "-o", tmp_path / "bad.su2", "--no-cache", "--json", cwd=tmp_path)
+    assert ser.returncode == par.returncode == 3
+    assert json.loads(ser.stdout) == json.loads(par.stdout)
     assert proc.stderr.count("ffd: error:") == 1, proc.stderr
     assert not (tmp_path / "bad.su2").exists()
 
