@@ -410,6 +410,10 @@ def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=No
         _change_panel(fig.add_subplot(grid[1, 1:]), part, curves)
         for col, (label, (value, j, q0, q1)) in enumerate(curves.items()):
             _section_panel(fig.add_subplot(grid[2, col]), part, label, value, j, q0, q1, names)
+    if note:                       # a long quality summary: wrapped, never cut at the figure's edge
+        import textwrap
+
+        note = "\n".join(textwrap.wrap(note, 150 if box.dim == 3 else 120))
     fig.suptitle(title + (f"\n{note}" if note else ""), color=BLACK if not note else RED)
     fig.tight_layout()
     p = Path(path)
