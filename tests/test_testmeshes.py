@@ -89,3 +89,24 @@ def test_robustness_harness_runs_in_quick_form(mesh_dir, tmp_path, monkeypatch):
     table = br.matrix_table(rows)
     assert all(d in table for d in designs) and "deformations:" in table
     assert br.summary(rows)[0]["measured"] == sum(r["status"] == "REFUSED" for r in rows)
+
+
+#: Generated wings with variety on which the default volume settings must not invert a cell.
+NO_INVERSION = {name: tm.smaller(tm.CASES[name], 1.5) for name in
+                ("rect_z_bl_ff5", "transport_x_ff50", "blunt_te_x", "crm_metres")}
+
+
+@pytest.mark.slow
+def test_default_volume_settings_invert_no_cell_on_generated_wings(tmp_path_factory):
+    """Span along z, x and y; prisms; a kink; a blunt trailing edge with a round tip; metres; far field at
+    5, 10 and 50 chords: the planform changes of issue 13's table with the default volume settings."""
+    from benchmarks import bench_robustness as br
+
+    folder = tmp_path_factory.mktemp("noinv")
+    designs = ["span1.1+sweep5", "sweep+10", "mix4_a", "twist_tip+10", "span1.15"]
+    for name, case in NO_INVERSION.items():
+        path = tm.write_case(case, folder / "meshes")
+        for d in designs:
+            row = br.run_one(path, "wing", d, work=folder)
+            assert row["status"] in ("ok", "REFUSED"), row
+            assert row["inverted"] == 0, (name, row)
