@@ -60,6 +60,8 @@ from ffdcli.errors import InputError
 CONSTRAINT_KINDS = ("thickness", "thickness_to_chord", "volume", "le_te", "fold_free")
 #: A constraint value within this of a bound is satisfied (the values are ratios near 1).
 SATISFIED_TOL = 1e-9
+#: Span fractions 0 and 1 (the root and tip edges of the surface) are read this far inside.
+END_INSET = 1e-6
 #: Samples per knot span and direction of ``fold_free`` by default.
 FOLD_SAMPLES = 4
 
@@ -594,7 +596,9 @@ def _thickness(kind, spec, key, index, lower, upper, box, surface, error, PointS
         if "span" not in spec:
             raise error("needs span: [fractions of the span, 0 = root, 1 = tip]", key)
         eta = _fractions(spec, "span", key, error)
-    le, te = chord_lines(box, eta)                               # (ns, 3)
+    # The root and tip are where the surface ends: stations 0 and 1 are read END_INSET of the span
+    # inside, so that the line along the thickness axis crosses the surface faces, not their edges.
+    le, te = chord_lines(box, np.clip(eta, END_INSET, 1.0 - END_INSET))     # (ns, 3)
     nc = len(xi)
     grid = np.stack(np.meshgrid(xi, eta, indexing="xy"), axis=-1).reshape(-1, 2)  # chord fastest
     LE = np.repeat(le, nc, axis=0)
