@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from wingcase import write_design, write_surface_wing
@@ -177,7 +178,6 @@ def test_2d_airfoil_constraints(tmp_path):
     mesh = airfoil_ogrid_mesh("0012", n_around=65, n_radial=9)
     path = tmp_path / "foil.su2"
     write_mesh(mesh, path)
-    import yaml
 
     design = tmp_path / "foil.yaml"
     design.write_text(yaml.safe_dump({"mesh": "foil.su2", "box": {"points": [6, 2]},
@@ -219,3 +219,25 @@ def test_affine_oracles_on_random_wings(tmp_path_factory, taper, sweep, dihedral
     np.testing.assert_allclose(by_kind(m, "thickness"), c, rtol=1e-11)
     np.testing.assert_allclose(by_kind(m, "thickness_to_chord"), 1.0, rtol=1e-11)
     np.testing.assert_allclose(by_kind(m, "fold_free"), s * c * c, rtol=1e-11)
+
+
+@pytest.mark.data
+def test_onera_m6_oracles(tmp_path):
+    """The real ONERA M6 mesh (shared data): span 1.1, uniform chord 0.8 and sweep 5 give volume
+    1.1 x 0.64, thickness 0.8, t/c 1 and fold-free 0.704, exactly; root station 0 is found."""
+    from conftest import shared_file
+
+    mesh = shared_file("oneram6/mesh_ONERAM6_gmsh_coarse.su2")
+    design = tmp_path / "m6.yaml"
+    design.write_text(yaml.safe_dump({
+        "mesh": str(mesh), "surface": "WING",
+        "changes": [{"span": 1.1}, {"chord": [0.8] * 8}, {"sweep": 5}],
+        "output": {"mesh": "out.su2", "lattice": "out_lattice.vtk"}}))
+    m = DesignModel.from_file(design, cache_dir=tmp_path)
+    m.set_constraints([{"thickness": {"chord": [0.1, 0.5, 0.9], "span": [0.0, 0.5, 0.95]}},
+                       {"thickness_to_chord": {"chord": [0.3], "span": [0.0, 0.5, 0.95]}},
+                       {"volume": {}}, {"fold_free": {}}])
+    np.testing.assert_allclose(by_kind(m, "volume"), 1.1 * 0.64, rtol=1e-10)
+    np.testing.assert_allclose(by_kind(m, "thickness"), 0.8, rtol=1e-10)
+    np.testing.assert_allclose(by_kind(m, "thickness_to_chord"), 1.0, rtol=1e-10)
+    np.testing.assert_allclose(by_kind(m, "fold_free"), 1.1 * 0.64, rtol=1e-10)
