@@ -205,9 +205,9 @@ def fit_design(config, target_file, out_yaml=None, *, overrides=(), rows: str = 
     """Fit the shape of 2D design ``config`` to ``target_file``; write ``out_yaml`` if given."""
     import yaml
 
-    from ffdcli.atomic import atomic_write, check_writable
     from ffdcli.design import load_design
     from ffdcli.formats.airfoil import read_airfoil
+    from ffdcli.outputs import plan_outputs
     from ffdcli.pipeline import load_run
 
     design = load_design(config, overrides=overrides)
@@ -217,8 +217,8 @@ def fit_design(config, target_file, out_yaml=None, *, overrides=(), rows: str = 
                          f"({', '.join(other)}) or fit a design that has only shape changes",
                          path=design.path, key="changes")
     design.changes_spec = []          # the fit replaces any shape change; its lengths need not match
-    if out_yaml is not None:
-        check_writable(out_yaml, inputs=(design.mesh, design.path))
+    plan = plan_outputs([("design", out_yaml, False, "-o")],      # checked before the work
+                        inputs=(design.mesh, design.path, target_file))
     target = read_airfoil(target_file)
     run = load_run(design, progress=progress)
     problem = build_problem(run, target.coords, rows)
@@ -230,9 +230,13 @@ def fit_design(config, target_file, out_yaml=None, *, overrides=(), rows: str = 
               "rows": rows, "shape": shape}
     if out_yaml is not None:
         data = fitted_design_data(design, shape, Path(out_yaml))
-        with atomic_write(out_yaml, "w") as fh:
-            fh.write(f"# fitted by ffd fit to {Path(target_file).name} ({target.name}): max deviation "
-                     f"{stats['before']['max']:.5f} -> {stats['after']['max']:.5f} chords\n")
-            yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None)
+
+        def write(tmp):
+            with open(tmp, "w") as fh:
+                fh.write(f"# fitted by ffd fit to {Path(target_file).name} ({target.name}): max deviation "
+                         f"{stats['before']['max']:.5f} -> {stats['after']['max']:.5f} chords\n")
+                yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None)
+
+        plan.write({"design": write})
         report["output"] = str(out_yaml)
     return report
