@@ -63,6 +63,7 @@ def cli():
       ffd plot design.yaml -o wing.png  original (black) and deformed (red) wing with its lattice
       ffd fit airfoil.yaml --target s1223.dat         2D: shape values that morph into a target
       ffd grad design.yaml --sens surface_sens.csv    dJ/d(design variables) for an optimiser
+      ffd constraints design.yaml --json              thickness/volume/fold constraints, exact Jacobian
 
     Every command has --help, -q/--quiet, -v/--verbose and --json. Exit status: 0 success,
     2 bad input, 3 the deformed mesh failed the quality check (nothing written), 1 other errors.
