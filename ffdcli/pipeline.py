@@ -98,6 +98,7 @@ def read_lattice_block(file) -> np.ndarray:
     if len(blocks) != 1:
         raise InputError(f"the lattice file has {len(blocks)} blocks; ffd takes a single-block lattice "
                          "(split the file, one box per wing)", path=file)
+    check_lattice_size(blocks[0].shape[:3], path=file, key=None)
     return blocks[0]
 
 

@@ -685,3 +685,16 @@ def test_a_writer_error_names_the_output_not_its_temporary_file(ws, monkeypatch)
     proc = ffd("deform", "good.yaml", "-o", "named.su2", cwd=ws)
     assert_clean_failure(proc, 2, "named.su2: cannot be written")
     assert ".part" not in proc.stderr and no_parts(ws) == []
+
+
+def test_imported_lattice_total_is_bounded(ws):
+    """The bound holds for a lattice given as a Plot3D file (``ffd box --from``) too."""
+    from ffdcli.formats.plot3d import write_plot3d
+
+    n = 40
+    grid = np.stack(np.meshgrid(np.linspace(-1, 2, n), np.linspace(-1, 4, n), np.linspace(-1, 1, 21),
+                                indexing="ij"), axis=-1)
+    write_plot3d(ws / "big_box.xyz", [grid])
+    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--from", "big_box.xyz"], 2, "at most",
+                   names=["big_box.xyz"])
+    (ws / "big_box.xyz").unlink()
