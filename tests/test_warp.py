@@ -250,13 +250,11 @@ def test_fixed_farfield_near_surface_moves_almost_rigidly():
     assert rel0.max() > 0.1
 
 
-@pytest.mark.parametrize("rotate,exact", [(False, False), (True, False), (True, True)])
-def test_vjp_is_the_transpose(mesh, rotate, exact):
+@pytest.mark.parametrize("exact", [False, True])
+def test_vjp_is_the_transpose(mesh, exact):
     model, roles = prepare_mesh_warp(mesh, "wing")
     rng = np.random.default_rng(2)
     ns = model.n_surface
-    b0 = 0.02 * rng.normal(size=(ns, 3))
-    R0 = np.stack([rot_z(a) for a in rng.uniform(-0.1, 0.1, ns)]) if rotate else None
     v = rng.normal(size=(ns, 3))
     V = rng.normal(size=(ns, 3, 3))
     g = rng.normal(size=(mesh.n_points, 3))
