@@ -29,47 +29,11 @@ import numpy as np
 
 from ffdcli.changes import design_variables, set_design_variables
 from ffdcli.errors import InputError
-
-
-def _axial(W: np.ndarray) -> np.ndarray:
-    """Axial vectors (..., 3) of skew matrices (..., 3, 3): W = [w]x."""
-    return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
-
-
-def _skew(w: np.ndarray) -> np.ndarray:
-    z = np.zeros(w.shape[:-1])
-    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1),
-                     np.stack([w[..., 2], z, -w[..., 0]], -1),
-                     np.stack([-w[..., 1], w[..., 0], z], -1)], axis=-2)
-
-
-def polar_rotation_derivative(F: np.ndarray, R: np.ndarray, dF: np.ndarray) -> np.ndarray:
-    """dR (..., 3, 3) of the polar rotation R of F (..., 3, 3) in direction dF (3D)."""
-    U = np.swapaxes(R, -1, -2) @ F
-    U = 0.5 * (U + np.swapaxes(U, -1, -2))
-    A = np.swapaxes(R, -1, -2) @ dF
-    rhs = _axial(A - np.swapaxes(A, -1, -2))
-    K = np.trace(U, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - U
-    omega = np.linalg.solve(K, rhs[..., None])[..., 0]
-    return R @ _skew(omega)
-
-
-def planar_rotation_derivative(F: np.ndarray, dF: np.ndarray, axis: int) -> np.ndarray:
-    """dR (..., 3, 3) of :func:`ffdcli.warp.rotations_from_deformation_gradient` with ``axis`` (2D)."""
-    i, j = [k for k in range(3) if k != axis]
-    a = F[..., j, i] - F[..., i, j]
-    c = F[..., i, i] + F[..., j, j]
-    da = dF[..., j, i] - dF[..., i, j]
-    dc = dF[..., i, i] + dF[..., j, j]
-    dphi = (da * c - a * dc) / (a * a + c * c)
-    phi = np.arctan2(a, c)
-    out = np.zeros(F.shape)
-    s, co = np.sin(phi), np.cos(phi)
-    out[..., i, i] = -s * dphi
-    out[..., j, j] = -s * dphi
-    out[..., j, i] = co * dphi
-    out[..., i, j] = -co * dphi
-    return out
+from ffdcli.rotations import (  # noqa: F401  (re-exported: the API's names of PR 7)
+    planar_rotation_derivative,
+    polar_rotation_derivative,
+    rotations_from_deformation_gradient,
+)
 
 
 class DesignModel:
@@ -422,7 +386,6 @@ class DesignModel:
     def _rotation_jacobian_uncached(self):
         from ffdcli.lattice import derivatives
         from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
-        from ffdcli.warp import rotations_from_deformation_gradient
 
         run, box, emb = self.run, self.run.box, self.run.prep.embedding
         S = len(emb.inside)

@@ -310,7 +310,7 @@ class DesignRun:
         lattice (which do not move) get the identity, and so does every point when ``P`` is the
         original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by 1e-18, and
         a design without changes must write the input back bit for bit)."""
-        from ffdcli.warp import rotations_from_deformation_gradient
+        from ffdcli.rotations import rotations_from_deformation_gradient
 
         box = self.box
         S = len(self.prep.embedding.inside)

@@ -16,6 +16,13 @@ rotation is the polar factor of F_s. Its derivative in a direction dF is
     dF_s = dF (I - n0 n0^T) + dn1 n0^T,   dn1 = (I - n1 n1^T) dw / |w|,
 
 with w = F t1 x F t2 (dw = dF t1 x F t2 + F t1 x dF t2), or w = rot90(F t) in 2D.
+
+This module is the one home of the rotation math (array functions, stacks of matrices):
+:func:`surface_frame_gradient` and its derivative, the polar rotation
+(:func:`rotations_from_deformation_gradient`, 3D by SVD, 2D in closed form) and its derivative
+(:func:`polar_rotation_derivative`: ``dR = R Omega``, Omega skew solving
+``Omega U + U Omega = R^T dF - dF^T R`` with ``U = R^T F``, i.e. ``(tr(U) I - U) omega =
+axial(R^T dF - dF^T R)``; :func:`planar_rotation_derivative` for the 2D angle).
 """
 
 from __future__ import annotations
@@ -69,3 +76,81 @@ def surface_frame_gradient_jvp(F: np.ndarray, n0: np.ndarray, dF: np.ndarray) ->
     dn1 = (dw - n1 * np.einsum("si,si->s", n1, dw)[:, None]) / np.where(norm > 0, norm, 1.0)
     Pn = np.eye(F.shape[-1]) - n0[:, :, None] * n0[:, None, :]
     return dF @ Pn + dn1[:, :, None] * n0[:, None, :]
+
+
+# ----------------------------------------------------------------------------------------------
+# Polar decomposition and its derivative
+
+
+def rotations_from_deformation_gradient(F: np.ndarray, *, axis: int | None = None) -> np.ndarray:
+    """The rotation R of the polar decomposition F = R U, for a stack of (Ns, 3, 3) matrices.
+
+    3D: R = W V^T from the SVD F = W S V^T, with the sign of the last singular direction flipped
+    where det(W V^T) < 0, so R is always a proper rotation (the one nearest F). 2D meshes: pass
+    ``axis``, the out-of-plane axis (e.g. 2 for an x-y mesh); the in-plane block gets the closed
+    form R = rotation by atan2(F_ji - F_ij, F_ii + F_jj) and that axis's row and column are the
+    identity's.
+    """
+    F = np.asarray(F, dtype=np.float64)
+    if F.ndim != 3 or F.shape[1:] != (3, 3):
+        raise ValueError(f"F must be (N, 3, 3), got {F.shape}")
+    if axis is not None:
+        i, j = [k for k in range(3) if k != axis]
+        ang = np.arctan2(F[:, j, i] - F[:, i, j], F[:, i, i] + F[:, j, j])
+        R = np.broadcast_to(np.eye(3), F.shape).copy()
+        c, s = np.cos(ang), np.sin(ang)
+        R[:, i, i] = c
+        R[:, j, j] = c
+        R[:, j, i] = s
+        R[:, i, j] = -s
+        return R
+    if len(F) == 0:
+        return F.copy()
+    W, _, Vt = np.linalg.svd(F)
+    R = W @ Vt
+    neg = np.linalg.det(R) < 0
+    if np.any(neg):
+        W[neg, :, 2] *= -1
+        R[neg] = W[neg] @ Vt[neg]
+    return R
+
+
+def _axial(W: np.ndarray) -> np.ndarray:
+    """Axial vectors (..., 3) of skew matrices (..., 3, 3): W = [w]x."""
+    return np.stack([W[..., 2, 1], W[..., 0, 2], W[..., 1, 0]], axis=-1)
+
+
+def _skew(w: np.ndarray) -> np.ndarray:
+    z = np.zeros(w.shape[:-1])
+    return np.stack([np.stack([z, -w[..., 2], w[..., 1]], -1),
+                     np.stack([w[..., 2], z, -w[..., 0]], -1),
+                     np.stack([-w[..., 1], w[..., 0], z], -1)], axis=-2)
+
+
+def polar_rotation_derivative(F: np.ndarray, R: np.ndarray, dF: np.ndarray) -> np.ndarray:
+    """dR (..., 3, 3) of the polar rotation R of F (..., 3, 3) in direction dF (3D)."""
+    U = np.swapaxes(R, -1, -2) @ F
+    U = 0.5 * (U + np.swapaxes(U, -1, -2))
+    A = np.swapaxes(R, -1, -2) @ dF
+    rhs = _axial(A - np.swapaxes(A, -1, -2))
+    K = np.trace(U, axis1=-2, axis2=-1)[..., None, None] * np.eye(3) - U
+    omega = np.linalg.solve(K, rhs[..., None])[..., 0]
+    return R @ _skew(omega)
+
+
+def planar_rotation_derivative(F: np.ndarray, dF: np.ndarray, axis: int) -> np.ndarray:
+    """dR (..., 3, 3) of :func:`rotations_from_deformation_gradient` with ``axis`` (2D)."""
+    i, j = [k for k in range(3) if k != axis]
+    a = F[..., j, i] - F[..., i, j]
+    c = F[..., i, i] + F[..., j, j]
+    da = dF[..., j, i] - dF[..., i, j]
+    dc = dF[..., i, i] + dF[..., j, j]
+    dphi = (da * c - a * dc) / (a * a + c * c)
+    phi = np.arctan2(a, c)
+    out = np.zeros(F.shape)
+    s, co = np.sin(phi), np.cos(phi)
+    out[..., i, i] = -s * dphi
+    out[..., j, j] = -s * dphi
+    out[..., j, i] = co * dphi
+    out[..., i, j] = -co * dphi
+    return out

@@ -88,6 +88,7 @@ from numba import njit, prange
 from ffdcli.errors import InputError
 from ffdcli.mesh import CellBlock
 from ffdcli.progress import chunks, no_progress
+from ffdcli.rotations import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
 from ffdcli.settings import METHODS, WarpSettings  # noqa: F401  (WarpSettings: re-exported)
 
 #: A marker is planar when all its nodes are within this fraction of the mesh's bounding-box
@@ -1156,41 +1157,3 @@ def idw_reference(points_src: np.ndarray, areas: np.ndarray, disp: np.ndarray, r
         gf = 1.0 if rotation_length is None else 1.0 / (1.0 + (r2raw / rotation_length ** 2) ** 2)
         v += np.broadcast_to(gf, w.shape)[:, :, None] * np.einsum("sij,tsj->tsi", rot - np.eye(3), e)
     return np.einsum("ts,tsi->ti", w, v) / w.sum(axis=1)[:, None]
-
-
-
-# ----------------------------------------------------------------------------------------------
-# Rotations
-
-
-def rotations_from_deformation_gradient(F: np.ndarray, *, axis: int | None = None) -> np.ndarray:
-    """The rotation R of the polar decomposition F = R U, for a stack of (Ns, 3, 3) matrices.
-
-    3D: R = W V^T from the SVD F = W S V^T, with the sign of the last singular direction flipped
-    where det(W V^T) < 0, so R is always a proper rotation (the one nearest F). 2D meshes: pass
-    ``axis``, the out-of-plane axis (e.g. 2 for an x-y mesh); the in-plane block gets the closed
-    form R = rotation by atan2(F_ji - F_ij, F_ii + F_jj) and that axis's row and column are the
-    identity's.
-    """
-    F = np.asarray(F, dtype=np.float64)
-    if F.ndim != 3 or F.shape[1:] != (3, 3):
-        raise ValueError(f"F must be (N, 3, 3), got {F.shape}")
-    if axis is not None:
-        i, j = [k for k in range(3) if k != axis]
-        ang = np.arctan2(F[:, j, i] - F[:, i, j], F[:, i, i] + F[:, j, j])
-        R = np.broadcast_to(np.eye(3), F.shape).copy()
-        c, s = np.cos(ang), np.sin(ang)
-        R[:, i, i] = c
-        R[:, j, j] = c
-        R[:, j, i] = s
-        R[:, i, j] = -s
-        return R
-    if len(F) == 0:
-        return F.copy()
-    W, _, Vt = np.linalg.svd(F)
-    R = W @ Vt
-    neg = np.linalg.det(R) < 0
-    if np.any(neg):
-        W[neg, :, 2] *= -1
-        R[neg] = W[neg] @ Vt[neg]
-    return R
