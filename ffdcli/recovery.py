@@ -18,7 +18,7 @@ is reported (and written only with ``--force``). Each attempt costs one warp and
 
 The result is NOT a smooth function of the design (it switches between attempts), so the
 derivatives (``ffd grad``, ``mesh_vjp``) are those of the default warp; the summary says which was
-used. Recovery runs serially (an MPI run with ``comm.size > 1`` reports the failure directly).
+used. Under MPI each intermediate warp is shared among the ranks like the first one (``warp(comm=)``).
 """
 
 from __future__ import annotations
