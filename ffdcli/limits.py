@@ -29,7 +29,7 @@ BYTES_PER_SURFACE_POINT = 200
 BYTES_PER_BASIS_WEIGHT = 24
 
 
-def check_lattice_size(points, *, path=None, key: str = "box.points") -> None:
+def check_lattice_size(points, *, path=None, key: str | None = "box.points", line: int | None = None) -> None:
     """InputError (exit 2) when the lattice has more than :data:`MAX_TOTAL_POINTS` control points."""
     if not points:
         return
@@ -37,7 +37,7 @@ def check_lattice_size(points, *, path=None, key: str = "box.points") -> None:
     total = math.prod(pts)
     if total > MAX_TOTAL_POINTS:
         raise InputError(f"at most {MAX_TOTAL_POINTS} control points in all, got "
-                         f"{' x '.join(map(str, pts))} = {total}", path=path, key=key,
+                         f"{' x '.join(map(str, pts))} = {total}", path=path, key=key, line=line,
                          hint="an FFD lattice needs tens per direction; use fewer points")
 
 

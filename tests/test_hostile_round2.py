@@ -409,12 +409,12 @@ def test_json_to_a_full_stdout(ws):
 # ----------------------------------------------------------------------------------------------
 
 @pytest.mark.parametrize("points", ["256,256,256", "64,64,16"])
-def test_lattice_total_refused_in_well_under_a_second(ws, points):
-    """Found: --points 256,256,256 (each within 'at most 256') grew to 23.8 GB and was OOM-killed."""
-    t0 = time.perf_counter()
-    assert_hostile(ws, ["box", "vwing.su2", "--surface", "wing", "--points", points], 2, "at most", "in all",
-                   names=["vwing.su2"])
-    assert time.perf_counter() - t0 < 1.0
+def test_lattice_total_refused_before_any_work(ws, points):
+    """Found: --points 256,256,256 (each within 'at most 256') grew to 23.8 GB and was OOM-killed.
+    The mesh here is garbage: refused before it is read (and before the heavy imports)."""
+    (ws / "garbage_box.su2").write_bytes(b"NDIME= 3\nnot a mesh\n")
+    assert_hostile(ws, ["box", "garbage_box.su2", "--surface", "wing", "--points", points], 2, "at most", "in all",
+                   names=["garbage_box.su2", "--points"])
 
 
 def test_lattice_total_in_a_design_names_the_line(ws):
@@ -422,6 +422,8 @@ def test_lattice_total_in_a_design_names_the_line(ws):
 
     data = yaml.safe_load((ws / "good.yaml").read_text())
     data["box"]["points"] = [200, 200, 2]
+    data["mesh"] = "garbage_box.su2"                # refused when the design is loaded, before the mesh is read
+    (ws / "garbage_box.su2").write_bytes(b"NDIME= 3\nnot a mesh\n")
     (ws / "big_lattice.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
     assert_hostile(ws, ["deform", "big_lattice.yaml"], 2, "at most", names=["big_lattice.yaml:", "box.points"])
 
@@ -633,11 +635,10 @@ def test_million_value_list_refused_quickly(ws):
     """Found: refused after 38 s of parsing."""
     text = (ws / "good.yaml").read_text() + "extra: [" + ", ".join(["0"] * 1_000_000) + "]\n"
     (ws / "million.yaml").write_text(text)
-    t0 = time.perf_counter()
-    assert_hostile(ws, ["deform", "million.yaml"], 2, "more than", names=["million.yaml"])
+    # "commas and lines": refused by counting separators, before the YAML parser sees the text
+    assert_hostile(ws, ["deform", "million.yaml"], 2, "more than", "commas and lines", names=["million.yaml"])
     assert_hostile(ws, ["deform", "good.yaml", "--set", "changes.0.twist.tip=[" + ",".join(["1"] * 300_000) + "]"],
-                   2, "more than")
-    assert time.perf_counter() - t0 < 5
+                   2, "more than", "commas and lines")
 
 
 def test_fifo_named_in_the_design_file(ws):

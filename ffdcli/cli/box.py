@@ -76,11 +76,15 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
       ffd box wing.su2 --surface wing --points 8,10,2 --sections xz --json
       ffd box design.yaml --lattice out/lattice.vtk
     """
+    from ffdcli.limits import check_lattice_size
+    from ffdcli.settings import BoxSettings
+
+    if points is not None:           # refused in a fraction of a second, before the heavy imports
+        check_lattice_size(points, path=mesh, key="--points")
     import numpy as np
 
     from ffdcli.formats.lattice_vtk import write_lattice_vtk
     from ffdcli.pipeline import prepare_box
-    from ffdcli.settings import BoxSettings
 
     if is_design_file(mesh):
         from ffdcli.design import load_design

@@ -55,13 +55,15 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     """
     from ffdcli.design import load_design
     from ffdcli.outputs import plan_deform
-    from ffdcli.pipeline import deform, load_run, write_outputs
-    from ffdcli.quality import enforce
 
     t0 = time.perf_counter()
     design = load_design(design_file, overrides=overrides)
     plan = plan_deform(design, mesh=output, lattice=lattice_out, plot=plot,    # every output, before the work
                        extra=[("surface_file", surface_file, False, "--surface-file")])
+    # the heavy part, once the input is checked
+    from ffdcli.pipeline import deform, load_run, write_outputs
+    from ffdcli.quality import enforce
+
     comm = console.comm
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress, comm=comm)
     for w in run.prep.warnings:

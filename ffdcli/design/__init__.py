@@ -50,6 +50,7 @@ from ffdcli.design.yamlmap import (
 )
 from ffdcli.errors import InputError
 from ffdcli.inputs import check_input_file, existing_kind
+from ffdcli.limits import check_lattice_size
 from ffdcli.settings import BoxSettings
 
 __all__ = ["ADDABLE", "CHANGE_KINDS", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "Design", "apply_overrides",
@@ -132,6 +133,8 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
         if check_files:
             check_input_file(box_file, "lattice file", design=path, key="box.file",
                              line=line_at(lines, ("box", "file")))
+    if b.get("points") is not None:   # an absurd lattice: refused here, before any heavy import or reading
+        check_lattice_size(b["points"], path=path, key="box.points", line=line_at(lines, ("box", "points")))
     defaults = BoxSettings()
     box = BoxSettings(points=tuple(b["points"]) if b.get("points") is not None else defaults.points,
                       degree=tuple(b["degree"]) if "degree" in b else None,
