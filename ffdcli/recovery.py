@@ -7,7 +7,9 @@ where the FFD puts it (bit for bit) every time:
 1. **a longer reach**: ``alpha`` x :data:`REACH_FACTOR` (the short-range ``b`` term then rules
    :data:`REACH_FACTOR` ^ (b / (b - a)) times further out: every node follows its nearest
    surface more closely, which is what planform changes need);
-2. **the design in increments**: the lattice goes from P0 to P' in :data:`INCREMENTS` equal steps
+2. **rotations not faded** (``rotation_reach: null``): a large twist (45 degrees) can need the
+   rotation carried whole a chord away from the wing;
+3. **the design in increments**: the lattice goes from P0 to P' in :data:`INCREMENTS` equal steps
    and the volume is warped through every intermediate surface, with the warp rebuilt on the
    mesh of the step before (so the weights see the cells where they are, not where they were),
    with the longer reach. The rotation of each step is ``R_k R_(k-1)^T``.
@@ -39,8 +41,13 @@ INCREMENTS = 4
 def attempts(settings: WarpSettings) -> list[tuple[str, WarpSettings, int]]:
     """(description, settings, increments) of the recovery attempts, in order."""
     longer = replace(settings, alpha=settings.alpha * REACH_FACTOR)
-    return [(f"longer reach (volume.alpha: {longer.alpha:g})", longer, 1),
-            (f"{INCREMENTS} increments with volume.alpha: {longer.alpha:g}", longer, INCREMENTS)]
+    out = [(f"longer reach (volume.alpha: {longer.alpha:g})", longer, 1)]
+    if settings.rotation_reach is not None:
+        # a large twist: the rotation carried whole (IDWarp's form) keeps cells near the wing rigid
+        out.append(("rotations not faded (volume.rotation_reach: null)",
+                    replace(settings, rotation_reach=None), 1))
+    out.append((f"{INCREMENTS} increments with volume.alpha: {longer.alpha:g}", longer, INCREMENTS))
+    return out
 
 
 def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *, progress=None

@@ -29,8 +29,10 @@ def crm_design(tmp_path, changes, volume=None, name="d.yaml"):
 
 def test_attempts_are_a_longer_reach_then_increments():
     got = attempts(WarpSettings(alpha=0.5))
-    assert [(st.alpha, n) for _, st, n in got] == [(2.0, 1), (2.0, 4)]
-    assert "alpha: 2" in got[0][0] and "4 increments" in got[1][0]
+    assert [(st.alpha, st.rotation_reach, n) for _, st, n in got] == [(2.0, 0.3, 1), (0.5, None, 1),
+                                                                      (2.0, 0.3, 4)]
+    assert "alpha: 2" in got[0][0] and "rotation_reach: null" in got[1][0] and "4 increments" in got[2][0]
+    assert len(attempts(WarpSettings(rotation_reach=None))) == 2
 
 
 @pytest.mark.slow
@@ -67,6 +69,15 @@ def test_a_failing_setting_is_recovered_and_reported(tmp_path):
     assert s["recovered_with"] == res.recovered_with and s["recovery"][0]["failed"] > 0
     proc = run_ffd("deform", str(design), "--cache-dir", str(tmp_path))
     assert "recovered: longer reach" in proc.stdout
+
+
+@pytest.mark.slow
+def test_a_large_twist_is_recovered_without_the_fade(tmp_path):
+    """configs/rect_twist_linear.yaml (45 degrees at the tip): the faded rotation makes 2 cells
+    markedly worse; carried whole (rotation_reach: null) the mesh passes."""
+    run = load_run(load_design(REPO / "configs" / "rect_twist_linear.yaml"), cache_dir=tmp_path)
+    res = deform(run)
+    assert res.quality.ok and res.recovered_with == "rotations not faded (volume.rotation_reach: null)"
 
 
 @pytest.mark.slow
