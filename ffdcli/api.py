@@ -278,17 +278,20 @@ class DesignModel:
                  "satisfied": bool(s)}
                 for n, x, a, b, s in zip(self.constraint_names, v, lo, hi, ok, strict=True)]
 
+    def constraint_jacobian_arrays(self) -> dict[str, np.ndarray]:
+        """The arrays of ``ffd constraints --jacobian FILE.npz`` (SPEC): ``names`` (C), ``variables`` (V),
+        ``values`` (C), ``lower`` (C), ``upper`` (C) (``-inf``/``inf``: none) and ``jacobian`` (C x V)."""
+        return dict(names=np.array(self.constraint_names, dtype=str), variables=np.array(self.names, dtype=str),
+                    values=self.constraint_values(), lower=self.constraint_lower, upper=self.constraint_upper,
+                    jacobian=self.constraint_jacobian())
+
     def write_constraint_jacobian(self, path) -> None:
-        """Write the constraints' exact Jacobian as ``.npz`` (whole or not at all): arrays ``names`` (C),
-        ``variables`` (V), ``values`` (C), ``lower`` (C), ``upper`` (C) (``-inf``/``inf``: none) and
-        ``jacobian`` (C x V)."""
+        """Write :meth:`constraint_jacobian_arrays` as ``.npz``, whole or not at all."""
         from ffdcli.atomic import atomic_write
 
-        J = self.constraint_jacobian()
+        arrays = self.constraint_jacobian_arrays()
         with atomic_write(path, "wb") as f:
-            np.savez(f, names=np.array(self.constraint_names, dtype=str), variables=np.array(self.names, dtype=str),
-                     values=self.constraint_values(), lower=self.constraint_lower, upper=self.constraint_upper,
-                     jacobian=J)
+            np.savez(f, **arrays)
 
     # -- evaluation --------------------------------------------------------------------------
     @property

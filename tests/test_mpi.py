@@ -333,3 +333,20 @@ def test_mpiexec_grad_jacobian_and_box_equal_the_serial_run(tmp_path):
     assert ser.returncode == 0 and par.returncode == 0, par.stderr
     assert (tmp_path / "bs.vtk").read_bytes() == (tmp_path / "bp.vtk").read_bytes()
     assert par.stdout.count("ffd box:") == 1
+
+
+@needs_mpi
+def test_mpiexec_constraints_equal_the_serial_run(tmp_path):
+    """``ffd constraints --jacobian`` under 2 ranks: the serial values and Jacobian, printed and written once."""
+    design = _design(tmp_path, extra="constraints: [{volume: {lower: 1.0}}, "
+                                     "{thickness: {chord: [0.3, 0.6], span: [0.2, 0.8]}}]")
+    ser = run_ffd("constraints", design, "--json", "--jacobian", tmp_path / "cs.npz", cwd=tmp_path)
+    assert ser.returncode == 0, ser.stderr
+    par = mpi_ffd(2, "constraints", design, "--json", "--jacobian", tmp_path / "cp.npz", cwd=tmp_path)
+    assert par.returncode == 0, par.stderr
+    assert json.loads(ser.stdout)["constraints"] == json.loads(par.stdout)["constraints"]
+    assert par.stdout.count('"constraints"') == 1
+    with np.load(tmp_path / "cs.npz") as A, np.load(tmp_path / "cp.npz") as B:
+        assert A.files == B.files
+        for k in A.files:
+            np.testing.assert_array_equal(A[k], B[k])

@@ -39,18 +39,25 @@ def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
       ffd constraints design.yaml --set changes.0.chord.tip=0.8 --json
       ffd constraints design.yaml --jacobian dcdv.npz
     """
+    import numpy as np
+
     from ffdcli.api import DesignModel
+    from ffdcli.design import load_design
+    from ffdcli.outputs import plan_outputs
+    from ffdcli.pipeline import load_run
 
+    design = load_design(design_file, overrides=overrides)
+    plan = plan_outputs([("jacobian", jacobian_file, False, "--jacobian")], inputs=(design.mesh, design.path))
+    model = DesignModel(load_run(design, cache_dir=cache_dir, progress=console.progress, comm=console.comm),
+                        comm=console.comm)
     if jacobian_file:
-        from ffdcli.atomic import check_writable
+        arrays = model.constraint_jacobian_arrays()
 
-        check_writable(jacobian_file)
-    model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
-    if jacobian_file:
-        from ffdcli.atomic import check_writable
+        def write(tmp):
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
 
-        check_writable(jacobian_file, inputs=(model.run.prep.mesh.path, design_file))
-        model.write_constraint_jacobian(jacobian_file)
+        console.comm.root_then_bcast(plan.write, {"jacobian": write})        # once: rank 0 of an MPI run
     rows = model.constraints_table()
     width = max([len(r["name"]) for r in rows] + [10])
     lines = [f"{'constraint':<{width}}  {'value':>12}  {'lower':>10}  {'upper':>10}  satisfied"]
