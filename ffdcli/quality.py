@@ -39,9 +39,12 @@ before (``ffd deform``):
   and where it is (with ``force``: only reported; such cells are not counted as failures below);
 - a cell *fails* when the design inverts it: ``q_after <= 0 < q_before``;
 - or when the design made it markedly worse: ``q_after < threshold`` (0.05) and ``q_after <
-  relative * q_before`` (``relative`` 0.5) and ``q_after <`` the input mesh's worst cell
-  (``min q_before``). The last condition means that a mesh whose worst cell did not get worse is not
-  refused on the scaled Jacobian: the solver already ran on a cell that bad;
+  relative * q_before`` (``relative`` 0.5) and ``q_after < min(collapse, min q_before)`` (``collapse``
+  0.01; ``min q_before`` the input mesh's worst cell). So a mesh whose worst cell did not get worse
+  is never refused on the scaled Jacobian (the solver already ran on a cell that bad), and a cell
+  squeezed from 0.11 to 0.039 by a tip-chord change is counted (below 0.05) but not refused: the
+  scaled Jacobian refuses cells on their way to collapse, the orthogonality rule below judges the
+  shape a finite-volume solver sees;
 - a node *fails* when its orthogonality falls below ``ortho_min`` (20 degrees) after losing more than
   ``ortho_loss`` (10 degrees) from the input.
 
@@ -68,6 +71,8 @@ from ffdcli.mesh import CellBlock, Mesh
 DEFAULT_THRESHOLD = 0.05
 #: A cell below the threshold fails only if its quality dropped below this fraction of before.
 DEFAULT_RELATIVE = 0.5
+#: ... and only if it also falls below this (or below the input mesh's worst cell, if lower).
+DEFAULT_COLLAPSE = 0.01
 #: A node fails when its orthogonality (degrees) falls below this ...
 DEFAULT_ORTHO_MIN = 20.0
 #: ... after losing more than this many degrees from the input mesh.
@@ -652,6 +657,7 @@ class QualityReport:
     n_ortho_low: int = 0
     n_ortho_low_before: int | None = None
     n_ortho_failed: int = 0
+    collapse: float = DEFAULT_COLLAPSE
     worst: list = field(default_factory=list)
     worst_nodes: list = field(default_factory=list)
     input_bad: list = field(default_factory=list)
@@ -660,6 +666,11 @@ class QualityReport:
     def relative_check(self) -> bool:
         """True when there was a mesh before (``ffd deform``), False for ``ffd check``."""
         return self.min_before is not None or self.n_inverted_before is not None
+
+    @property
+    def collapse_floor(self) -> float | None:
+        """The quality under which a cell made worse fails: min(collapse, the input's worst)."""
+        return None if self.min_before is None else min(self.collapse, self.min_before)
 
     @property
     def n_failed(self) -> int:
@@ -676,14 +687,16 @@ class QualityReport:
     def rule(self) -> str:
         """The gate's rule in words, for messages."""
         return (f"a cell fails when the design inverts it, or when its scaled Jacobian falls below "
-                f"{self.threshold:g}, below {self.relative:g} x its value before and below the input mesh's "
-                f"worst ({_g(self.min_before)}); a node fails when its orthogonality falls below "
+                f"{self.threshold:g}, below {self.relative:g} x its value before and below "
+                f"{_g(self.collapse_floor)} (the lower of {self.collapse:g} and the input mesh's worst); "
+                f"a node fails when its orthogonality falls below "
                 f"{self.ortho_min:g} deg after losing more than {self.ortho_loss_max:g} deg")
 
     def to_dict(self) -> dict:
         """The report for ``--json`` (the same keys for ``deform`` and ``check``)."""
         return {"cells": self.count, "inverted": self.n_inverted, "below_threshold": self.n_below,
-                "threshold": self.threshold, "relative": self.relative, "min_before": self.min_before,
+                "threshold": self.threshold, "relative": self.relative, "collapse": self.collapse,
+                "min_before": self.min_before,
                 "min_after": self.min_after, "inverted_before": self.n_inverted_before,
                 "below_threshold_before": self.n_below_before, "input_degenerate": self.n_input_bad,
                 "inverted_by_design": self.n_new_inverted, "made_worse": self.n_worse,
@@ -751,6 +764,7 @@ def _xyz(p) -> str:
 
 def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold: float = DEFAULT_THRESHOLD,
                   points_before: np.ndarray | None = None, *, relative: float = DEFAULT_RELATIVE,
+                  collapse: float = DEFAULT_COLLAPSE,
                   ortho_min: float = DEFAULT_ORTHO_MIN, ortho_loss: float = DEFAULT_ORTHO_LOSS,
                   orthogonality: bool = True, n_worst: int = 10,
                   reference: QualityReference | None = None) -> QualityReport:
@@ -763,7 +777,7 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     points_after
         (N, 3) coordinates to judge. Default: ``mesh.points``, and then there is no "before"
         (``ffd check``) unless ``points_before`` is given.
-    threshold, relative, ortho_min, ortho_loss
+    threshold, relative, collapse, ortho_min, ortho_loss
         The rules of the module docstring.
     points_before
         (N, 3) the reference (default ``mesh.points`` when ``points_after`` is given).
@@ -790,10 +804,9 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     ref = after if before is None else before
     _check_types(cells, mesh.dim)
     kw = {"threshold": float(threshold), "relative": float(relative), "ortho_min": float(ortho_min),
-          "ortho_loss_max": float(ortho_loss)}
+          "ortho_loss_max": float(ortho_loss), "collapse": float(collapse)}
     if not cells:
-        return QualityReport(0, 0, 0, min_before=None, min_after=None, **{k: kw[k] for k in ("threshold", "relative")},
-                             ortho_min=kw["ortho_min"], ortho_loss_max=kw["ortho_loss_max"])
+        return QualityReport(0, 0, 0, min_before=None, min_after=None, **kw)
     if reference is None or (orthogonality and reference.ortho is None):
         reference = quality_reference(mesh, ref, orthogonality=orthogonality)
     orientation, q_ref = reference.orientation, reference.q
@@ -823,7 +836,7 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     if has_before:
         bad_in = qb <= 0
         valid = ~bad_in
-        floor = float(qb[valid].min()) if valid.any() else 0.0
+        floor = min(float(qb[valid].min()) if valid.any() else 0.0, collapse)
         new_inv = inverted & valid
         worse = valid & ~inverted & (q < threshold) & (q < relative * qb) & (q < floor)
         failed = new_inv | worse

@@ -193,8 +193,9 @@ def test_plot_says_when_the_gate_would_refuse(tmp_path):
     import json
 
     design = REPO / "configs" / "rect_twist_sections.yaml"
+    # the surface moved and the volume not (volume.method: none): cells at the wall invert, no recovery
     proc = run_ffd("plot", design, "-o", tmp_path / "r.png", "--no-3d", "--json",
-                   "--set", "volume.alpha=0.25", "--set", "volume.threshold=0.05")
+                   "--set", "volume.method=none")
     assert proc.returncode == 0, proc.stderr
     assert "quality gate would refuse" in proc.stderr
     assert json.loads(proc.stdout)["refused"] is True

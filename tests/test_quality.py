@@ -136,7 +136,9 @@ def test_already_poor_cells_do_not_block_unless_they_get_much_worse():
     r = check_quality(poor, sheared(31), threshold=0.05)      # 0.0333 -> 0.0322: below 0.05, not halved
     # (orthogonality 4.66 -> 4.52 deg: below 20 but lost less than 10)
     assert r.ok and r.n_worse == 0 and r.n_below == 1 and r.n_below_before == 1 and r.min_after < 0.05
-    r = check_quality(poor, sheared(70), threshold=0.05)      # 0.0333 -> 0.0143: halved, under the worst
+    r = check_quality(poor, sheared(70), threshold=0.05)      # 0.0333 -> 0.0143: halved, not under 0.01
+    assert r.ok and r.n_worse == 0 and r.n_below == 1
+    r = check_quality(poor, sheared(150), threshold=0.05)     # 0.0333 -> 0.0067: halved, under 0.01
     assert not r.ok and r.n_inverted == 0 and r.n_worse == 1 and r.n_failed == 1
     assert "1 cells made worse" in r.failure_message() and "below 0.5 x its value before" in r.failure_message()
     # without a "before" the threshold alone counts (ffd check)
@@ -158,14 +160,16 @@ def _two_hexes(top_shift):
 
 def test_a_mesh_whose_worst_cell_did_not_get_worse_is_not_refused():
     # the good cube sheared by 20: q = 1/sqrt(401) = 0.0499 (< 0.05, < half of 1) but still above the
-    # input's worst cell (0.0333): the solver already ran on worse, so the scaled Jacobian does not
+    # input's worst cell (0.0333) and 0.01: the solver already ran on worse, so the scaled Jacobian does not
     # refuse it (its orthogonality does, 90 -> 3 deg: checked apart here)
     mesh, moved = _two_hexes(20.0)
     r = check_quality(mesh, moved, orthogonality=False)
     assert r.min_after == pytest.approx(1 / np.sqrt(901)) and r.min_after == r.min_before
     assert r.n_below == 2 and r.n_below_before == 1 and r.n_worse == 0 and r.ok
-    # below the input's worst (shift 40: 0.025): refused
+    # shift 40 (0.025): counted below 0.05 but above 0.01, not refused; shift 120 (0.0083): refused
     mesh, moved = _two_hexes(40.0)
+    assert check_quality(mesh, moved, orthogonality=False).ok
+    mesh, moved = _two_hexes(120.0)
     r = check_quality(mesh, moved, orthogonality=False)
     assert r.n_worse == 1 and not r.ok and r.worst[0]["cell"] == 1 and r.worst[0]["failed"]
 

@@ -42,7 +42,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     surface follows exactly (X = X0 + B (P' - P0)), the rest of the mesh by inverse-distance
     warping (volume.method: idw) or not at all (none). Every cell and node is checked (the gate of
     `ffd check`, same words): if the design inverts a cell, makes one markedly worse (below 0.05,
-    under half its quality and under the input's worst) or drops a node's orthogonality below 20
+    under half its quality and under 0.01 or the input's worst) or drops a node's orthogonality below 20
     degrees by more than 10, nothing is written and the exit status is 3; a cell already inverted or
     degenerate in the input mesh is exit 2 (--force writes anyway in both cases).
 
