@@ -37,6 +37,7 @@ from ffdcli.changes import LatticeFrame
 from ffdcli.embedding import embed
 from ffdcli.errors import InputError
 from ffdcli.lattice import Lattice
+from ffdcli.mesh import diagonal
 from ffdcli.progress import no_progress
 from ffdcli.sections import (
     Cutter,
@@ -52,12 +53,6 @@ from ffdcli.spline import basis, clamped_knots
 
 #: Largest number of rebuilds when growing margins to contain the surface.
 MAX_REBUILDS = 12
-
-
-def diagonal(points: np.ndarray) -> float:
-    """The length of the bounding-box diagonal of points (N, 3): the size scale of a surface."""
-    pts = np.asarray(points, dtype=np.float64)
-    return float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 0.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -41,6 +41,7 @@ from scipy.spatial import cKDTree
 from ffdcli.errors import InputError
 from ffdcli.lattice import Lattice, derivatives, eval_point_nb, evaluate, kernel_args
 from ffdcli.progress import chunks, no_progress
+from ffdcli.settings import MAX_DEGREE
 from ffdcli.spline import basis, basis_compiled
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
@@ -555,7 +556,7 @@ def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, 
     stop2 = stop * stop
     nchunk = min(npts, 1024)
     for ch in prange(nchunk):
-        scratch = np.zeros((8, 6))
+        scratch = np.zeros((8, MAX_DEGREE + 1))
         cur = np.zeros(12)
         trial = np.zeros(12)
         u = np.zeros(3)

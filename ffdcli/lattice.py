@@ -25,6 +25,7 @@ import numpy as np
 from numba import njit, prange
 
 from ffdcli.errors import InputError
+from ffdcli.mesh import diagonal
 from ffdcli.settings import MAX_DEGREE, check_degree
 from ffdcli.spline import basis_d1_nb, basis_derivs, check_knots, clamped_knots, find_span_nb
 
@@ -126,8 +127,7 @@ class Lattice:
 
 def size(lattice: Lattice) -> float:
     """Length scale of ``lattice``: the bounding-box diagonal of its control points (mesh units)."""
-    pts = lattice.control_points.reshape(-1, lattice.gdim)
-    return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
+    return diagonal(lattice.control_points.reshape(-1, lattice.gdim))
 
 
 # ----------------------------------------------------------------------------------------------

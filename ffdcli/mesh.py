@@ -92,12 +92,9 @@ class Mesh:
         """Sorted unique point ids of one or more markers. Unknown names raise InputError."""
         if isinstance(names, str):
             names = [names]
+        check_markers(self.markers, names, path=self.path)
         ids = []
         for name in names:
-            if name not in self.markers:
-                have = ", ".join(self.markers) or "(none)"
-                raise InputError(f"no marker named {name!r}; the markers are: {have}",
-                                 path=self.path)
             ids.extend(b.data.ravel() for b in self.markers[name])
         if not ids:
             return np.zeros(0, dtype=np.int64)
@@ -107,12 +104,9 @@ class Mesh:
         """The boundary cell blocks of one or more markers (vertex blocks left out)."""
         if isinstance(names, str):
             names = [names]
+        check_markers(self.markers, names, path=self.path)
         out = []
         for name in names:
-            if name not in self.markers:
-                have = ", ".join(self.markers) or "(none)"
-                raise InputError(f"no marker named {name!r}; the markers are: {have}",
-                                 path=self.path)
             out.extend(b for b in self.markers[name] if b.type != "vertex")
         return out
 
@@ -121,3 +115,25 @@ class Mesh:
         return Mesh(points=np.asarray(points, dtype=np.float64).reshape(self.points.shape),
                     dim=self.dim, cells=self.cells, markers=self.markers, path=self.path,
                     format=self.format, source=self.source)
+
+
+def check_markers(markers, names, *, path=None, key: str | None = None) -> None:
+    """The one rule of marker names: every name in ``names`` is a key of ``markers``.
+
+    Raises :class:`InputError` for the first unknown name, listing the mesh's markers (``key`` is
+    the design-file key that named it, e.g. ``volume.fixed``)."""
+    for name in names:
+        if name not in markers:
+            have = ", ".join(markers) or "(none)"
+            raise InputError(f"no marker named {name!r}; the markers are: {have}", path=path, key=key,
+                             hint="marker names are case-sensitive")
+
+
+def diagonal(points: np.ndarray) -> float:
+    """The length of the bounding-box diagonal of points (N, d): the size scale of a point set
+    (0 for no points). Tolerances relative to "the size of the mesh/surface/lattice" use it."""
+    pts = np.asarray(points, dtype=np.float64)
+    if len(pts) == 0:
+        return 0.0
+    pts = pts.reshape(len(pts), -1) if pts.ndim != 2 else pts
+    return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))

@@ -20,7 +20,7 @@ from ffdcli.box_import import import_box
 from ffdcli.errors import InputError, QualityError
 from ffdcli.formats.plot3d import read_plot3d
 from ffdcli.limits import check_box_memory, check_lattice_size
-from ffdcli.mesh import Mesh
+from ffdcli.mesh import Mesh, check_markers
 from ffdcli.progress import no_progress
 from ffdcli.settings import BoxSettings
 
@@ -84,10 +84,7 @@ def resolve_surface(mesh: Mesh, surface) -> list[str]:
 
     if surface:
         names = [surface] if isinstance(surface, str) else list(surface)
-        for name in names:
-            if name not in mesh.markers:
-                have = ", ".join(mesh.markers) or "(none)"
-                raise InputError(f"no marker named {name!r}; the markers are: {have}", path=mesh.path)
+        check_markers(mesh.markers, names, path=mesh.path)
         return names
     return default_surface(mesh)
 

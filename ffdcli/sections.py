@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.axes import Axes
+from ffdcli.mesh import diagonal
 
 #: Where the first cut inboard of a degenerate tip cut is searched, as fractions of the span.
 TIP_SEARCH = (0.0025, 0.005, 0.01, 0.02, 0.04, 0.08, 0.16)
@@ -201,8 +202,7 @@ class Cutter:
     def of(cls, points: np.ndarray, faces, axes: Axes, *, slab: float) -> Cutter:
         """The cutter of a surface given as points (N, 3) and faces (CellBlocks, local ids)."""
         pts = np.asarray(points, dtype=np.float64)
-        size = float(np.linalg.norm(pts.max(0) - pts.min(0))) if len(pts) else 0.0
-        return cls(points=pts, edges=surface_edges(faces, unique=False), axes=axes, tol=1e-9 * size,
+        return cls(points=pts, edges=surface_edges(faces, unique=False), axes=axes, tol=1e-9 * diagonal(pts),
                    slab=slab)
 
     @property

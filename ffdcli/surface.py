@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ffdcli.errors import InputError
-from ffdcli.mesh import CellBlock, Mesh
+from ffdcli.mesh import CellBlock, Mesh, check_markers
 
 #: Marker names that look like the domain's outer or symmetry boundaries (never the wing):
 #: a name is excluded when, lower-cased, it contains one of these.
@@ -133,13 +133,32 @@ def vertex_normals(points: np.ndarray, faces: Sequence[CellBlock]) -> np.ndarray
     return out
 
 
-def vertex_areas(points: np.ndarray, faces: Sequence[CellBlock]) -> np.ndarray:
-    """Vertex areas (N,): every face's area (length for lines) split equally among its nodes."""
+def face_measures(points: np.ndarray, faces: Sequence[CellBlock]) -> np.ndarray:
+    """Areas (F,) of triangle and quad faces, lengths of lines (in 3D, whatever plane a 2D mesh is
+    in), blocks concatenated in order as in :func:`face_vectors`; vertex blocks skipped."""
     points = np.asarray(points, dtype=np.float64)
-    vec = face_vectors(points, faces)
+    out = []
+    for b in faces:
+        if b.type == "vertex":
+            continue
+        if b.type == "line":
+            p = points[b.data]
+            out.append(np.linalg.norm(p[:, 1] - p[:, 0], axis=1))
+        else:
+            out.append(np.linalg.norm(face_vectors(points, [b]), axis=1))
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def vertex_areas(points: np.ndarray, faces: Sequence[CellBlock], n_points: int | None = None) -> np.ndarray:
+    """Vertex areas (n_points,): every face's area (length for lines) split equally among its nodes.
+
+    ``n_points`` defaults to ``len(points)``; nodes on no face get 0. The one home of the area
+    weights (the surface's and the volume warp's sources). Raises ValueError for volume cells."""
+    points = np.asarray(points, dtype=np.float64)
     nodes = np.concatenate([np.full(len(b), b.data.shape[1]) for b in faces if b.type != "vertex"]
                            or [np.zeros(0)])
-    return _scatter(len(points), faces, np.linalg.norm(vec, axis=1) / np.maximum(nodes, 1))
+    n = len(points) if n_points is None else int(n_points)
+    return _scatter(n, faces, face_measures(points, faces) / np.maximum(nodes, 1))
 
 
 def extract_surface(mesh: Mesh, names: str | Sequence[str]) -> Surface:
@@ -153,11 +172,7 @@ def extract_surface(mesh: Mesh, names: str | Sequence[str]) -> Surface:
     if not names:
         raise InputError("no surface marker given; the markers are: "
                          f"{', '.join(mesh.markers) or '(none)'}", path=mesh.path)
-    missing = [n for n in names if n not in mesh.markers]
-    if missing:
-        have = ", ".join(mesh.markers) or "(none)"
-        raise InputError(f"no marker named {missing[0]!r}; the markers are: {have}", path=mesh.path,
-                         hint="marker names are case-sensitive")
+    check_markers(mesh.markers, names, path=mesh.path)
     ids = mesh.marker_point_ids(list(names))
     faces = [CellBlock(b.type, np.searchsorted(ids, b.data)) for b in mesh.marker_faces(list(names))]
     return Surface(names=names, ids=ids, points=mesh.points[ids], faces=faces)

@@ -86,10 +86,11 @@ import numpy as np
 from numba import njit, prange
 
 from ffdcli.errors import InputError
-from ffdcli.mesh import CellBlock
+from ffdcli.mesh import CellBlock, check_markers, diagonal
 from ffdcli.progress import chunks, no_progress
 from ffdcli.rotations import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
 from ffdcli.settings import METHODS, WarpSettings  # noqa: F401  (WarpSettings: re-exported)
+from ffdcli.surface import vertex_areas
 
 #: A marker is planar when all its nodes are within this fraction of the mesh's bounding-box
 #: diagonal from one plane (2D: one line).
@@ -150,13 +151,9 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
     settings = settings or WarpSettings()
     pts = np.asarray(points, dtype=np.float64)
     surface = (surface,) if isinstance(surface, str) else tuple(surface)
-    have = ", ".join(markers) or "(none)"
     for key, names in (("surface", surface), ("volume.fixed", settings.fixed or ()),
                        ("volume.sliding", settings.sliding or ())):
-        for name in names:
-            if name not in markers:
-                raise InputError(f"no marker named {name!r}; the markers are: {have}",
-                                 key=key, path=path)
+        check_markers(markers, names, path=path, key=key)
     clash = set(surface) & (set(settings.fixed or ()) | set(settings.sliding or ()))
     if clash:
         raise InputError(f"{', '.join(sorted(clash))} is the deforming surface; it cannot also be "
@@ -170,7 +167,7 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
 
     surface_ids = (np.unique(np.concatenate([ids_of(n) for n in surface])) if surface
                    else np.zeros(0, dtype=np.int64))
-    size = _diagonal(pts)
+    size = diagonal(pts)
     mesh_normal = _plane_normal(pts) if dim == 2 else None
     roles: dict[str, str] = {n: "surface" for n in surface}
     planes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
@@ -203,12 +200,6 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
     faces = [b for n, r in roles.items() if r in ("surface", "fixed") for b in markers[n]
              if b.type != "vertex"]
     return MarkerRoles(roles, surface_ids, fixed_ids, sliding, faces)
-
-
-def _diagonal(pts: np.ndarray) -> float:
-    if len(pts) == 0:
-        return 0.0
-    return float(np.linalg.norm(pts.max(axis=0) - pts.min(axis=0)))
 
 
 def _snap_axis(n: np.ndarray) -> np.ndarray:
@@ -250,35 +241,6 @@ def _fit_plane(pts: np.ndarray, size: float, mesh_normal: np.ndarray | None):
     if np.max(np.abs(c @ normal)) > tol:
         return None
     return normal, center
-
-
-def vertex_areas(points: np.ndarray, faces: list[CellBlock], n_points: int | None = None) -> np.ndarray:
-    """Area weight of every node: each face gives an equal share of its area to its nodes.
-
-    Triangles and quads (a quad's area is half the norm of the cross product of its diagonals);
-    lines (2D meshes) give half their length to each end. Vertex blocks are ignored. Returns an
-    (n_points,) array, zero for nodes on no face.
-    """
-    pts = np.asarray(points, dtype=np.float64)
-    n = len(pts) if n_points is None else n_points
-    out = np.zeros(n)
-    for blk in faces:
-        c = blk.data
-        if len(c) == 0 or blk.type == "vertex":
-            continue
-        if blk.type == "line":
-            a = np.linalg.norm(pts[c[:, 1]] - pts[c[:, 0]], axis=1)
-        elif blk.type == "triangle":
-            a = 0.5 * np.linalg.norm(np.cross(pts[c[:, 1]] - pts[c[:, 0]], pts[c[:, 2]] - pts[c[:, 0]]),
-                                     axis=1)
-        elif blk.type == "quad":
-            a = 0.5 * np.linalg.norm(np.cross(pts[c[:, 2]] - pts[c[:, 0]], pts[c[:, 3]] - pts[c[:, 1]]),
-                                     axis=1)
-        else:
-            raise ValueError(f"boundary faces must be lines, triangles or quads, got {blk.type}")
-        k = c.shape[1]
-        np.add.at(out, c.ravel(), np.repeat(a / k, k))
-    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -386,7 +348,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     origin = 0.5 * (lo + hi)
     size = float(np.linalg.norm(hi - lo))
     if size <= 0:
-        size = max(_diagonal(pts), 1.0)
+        size = max(diagonal(pts), 1.0)
     ldef = float(settings.ldef) if settings.ldef is not None else size
     chord = size
     surface_pos = pts[surface_ids] - origin

@@ -10,6 +10,7 @@ import pytest
 
 from ffdcli.errors import InputError
 from ffdcli.mesh import CellBlock, Mesh
+from ffdcli.surface import vertex_areas
 from ffdcli.warp import (
     WarpSettings,
     idw_reference,
@@ -17,7 +18,6 @@ from ffdcli.warp import (
     prepare_mesh_warp,
     prepare_warp,
     rotations_from_deformation_gradient,
-    vertex_areas,
     warp,
     warp_vjp,
 )

@@ -19,7 +19,7 @@ import click
 
 from ffdcli import __version__
 from ffdcli.atomic import Terminated
-from ffdcli.cli.console import Console, StdoutError
+from ffdcli.cli.console import Console, StdoutError, jsonable
 from ffdcli.errors import FfdError
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -139,7 +139,7 @@ def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, sho
         if extra:
             obj["report"] = extra
         try:
-            click.echo(json.dumps(obj, default=_jsonable))
+            click.echo(json.dumps(obj, default=jsonable))
             sys.stdout.flush()
         except OSError:
             _quiet_stdout()
@@ -151,16 +151,3 @@ def _quiet_stdout() -> None:
     with contextlib.suppress(OSError, ValueError, AttributeError):
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
-
-
-def _jsonable(o):
-    try:
-        import numpy as np
-
-        if isinstance(o, np.generic):
-            return o.item()
-        if isinstance(o, np.ndarray):
-            return o.tolist()
-    except ImportError:
-        pass
-    return str(o)

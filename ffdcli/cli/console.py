@@ -46,7 +46,7 @@ class Console:
     def result(self, summary: dict, text: str) -> None:
         """The command's summary: JSON with --json, else ``text``."""
         if self.json and self.comm.is_root:
-            _print(json.dumps(summary, default=_jsonable))
+            _print(json.dumps(summary, default=jsonable))
         else:
             self.say(text)
 
@@ -69,8 +69,9 @@ def _print(text: str) -> None:
                           "written by this run is complete", hint="check where stdout goes") from None
 
 
-def _jsonable(o):
-    import numpy as np
+def jsonable(o):
+    """``json.dumps(default=)`` for the values a summary holds: numpy scalars and arrays, paths."""
+    import numpy as np  # here: ``ffd --help`` and ``ffd schema`` do not load numpy
 
     if isinstance(o, np.generic):
         return o.item()

@@ -24,6 +24,7 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.inputs import check_input_file, existing_kind
+from ffdcli.mesh import diagonal
 
 ID_COLUMNS = ("pointid", "point", "global_index", "globalindex", "point_id")
 
@@ -117,7 +118,7 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
     data, lines = _parse_rows(text, p)
     header = lines.header
     ncol = data.shape[1]
-    size = float(np.linalg.norm(points.max(0) - points.min(0))) or 1.0
+    size = diagonal(points) or 1.0
     tol = 1e-6 * size if tol is None else tol
     gd = 3 if dim == 3 else 2
 
