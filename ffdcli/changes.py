@@ -64,9 +64,6 @@ class LatticeFrame:
         points at the root (row 0) and the tip (row 1); they define the sweep and dihedral angles.
     dim
         2 or 3.
-    le_offset
-        (2, 3) or None: added to ``le_rows @ P`` (``X0 - B P0`` of those two surface points, so
-        that the angle is that of the surface even where the embedding residual is not zero).
     le_weights
         (m, n, l) or None: section ``j``'s leading-edge point on its chord line is
         ``sum_ik le_weights[j, i, k] * P[i, j, k]``; None: the midpoint of ``P[0, j, 0]`` and
@@ -80,7 +77,6 @@ class LatticeFrame:
     ref_weights: np.ndarray
     le_rows: np.ndarray | None = None
     dim: int = 3
-    le_offset: np.ndarray | None = None
     le_weights: np.ndarray | None = None
 
     def __post_init__(self):
@@ -97,8 +93,6 @@ class LatticeFrame:
             raise ValueError("LatticeFrame.ref_weights must have shape (m, n, l)")
         if self.le_rows is not None:
             object.__setattr__(self, "le_rows", np.asarray(self.le_rows, dtype=float))
-        if self.le_offset is not None:
-            object.__setattr__(self, "le_offset", np.asarray(self.le_offset, dtype=float).reshape(2, 3))
         if self.le_weights is None:
             m, n, l = self.ref_weights.shape
             w = np.zeros((m, n, l))
@@ -146,17 +140,13 @@ class LatticeFrame:
         le = np.einsum("jik,...ijkd->...jd", self.le_weights, P)
         return te + (1.0 - fraction) * (le - te)
 
-    def le_lin(self, P: np.ndarray) -> np.ndarray:
-        """(..., 2, 3) ``le_rows @ P``: the linear part of the leading-edge points."""
+    def le_points(self, P: np.ndarray) -> np.ndarray:
+        """(..., 2, 3) ``le_rows @ P``: the leading-edge points of the surface at the root and the tip
+        (linear in ``P``, so it is its own derivative: ``le_points(dP)``)."""
         if self.le_rows is None:
             raise InputError("sweep and dihedral need a 3D lattice with leading-edge points")
         flat = P.reshape(*P.shape[:-4], -1, 3)
         return np.einsum("rq,...qd->...rd", self.le_rows, flat)
-
-    def le_points(self, P: np.ndarray) -> np.ndarray:
-        """(2, 3) leading-edge points of the surface at the root and the tip."""
-        le = self.le_lin(P)
-        return le if self.le_offset is None else le + self.le_offset
 
     def plane(self) -> np.ndarray:
         """(3, 3) projector onto the chord-thickness plane: c c^T + t t^T."""
@@ -689,7 +679,7 @@ class _Shear(Change):
         le = frame.le_points(P)
         v = le[1] - le[0]
         ve, vs = float(v @ e), float(v @ s)
-        dle = frame.le_lin(dP)
+        dle = frame.le_points(dP)
         dv = dle[..., 1, :] - dle[..., 0, :]
         dlam = (vs * (dv @ e) - ve * (dv @ s)) / (vs * vs + ve * ve)              # (...)
         dk = (1.0 / math.cos(lam + self.delta * DEG) ** 2 - 1.0 / math.cos(lam) ** 2) * dlam

@@ -85,9 +85,6 @@ class Mesh:
     def n_cells(self) -> int:
         return sum(len(b) for b in self.cells)
 
-    def marker_names(self) -> list[str]:
-        return list(self.markers)
-
     def marker_point_ids(self, names: str | list[str] | tuple[str, ...]) -> np.ndarray:
         """Sorted unique point ids of one or more markers. Unknown names raise InputError."""
         if isinstance(names, str):

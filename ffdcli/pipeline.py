@@ -15,14 +15,28 @@ from pathlib import Path
 
 import numpy as np
 
+from ffdcli import cache as cache_mod
 from ffdcli.box import Box, fit_box
 from ffdcli.box_import import import_box
+from ffdcli.changes import Change, apply_changes
+from ffdcli.design import Design, build_changes
+from ffdcli.embedding import Embedding
 from ffdcli.errors import InputError, QualityError
+from ffdcli.extruded import one_cell_thick
+from ffdcli.formats import read_mesh, write_mesh
+from ffdcli.formats.lattice_vtk import write_lattice_vtk
 from ffdcli.formats.plot3d import read_plot3d
+from ffdcli.formats.su2_surface import write_surface_file
+from ffdcli.lattice import derivatives
 from ffdcli.limits import check_box_memory, check_lattice_size
 from ffdcli.mesh import Mesh, check_markers
+from ffdcli.parallel import SerialComm
 from ffdcli.progress import no_progress
+from ffdcli.quality import QualityReport, check_quality, quality_reference
+from ffdcli.rotations import rotations_from_deformation_gradient, surface_frame_gradient
 from ffdcli.settings import BoxSettings
+from ffdcli.surface import Surface, default_surface, extract_surface
+from ffdcli.warp import WarpModel, WarpSettings, prepare_mesh_warp, warp
 
 
 @dataclass
@@ -30,9 +44,9 @@ class PreparedBox:
     """A mesh with its wing surface embedded in a lattice."""
 
     mesh: Mesh
-    surface: object              # ffdcli.surface.Surface
+    surface: Surface
     box: Box
-    embedding: object            # ffdcli.embedding.Embedding (of the surface points, core coordinates)
+    embedding: Embedding         # of the surface points, in core coordinates
     report: dict
     cache: Path | None
     from_cache: bool
@@ -80,7 +94,6 @@ def is_surface_mesh(mesh: Mesh) -> bool:
 
 def resolve_surface(mesh: Mesh, surface) -> list[str]:
     """The surface marker names: as given, else the default rule of :mod:`ffdcli.surface`."""
-    from ffdcli.surface import default_surface
 
     if surface:
         names = [surface] if isinstance(surface, str) else list(surface)
@@ -122,7 +135,6 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     broadcasts them; the cache is written by rank 0 only (it holds the whole surface's embedding, so
     any rank count reads it).
     """
-    from ffdcli.parallel import SerialComm
 
     comm = comm or SerialComm()
     if comm.size > 1:
@@ -137,12 +149,7 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
     """:func:`prepare_box` with ``mesh`` read. ``comm`` (MPI, every rank with the same mesh): rank 0
     reads the cache file and broadcasts it, rank 0 writes it, and a box fit embeds the surface in
     blocks of points, one a rank."""
-    from ffdcli.parallel import SerialComm
-
     comm = comm or SerialComm()
-    from ffdcli import cache as cache_mod
-    from ffdcli.formats import read_mesh
-    from ffdcli.surface import extract_surface
 
     t0 = time.perf_counter()
     progress = progress or no_progress
@@ -161,7 +168,6 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
         check_sections_plane(mesh, settings, dim)
         check_lattice_size(settings.points, path=mesh.path)
         check_box_memory(settings.points, settings.degree, len(surf.ids), path=mesh.path)
-    from ffdcli.extruded import one_cell_thick
 
     extrusion = one_cell_thick(mesh, names)
     notes = [extrusion.message()] if extrusion is not None else []
@@ -209,8 +215,6 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
     """:func:`prepare_box` over ranks: rank 0 reads (and hashes) the mesh, every rank gets it by
     broadcast, then every rank runs :func:`_prepare_box` with the communicator (rank 0 reads and
     writes the cache; on a miss every rank fits the box, each embedding its block of the surface)."""
-    from ffdcli import cache as cache_mod
-    from ffdcli.formats import read_mesh
 
     def read():
         m = mesh if isinstance(mesh, Mesh) else read_mesh(mesh, progress=progress or no_progress)
@@ -235,10 +239,10 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
 class DesignRun:
     """A design file with its box prepared and its changes built: everything ``deform`` needs."""
 
-    design: object               # ffdcli.design.Design
+    design: Design
     prep: PreparedBox
-    changes: list                # ffdcli.changes change objects, in pipeline order
-    _warp: object = field(default=None, repr=False)   # the volume warp model, built on first use
+    changes: list[Change]        # in pipeline order
+    _warp: WarpModel | None = field(default=None, repr=False)   # the volume warp model, built on first use
     comm: object = field(default=None, repr=False)    # ffdcli.parallel communicator (None: serial)
     _quality_ref: object = field(default=None, repr=False)   # the gate's view of the input mesh, built once
 
@@ -246,8 +250,6 @@ class DesignRun:
         """The quality gate's :class:`~ffdcli.quality.QualityReference` of the input mesh, computed
         once: every design of a loop is judged against it without recomputing the input's quality."""
         if self._quality_ref is None:
-            from ffdcli.quality import quality_reference
-
             self._quality_ref = quality_reference(self.prep.mesh)
         return self._quality_ref
 
@@ -255,7 +257,6 @@ class DesignRun:
         """The IDW model of this mesh (``volume:`` settings of the design; the quality ``threshold``
         there is not the warp's), built once and kept: a design loop does not rebuild its tree."""
         if self._warp is None:
-            from ffdcli.warp import WarpSettings, prepare_mesh_warp
 
             vol = self.design.volume or {}      # the gate's keys are skipped by from_dict
             settings = WarpSettings.from_dict(vol, path=self.design.path)
@@ -277,7 +278,6 @@ class DesignRun:
 
     def lattice_after(self, changes=None) -> np.ndarray:
         """Control points after the design's changes (or ``changes``)."""
-        from ffdcli.changes import apply_changes
 
         if changes is not None:
             return apply_changes(self.P0, self.box.frame, changes)
@@ -307,7 +307,6 @@ class DesignRun:
         lattice (which do not move) get the identity, and so does every point when ``P`` is the
         original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by 1e-18, and
         a design without changes must write the input back bit for bit)."""
-        from ffdcli.rotations import rotations_from_deformation_gradient
 
         box = self.box
         S = len(self.prep.embedding.inside)
@@ -317,7 +316,6 @@ class DesignRun:
         ins, F, n0 = self._frame_gradient_inputs(P)
         if not len(ins):
             return R
-        from ffdcli.rotations import surface_frame_gradient
 
         Fs = surface_frame_gradient(F, n0)
         if box.dim == 2:
@@ -328,7 +326,6 @@ class DesignRun:
 
     def _frame_gradient_inputs(self, P: np.ndarray):
         """(inside point indices, F in core coordinates (k, d, d), unit normals n0 (k, d))."""
-        from ffdcli.lattice import derivatives
 
         box, emb = self.box, self.prep.embedding
         n_all = self.prep.surface.normals[:, box.plane_axes]
@@ -357,7 +354,6 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
 
     ``comm`` (:mod:`ffdcli.parallel`) is kept by the run: :func:`deform` shares the volume among
     the ranks."""
-    from ffdcli.design import build_changes
 
     try:
         prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
@@ -372,7 +368,7 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     return DesignRun(design=design, prep=prep, changes=changes, comm=comm)
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class Deformation:
     """The result of one design: new coordinates of every mesh node, and what was checked."""
 
@@ -380,7 +376,7 @@ class Deformation:
     lattice: np.ndarray          # (n, m, l, 3) deformed control points
     surface_displacement: np.ndarray   # (S, 3)
     volume_method: str
-    quality: object | None       # ffdcli.quality.QualityReport
+    quality: QualityReport | None
     seconds: dict
     #: The recovery attempts when the design's own settings failed the gate (:mod:`ffdcli.recovery`):
     #: ``[{"attempt": what, "failed": cells, "ok": bool}, ...]``, the design's settings first.
@@ -434,7 +430,6 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     method = volume_method(run)
     t1 = time.perf_counter()
     if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
-        from ffdcli.warp import warp
 
         model = run.warp_model(progress)
         rot = run.surface_rotations(P1)
@@ -449,8 +444,6 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
                            "large? nothing was written", path=run.design.path)
     quality = None
     if mesh.n_cells and check and not is_surface_mesh(mesh):
-        from ffdcli.quality import check_quality
-
         t2 = time.perf_counter()
         threshold = (run.design.volume or {}).get("threshold")
         kw = {} if threshold is None else {"threshold": float(threshold)}
@@ -458,8 +451,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
     if quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw":
-        from ffdcli.quality import check_quality
-        from ffdcli.recovery import attempts, incremental_warp
+        from ffdcli.recovery import attempts, incremental_warp  # it runs the warp of a DesignRun
 
         t3 = time.perf_counter()
         tried.append({"attempt": "the design's volume settings", "failed": quality.n_failed, "ok": False})
@@ -487,9 +479,6 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
 
     ``notes`` (a dict) receives what a writer reports: ``"su2_ffd"``, what was done to SU2's own FFD
     section of an SU2 mesh, when it has one. ``target``: an airfoil (K, 2) drawn on the picture."""
-    from ffdcli.formats import write_mesh
-    from ffdcli.formats.lattice_vtk import write_lattice_vtk
-    from ffdcli.formats.su2_surface import write_surface_file
 
     notes = {} if notes is None else notes
 

@@ -73,10 +73,6 @@ class Surface:
         """(S,) vertex areas (lengths in 2D): each face's area shared equally by its nodes."""
         return vertex_areas(self.points, self.faces)
 
-    def with_points(self, points: np.ndarray) -> Surface:
-        """The same surface (ids, faces) with new coordinates, e.g. after a deformation."""
-        return Surface(self.names, self.ids, np.asarray(points, dtype=np.float64), self.faces)
-
 
 def face_vectors(points: np.ndarray, faces: Sequence[CellBlock]) -> np.ndarray:
     """Vector areas (F, 3) of line, triangle and quad faces, blocks concatenated in order.

@@ -173,17 +173,6 @@ def test_sweep_and_dihedral_offsets_move_whole_sections():
     assert [n for n, _ in Sweep(offsets=off).variables()][1] == "sweep.offsets[1]"
 
 
-def test_sweep_uses_the_surface_leading_edge_offset():
-    """le_offset (X0 - B P0 of the leading-edge points) enters the angle."""
-    P, frame = wing_lattice(sweep_deg=0.0)
-    shifted = LatticeFrame(frame.chord_dir, frame.thickness_dir, frame.span_dir, frame.ref_weights,
-                           frame.le_rows, 3, le_offset=np.array([[0, 0, 0], [0.4, 0, 0]]))
-    lam0 = le_angle(P, shifted, shifted.chord_dir)
-    assert lam0 == pytest.approx(math.atan2(0.4, 4.0), abs=TOL)
-    Q = Sweep(7.0).apply(P, shifted)
-    assert le_angle(Q, shifted, shifted.chord_dir) == pytest.approx(lam0 + math.radians(7.0), abs=TOL)
-
-
 # ------------------------------------------------------------------------------------------- chord
 
 def test_chord_scales_about_the_trailing_edge_in_plane_keeping_thickness_to_chord():
