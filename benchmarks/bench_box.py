@@ -1,6 +1,6 @@
 """The automatic box on a big surface (issue 4): fitting must not cost more than embedding.
 
-A swept, tapered, twisted wing surface of ~1M points (``ffdcli.wings.wing_surface``); ``fit_box``
+A swept, tapered, twisted wing surface of ~1M points (``ffdcli.testing.wings.wing_surface``); ``fit_box``
 (section cuts, rectangles, embedding, margin check) against ``embed`` alone on the final lattice.
 """
 
@@ -17,7 +17,7 @@ def _case(n_chord: int, n_span: int) -> dict:
     from ffdcli.embedding import embed
     from ffdcli.mesh import CellBlock
     from ffdcli.settings import BoxSettings
-    from ffdcli.wings import Planform, wing_surface
+    from ffdcli.testing.wings import Planform, wing_surface
 
     pf = Planform(le_sweep_deg=30, taper=0.3, twist_root_deg=2, twist_tip_deg=-4, dihedral_deg=5)
     pts, quads = wing_surface(pf, n_chord=n_chord, n_span=n_span)

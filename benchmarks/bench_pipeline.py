@@ -1,7 +1,7 @@
 """End to end: `ffd deform` of a 1M-node wing mesh whose box is cached (issue 5), and the volume warp
 on that real mesh (issue 6).
 
-The mesh: :func:`ffdcli.wings.extruded_wing_mesh` of a tapered (0.5), swept (20 deg) NACA 0012 wing,
+The mesh: :func:`ffdcli.testing.wings.extruded_wing_mesh` of a tapered (0.5), swept (20 deg) NACA 0012 wing,
 semi-span 3 (chord x, thickness y, span z): a structured hexahedral O-grid volume mesh,
 ``n_around=257, n_radial=20, n_span=196`` = 1,003,520 nodes, 50,176 of them on the marker ``wing``
 (markers wing, farfield, symmetry, side), written as SU2 to a temporary folder. ``ffd box`` builds and
@@ -60,7 +60,7 @@ def build_case(folder: Path, sizes: dict) -> dict:
     import numpy as np
 
     from ffdcli.formats import write_mesh
-    from ffdcli.wings import Planform, extruded_wing_mesh
+    from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
     t0 = time.perf_counter()
     mesh = extruded_wing_mesh(Planform(semi_span=3.0, taper=0.5, le_sweep_deg=20.0), **sizes)

@@ -4,7 +4,7 @@ Every mesh is a half wing whose root lies in a symmetry plane and whose TIP IS I
 (the far-field box extends beyond it), as in a real external-aerodynamics mesh:
 
 - the wing is lofted (OpenCASCADE, straight between consecutive sections) through NACA sections of
-  a :class:`ffdcli.wings.Planform` — any span axis (x, y or z), left or right (``span_sign``),
+  a :class:`ffdcli.testing.wings.Planform` — any span axis (x, y or z), left or right (``span_sign``),
   sweep, dihedral, taper, twist, a trailing-edge kink, sharp or blunt trailing edge;
 - the tip is ``flat`` (a blunt cap: the tip section closed by a plane) or ``round`` (the thickness
   shrinks as ``cos(phi)`` over half a tip thickness beyond the tip, a faceted half-round cap);
@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.mesh import CellBlock, Mesh
-from ffdcli.wings import Planform, crm_planform
+from ffdcli.testing.wings import Planform, crm_planform
 
 #: Bump when the generator changes what it writes (part of the cache key).
 GENERATOR_VERSION = 2

@@ -6,9 +6,9 @@ Usage (from the repository root; needs the optional extra ``samples``, i.e. gmsh
     PYTHONPATH=$PWD python samples/make_samples.py rect_wing  # one of them
 
 The outputs are committed, so neither the tests nor CI need gmsh. The 3D wings are lofted with the
-OpenCASCADE kernel through NACA sections from :mod:`ffdcli.wings` (same planform parameters as
+OpenCASCADE kernel through NACA sections from :mod:`ffdcli.testing.wings` (same planform parameters as
 ``rect_wing_planform`` / ``crm_planform``), cut from a box far field and meshed with tetrahedra; the 2D
-O-grid is :func:`ffdcli.wings.airfoil_ogrid` (pure NumPy). The SU2 files are written by the small
+O-grid is :func:`ffdcli.testing.wings.airfoil_ogrid` (pure NumPy). The SU2 files are written by the small
 writer below (``ffdcli.formats.su2`` is not used so that this script stays independent of it).
 """
 
@@ -22,7 +22,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from ffdcli import wings  # noqa: E402
+from ffdcli.testing import wings  # noqa: E402
 from ffdcli.atomic import atomic_write  # noqa: E402
 from ffdcli.mesh import VTK_ID  # noqa: E402
 
@@ -257,7 +257,7 @@ def write_dat(out: Path, name: str, coords: np.ndarray) -> None:
 
 def make_airfoils() -> list[dict]:
     naca = wings.naca4("0012", 133, closed_te=True)
-    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.wings.naca4)",
+    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.testing.wings.naca4)",
               naca)
     src = Path("/work/shared/data/airfoils/s1223.dat")
     if src.exists():

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 from conftest import SAMPLES, shared_file
 
-from ffdcli import wings
 from ffdcli.errors import InputError
 from ffdcli.formats.airfoil import Airfoil, read_airfoil, write_airfoil
+from ffdcli.testing import wings
 
 
 def _write(tmp_path, text, name="foil.dat"):

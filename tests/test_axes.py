@@ -8,7 +8,7 @@ from ffdcli.axes import detect_axes, free_edge_nodes
 from ffdcli.box import fit_box
 from ffdcli.settings import BoxSettings
 from ffdcli.surface import extract_surface
-from ffdcli.wings import Planform, surface_mesh
+from ffdcli.testing.wings import Planform, surface_mesh
 
 SECTIONS = ["xy", "xz", "yz", "yx", "zx", "zy"]
 

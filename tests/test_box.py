@@ -16,7 +16,7 @@ from ffdcli.mesh import CellBlock
 from ffdcli.pipeline import prepare_box
 from ffdcli.settings import BoxSettings
 from ffdcli.surface import extract_surface
-from ffdcli.wings import Planform, wing_surface
+from ffdcli.testing.wings import Planform, wing_surface
 
 # Residual bound of the embedding: 1e-10 x lattice size (issue 3); the Newton stops far below it.
 RES = 1e-10
@@ -69,7 +69,7 @@ def test_box_margin_grows_until_the_surface_is_inside():
 
 
 def test_box_2d_airfoil():
-    from ffdcli.wings import naca4
+    from ffdcli.testing.wings import naca4
 
     xy = naca4("0012", 81)
     pts = np.c_[xy, np.zeros(len(xy))]

@@ -88,7 +88,7 @@ def test_affine_oracles(tmp_path, wing):
 def test_volume_is_the_closed_volume(tmp_path):
     """The half wing closed by its symmetry plane: the same volume as the wing with its root capped."""
     from ffdcli.constraints import _enclosed, enclosed_volume, surface_triangles
-    from ffdcli.wings import Planform, surface_mesh
+    from ffdcli.testing.wings import Planform, surface_mesh
 
     m = model_for(tmp_path, "tapered_swept_y", [{"span": 1.0}])
     closed = surface_mesh(Planform(**WINGS["tapered_swept_y"]), n_chord=31, n_span=13, root="closed")
@@ -173,7 +173,7 @@ def test_fold_free_sees_a_fold(tmp_path):
 
 def test_2d_airfoil_constraints(tmp_path):
     from ffdcli.formats import write_mesh
-    from ffdcli.wings import airfoil_ogrid_mesh
+    from ffdcli.testing.wings import airfoil_ogrid_mesh
 
     mesh = airfoil_ogrid_mesh("0012", n_around=65, n_radial=9)
     path = tmp_path / "foil.su2"

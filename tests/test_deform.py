@@ -12,7 +12,7 @@ from wingcase import write_design, write_surface_wing
 from ffdcli.design import load_design
 from ffdcli.formats import read_mesh
 from ffdcli.pipeline import deform, load_run, write_outputs
-from ffdcli.wings import Planform
+from ffdcli.testing.wings import Planform
 
 # Global changes (span, sweep, dihedral, uniform twist) are affine maps of the whole lattice, so by
 # affine invariance of B-splines every surface point moves by the same map: exact to rounding of

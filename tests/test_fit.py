@@ -13,7 +13,7 @@ from ffdcli.design import load_design
 from ffdcli.fit import build_problem, fit_design, solve
 from ffdcli.formats.airfoil import write_airfoil
 from ffdcli.pipeline import load_run
-from ffdcli.wings import naca4
+from ffdcli.testing.wings import naca4
 
 CONFIG = REPO / "configs" / "naca0012_s1223.yaml"
 

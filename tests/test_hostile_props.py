@@ -162,7 +162,7 @@ def _popen_ffd(*args, cwd):
 def big_wing(tmp_path_factory):
     """A volume wing big enough that writing it takes a noticeable time (~100k nodes), with no warp."""
     from ffdcli.formats import write_mesh
-    from ffdcli.wings import Planform, extruded_wing_mesh
+    from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
     d = tmp_path_factory.mktemp("sigint")
     mesh = extruded_wing_mesh(Planform(), n_around=121, n_radial=33, n_span=26)

@@ -12,8 +12,8 @@ from conftest import SAMPLES, assert_clean_failure, file_hash, run_ffd
 from ffdcli.design import changes_from_spec, load_design
 from ffdcli.formats import read_mesh, write_mesh
 from ffdcli.starter import _flow, starter_design, volume_defaults
+from ffdcli.testing.wings import Planform, extruded_wing_mesh, surface_mesh
 from ffdcli.warp import WarpSettings
-from ffdcli.wings import Planform, extruded_wing_mesh, surface_mesh
 
 
 def _commented_changes(text: str) -> list[str]:

@@ -128,7 +128,7 @@ def test_multizone_cgns_wing_surface_is_3d_with_the_box_axes():
 
 def _extruded_airfoil(tmp_path, merge: bool):
     """A one-cell-thick extruded NACA0012 (span z 0..1); ``merge``: both side planes one marker."""
-    from ffdcli.wings import Planform, extruded_wing_mesh
+    from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
     m = extruded_wing_mesh(Planform(semi_span=1.0, root_chord=1.0, sections="xy"), n_around=41,
                            n_radial=9, n_span=2)

@@ -97,7 +97,7 @@ def _run(tmp_path, changes, **planform):
 
 def test_outline_of_a_swept_tapered_planform_follows_its_edges():
     from ffdcli.plot import outline
-    from ffdcli.wings import Planform, wing_surface
+    from ffdcli.testing.wings import Planform, wing_surface
 
     pf = Planform(semi_span=3.0, root_chord=1.5, taper=0.4, le_sweep_deg=30.0, sections="xz")
     X = wing_surface(pf, n_chord=41, n_span=31)[0]

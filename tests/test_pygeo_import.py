@@ -15,7 +15,7 @@ from ffdcli.formats import write_mesh
 from ffdcli.formats.plot3d import read_plot3d
 from ffdcli.lattice import Lattice, evaluate
 from ffdcli.spline import clamped_knots
-from ffdcli.wings import Planform, surface_mesh
+from ffdcli.testing.wings import Planform, surface_mesh
 
 REF = "reference-ffd"
 SINGLE = ["CRM_Wing__FFD__wingFFD.xyz", "MACH_Tutorial_Wing__FFD__wingFFD.xyz",

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import SAMPLES, shared_file
 
-from ffdcli import wings
+from ffdcli.testing import wings
 
 NODES = {3: 2, 5: 3, 9: 4, 10: 4, 12: 8, 13: 6, 14: 5}
 

@@ -1,4 +1,4 @@
-"""ffdcli.wings: NACA sections, planforms, the quad wing surface, the O-grid and the extruded hex mesh.
+"""ffdcli.testing.wings: NACA sections, planforms, the quad wing surface, the O-grid and the extruded hex mesh.
 
 Most checks are against closed forms the construction must meet to rounding: 1e-12 (a few hundred
 ulps of coordinates of order 1-30) unless a comment says why another tolerance.
@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ffdcli import wings
 from ffdcli.mesh import Mesh
+from ffdcli.testing import wings
 
 TOL = 1e-12
 

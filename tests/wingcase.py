@@ -7,7 +7,7 @@ from pathlib import Path
 import yaml
 
 from ffdcli.formats import write_mesh
-from ffdcli.wings import Planform, extruded_wing_mesh, surface_mesh
+from ffdcli.testing.wings import Planform, extruded_wing_mesh, surface_mesh
 
 
 def write_surface_wing(tmp: Path, name: str = "wing.su2", **planform) -> Path:
