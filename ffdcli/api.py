@@ -23,12 +23,14 @@ Derivatives are exact (no finite differences):
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ffdcli.changes import design_variables, set_design_variables
 from ffdcli.errors import InputError
+from ffdcli.formats.sensitivity import Sensitivity, read_sensitivity
 from ffdcli.rotations import (  # noqa: F401  (re-exported: the API's names of PR 7)
     planar_rotation_derivative,
     polar_rotation_derivative,
@@ -469,13 +471,48 @@ def _finite_or_none(x: float) -> float | None:
 def read_sensitivity_for(model: DesignModel, path, *, points=None):
     """Read a sensitivity file against the deformed mesh of ``model`` (SPEC: coordinates of the
     design being differentiated). Returns (g (N, 3) dense, Sensitivity)."""
-    from ffdcli.formats.sensitivity import read_sensitivity
-
     mesh = model.run.prep.mesh
     pts = model.mesh_points() if points is None else points
     sens = read_sensitivity(path, pts, mesh.dim)
     return sens.to_dense(mesh.n_points), sens
 
 
-__all__ = ["DesignModel", "read_sensitivity_for", "polar_rotation_derivative", "planar_rotation_derivative",
-           "Path"]
+@dataclass(frozen=True)
+class Gradient:
+    """dJ/dv from a sensitivity file (:func:`gradient_from_file`).
+
+    values
+        {variable name: dJ/dv} in the order of the model's variables.
+    sensitivity
+        The file's rows as matched to the mesh (``matched_by``, ``worst_distance``).
+    surface_nodes, volume_nodes
+        How many rows are on the surface marker(s), and how many elsewhere in the mesh.
+    through_volume
+        Whether the volume rows were pulled back through the volume-mesh motion (a volume method and
+        volume rows); otherwise only the surface rows count.
+    """
+
+    values: dict[str, float]
+    sensitivity: Sensitivity
+    surface_nodes: int
+    volume_nodes: int
+    through_volume: bool
+
+
+def gradient_from_file(model: DesignModel, path, *, progress=None) -> Gradient:
+    """dJ/dv of every design variable of ``model`` by the chain rule from a sensitivity file (dJ/dX at
+    the nodes of the deformed mesh). The file must cover every surface node (InputError otherwise);
+    volume rows go through the volume-mesh motion's exact transpose when the design moves the volume."""
+    g, sens = read_sensitivity_for(model, path)
+    sens.check_covers(model.surface_ids, path)
+    on_surface = np.isin(sens.ids, model.surface_ids)
+    volume_nodes = int((~on_surface).sum())
+    through = bool(volume_nodes and model.uses_volume())
+    grad = model.mesh_vjp(g, progress=progress) if through else model.surface_vjp(g[model.surface_ids])
+    return Gradient(values={name: float(v) for name, v in zip(model.names, grad, strict=True)},
+                    sensitivity=sens, surface_nodes=int(on_surface.sum()), volume_nodes=volume_nodes,
+                    through_volume=through)
+
+
+__all__ = ["DesignModel", "Gradient", "gradient_from_file", "read_sensitivity_for", "polar_rotation_derivative",
+           "planar_rotation_derivative", "Path"]

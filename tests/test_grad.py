@@ -217,3 +217,22 @@ def test_volume_derivatives_at_default_tolerance_tip_inside(tmp_path, point):
     g = np.random.default_rng(20 + point).standard_normal((model.run.prep.mesh.n_points, 3))
     names = [n for n in model.names if "shape" not in n or n.endswith("[2]")]
     fd_check(model, g, mesh_functional(model), names=set(names))
+
+
+def test_gradient_from_file_is_the_cli_grad_and_needs_every_surface_node(tmp_path):
+    """The library call behind ffd grad: the same values, and the same refusal of a partial file."""
+    from ffdcli.api import gradient_from_file
+    from ffdcli.errors import InputError
+
+    mesh = write_surface_wing(tmp_path)
+    design = write_design(tmp_path, mesh, [{"twist": {"tip": 5}}, {"sweep": 3.0}])
+    model = DesignModel.from_file(design)
+    X = model.surface_points()
+    g = np.random.default_rng(7).standard_normal(X.shape)
+    write_sens_csv(tmp_path / "all.csv", model.surface_ids, X, g)
+    grad = gradient_from_file(model, tmp_path / "all.csv")
+    np.testing.assert_allclose(list(grad.values.values()), model.surface_vjp(g), rtol=1e-12)
+    assert list(grad.values) == model.names and grad.surface_nodes == len(X) and not grad.through_volume
+    write_sens_csv(tmp_path / "part.csv", model.surface_ids[1:], X[1:], g[1:])
+    with pytest.raises(InputError, match="has no row for 1 of the"):
+        gradient_from_file(model, tmp_path / "part.csv")

@@ -37,9 +37,7 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     Example:
       ffd grad design.yaml --sens surface_sens.csv -o grad.json
     """
-    import numpy as np
-
-    from ffdcli.api import DesignModel, read_sensitivity_for
+    from ffdcli.api import DesignModel, gradient_from_file
     from ffdcli.design import load_design
     from ffdcli.outputs import plan_outputs
     from ffdcli.pipeline import load_run
@@ -51,26 +49,13 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     model = DesignModel(load_run(design, cache_dir=cache_dir, progress=console.progress, comm=console.comm),
                         comm=console.comm)
     sens_file = sens
-    g, sens = read_sensitivity_for(model, sens_file)
-    on_surface = np.isin(sens.ids, model.surface_ids)
-    missing = np.setdiff1d(model.surface_ids, sens.ids)
-    if len(missing):
-        from ffdcli.errors import InputError
-
-        raise InputError(f"has no row for {len(missing)} of the {len(model.surface_ids)} surface nodes "
-                         f"(first mesh node ids: {', '.join(map(str, missing[:5].tolist()))}); dJ/dX is needed "
-                         "at every node of the surface marker(s)", path=sens_file)
-    volume_nodes = int((~on_surface).sum())
-    if volume_nodes and model.uses_volume():
-        grad = model.mesh_vjp(g, progress=console.progress)
-    else:
-        grad = model.surface_vjp(g[model.surface_ids])
-    result = {name: float(v) for name, v in zip(model.names, grad)}
+    grad = gradient_from_file(model, sens_file, progress=console.progress)
+    sens, result, volume_nodes = grad.sensitivity, grad.values, grad.volume_nodes
     summary = {
         "design": str(design_file), "sensitivity": str(sens_file),
         "gradient": result, "matched_by": sens.matched_by,
-        "worst_match_distance": sens.worst_distance, "surface_nodes": int(on_surface.sum()),
-        "volume_nodes": volume_nodes, "through_volume": bool(volume_nodes and model.uses_volume()),
+        "worst_match_distance": sens.worst_distance, "surface_nodes": grad.surface_nodes,
+        "volume_nodes": volume_nodes, "through_volume": grad.through_volume,
         "seconds": round(time.perf_counter() - t0, 3),
     }
     if output:

@@ -43,6 +43,15 @@ class Sensitivity:
         out[self.ids] = self.values
         return out
 
+    def check_covers(self, ids: np.ndarray, path=None, what: str = "surface") -> None:
+        """The rule of a gradient: dJ/dX is given at every node of ``ids`` (the surface marker's
+        nodes); raises :class:`InputError` naming the file, how many rows are missing and the first ids."""
+        missing = np.setdiff1d(ids, self.ids)
+        if len(missing):
+            raise InputError(f"has no row for {len(missing)} of the {len(ids)} {what} nodes (first mesh node "
+                             f"ids: {', '.join(map(str, missing[:5].tolist()))}); dJ/dX is needed at every "
+                             f"node of the {what} marker(s)", path=path)
+
 
 def _split(line: str) -> list[str]:
     return [t.strip().strip('"').strip("'") for t in re.split(r"[,\s]+", line.strip()) if t.strip()]
