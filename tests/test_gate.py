@@ -12,7 +12,7 @@ from wingcase import write_design
 
 from ffdcli.formats import read_mesh, write_mesh
 from ffdcli.quality import cell_quality
-from ffdcli.wings import Planform, extruded_wing_mesh
+from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
 
 @pytest.fixture(scope="module")
