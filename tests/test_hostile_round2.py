@@ -223,7 +223,7 @@ def test_plan_write_is_all_or_nothing(tmp_path):
 @pytest.fixture(scope="module")
 def nan_meshes(tmp_path_factory):
     from ffdcli.formats import write_mesh
-    from ffdcli.wings import Planform, extruded_wing_mesh
+    from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
     d = tmp_path_factory.mktemp("nan")
     mesh = extruded_wing_mesh(Planform(), n_around=21, n_radial=5, n_span=4)
@@ -309,7 +309,7 @@ def _popen_ffd(*args, cwd):
 def mid_wing(tmp_path_factory):
     """A volume wing whose SU2 output takes a noticeable time to write, its box cached."""
     from ffdcli.formats import write_mesh
-    from ffdcli.wings import Planform, extruded_wing_mesh
+    from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
     d = tmp_path_factory.mktemp("sigterm")
     mesh = extruded_wing_mesh(Planform(), n_around=101, n_radial=25, n_span=20)
