@@ -134,6 +134,18 @@ class BoxSettings:
                              path=path, key=f"{key}.margin")
         return replace(self, points=pts, degree=deg)
 
+    def with_options(self, **options) -> BoxSettings:
+        """These settings with every option that is given (not None) in place of theirs: how the
+        options of ``ffd box`` (or a script's) go over a design file's ``box:``.
+
+        New ``points`` without a ``degree`` drop the old degree (it was chosen for the old points):
+        the default of the new points applies."""
+        given = {k: v for k, v in options.items() if v is not None}
+        out = replace(self, **given)
+        if "points" in given and "degree" not in given:
+            out = replace(out, degree=None)
+        return out
+
     def as_dict(self) -> dict:
         """The settings as JSON values (tuples as lists)."""
         d = asdict(self)

@@ -8,8 +8,8 @@ import pytest
 from conftest import assert_clean_failure, run_ffd, shared_file
 from test_su2 import HEX2, TRI2D
 
-from ffdcli.cli.inspect import inspect_mesh
 from ffdcli.formats import read_mesh, write_mesh
+from ffdcli.inspection import inspect_mesh
 
 
 def test_json_summary_of_hand_made_mesh(tmp_path):
@@ -33,7 +33,7 @@ def test_json_summary_of_hand_made_mesh(tmp_path):
 def test_surface_option_gives_axes(tmp_path):
     p = tmp_path / "hex.su2"
     p.write_text(HEX2)
-    summary, text = inspect_mesh(p, ("Wing Lower-1",))
+    summary, text = inspect_mesh(p, ("Wing Lower-1",)).report()
     # the marker lies in z = 0, spans x 0..2 and y 0..1: span x, chord y, thickness z
     assert summary["axes"] == {"chord": "y", "thickness": "z", "span": "x"}
     assert summary["root"] == "min" and summary["surface"] == ["Wing Lower-1"]
@@ -43,7 +43,7 @@ def test_surface_option_gives_axes(tmp_path):
 def test_2d_mesh_text(tmp_path):
     p = tmp_path / "tri.su2"
     p.write_text(TRI2D)
-    summary, text = inspect_mesh(p)
+    summary, text = inspect_mesh(p).report()
     assert summary["dim"] == 2 and summary["surface"] == ["airfoil"]
     assert summary["cells"] == {"triangle": 2, "quad": 1}
     assert "airfoil" in text and "farfield" in text and "2D" in text
@@ -55,7 +55,7 @@ def test_real_wing_text_and_json():
     assert proc.returncode == 0, proc.stderr
     for word in ("WING", "FARFIELD", "SYMMETRY", "16234", "8149", "tetra"):
         assert word in proc.stdout
-    out, _ = inspect_mesh(src)              # the --json object, in process (one subprocess is enough)
+    out, _ = inspect_mesh(src).report()              # the --json object, in process (one subprocess is enough)
     out = json.loads(json.dumps(out))
     assert out["surface"] == ["WING"] and out["markers"]["WING"] == {"elements": 16234, "points": 8149}
     assert out["axes"]["thickness"] == "z"
@@ -64,8 +64,8 @@ def test_real_wing_text_and_json():
 def test_vtu_inspect_same_markers(tmp_path):
     src = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
     write_mesh(read_mesh(src), tmp_path / "rae.vtu")
-    a, _ = inspect_mesh(src)
-    b, _ = inspect_mesh(tmp_path / "rae.vtu")
+    a, _ = inspect_mesh(src).report()
+    b, _ = inspect_mesh(tmp_path / "rae.vtu").report()
     assert b["format"] == "vtu"
     for key in ("dim", "points", "cells", "markers", "bounds", "axes", "root", "surface"):
         assert a[key] == b[key], key
@@ -110,7 +110,7 @@ def test_surface_mesh_is_3d_with_the_axes_of_ffd_box(tmp_path, sections):
 
     p = write_surface_wing(tmp_path, sections=sections, semi_span=3.0, root_chord=1.0, taper=0.6,
                            le_sweep_deg=20.0)
-    summary, text = inspect_mesh(p)
+    summary, text = inspect_mesh(p).report()
     assert summary["dim"] == 3 and summary["surface_mesh"] is True
     axes, root, _ = _box_axes(p)
     assert summary["axes"] == axes and summary["root"] == root
@@ -119,7 +119,7 @@ def test_surface_mesh_is_3d_with_the_axes_of_ffd_box(tmp_path, sections):
 
 def test_multizone_cgns_wing_surface_is_3d_with_the_box_axes():
     src = shared_file("cgns/aero__meshing__volume__wing.cgns")
-    summary, text = inspect_mesh(src)
+    summary, text = inspect_mesh(src).report()
     assert summary["dim"] == 3 and summary["surface_mesh"] is True and "2D" not in text.splitlines()[0]
     axes, root, _ = _box_axes(src)
     assert summary["axes"] == axes == {"chord": "x", "thickness": "y", "span": "z"}
@@ -144,7 +144,7 @@ def test_one_cell_thick_extruded_airfoil_is_named_in_inspect_box_and_deform(tmp_
     from wingcase import write_design
 
     p = _extruded_airfoil(tmp_path, merge)
-    summary, text = inspect_mesh(p, ("wing",))
+    summary, text = inspect_mesh(p, ("wing",)).report()
     side = "sym" if merge else "symmetry"
     assert len(summary["warnings"]) == 1
     w = summary["warnings"][0]
@@ -161,7 +161,7 @@ def test_one_cell_thick_extruded_airfoil_is_named_in_inspect_box_and_deform(tmp_
 
 def test_real_extruded_airfoil_cgns_is_named():
     src = shared_file("cgns/airfoil__analysis__n0012.cgns")
-    summary, _ = inspect_mesh(src)
+    summary, _ = inspect_mesh(src).report()
     (w,) = summary["warnings"]
     assert "one cell thick along z" in w and "Sym" in w and "box.sections: xy" in w
 
@@ -169,5 +169,5 @@ def test_real_extruded_airfoil_cgns_is_named():
 def test_volume_meshes_get_no_extrusion_warning():
     from conftest import SAMPLES
 
-    summary, _ = inspect_mesh(SAMPLES / "rect_wing.su2")
+    summary, _ = inspect_mesh(SAMPLES / "rect_wing.su2").report()
     assert summary["warnings"] == []

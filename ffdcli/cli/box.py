@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import click
@@ -97,13 +96,8 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
         mesh_path = Path(mesh)
         settings = None
         surface = list(surfaces) or None
-    overrides = {k: v for k, v in (("points", points), ("degree", degree), ("sections", sections),
-                                   ("root", root), ("margin", margin), ("file", from_file))
-                 if v is not None}
-    if overrides:
-        settings = replace(settings or BoxSettings(), **overrides)
-        if "points" in overrides and "degree" not in overrides:
-            settings = replace(settings, degree=None)
+    settings = (settings or BoxSettings()).with_options(points=points, degree=degree, sections=sections,
+                                                        root=root, margin=margin, file=from_file)
     from ffdcli.formats import format_of
     from ffdcli.inputs import check_input_file
     from ffdcli.outputs import plan_outputs
