@@ -1,7 +1,7 @@
 """Constraints (issue 15): values and exact Jacobian of a full constraint set on a 1M-point wing surface.
 
 One child process (``python -m benchmarks.bench_constraints --child N``). The surface is a generated
-tapered, swept NACA 0012 wing (:func:`ffdcli.wings.surface_mesh`, about N points, quads); its box
+tapered, swept NACA 0012 wing (:func:`ffdcli.testing.wings.surface_mesh`, about N points, quads); its box
 (8 x 6 x 2, degree (3, 3, 1)) is fitted and the surface embedded untimed ("after the box is cached").
 The design is the 101-variable design of :mod:`benchmarks.bench_derivatives`. The constraints:
 a 10 x 8 thickness grid, t/c at 8 span stations, the volume, LE/TE and fold-free.
@@ -51,12 +51,13 @@ def _best(fn, repeat: int) -> float:
 
 def measure(npts: int) -> dict:
     from benchmarks.bench_derivatives import design_changes
-    from ffdcli.box import BoxSettings, fit_box
+    from ffdcli.box import fit_box
     from ffdcli.changes import apply_changes, design_variables
     from ffdcli.constraints import ConstraintInputs, build_constraints, constraint_names, evaluate
     from ffdcli.derivatives import lattice_jacobian
+    from ffdcli.settings import BoxSettings
     from ffdcli.surface import extract_surface
-    from ffdcli.wings import Planform, surface_mesh
+    from ffdcli.testing.wings import Planform, surface_mesh
 
     n_chord = max(11, int(np.sqrt(npts / 2.0)))
     n_span = max(5, npts // (2 * n_chord - 2))

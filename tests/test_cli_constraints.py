@@ -111,7 +111,7 @@ def test_bad_input_exit_2_naming_key_and_line(case, extra, words):
 
 def test_2d_span_has_no_meaning(tmp_path):
     from ffdcli.formats import write_mesh
-    from ffdcli.wings import airfoil_ogrid_mesh
+    from ffdcli.testing.wings import airfoil_ogrid_mesh
 
     write_mesh(airfoil_ogrid_mesh("0012", n_around=65, n_radial=9), tmp_path / "foil.su2")
     design = tmp_path / "foil.yaml"
