@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli import cache as cache_mod
+from ffdcli import formats
 from ffdcli.box import Box, fit_box
 from ffdcli.box_import import import_box
 from ffdcli.changes import Change, apply_changes
@@ -23,10 +24,8 @@ from ffdcli.design import Design, build_changes
 from ffdcli.embedding import Embedding
 from ffdcli.errors import InputError, QualityError
 from ffdcli.extruded import one_cell_thick
-from ffdcli.formats import read_mesh, write_mesh
-from ffdcli.formats.lattice_vtk import write_lattice_vtk
+from ffdcli.formats import lattice_vtk, su2_surface
 from ffdcli.formats.plot3d import read_plot3d
-from ffdcli.formats.su2_surface import write_surface_file
 from ffdcli.lattice import derivatives
 from ffdcli.limits import check_box_memory, check_lattice_size
 from ffdcli.mesh import Mesh, check_markers
@@ -156,7 +155,7 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
     if settings is not None:         # an absurd lattice is refused before minutes of reading
         check_lattice_size(settings.points, path=None if isinstance(mesh, Mesh) else mesh)
     if not isinstance(mesh, Mesh):
-        mesh = read_mesh(mesh, progress=progress)
+        mesh = formats.read_mesh(mesh, progress=progress)
     names = resolve_surface(mesh, surface)
     surf = extract_surface(mesh, names)
     if len(surf.ids) == 0:
@@ -217,7 +216,7 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
     writes the cache; on a miss every rank fits the box, each embedding its block of the surface)."""
 
     def read():
-        m = mesh if isinstance(mesh, Mesh) else read_mesh(mesh, progress=progress or no_progress)
+        m = mesh if isinstance(mesh, Mesh) else formats.read_mesh(mesh, progress=progress or no_progress)
         h = mesh_hash or (cache_mod.file_hash(m.path) if m.path is not None else None)
         return m, h
 
@@ -473,6 +472,8 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
                        quality=quality, seconds=t, recovery=tried, recovered_with=used)
 
 
+# The writers are called through their modules (formats.write_mesh, ...), not bound names: a test or
+# a caller that replaces a writer (a full disk, an I/O error) replaces it here too.
 def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes: dict | None = None,
                    target=None) -> dict:
     """{output kind: writer(tmp_path)} for the outputs of one design (see :mod:`ffdcli.outputs`).
@@ -483,16 +484,16 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
     notes = {} if notes is None else notes
 
     def mesh(tmp):
-        got = write_mesh(run.prep.mesh, tmp, result.points, progress=progress) or {}
+        got = formats.write_mesh(run.prep.mesh, tmp, result.points, progress=progress) or {}
         if "su2_ffd" in got:         # SU2's own FFD section, brought up to date (or dropped): say so
             notes["su2_ffd"] = got["su2_ffd"]
 
     def lattice(tmp):
-        write_lattice_vtk(tmp, result.lattice, original=run.P0)
+        lattice_vtk.write_lattice_vtk(tmp, result.lattice, original=run.P0)
 
     def surface_file(tmp):           # SU2's DV_KIND= SURFACE_FILE: the surface for SU2's own volume motion
         ids = run.prep.surface.ids
-        write_surface_file(tmp, ids, result.points[ids], space_dim(run.prep.mesh))
+        su2_surface.write_surface_file(tmp, ids, result.points[ids], space_dim(run.prep.mesh))
 
     def plot(tmp):
         from ffdcli.plot import plot_design
