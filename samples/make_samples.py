@@ -235,6 +235,176 @@ def make_crm_wing(out: Path) -> dict:
     return summary(out, pts, tets, markers)
 
 
+# ----------------------------------------------------------------------------------------------
+# Several components: wing + horizontal tail + fin, and a wing on a fuselage (issue 16)
+# ----------------------------------------------------------------------------------------------
+
+
+def _loft(occ, planform: wings.Planform, etas, n_chord: int = 61) -> int:
+    """OCC solid lofted straight through the planform's sections at ``etas`` (sharp TE, flat caps)."""
+    coords = planform.airfoil_coords(np.asarray(etas, float), 2 * n_chord - 1)
+    wires = []
+    for j, eta in enumerate(etas):
+        xyz = planform.section_points(np.array([eta]), coords[j])[0]
+        le = n_chord - 1
+        tags = [occ.addPoint(*p) for p in xyz[:-1]]
+        tags.append(tags[0])
+        wires.append(occ.addWire([occ.addSpline(tags[: le + 1]), occ.addSpline(tags[le:])]))
+    return occ.addThruSections(wires, makeSolid=True, makeRuled=True)[0][1]
+
+
+def mesh_parts(builders: dict, *, box_lo, box_hi, symmetry_axis: int, h_part: float, h_edge: float,
+               h_far: float, fuse: bool = False):
+    """Tetrahedral mesh of the fluid between several solids and a box; markers named after the solids.
+
+    ``builders`` maps a marker name to ``f(occ) -> volume tag``. ``fuse``: the solids intersect (a
+    wing on a fuselage) and are fused first, so that they share the junction curve. Every boundary
+    face of the fluid goes to ``symmetry`` (the box face at ``symmetry_axis`` = 0), ``farfield`` (the
+    other box faces) or to the solid whose bounding box holds it (the smallest such box).
+    """
+    import gmsh
+
+    gmsh.initialize(["-nt", "1"])
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add("parts")
+        occ = gmsh.model.occ
+        solids = {name: build(occ) for name, build in builders.items()}
+        occ.synchronize()
+        bbs = {name: np.array(gmsh.model.getBoundingBox(3, t)).reshape(2, 3) for name, t in solids.items()}
+        lo, hi = np.asarray(box_lo, float), np.asarray(box_hi, float)
+        tools = [(3, t) for t in solids.values()]
+        if fuse:
+            tools, _ = occ.fuse(tools[:1], tools[1:])
+        box = occ.addBox(*lo, *(hi - lo))
+        occ.cut([(3, box)], tools)
+        occ.synchronize()
+        vols = gmsh.model.getEntities(3)
+        assert len(vols) == 1, vols
+        groups = {name: [] for name in solids}
+        groups.update(symmetry=[], farfield=[])
+        tol = 1e-6 * float(np.max(hi - lo))
+        for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
+            bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
+            flat = np.abs(bb[0] - bb[1]) < tol
+            on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
+            on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
+            if on_box and on_box[0] == symmetry_axis and abs(bb[0, symmetry_axis]) < tol:
+                groups["symmetry"].append(tag)
+            elif on_box:
+                groups["farfield"].append(tag)
+            else:
+                holders = [n for n, b in bbs.items() if np.all(bb[0] >= b[0] - 1e-3) and np.all(bb[1] <= b[1] + 1e-3)]
+                assert holders, f"face {tag} {bb.tolist()} is in no solid's bounding box"
+                groups[min(holders, key=lambda n: float(np.prod(np.ptp(bbs[n], axis=0))))].append(tag)
+        part_faces = [t for n in solids for t in groups[n]]
+        for name, tags in groups.items():
+            assert tags, f"no surface classified as {name}"
+            gmsh.model.addPhysicalGroup(2, tags, name=name)
+        curves = sorted({abs(c[1]) for s in part_faces for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
+        f = gmsh.model.mesh.field
+        d_s = f.add("Distance")
+        f.setNumbers(d_s, "SurfacesList", part_faces)
+        f.setNumber(d_s, "Sampling", 60)
+        t_s = f.add("Threshold")
+        f.setNumber(t_s, "InField", d_s)
+        f.setNumber(t_s, "SizeMin", h_part)
+        f.setNumber(t_s, "SizeMax", h_far)
+        f.setNumber(t_s, "DistMin", 0.5 * h_part)
+        f.setNumber(t_s, "DistMax", 0.6 * float(np.min(hi - lo)))
+        d_c = f.add("Distance")
+        f.setNumbers(d_c, "CurvesList", curves)
+        f.setNumber(d_c, "Sampling", 200)
+        t_c = f.add("Threshold")
+        f.setNumber(t_c, "InField", d_c)
+        f.setNumber(t_c, "SizeMin", h_edge)
+        f.setNumber(t_c, "SizeMax", h_far)
+        f.setNumber(t_c, "DistMin", 0.5 * h_edge)
+        f.setNumber(t_c, "DistMax", 20 * h_part)
+        m = f.add("Min")
+        f.setNumbers(m, "FieldsList", [t_s, t_c])
+        f.setAsBackgroundMesh(m)
+        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+        gmsh.option.setNumber("Mesh.Algorithm", 6)
+        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+        gmsh.option.setNumber("Mesh.Optimize", 1)
+        gmsh.model.mesh.generate(3)
+        node_tags, xyz, _ = gmsh.model.mesh.getNodes()
+        xyz = xyz.reshape(-1, 3)
+        etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
+        assert list(etypes) == [4], etypes
+        tets_tags = enodes[0].reshape(-1, 4).astype(np.int64)
+        marker_tags = {}
+        for name, tags in groups.items():
+            tris = []
+            for s in tags:
+                et, _, en = gmsh.model.mesh.getElements(2, s)
+                assert list(et) == [2], et
+                tris.append(en[0].reshape(-1, 3).astype(np.int64))
+            marker_tags[name] = np.concatenate(tris)
+    finally:
+        gmsh.finalize()
+    used = np.unique(tets_tags)
+    lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
+    lookup[used] = np.arange(len(used))
+    pos = np.full(len(lookup), -1, dtype=np.int64)
+    pos[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+    points = xyz[pos[used]]
+    tets = lookup[tets_tags]
+    vol = tet_volumes(points, tets)
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
+    markers = {}
+    for name, tris in marker_tags.items():
+        t = lookup[tris]
+        if np.any(t < 0):
+            raise RuntimeError(f"marker {name} references a node that no tetrahedron uses")
+        markers[name] = t
+    return points, tets, _orient_boundary(points, tets, markers)
+
+
+# Chord x, span y, thickness z (as the CRM); the symmetry plane is y = 0.
+WING = dict(semi_span=2.5, root_chord=1.0, taper=0.4, le_sweep_deg=25.0, root_airfoil="0012", sections="xz")
+HTAIL = dict(semi_span=1.0, root_chord=0.5, taper=0.6, le_sweep_deg=30.0, root_airfoil="0010", sections="xz",
+             root_offset=(3.0, 0.0, 0.0))
+# a twin fin standing clear of the tail (its root at z = 0.15, off the tail's tip): span along z
+FIN = dict(semi_span=0.7, root_chord=0.5, taper=0.6, le_sweep_deg=35.0, root_airfoil="0010", sections="xy",
+           root_offset=(3.1, 0.8, 0.15))
+FUSELAGE_RADIUS = 0.35
+
+
+def make_wing_tail_fin(out: Path) -> dict:
+    """Wing + horizontal tail (roots on the symmetry plane) + a vertical fin (span along z)."""
+    parts = {"wing": (WING, [0.0, 1.0]), "htail": (HTAIL, [0.0, 1.0]), "vfin": (FIN, [0.0, 1.0])}
+    builders = {n: (lambda occ, kw=kw, e=e: _loft(occ, wings.Planform(**kw), e)) for n, (kw, e) in parts.items()}
+    pts, tets, markers = mesh_parts(builders, box_lo=(-6.0, 0.0, -6.0), box_hi=(10.0, 7.0, 6.0), symmetry_axis=1,
+                                    h_part=0.045, h_edge=0.018, h_far=2.0)
+    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
+    return summary(out, pts, tets, markers)
+
+
+def _fuselage(occ) -> int:
+    """Half a body of revolution along x (the box cuts it at y = 0): a cylinder with a round nose and tail."""
+    r = FUSELAGE_RADIUS
+    cyl = occ.addCylinder(-0.5, 0.0, 0.0, 3.5, 0.0, 0.0, r)
+    nose = occ.addSphere(-0.5, 0.0, 0.0, r)
+    tail = occ.addSphere(3.0, 0.0, 0.0, r)
+    (out, _) = occ.fuse([(3, cyl)], [(3, nose), (3, tail)])
+    return out[0][1]
+
+
+def make_wing_body(out: Path) -> dict:
+    """A low wing through a fuselage: the wing's root meets the fuselage, not the symmetry plane."""
+    wing = wings.Planform(**{**WING, "root_offset": (0.6, 0.0, -0.12)})
+    builders = {"fuselage": _fuselage, "wing": lambda occ: _loft(occ, wing, [0.0, 1.0])}
+    pts, tets, markers = mesh_parts(builders, box_lo=(-6.0, 0.0, -6.0), box_hi=(10.0, 7.0, 6.0), symmetry_axis=1,
+                                    h_part=0.045, h_edge=0.018, h_far=2.0, fuse=True)
+    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
+    return summary(out, pts, tets, markers)
+
+
 def make_naca0012_2d(out: Path) -> dict:
     m = wings.airfoil_ogrid_mesh("0012", n_around=161, n_radial=41, farfield_radius=15.0)
     write_su2(out, 2, m.points, [("quad", m.cells[0].data)],
@@ -298,6 +468,8 @@ MAKERS = {
     "crm_wing": lambda: make_crm_wing(HERE / "crm_wing.su2"),
     "airfoils": make_airfoils,
     "surface_sens": lambda: make_volume_sens(HERE / "rect_wing_surface_sens.csv"),
+    "wing_tail_fin": lambda: make_wing_tail_fin(HERE / "wing_tail_fin.su2"),
+    "wing_body": lambda: make_wing_body(HERE / "wing_body.su2"),
 }
 
 
