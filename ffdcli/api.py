@@ -28,7 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.changes import design_variables, set_design_variables
 from ffdcli.errors import InputError
 from ffdcli.formats.sensitivity import Sensitivity, read_sensitivity
 from ffdcli.rotations import (  # noqa: F401  (re-exported: the API's names of PR 7)
@@ -63,9 +62,10 @@ class DesignModel:
 
         self.run = run
         self.comm = comm or getattr(run, "comm", None) or SerialComm()
-        self.names, self.values = design_variables(run.changes)
-        self.units = design_units(run.changes)
-        natural = design_bounds(run.P0, run.box.frame, run.changes)
+        self.names, self.values = run.variables()
+        self.units = [u for c in run.components for u in design_units(list(c.changes))]
+        natural = np.concatenate([design_bounds(c.P0, c.box.frame, list(c.changes)) for c in run.components]) \
+            if run.components else np.zeros((0, 2))
         design = run.design
         spec = (getattr(design, "data", None) or {}).get("bounds")
         error = getattr(design, "error", None)
@@ -139,7 +139,7 @@ class DesignModel:
             if any(r != ranks[0] for r in ranks):
                 raise InputError("set_values: the MPI ranks were given different design values; every rank "
                                  "must set the same values")
-        self.run.changes = set_design_variables(self.run.changes, values)
+        self.run.set_values(values)
         self.values = values.copy()
         self._cache.clear()
 
@@ -298,32 +298,63 @@ class DesignModel:
     # -- evaluation --------------------------------------------------------------------------
     @property
     def surface_ids(self) -> np.ndarray:
-        """(S,) mesh node ids of the surface points, in the row order of :meth:`surface_points`."""
-        return self.run.prep.surface.ids
+        """(S,) mesh node ids of the surface points (every component's, sorted), in the row order of
+        :meth:`surface_points`."""
+        return self.run.surface_ids
 
     @property
     def basis(self):
-        """B (S, n_ctrl) CSR: surface displacement = B @ (P' - P0).reshape(-1, 3)."""
+        """B (S, n_ctrl) CSR: surface displacement = B @ (P' - P0).reshape(-1, 3).
+
+        Several components: block diagonal, the columns of the components' lattices one after the
+        other (file order), the rows as ``surface_ids``."""
         if self._B is None:
-            self._B = self.run.prep.embedding.basis_matrix().tocsr()
+            import scipy.sparse as sp
+
+            comps = self.run.components
+            if len(comps) == 1:
+                self._B = comps[0].prep.embedding.basis_matrix().tocsr()
+            else:
+                lay = self.run.layout
+                S, K = len(lay.surface_ids), lay.ctrl_offsets[-1]
+                r, c, d = [], [], []
+                for comp, rows, off in zip(comps, lay.rows, lay.ctrl_offsets, strict=False):
+                    b = comp.prep.embedding.basis_matrix().tocoo()
+                    r.append(rows[b.row])
+                    c.append(b.col + off)
+                    d.append(b.data)
+                self._B = sp.csr_matrix((np.concatenate(d), (np.concatenate(r), np.concatenate(c))), shape=(S, K))
         return self._B
 
-    def lattice(self) -> np.ndarray:
-        """(n, m, l, 3) control points after the changes at the current values."""
-        if "P" not in self._cache:
-            self._cache["P"] = self.run.lattice_after()
-        return self._cache["P"]
+    def lattices(self) -> list[np.ndarray]:
+        """Deformed control points of every component (file order)."""
+        if "Ps" not in self._cache:
+            self._cache["Ps"] = self.run.lattices_after()
+        return self._cache["Ps"]
+
+    def lattice(self):
+        """Deformed control points (n, m, l, 3); several components: the list of every component's."""
+        Ps = self.lattices()
+        return Ps[0] if self.run.single else Ps
 
     def surface_points(self) -> np.ndarray:
         """(S, 3) deformed surface points (the rows of ``surface_ids``)."""
-        return self.run.prep.surface.points + self.run.surface_displacement(self.lattice())
+        X0 = self.run.prep.mesh.points[self.surface_ids] if not self.run.single else self.run.prep.surface.points
+        return X0 + self.run.surface_displacement(self.lattices())
 
     def lattice_jacobian(self) -> np.ndarray:
-        """dP'/dv (n_ctrl*3, n_vars)."""
+        """dP'/dv (n_ctrl*3, n_vars); several components: block diagonal (``basis`` column order)."""
         if "J" not in self._cache:
-            from ffdcli.derivatives import lattice_jacobian
-
-            self._cache["J"] = lattice_jacobian(self.run.P0, self.run.box.frame, self.run.changes)
+            comps = self.run.components
+            blocks = [c.lattice_jacobian() for c in comps]
+            if len(blocks) == 1:
+                self._cache["J"] = blocks[0]
+            else:
+                lay = self.run.layout
+                J = np.zeros((3 * lay.ctrl_offsets[-1], lay.var_offsets[-1]))
+                for blk, c0, v0 in zip(blocks, lay.ctrl_offsets, lay.var_offsets, strict=False):
+                    J[3 * c0:3 * c0 + blk.shape[0], v0:v0 + blk.shape[1]] = blk
+                self._cache["J"] = J
         return self._cache["J"]
 
     def jacobian_factors(self):
@@ -392,29 +423,35 @@ class DesignModel:
         from ffdcli.lattice import derivatives
         from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
 
-        run, box, emb = self.run, self.run.box, self.run.prep.embedding
-        S = len(emb.inside)
-        out = np.zeros((self.n_vars, S, 3, 3))
-        P1 = self.lattice()
-        ins, F, n0 = run._frame_gradient_inputs(P1)
-        if not len(ins) or not self.n_vars:
-            return out
-        J0inv = np.linalg.inv(derivatives(box.lattice(run.P0), emb.params[ins]))
-        D = self.lattice_jacobian().reshape(*P1.shape, self.n_vars)
-        Fs = surface_frame_gradient(F, n0)
-        if box.dim == 3:
-            R = rotations_from_deformation_gradient(Fs)
-        else:
-            Fs3 = run.full3(Fs)
-        for v in range(self.n_vars):
-            dF = derivatives(box.lattice(D[..., v]), emb.params[ins]) @ J0inv
-            dFs = surface_frame_gradient_jvp(F, n0, dF)
+        from ffdcli.pipeline import frame_gradient_inputs, full3
+
+        run = self.run
+        lay = run.layout
+        out = np.zeros((self.n_vars, len(self.surface_ids), 3, 3))
+        for c, (comp, P1) in enumerate(zip(run.components, self.lattices(), strict=True)):
+            box, emb = comp.box, comp.prep.embedding
+            rows = lay.rows[c] if not run.single else np.arange(len(emb.inside))
+            ins, F, n0 = frame_gradient_inputs(comp, P1)
+            nv = lay.var_offsets[c + 1] - lay.var_offsets[c]
+            if not len(ins) or not nv:
+                continue
+            J0inv = np.linalg.inv(derivatives(box.lattice(comp.P0), emb.params[ins]))
+            D = comp.lattice_jacobian().reshape(*P1.shape, nv)
+            Fs = surface_frame_gradient(F, n0)
             if box.dim == 3:
-                out[v, ins] = polar_rotation_derivative(Fs, R, dFs)
+                R = rotations_from_deformation_gradient(Fs)
             else:
-                dFs3 = run.full3(dFs)
-                dFs3[:, box.axes.span, box.axes.span] = 0.0
-                out[v, ins] = planar_rotation_derivative(Fs3, dFs3, box.axes.span)
+                Fs3 = full3(box, Fs)
+            for k in range(nv):
+                v = lay.var_offsets[c] + k
+                dF = derivatives(box.lattice(D[..., k]), emb.params[ins]) @ J0inv
+                dFs = surface_frame_gradient_jvp(F, n0, dF)
+                if box.dim == 3:
+                    out[v, rows[ins]] = polar_rotation_derivative(Fs, R, dFs)
+                else:
+                    dFs3 = full3(box, dFs)
+                    dFs3[:, box.axes.span, box.axes.span] = 0.0
+                    out[v, rows[ins]] = planar_rotation_derivative(Fs3, dFs3, box.axes.span)
         return out
 
     def mesh_jvp(self, dv, progress=None) -> np.ndarray:

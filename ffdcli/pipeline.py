@@ -10,7 +10,7 @@ These functions are what the commands call; they are also the Python API for scr
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -19,8 +19,8 @@ from ffdcli import cache as cache_mod
 from ffdcli import formats
 from ffdcli.box import Box, fit_box
 from ffdcli.box_import import import_box
-from ffdcli.changes import Change, apply_changes
-from ffdcli.design import Design, build_changes
+from ffdcli.changes import apply_changes
+from ffdcli.design import Design
 from ffdcli.embedding import Embedding
 from ffdcli.errors import InputError, QualityError
 from ffdcli.extruded import one_cell_thick
@@ -236,11 +236,16 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
 
 @dataclass
 class DesignRun:
-    """A design file with its box prepared and its changes built: everything ``deform`` needs."""
+    """A design file with its components prepared (box, embedding, changes): everything ``deform`` needs.
+
+    The single-component form of the design file is a run of one component; ``prep``, ``box``,
+    ``P0`` and ``changes`` are those of the first (the only) component. Surface arrays of the run
+    (:meth:`surface_displacement`, :meth:`surface_rotations`) are ordered as :attr:`surface_ids`, the
+    sorted union of every component's surface nodes.
+    """
 
     design: Design
-    prep: PreparedBox
-    changes: list[Change]        # in pipeline order
+    components: list             # ffdcli.components.Component, in file order
     _warp: WarpModel | None = field(default=None, repr=False)   # the volume warp model, built on first use
     comm: object = field(default=None, repr=False)    # ffdcli.parallel communicator (None: serial)
     _quality_ref: object = field(default=None, repr=False)   # the gate's view of the input mesh, built once
@@ -252,6 +257,52 @@ class DesignRun:
             self._quality_ref = quality_reference(self.prep.mesh)
         return self._quality_ref
 
+    @property
+    def prep(self) -> PreparedBox:
+        """The first component's prepared box (its ``mesh`` is the run's mesh)."""
+        return self.components[0].prep
+
+    @property
+    def single(self) -> bool:
+        return len(self.components) == 1
+
+    @property
+    def changes(self) -> list:
+        """The changes of a single-component run."""
+        self._single("changes")
+        return list(self.components[0].changes)
+
+    @changes.setter
+    def changes(self, changes) -> None:
+        self._single("changes")
+        self.components[0] = self.components[0].with_changes(changes)
+
+    def _single(self, what: str) -> None:
+        if not self.single:
+            raise ValueError(f"run.{what} is for a single-component design; use run.components")
+
+    @property
+    def layout(self):
+        """:class:`ffdcli.components.Layout` of the run's surface."""
+        from ffdcli.components import layout
+
+        return layout(self.components)
+
+    @property
+    def surface_ids(self) -> np.ndarray:
+        return self.layout.surface_ids if not self.single else self.prep.surface.ids
+
+    def variables(self) -> tuple[list[str], np.ndarray]:
+        """Names and values of every design variable of the run (component by component)."""
+        from ffdcli.components import design_variables
+
+        return design_variables(self.components)
+
+    def set_values(self, values) -> None:
+        from ffdcli.components import set_design_variables
+
+        self.components = set_design_variables(self.components, values)
+
     def warp_model(self, progress=None):
         """The IDW model of this mesh (``volume:`` settings of the design; the quality ``threshold``
         there is not the warp's), built once and kept: a design loop does not rebuild its tree."""
@@ -259,9 +310,9 @@ class DesignRun:
 
             vol = self.design.volume or {}      # the gate's keys are skipped by from_dict
             settings = WarpSettings.from_dict(vol, path=self.design.path)
-            model, _ = prepare_mesh_warp(self.prep.mesh, list(self.prep.surface.names), settings,
-                                         progress=progress)
-            if not np.array_equal(model.surface_ids, self.prep.surface.ids):
+            names = [n for c in self.components for n in c.prep.surface.names]
+            model, _ = prepare_mesh_warp(self.prep.mesh, names, settings, progress=progress)
+            if not np.array_equal(model.surface_ids, self.surface_ids):
                 raise RuntimeError("the warp's surface nodes differ from the box's")
             self._warp = model
         return self._warp
@@ -272,99 +323,191 @@ class DesignRun:
 
     @property
     def P0(self) -> np.ndarray:
-        """Original control points (n, m, l, 3)."""
+        """Original control points (n, m, l, 3) of the first component."""
         return self.prep.box.control_points
 
-    def lattice_after(self, changes=None) -> np.ndarray:
-        """Control points after the design's changes (or ``changes``)."""
+    def lattices_after(self) -> list[np.ndarray]:
+        """Control points of every component after its changes."""
+        return [self._component_lattice(c) for c in self.components]
+
+    def lattice_after(self, changes=None):
+        """Control points after the design's changes (or ``changes``): an array for a single-component
+        run, the list of every component's for several."""
 
         if changes is not None:
-            return apply_changes(self.P0, self.box.frame, changes)
-        P = self.P0
-        for index, (change, spec) in enumerate(zip(self.changes, self.design.changes_spec, strict=True)):
+            self._single("lattice_after(changes)")
+            return self.components[0].freeze(apply_changes(self.P0, self.box.frame, changes))
+        Ps = self.lattices_after()
+        return Ps[0] if self.single else Ps
+
+    def _component_lattice(self, comp) -> np.ndarray:
+
+        P = comp.P0
+        for index, (change, spec) in enumerate(zip(comp.changes, comp.spec.changes_spec, strict=True)):
             try:
-                P = apply_changes(P, self.box.frame, [change])
+                P = apply_changes(P, comp.box.frame, [change])
             except InputError as e:      # a change refused on this lattice: name the design file and key
                 if e.path is not None:
                     raise
-                raise self.design.error(e.message, f"changes[{index}].{next(iter(spec))}") from None
-        return P
+                raise self.design.error(e.message, comp.spec.subkey(f"changes[{index}].{next(iter(spec))}")) \
+                    from None
+        return comp.freeze(P)
 
-    def surface_displacement(self, P: np.ndarray) -> np.ndarray:
-        """(S, 3) displacement of the surface points for control points ``P``: B @ (P - P0).
+    def _per_component(self, P) -> list[np.ndarray]:
+        if isinstance(P, np.ndarray) and P.ndim == 4:
+            self._single("surface motion of one lattice")
+            return [P]
+        if len(P) != len(self.components):
+            raise ValueError(f"expected {len(self.components)} lattices, got {len(P)}")
+        return list(P)
 
-        Points outside the lattice do not move (zero rows)."""
-        box = self.box
-        dP = box.core_control_points(P) - box.core_control_points(self.P0)
-        return box.mesh_vectors(self.prep.embedding.displace(dP))
+    def surface_displacement(self, P) -> np.ndarray:
+        """(S, 3) displacement of the surface points for control points ``P`` (one array, or one per
+        component): B @ (P - P0), rows as :attr:`surface_ids`. Points outside a lattice do not move."""
+        Ps = self._per_component(P)
+        if self.single:
+            return component_displacement(self.components[0], Ps[0])
+        lay = self.layout
+        out = np.zeros((len(lay.surface_ids), 3))
+        for comp, rows, Pc in zip(self.components, lay.rows, Ps, strict=True):
+            out[rows] = component_displacement(comp, Pc)
+        return out
 
-    def surface_rotations(self, P: np.ndarray) -> np.ndarray:
-        """(S, 3, 3) local rotation of the wing surface at each surface point (for the volume warp).
+    def surface_rotations(self, P) -> np.ndarray:
+        """(S, 3, 3) local rotation of the surface at each surface point (for the volume warp).
 
         The rotation of the surface frame under the FFD map (see :mod:`ffdcli.rotations`): the polar
         factor of F on the tangent plane completed by the deformed unit normal. Points outside the
-        lattice (which do not move) get the identity, and so does every point when ``P`` is the
-        original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by 1e-18, and
-        a design without changes must write the input back bit for bit)."""
-
-        box = self.box
-        S = len(self.prep.embedding.inside)
-        R = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
-        if np.array_equal(P, self.P0):
-            return R
-        ins, F, n0 = self._frame_gradient_inputs(P)
-        if not len(ins):
-            return R
-
-        Fs = surface_frame_gradient(F, n0)
-        if box.dim == 2:
-            R[ins] = rotations_from_deformation_gradient(self.full3(Fs), axis=box.axes.span)
-        else:
-            R[ins] = rotations_from_deformation_gradient(Fs)
-        return R
+        lattice (which do not move) get the identity, and so does every point of a component whose
+        ``P`` is its original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by
+        1e-18, and a design without changes must write the input back bit for bit)."""
+        Ps = self._per_component(P)
+        if self.single:
+            return component_rotations(self.components[0], Ps[0])
+        lay = self.layout
+        out = np.broadcast_to(np.eye(3), (len(lay.surface_ids), 3, 3)).copy()
+        for comp, rows, Pc in zip(self.components, lay.rows, Ps, strict=True):
+            out[rows] = component_rotations(comp, Pc)
+        return out
 
     def _frame_gradient_inputs(self, P: np.ndarray):
-        """(inside point indices, F in core coordinates (k, d, d), unit normals n0 (k, d))."""
-
-        box, emb = self.box, self.prep.embedding
-        n_all = self.prep.surface.normals[:, box.plane_axes]
-        nn = np.linalg.norm(n_all, axis=1)
-        ins = np.flatnonzero(emb.inside & (nn > 0))
-        if not len(ins):
-            return ins, None, None
-        J0 = derivatives(box.lattice(self.P0), emb.params[ins])
-        J1 = derivatives(box.lattice(P), emb.params[ins])
-        F = J1 @ np.linalg.inv(J0)
-        return ins, F, n_all[ins] / nn[ins, None]
+        self._single("_frame_gradient_inputs")
+        return frame_gradient_inputs(self.components[0], P)
 
     def full3(self, Fc: np.ndarray) -> np.ndarray:
-        """(k, 3, 3) mesh-axis matrices from core-coordinate ones (2D: identity across the plane)."""
-        if self.box.dim == 3:
-            return Fc
-        a, b = self.box.plane_axes
-        F3 = np.broadcast_to(np.eye(3), (len(Fc), 3, 3)).copy()
-        F3[:, a, a], F3[:, a, b], F3[:, b, a], F3[:, b, b] = Fc[:, 0, 0], Fc[:, 0, 1], Fc[:, 1, 0], Fc[:, 1, 1]
-        return F3
+        return full3(self.box, Fc)
+
+
+def component_displacement(comp, P: np.ndarray) -> np.ndarray:
+    """(S_c, 3) displacement of one component's surface points: B @ (P - P0)."""
+    box = comp.box
+    dP = box.core_control_points(P) - box.core_control_points(comp.P0)
+    return box.mesh_vectors(comp.prep.embedding.displace(dP))
+
+
+def component_rotations(comp, P: np.ndarray) -> np.ndarray:
+    """(S_c, 3, 3) rotation of one component's surface frame (identity outside its lattice)."""
+
+    box = comp.box
+    S = len(comp.prep.embedding.inside)
+    R = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
+    if np.array_equal(P, comp.P0):
+        return R
+    ins, F, n0 = frame_gradient_inputs(comp, P)
+    if not len(ins):
+        return R
+    Fs = surface_frame_gradient(F, n0)
+    if box.dim == 2:
+        R[ins] = rotations_from_deformation_gradient(full3(box, Fs), axis=box.axes.span)
+    else:
+        R[ins] = rotations_from_deformation_gradient(Fs)
+    return R
+
+
+def frame_gradient_inputs(comp, P: np.ndarray):
+    """(inside point indices, F in core coordinates (k, d, d), unit normals n0 (k, d)) of a component."""
+
+    box, emb = comp.box, comp.prep.embedding
+    n_all = comp.prep.surface.normals[:, box.plane_axes]
+    nn = np.linalg.norm(n_all, axis=1)
+    ins = np.flatnonzero(emb.inside & (nn > 0))
+    if not len(ins):
+        return ins, None, None
+    J0 = derivatives(box.lattice(comp.P0), emb.params[ins])
+    J1 = derivatives(box.lattice(P), emb.params[ins])
+    F = J1 @ np.linalg.inv(J0)
+    return ins, F, n_all[ins] / nn[ins, None]
+
+
+def full3(box: Box, Fc: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) mesh-axis matrices from core-coordinate ones (2D: identity across the plane)."""
+    if box.dim == 3:
+        return Fc
+    a, b = box.plane_axes
+    F3 = np.broadcast_to(np.eye(3), (len(Fc), 3, 3)).copy()
+    F3[:, a, a], F3[:, a, b], F3[:, b, a], F3[:, b, b] = Fc[:, 0, 0], Fc[:, 0, 1], Fc[:, 1, 0], Fc[:, 1, 1]
+    return F3
 
 
 def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = False,
              progress=None, comm=None) -> DesignRun:
-    """Prepare the box of a loaded design (cached) and build its changes against the lattice.
+    """Prepare the box of every component of a loaded design (cached) and build its changes.
 
     ``comm`` (:mod:`ffdcli.parallel`) is kept by the run: :func:`deform` shares the volume among
-    the ranks."""
+    the ranks; rank 0 reads the mesh and broadcasts it."""
+    from ffdcli import components as comp_mod
+    from ffdcli.cache import file_hash
+    from ffdcli.design import changes_from_spec
+    from ffdcli.formats import read_mesh
+    from ffdcli.surface import extract_surface
 
-    try:
-        prep = prepare_box(design.mesh, design.surface, design.box, cache_dir=cache_dir,
-                           use_cache=use_cache, rebuild=rebuild, progress=progress, comm=comm)
-    except InputError as e:      # a box setting of the design file: name the design file and its line
-        if e.key and e.key.startswith("box.") and e.line is None:
-            raise InputError(e.message, path=design.path, key=e.key, line=design.line_of(e.key),
-                             hint=e.hint) from None
-        raise
-    n, m, l = prep.box.shape
-    changes = build_changes(design, n, m, l, prep.box.dim)
-    return DesignRun(design=design, prep=prep, changes=changes, comm=comm)
+    progress = progress or no_progress
+    specs = comp_mod.specs_of(design)
+    from ffdcli.parallel import SerialComm
+
+    def read():
+        m = read_mesh(design.mesh, progress=progress)
+        return m, (file_hash(m.path) if m.path is not None else None)
+
+    mesh, mesh_hash = (comm or SerialComm()).root_then_bcast(read)
+    if len(specs) > 1 or specs[0].name:
+        comp_mod.check_markers(specs, mesh, path=design.path)
+    comps = []
+    for spec in specs:
+        settings = spec.box
+        if comps and settings.sections is None and settings.file is None:
+            names = resolve_surface(mesh, list(spec.surface))
+            pts = extract_surface(mesh, names).points
+            settings = replace(settings, sections=comp_mod.sections_for(pts, comps[0].box.axes.chord))
+        try:
+            prep = prepare_box(mesh, None if spec.surface is None else list(spec.surface), settings,
+                               cache_dir=cache_dir, use_cache=use_cache, rebuild=rebuild, progress=progress,
+                               mesh_hash=mesh_hash, comm=comm)
+        except InputError as e:      # a box setting of the design file: name the design file and its line
+            if e.key and e.key.startswith("box.") and e.line is None:
+                key = spec.subkey(e.key)
+                raise InputError(e.message, path=design.path, key=key, line=design.line_of(key),
+                                 hint=e.hint) from None
+            if spec.name and e.path == mesh.path and e.key is None:
+                raise InputError(f"component {spec.name!r}: {e.message}", path=design.path,
+                                 key=spec.subkey("surface"), line=design.line_of(spec.subkey("surface")),
+                                 hint=e.hint) from None
+            raise
+        n, m, l = prep.box.shape
+
+        def error(message, key, spec=spec):
+            return design.error(message, spec.subkey(key))
+
+        changes = changes_from_spec(list(spec.changes_spec), n, m, l, prep.box.dim, error=error)
+        others = [x for s in specs if s is not spec for x in (s.surface or ())]
+        junction = comp_mod.find_junction(mesh, prep, prep.surface.names, others)
+        if junction is not None and junction.frozen:
+            changes = comp_mod.check_body_changes(spec, changes, junction, error)
+        comps.append(comp_mod.Component(spec=spec, prep=prep, changes=tuple(changes), junction=junction))
+    if len(comps) > 1:
+        comp_mod.check_shared_nodes(comps, path=design.path)
+        comp_mod.check_overlap(comps, path=design.path)
+    return DesignRun(design=design, components=comps, comm=comm)
 
 
 @dataclass(frozen=True, eq=False)
@@ -372,7 +515,7 @@ class Deformation:
     """The result of one design: new coordinates of every mesh node, and what was checked."""
 
     points: np.ndarray           # (N, 3) all mesh nodes
-    lattice: np.ndarray          # (n, m, l, 3) deformed control points
+    lattice: object              # (n, m, l, 3) deformed control points; several components: a list
     surface_displacement: np.ndarray   # (S, 3)
     volume_method: str
     quality: QualityReport | None
@@ -421,7 +564,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     progress = progress or no_progress
     t = {}
     t0 = time.perf_counter()
-    mesh, surf = run.prep.mesh, run.prep.surface
+    mesh, ids = run.prep.mesh, run.surface_ids
     P1 = run.lattice_after() if P is None else P
     disp = run.surface_displacement(P1)
     t["changes"] = time.perf_counter() - t0
@@ -434,9 +577,9 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         rot = run.surface_rotations(P1)
         points += warp(model, disp, rot, progress=progress, comm=run.comm)   # MPI: each rank its block
     else:
-        points[surf.ids] += disp
+        points[ids] += disp
     # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
-    points[surf.ids] = mesh.points[surf.ids] + disp
+    points[ids] = mesh.points[ids] + disp
     t["volume"] = time.perf_counter() - t1
     if not np.all(np.isfinite(points)):
         raise QualityError("the deformed mesh has non-finite coordinates; are the design values far too "
@@ -491,8 +634,11 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
     def lattice(tmp):
         lattice_vtk.write_lattice_vtk(tmp, result.lattice, original=run.P0)
 
+    def component_lattice(comp, P):  # several components: one lattice file each (kind lattice.<name>)
+        return lambda tmp: lattice_vtk.write_lattice_vtk(tmp, P, original=comp.P0)
+
     def surface_file(tmp):           # SU2's DV_KIND= SURFACE_FILE: the surface for SU2's own volume motion
-        ids = run.prep.surface.ids
+        ids = run.surface_ids
         su2_surface.write_surface_file(tmp, ids, result.points[ids], space_dim(run.prep.mesh))
 
     def plot(tmp):
@@ -505,7 +651,15 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
 
         return run.box.dim == 3 and render(run, result, tmp) is not None
 
-    return {"mesh": mesh, "lattice": lattice, "surface_file": surface_file, "plot": plot, "plot_3d": plot_3d}
+    writers = {"mesh": mesh, "surface_file": surface_file, "plot": plot, "plot_3d": plot_3d}
+    if run.single:
+        writers["lattice"] = lattice
+    else:
+        from ffdcli.components import lattice_kind
+
+        for comp, P in zip(run.components, result.lattice, strict=True):
+            writers[lattice_kind(comp.name)] = component_lattice(comp, P)
+    return writers
 
 
 def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattice_path=None,
@@ -527,3 +681,13 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     written = plan.write(writers)
     written.update(notes)
     return written
+
+
+def lattice_files(run: DesignRun, lattice_path) -> list[Path]:
+    """Where the lattices go: ``lattice_path`` for one component; for several, one legacy VTK per
+    component named after it (:func:`ffdcli.components.component_lattice_path`)."""
+    from ffdcli.components import component_lattice_path
+
+    if run.single:
+        return [Path(lattice_path)]
+    return [component_lattice_path(lattice_path, c.name) for c in run.components]
