@@ -369,9 +369,9 @@ def mesh_parts(builders: dict, *, box_lo, box_hi, symmetry_axis: int, h_part: fl
 WING = dict(semi_span=2.5, root_chord=1.0, taper=0.4, le_sweep_deg=25.0, root_airfoil="0012", sections="xz")
 HTAIL = dict(semi_span=1.0, root_chord=0.5, taper=0.6, le_sweep_deg=30.0, root_airfoil="0010", sections="xz",
              root_offset=(3.0, 0.0, 0.0))
-# a twin fin standing clear of the tail (its root at z = 0.15, off the tail's tip): span along z
+# a twin fin standing clear above the tail (its root at z = 0.3): span along z
 FIN = dict(semi_span=0.7, root_chord=0.5, taper=0.6, le_sweep_deg=35.0, root_airfoil="0010", sections="xy",
-           root_offset=(3.1, 0.8, 0.15))
+           root_offset=(3.1, 0.6, 0.3))
 FUSELAGE_RADIUS = 0.35
 
 
