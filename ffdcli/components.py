@@ -150,8 +150,15 @@ def component_lattice_path(lattice_path, name: str) -> Path:
 
 
 def lattice_kind(name: str) -> str:
-    """The output kind (:mod:`ffdcli.outputs`) of component ``name``'s lattice file."""
-    return f"lattice.{name}"
+    """The output kind (:mod:`ffdcli.outputs`) of component ``name``'s lattice file (registered on
+    first use: a legacy VTK like the single lattice)."""
+    from ffdcli.outputs import KINDS, OutputKind, register
+
+    kind = f"lattice.{name}"
+    if kind not in KINDS:
+        register(OutputKind(kind, f"the lattice of {name}", (".vtk",),
+                            "the lattice is written as legacy VTK: give it a .vtk name"))
+    return kind
 
 
 # ----------------------------------------------------------------------------------------------
@@ -207,47 +214,48 @@ def _plane_normal_to(points: np.ndarray, axis: int, size: float) -> bool:
     return len(points) > 0 and float(np.ptp(points[:, axis])) <= 1e-6 * max(size, 1e-300)
 
 
-def find_junction(mesh, prep, own_markers, other_component_markers=()) -> Junction | None:
-    """The body marker the component's root meets, with the sections to freeze; None for a root on a
-    symmetry plane (or a free root).
+def root_contact(mesh, surface_ids: np.ndarray, span_axis: int, skip=()) -> tuple[str, np.ndarray] | None:
+    """(marker, shared node ids) of the body a surface meets, or None.
 
-    A body is a marker other than the component's own and the other components', sharing nodes with
-    its surface, that is not a plane normal to the component's span axis. With several, the one
-    sharing the most nodes.
-    """
+    A body is a marker not in ``skip`` (the surface's own and the other components' markers) that
+    shares nodes with the surface and is not a plane normal to the span axis (a symmetry plane).
+    With several, the one sharing the most nodes."""
+    pts = mesh.points[surface_ids]
+    size = float(np.linalg.norm(np.ptp(pts, axis=0))) if len(pts) else 0.0
+    best = None
+    for name in mesh.markers:
+        if name in skip:
+            continue
+        ids = marker_ids(mesh, name)
+        shared = np.intersect1d(ids, surface_ids, assume_unique=True)
+        if not len(shared) or _plane_normal_to(mesh.points[ids], span_axis, size):
+            continue
+        if best is None or len(shared) > len(best[1]):
+            best = (name, shared)
+    return best
+
+
+def find_junction(mesh, prep, own_markers, other_component_markers=()) -> Junction | None:
+    """The body marker the component's root meets (:func:`root_contact`), with the sections to
+    freeze: every section whose B-spline basis is not zero at a shared node. None for a root on a
+    symmetry plane, a free root, or a 2D mesh."""
     from ffdcli.spline import find_span
 
     box = prep.box
     if box.dim != 3:
         return None
     surf_ids = prep.surface.ids
-    size = float(np.linalg.norm(np.ptp(prep.surface.points, axis=0)))
-    skip = set(own_markers) | set(other_component_markers)
-    best = None
-    for name in mesh.markers:
-        if name in skip:
-            continue
-        ids = marker_ids(mesh, name)
-        shared = np.intersect1d(ids, surf_ids, assume_unique=True)
-        if not len(shared):
-            continue
-        if _plane_normal_to(mesh.points[ids], box.axes.span, size):
-            continue
-        if best is None or len(shared) > len(best[1]):
-            best = (name, shared)
-    if best is None:
+    found = root_contact(mesh, surf_ids, box.axes.span, set(own_markers) | set(other_component_markers))
+    if found is None:
         return None
-    name, shared = best
+    name, shared = found
     rows = np.searchsorted(surf_ids, shared)
     emb = prep.embedding
-    inside = emb.inside[rows]
-    v = emb.params[rows[inside], 1]
-    q = box.degree[1]
-    m = box.shape[1]
+    v = emb.params[rows[emb.inside[rows]], 1]
     if not len(v):
         return Junction(name, shared, 0)
-    spans = find_span(box.knots[1], q, v)
-    frozen = int(min(spans.max() + 1, m))       # bases s - q .. s are nonzero in knot span s
+    spans = find_span(box.knots[1], box.degree[1], v)
+    frozen = int(min(spans.max() + 1, box.shape[1]))     # bases s - q .. s are nonzero in knot span s
     return Junction(name, shared, frozen)
 
 

@@ -62,6 +62,7 @@ class MeshInfo:
     axes: Axes | None
     note: str = ""
     warnings: tuple[str, ...] = field(default_factory=tuple)
+    root_on: tuple[str, int] | None = None      # (body marker, shared nodes) when the root meets a body
 
     def summary(self) -> dict:
         """The ``ffd inspect --json`` object."""
@@ -72,7 +73,8 @@ class MeshInfo:
                 "bounds": None if self.bounds is None else {"min": self.bounds[0].tolist(),
                                                             "max": self.bounds[1].tolist()},
                 "axes": self.axes.as_dict() if self.axes else None,
-                "root": self.axes.root if self.axes else None, "surface": self.surface}
+                "root": self.axes.root if self.axes else None, "surface": self.surface,
+                "root_on": self.root_on[0] if self.root_on else None}
 
     def text(self) -> str:
         """The ``ffd inspect`` report, one line per item."""
@@ -100,6 +102,9 @@ class MeshInfo:
             else:
                 lines.append(f"  axes:    chord {ax['chord']}, thickness {ax['thickness']}, span {ax['span']} "
                              f"(sections: {axes.sections}); root at {ax['span']} {axes.root}{guess}")
+            if self.root_on is not None:
+                lines.append(f"  root:    on the body {self.root_on[0]!r} ({self.root_on[1]} shared nodes): they and "
+                             "the body do not move; the lattice sections at the junction stay fixed")
         elif self.note:
             lines.append(f"  surface: not detected: {self.note}")
         lines += [f"  warning: {w}" for w in self.warnings]
@@ -149,6 +154,12 @@ def inspect_mesh(mesh: Mesh | str | Path, surfaces=(), progress=None) -> MeshInf
         extrusion = one_cell_thick(mesh, names)
         if extrusion is not None:
             warnings.append(extrusion.message())
+    contact = None
+    if axes is not None and dim == 3:
+        from ffdcli.components import root_contact
+
+        found = root_contact(mesh, surf.ids, axes.span, skip=names)
+        contact = None if found is None else (found[0], len(found[1]))
     return MeshInfo(path=mesh.path, format=mesh.format, dim=dim, surface_mesh=surface_only,
                     points=mesh.n_points, n_cells=mesh.n_cells, cells=cells, markers=markers, bounds=bounds,
-                    surface=names, axes=axes, note=note, warnings=tuple(warnings))
+                    surface=names, axes=axes, note=note, warnings=tuple(warnings), root_on=contact)
