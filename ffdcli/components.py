@@ -239,8 +239,6 @@ def find_junction(mesh, prep, own_markers, other_component_markers=()) -> Juncti
     """The body marker the component's root meets (:func:`root_contact`), with the sections to
     freeze: every section whose B-spline basis is not zero at a shared node. None for a root on a
     symmetry plane, a free root, or a 2D mesh."""
-    from ffdcli.spline import find_span
-
     box = prep.box
     if box.dim != 3:
         return None
@@ -254,9 +252,19 @@ def find_junction(mesh, prep, own_markers, other_component_markers=()) -> Juncti
     v = emb.params[rows[emb.inside[rows]], 1]
     if not len(v):
         return Junction(name, shared, 0)
-    spans = find_span(box.knots[1], box.degree[1], v)
-    frozen = int(min(spans.max() + 1, box.shape[1]))     # bases s - q .. s are nonzero in knot span s
-    return Junction(name, shared, frozen)
+    return Junction(name, shared, frozen_sections(box.knots[1], box.degree[1], v, box.shape[1]))
+
+
+def frozen_sections(knots, degree: int, v: np.ndarray, m: int) -> int:
+    """How many root sections to freeze so that the motion and its first span derivative vanish at
+    the span parameters ``v`` of the junction nodes (C1): one past the last section whose basis
+    function or its derivative is non-zero at some ``v``."""
+    from ffdcli.spline import basis_derivs
+
+    first, ders = basis_derivs(knots, degree, np.asarray(v, dtype=float), nder=1)
+    live = (np.abs(ders[0]) > 0) | (np.abs(ders[1]) > 0)          # (N, p + 1)
+    last = first[:, None] + np.arange(degree + 1)[None, :]
+    return int(min(np.max(np.where(live, last, -1)) + 1, m))
 
 
 def check_body_changes(spec: ComponentSpec, changes, junction: Junction, error) -> list:

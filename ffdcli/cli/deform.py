@@ -66,11 +66,13 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
 
     comm = console.comm
     run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress, comm=comm)
-    for w in run.prep.warnings:
-        console.warn(w)
-    if run.prep.summary()["outside"]:
-        console.warn(f"{run.prep.summary()['outside']} surface points are outside the lattice and "
-                     "will not move")
+    for comp in run.components:
+        who = f"{comp.name}: " if comp.name else ""
+        for w in comp.prep.warnings:
+            console.warn(who + w)
+        if comp.prep.summary()["outside"]:
+            console.warn(f"{who}{comp.prep.summary()['outside']} surface points are outside the lattice and "
+                         "will not move")
     result = deform(run, progress=console.progress)
     q = result.quality
     qd = q.to_dict() if q is not None else None
@@ -104,7 +106,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         "surface_file": written.get("surface_file"),
         "changes": [next(iter(c)) for c in design.changes_spec],
         "lattice": list(run.box.lattice_shape),
-        "surface_points": int(len(run.prep.surface.ids)),
+        "surface_points": int(len(run.surface_ids)),
         "max_displacement": result.max_displacement,
         "volume": result.volume_method,
         "recovery": result.recovery,
@@ -116,11 +118,22 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         "from_cache": run.prep.from_cache,
         "seconds": round(secs, 3),
     }
+    if not run.single:
+        summary["components"] = [{"name": c.name, "surface": list(c.prep.surface.names),
+                                  "lattice": list(c.box.lattice_shape), "root_on": c.summary()["root_on"],
+                                  "changes": [next(iter(x)) for x in c.spec.changes_spec]} for c in run.components]
+    head = (f"ffd deform: {Path(design.path).name} on {Path(design.mesh).name} ({len(run.surface_ids)} surface "
+            f"points, " + (f"lattice {' x '.join(map(str, run.box.lattice_shape))}, box "
+                           f"{'from cache' if run.prep.from_cache else 'built'})" if run.single else
+                           f"{len(run.components)} components)"))
+    per = [f"  {c['name']:<9} lattice {' x '.join(map(str, c['lattice']))}, changes "
+           f"{', '.join(c['changes']) or '(none)'}" + (f"; root on {c['root_on']!r}" if c["root_on"] else "")
+           for c in summary.get("components", [])]
     lines = [
-        f"ffd deform: {Path(design.path).name} on {Path(design.mesh).name} "
-        f"({len(run.prep.surface.ids)} surface points, lattice {' x '.join(map(str, run.box.lattice_shape))}"
-        f", box {'from cache' if run.prep.from_cache else 'built'})",
-        f"  changes   {', '.join(summary['changes']) or '(none)'}",
+        head,
+        *([f"  changes   {', '.join(summary['changes']) or '(none)'}"] if run.single else per),
+        *([f"  root      on the body {run.components[0].junction.marker!r} (its nodes and the junction do "
+            f"not move)"] if run.single and run.components[0].junction is not None else []),
         f"  moved     max surface displacement {result.max_displacement:.4g}; volume: {result.volume_method}"
         + (f" (recovered: {result.recovered_with}, after the design's settings failed the gate)"
            if result.recovered_with else ""),
@@ -135,6 +148,6 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         from ffdcli.formats.su2_ffd import describe
 
         lines.append(f"  su2 ffd   {describe(su2_ffd)}")
-    lines += [f"  wrote     {p}" for p in written.values()]
+    lines += [f"  wrote     {p}" for v in written.values() for p in (v if isinstance(v, list) else [v])]
     lines.append(f"  time      {secs:.2f} s")
     console.result(summary, "\n".join(lines))

@@ -76,6 +76,7 @@ class Design:
     output: dict[str, Path]
     data: dict = field(repr=False)
     lines: dict[str, int] = field(default_factory=dict, repr=False)
+    components: list | None = None     # ffdcli.components.ComponentSpec per item of components:, or None
 
     def line_of(self, key: str) -> int | None:
         """The YAML line of a key path like ``changes[2].twist`` (or of its closest parent)."""
@@ -126,20 +127,37 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     surface = data.get("surface")
     if isinstance(surface, str):
         surface = [surface]
-    b = dict(data.get("box") or {})
-    box_file = None
-    if "file" in b:
-        box_file = resolve(b["file"])
-        if check_files:
-            check_input_file(box_file, "lattice file", design=path, key="box.file",
-                             line=line_at(lines, ("box", "file")))
-    if b.get("points") is not None:   # an absurd lattice: refused here, before any heavy import or reading
-        check_lattice_size(b["points"], path=path, key="box.points", line=line_at(lines, ("box", "points")))
-    defaults = BoxSettings()
-    box = BoxSettings(points=tuple(b["points"]) if b.get("points") is not None else defaults.points,
-                      degree=tuple(b["degree"]) if "degree" in b else None,
-                      sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
-                      root=b.get("root"), file=None if box_file is None else str(box_file))
+
+    def box_settings(b, at=()):
+        b = dict(b or {})
+        box_file = None
+        if "file" in b:
+            box_file = resolve(b["file"])
+            if check_files:
+                check_input_file(box_file, "lattice file", design=path, key=key_path(at + ("box", "file")),
+                                 line=line_at(lines, at + ("box", "file")))
+        if b.get("points") is not None:   # an absurd lattice: refused here, before any heavy import or reading
+            check_lattice_size(b["points"], path=path, key=key_path(at + ("box", "points")),
+                               line=line_at(lines, at + ("box", "points")))
+        defaults = BoxSettings()
+        return BoxSettings(points=tuple(b["points"]) if b.get("points") is not None else defaults.points,
+                           degree=tuple(b["degree"]) if "degree" in b else None,
+                           sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
+                           root=b.get("root"), file=None if box_file is None else str(box_file),
+                           block=b.get("block"))
+
+    box = box_settings(data.get("box"))
+    components = None
+    if "components" in data:
+        from ffdcli.components import ComponentSpec
+
+        components = []
+        for c, item in enumerate(data["components"]):
+            names = item["surface"]
+            components.append(ComponentSpec(
+                name=item["name"], surface=(names,) if isinstance(names, str) else tuple(names),
+                box=box_settings(item.get("box"), ("components", c)),
+                changes_spec=tuple(item.get("changes") or ()), key=f"components[{c}]"))
     volume = {"method": "idw", **(data.get("volume") or {})}
     out = dict(data.get("output") or {})
     stem = path.stem
@@ -151,7 +169,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
                          key="output.mesh", line=line_at(lines, ("output", "mesh")))
     return Design(path=path, mesh=mesh, surface=surface, box=box, volume=volume,
                   changes_spec=list(data.get("changes") or []), output=output, data=data,
-                  lines={key_path(k): v for k, v in lines.items() if k})
+                  lines={key_path(k): v for k, v in lines.items() if k}, components=components)
 
 
 #: How each mesh format begins (the first bytes), for a mesh given where a design file belongs.

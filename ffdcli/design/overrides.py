@@ -65,6 +65,13 @@ def apply_overrides(data: dict, overrides=(), path=None) -> dict:
                     cur = cur[seg]
                 parts += (seg,)
             elif isinstance(cur, list):
+                if parts == ("components",) and not seg.lstrip("-").isdigit():     # a component by name
+                    named = [i for i, c in enumerate(cur) if isinstance(c, dict) and c.get("name") == seg]
+                    if not named:
+                        have = ", ".join(str(c.get("name")) for c in cur if isinstance(c, dict))
+                        raise InputError(f"--set {key}: no component named '{seg}'; the components are: "
+                                         f"{have} (or give a position 0..{len(cur) - 1})", path=path, key=key)
+                    seg = str(named[0])
                 try:
                     index = int(seg)
                 except ValueError:

@@ -155,6 +155,8 @@ def box_schema() -> dict:
             "root": {"enum": list(ROOT_CHOICES), "description": "end of the span axis at the root"},
             "file": {"type": "string", "minLength": 1,
                      "description": "a Plot3D lattice to use instead of the automatic box"},
+            "block": {"type": "integer", "minimum": 0,
+                      "description": "which block of a multi-block Plot3D file (0-based)"},
         }}
 
 
@@ -233,11 +235,29 @@ def bounds_schema() -> dict:
                 {"type": "object", "properties": {"lower": bound, "upper": bound}, "additionalProperties": False}]}}
 
 
+#: The keys of one component (``components:`` items), besides ``name``; ``constraints`` joins them
+#: when the top level has it.
+COMPONENT_KEYS = ("surface", "box", "changes", "constraints")
+
+
+def components_schema() -> dict:
+    """``components:``: several named components, each with the single form's surface, box and
+    changes (and constraints), instead of those keys at the top level."""
+    props = {key: SECTIONS[key]() for key in COMPONENT_KEYS if key in SECTIONS}
+    props["name"] = {"type": "string", "pattern": "^[A-Za-z_][A-Za-z0-9_-]*$",
+                     "description": "the component's name (a letter or _, then letters, digits, _ or -): "
+                                    "its variables are <name>.c<index>..."}
+    return {"type": "array", "minItems": 1,
+            "description": "several components (wing, tail, fin), instead of surface, box and changes",
+            "items": {"type": "object", "additionalProperties": False, "required": ["name", "surface"],
+                      "properties": props}}
+
+
 #: The top-level keys of a design file, in the order ``ffd schema`` lists them.
 SECTIONS: dict[str, Callable[[], dict]] = {
     "mesh": mesh_schema, "surface": surface_schema, "box": box_schema, "volume": volume_schema,
     "changes": changes_schema, "constraints": constraints_schema, "bounds": bounds_schema,
-    "output": output_schema,
+    "output": output_schema, "components": components_schema,
 }
 #: Top-level keys a design file must have.
 REQUIRED = ("mesh",)

@@ -113,14 +113,32 @@ def validate(data, path=None, lines: dict | None = None) -> None:
         parts, message = min(problems, key=lambda p: (line_at(lines, p[0]) or 10**9, -len(p[0])))
         fail(parts, message)
     # what the schema cannot say in words
+    if "components" in data:
+        both = [k for k in ("surface", "box", "changes", "constraints") if k in data]
+        if both:
+            fail((both[0],), f"with components:, {both[0]} goes inside each component (components[i].{both[0]})")
+        seen: dict[str, int] = {}
+        for c, comp in enumerate(data["components"]):
+            if comp["name"] in seen:
+                fail(("components", c, "name"), f"component name {comp['name']!r} is also the name of "
+                                                f"components[{seen[comp['name']]}]; names must differ")
+            seen[comp["name"]] = c
+            _check_part(comp, ("components", c), fail)
+    else:
+        _check_part(data, (), fail)
+
+
+def _check_part(data: dict, at: tuple, fail) -> None:
+    """The checks of one component's box and changes (``at``: its key path parts; () for the
+    single-component form)."""
     box = data.get("box") or {}
     if "degree" in box and box.get("points") is not None:   # else the default of the mesh's dimension
         points = box["points"]
         if len(box["degree"]) != len(points):
-            fail(("box", "degree"), f"has {len(box['degree'])} values but box.points has {len(points)}")
+            fail(at + ("box", "degree"), f"has {len(box['degree'])} values but box.points has {len(points)}")
         problem = degree_problem(points, box["degree"])
         if problem is not None:
-            fail(("box", "degree", problem[0]), problem[1])
+            fail(at + ("box", "degree", problem[0]), problem[1])
     for i, item in enumerate(data.get("changes") or []):
         tw = item.get("twist")
         if isinstance(tw, dict):
@@ -133,15 +151,16 @@ def validate(data, path=None, lines: dict | None = None) -> None:
                 fail(("changes", i, "twist", other), f"{forms[0]} and {other} are two forms of twist; "
                                                      "give one: {root, tip}, {values} or (2D) {angle}")
         spec = item.get("shape")
+        here = at + ("changes", i, "shape")
         if isinstance(spec, dict) and "random" in spec:
             clash = [k for k in ("upper", "lower", "sections") if k in spec]
             if clash:
-                fail(("changes", i, "shape", clash[0]),
+                fail(here + (clash[0],),
                      "a random shape takes only random and seed; write explicit shapes as another change")
         elif isinstance(spec, dict) and "seed" in spec:
-            fail(("changes", i, "shape", "seed"), "seed goes with random")
+            fail(here + ("seed",), "seed goes with random")
         if isinstance(spec, dict) and "rows" in spec:
             clash = [k for k in ("upper", "lower", "random") if k in spec]
             if clash:
-                fail(("changes", i, "shape", clash[0]), "rows gives every thickness row; write upper/lower "
-                                                        "or random as another change")
+                fail(here + (clash[0],), "rows gives every thickness row; write upper/lower "
+                                         "or random as another change")
