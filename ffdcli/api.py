@@ -421,9 +421,8 @@ class DesignModel:
 
     def _rotation_jacobian_uncached(self):
         from ffdcli.lattice import derivatives
-        from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
-
         from ffdcli.pipeline import frame_gradient_inputs, full3
+        from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
 
         run = self.run
         lay = run.layout
