@@ -49,7 +49,9 @@ def run_case(config: Path, out: Path, progress, target=None) -> dict:
         "case": stem, "config": str(config.relative_to(REPO)) if config.is_relative_to(REPO) else str(config),
         "mesh": mesh_out.name if ok else None, "lattice": lattice_out.name if ok else None,
         "png": png.name, "png3d": png3d,
-        "changes": ", ".join(next(iter(c)) for c in design.changes_spec),
+        "changes": "; ".join(f"{c.name + ': ' if c.name else ''}"
+                             f"{', '.join(next(iter(x)) for x in c.spec.changes_spec) or 'none'}"
+                             for c in run.components),
         "max_displacement": result.max_displacement,
         "quality": (q.summary() if ok else f"refused by the quality gate: {q.summary()}; "
                     f"{q.describe_worst(1).strip()}") if q is not None else "surface only",

@@ -52,12 +52,16 @@ class Part:
 
 
 def run_parts(run, result) -> list[Part]:
-    """The parts of a design run (``ffdcli.pipeline``): one wing today."""
+    """The parts of a design run (``ffdcli.pipeline``): one per component, in file order."""
     from ffdcli.sections import surface_edges
 
-    surf = run.prep.surface
-    return [Part(name=", ".join(surf.names), X0=surf.points, X1=result.points[surf.ids],
-                 edges=surface_edges(surf.faces), P0=run.P0, P1=result.lattice, box=run.box)]
+    Ps = [result.lattice] if run.single else list(result.lattice)
+    out = []
+    for comp, P1 in zip(run.components, Ps, strict=True):
+        surf = comp.prep.surface
+        out.append(Part(name=comp.name or ", ".join(surf.names), X0=surf.points, X1=result.points[surf.ids],
+                        edges=surface_edges(surf.faces), P0=comp.P0, P1=P1, box=comp.box))
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
@@ -335,7 +339,10 @@ def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110,
     title = title or f"{Path(run.design.path).name}: original (black), deformed (red)"
     if note is None and result.quality is not None and not result.quality.ok:
         note = f"refused by the quality gate: {result.quality.summary()}"
-    return plot_parts(run_parts(run, result), path, title=title, dpi=dpi, target=target, note=note)
+    parts = run_parts(run, result)
+    if len(parts) > 1:
+        return plot_components(parts, path, title=title, dpi=dpi, note=note)
+    return plot_parts(parts, path, title=title, dpi=dpi, target=target, note=note)
 
 
 def _pyplot():
@@ -427,7 +434,7 @@ def plot_3d(run, result, path) -> Path | None:
     """The 3D view (pyvista, off-screen, in a subprocess) of a 3D design; None when not possible."""
     from ffdcli.render3d import render_3d
 
-    if run.box.dim != 3:
+    if run.box.dim != 3 or not run.single:
         return None
     part = run_parts(run, result)[0]
     surf = run.prep.surface
@@ -461,3 +468,56 @@ def section_polylines_3d(part: Part, count: int = 5):
         out0.append(q0[o])
         out1.append(q1[o])
     return out0, out1
+
+
+def _draw_part_view(ax, part: Part, cols) -> None:
+    """One component in the view of mesh columns ``cols`` (horizontal, vertical): its outline with
+    section lines when its span axis is in the view, else the outline of its projection."""
+    from matplotlib.collections import LineCollection
+
+    s = part.box.axes.span
+    if s in cols:
+        across = cols[1] if cols[0] == s else cols[0]
+        _draw_outlines(ax, part, s, across, swap=cols[0] != s)
+        return
+    a, b = cols
+    for X, color, lw, z in ((part.X1, RED, 1.8, 2), (part.X0, BLACK, 1.0, 3)):
+        o = outline(X, a, b)
+        ax.plot(o[:, 0], o[:, 1], "-", color=color, lw=lw, zorder=z)
+    for P, color, style in ((part.P0, GREY, "--"), (part.P1, RED, "-")):
+        Q = P[..., [a, b]]
+        ax.add_collection(LineCollection(_lattice_segments(Q), colors=color, linewidths=0.4, linestyles=style,
+                                         alpha=0.45, zorder=1))
+
+
+def plot_components(parts: list[Part], path, *, title: str, dpi: int = 110, note: str | None = None) -> Path:
+    """The PNG of a design with several components: top, front and side views (mesh axes of the first
+    component) of every component's outline and lattice, original black, deformed red."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ax0 = parts[0].box.axes
+    c, t, s = ax0.chord, ax0.thickness, ax0.span
+    label = {c: f"{AXIS[c]} (chord)", t: f"{AXIS[t]} (thickness)", s: f"{AXIS[s]} (span of {parts[0].name})"}
+    views = (("top view", (s, c)), ("front view", (s, t)), ("side view", (c, t)))
+    fig, axs = plt.subplots(1, 3, figsize=(17, 5.5))
+    for ax, (name, cols) in zip(axs, views, strict=True):
+        for part in parts:
+            _draw_part_view(ax, part, cols)
+            P = part.P1 if name == "top view" else part.P0
+            at = P.reshape(-1, 3).max(axis=0)
+            ax.annotate(part.name, (at[cols[0]], at[cols[1]]), fontsize=8, color=BLACK)
+        ax.set_xlabel(label[cols[0]])
+        ax.set_ylabel(label[cols[1]])
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.autoscale_view()
+        ax.set_title(name)
+    fig.suptitle(title + (f"\n{note}" if note else ""), color=BLACK if not note else RED)
+    fig.tight_layout()
+    p = Path(path)
+    with atomic_path(p) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
+    plt.close(fig)
+    return p
