@@ -101,14 +101,18 @@ def resolve_surface(mesh: Mesh, surface) -> list[str]:
     return default_surface(mesh)
 
 
-def read_lattice_block(file) -> np.ndarray:
-    """The control points (ni, nj, nk, 3) of a single-block Plot3D lattice file (``box.file``)."""
+def read_lattice_block(file, block: int | None = None) -> np.ndarray:
+    """The control points (ni, nj, nk, 3) of block ``block`` (0-based) of a Plot3D lattice file
+    (``box.file``, ``box.block``); ``None`` for a single-block file."""
     blocks = read_plot3d(file)
-    if len(blocks) != 1:
-        raise InputError(f"the lattice file has {len(blocks)} blocks; ffd takes a single-block lattice "
-                         "(split the file, one box per wing)", path=file)
-    check_lattice_size(blocks[0].shape[:3], path=file, key=None)
-    return blocks[0]
+    if block is None and len(blocks) != 1:
+        raise InputError(f"the lattice file has {len(blocks)} blocks; choose one with box.block (0 to "
+                         f"{len(blocks) - 1}), one component per block", path=file)
+    if block is not None and not 0 <= block < len(blocks):
+        raise InputError(f"box.block {block}: the lattice file has {len(blocks)} blocks (0 to "
+                         f"{len(blocks) - 1})", path=file, key="box.block")
+    check_lattice_size(blocks[block or 0].shape[:3], path=file, key=None)
+    return blocks[block or 0]
 
 
 def check_sections_plane(mesh: Mesh, settings: BoxSettings, dim: int) -> None:
@@ -192,8 +196,8 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
                                        warnings=notes + list(header.get("report", {}).get("warnings", [])))
 
     if settings.file:
-        box, emb, report = import_box(read_lattice_block(settings.file), surf.points, surf.faces, settings,
-                                      dim=dim, path=mesh.path, source=settings.file, progress=progress,
+        box, emb, report = import_box(read_lattice_block(settings.file, settings.block), surf.points, surf.faces,
+                                      settings, dim=dim, path=mesh.path, source=settings.file, progress=progress,
                                       comm=comm)
     else:
         box, emb, report = fit_box(surf.points, surf.faces, settings, dim=dim, path=mesh.path,

@@ -89,6 +89,9 @@ class BoxSettings:
         ``"min"``/``"max"``: the end of the span axis where the root is; ``None`` = detected.
     file
         A Plot3D lattice to use instead of building one (pyGeo/DAFoam users' boxes).
+    block
+        Which block of a multi-block Plot3D ``file`` (0-based; one component per block, e.g. the
+        wing and the tail of the DPW4 lattice); ``None`` for a single-block file.
     """
 
     points: tuple[int, ...] | None = None
@@ -97,6 +100,7 @@ class BoxSettings:
     margin: float = DEFAULT_MARGIN
     root: str | None = None
     file: str | None = None
+    block: int | None = None
 
     def degrees(self, dim: int | None = None) -> tuple[int, ...]:
         """The degree per direction: as given, else :func:`default_degree` of the points (those of
@@ -160,7 +164,7 @@ class BoxSettings:
         return cls(points=None if d.get("points") is None else tuple(d["points"]),
                    degree=None if d.get("degree") is None else tuple(d["degree"]),
                    sections=d.get("sections"), margin=float(d.get("margin", DEFAULT_MARGIN)),
-                   root=d.get("root"), file=d.get("file"))
+                   root=d.get("root"), file=d.get("file"), block=d.get("block"))
 
     def get_cache_key(self) -> str:
         """A short digest of these settings: equal settings, equal key (part of the box cache key)."""

@@ -374,3 +374,62 @@ def test_overlapping_boxes_are_an_error_naming_both(tmp_path):
     with pytest.raises(InputError, match="overlap") as e:
         load_run(load_design(write_components(tmp_path, path, comps)), use_cache=False)
     assert "htail" in str(e.value) and "pod" in str(e.value)
+
+
+DPW4 = Path("/work/shared/data/reference-ffd/DPW4_Aircraft__FFD__wingTailFFD.xyz")
+
+
+def planform_inside(blk: np.ndarray) -> Planform:
+    """A tapered, swept wing (chord x, span y, thickness z) well inside a Plot3D block whose edges
+    i = 0 / i = -1 are its leading and trailing edges: sections in y planes from 15 % to 85 % of the
+    block's y range, chord 70 % of the block's, thickness half the block's height."""
+    y = blk[..., 1]
+    y0, y1 = y.min() + 0.15 * np.ptp(y), y.min() + 0.85 * np.ptp(y)
+
+    def at(edge, Y):            # x, z of a block edge (i = 0 or -1, mean over k) at y = Y
+        e = blk[edge].mean(axis=1)
+        return np.interp(Y, e[:, 1], e[:, 0]), np.interp(Y, e[:, 1], e[:, 2])
+
+    (le0, z0), (te0, _) = at(0, y0), at(-1, y0)
+    (le1, z1), (te1, _) = at(0, y1), at(-1, y1)
+    c0, c1 = 0.7 * (te0 - le0), 0.7 * (te1 - le1)
+    h = float(np.min(blk[:, :, -1, 2] - blk[:, :, 0, 2]))
+    tc = int(np.clip(50 * h / c0, 4, 12))
+    return Planform(semi_span=y1 - y0, root_chord=c0, taper=c1 / c0, root_airfoil=f"00{tc:02d}", sections="xz",
+                    le_sweep_deg=float(np.degrees(np.arctan2((le1 + 0.15 * (te1 - le1)) - (le0 + 0.15 * (te0 - le0)),
+                                                             y1 - y0))),
+                    dihedral_deg=float(np.degrees(np.arctan2(z1 - z0, y1 - y0))),
+                    root_offset=(le0 + 0.15 * (te0 - le0), y0, z0))
+
+
+@pytest.mark.data
+@pytest.mark.skipif(not DPW4.exists(), reason="needs ../shared/data/reference-ffd")
+def test_dpw4_wing_and_tail_lattice_imports_as_two_components(tmp_path):
+    """The DAFoam DPW4 wing + tail FFD file (two Plot3D blocks): one component per block."""
+    from ffdcli.formats.plot3d import read_plot3d, write_plot3d
+
+    blocks = read_plot3d(DPW4)
+    assert len(blocks) == 2
+    parts = {name: surface_mesh(planform_inside(blk), n_chord=21, n_span=9)
+             for name, blk in zip(("wing", "htail"), blocks, strict=True)}
+    path = tmp_path / "dpw4_parts.su2"
+    write_mesh(merged_surface(parts), path)
+    comps = [{"name": n, "surface": n, "box": {"file": str(DPW4), "block": b, "sections": "xz"},
+              "changes": [{"twist": {"tip": 2}}]} for b, n in enumerate(("wing", "htail"))]
+    run = load_run(load_design(write_components(tmp_path, path, comps)), use_cache=False)
+    for comp, blk in zip(run.components, blocks, strict=True):
+        emb = comp.prep.embedding
+        assert emb.inside.all() and float(emb.residual.max()) < 1e-9
+        assert comp.box.imported and sorted(comp.P0.shape[:3]) == sorted(blk.shape[:3])
+    res = deform(run)
+    assert res.max_displacement > 0
+    # exported again: one block per component, same points as the file (up to the index order)
+    out = tmp_path / "again.xyz"
+    write_plot3d(out, [c.P0 for c in run.components])
+    again = read_plot3d(out)
+    for a, b in zip(again, blocks, strict=True):
+        np.testing.assert_allclose(np.sort(a.reshape(-1, 3), axis=0), np.sort(b.reshape(-1, 3), axis=0), atol=1e-12)
+    # one block chosen out of range, or none for a multi-block file: exit 2 naming box.block
+    bad = [{**comps[0], "box": {"file": str(DPW4), "block": 5}}]
+    r = run_ffd("deform", str(write_components(tmp_path, path, bad, name="bad.yaml")))
+    assert r.returncode == 2 and "block" in r.stderr
