@@ -199,29 +199,45 @@ class DesignModel:
     @property
     def constraints(self) -> list:
         """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints`),
-        built once on the baseline surface and lattice."""
+        built once on the baseline surface and lattice; several components: every component's, in
+        component order (see :attr:`constraint_groups`)."""
+        return [c for _, group in self.constraint_groups for c in group]
+
+    @property
+    def constraint_groups(self) -> list[tuple[int, list]]:
+        """``[(component index, its constraint objects)]``: each component's ``constraints:`` built on its
+        own box and surface (the single-component form: one group, the file's ``constraints:``)."""
         if "constraints" not in self._static:
-            spec = (getattr(self.run.design, "data", None) or {}).get("constraints") or []
-            self._static["constraints"] = self._build_constraints(spec)
+            data = getattr(self.run.design, "data", None) or {}
+            if "components" in data:
+                specs = [item.get("constraints") or [] for item in data["components"]]
+            else:
+                specs = [data.get("constraints") or []]
+            self._static["constraints"] = [(c, self._build_constraints(s, c)) for c, s in enumerate(specs)]
         return self._static["constraints"]
 
-    def set_constraints(self, specs) -> None:
-        """Replace the constraints by those of a ``constraints:`` list ``specs`` (list of dict)."""
-        self._static["constraints"] = self._build_constraints(specs)
+    def set_constraints(self, specs, component: int = 0) -> None:
+        """Replace the constraints of one component (default the first) by a ``constraints:`` list."""
+        groups = [g for g in self.constraint_groups if g[0] != component]
+        groups.append((component, self._build_constraints(specs, component)))
+        self._static["constraints"] = sorted(groups, key=lambda g: g[0])
+        self._cache.clear()
 
-    def _build_constraints(self, specs) -> list:
+    def _build_constraints(self, specs, c: int = 0) -> list:
         from ffdcli.constraints import build_constraints
 
-        run = self.run
-        return build_constraints(specs, run.box, run.prep.surface, run.changes,
-                                 error=getattr(run.design, "error", None))
+        comp = self.run.components[c]
+        design_error = getattr(self.run.design, "error", None)
+        error = None if design_error is None else (lambda message, key: design_error(message, comp.spec.subkey(key)))
+        return build_constraints(specs, comp.box, comp.prep.surface, list(comp.changes), error=error)
 
     @property
     def constraint_names(self) -> list[str]:
-        """(C,) ``k<index>.<kind>[<j>]`` of every constraint item."""
+        """(C,) ``k<index>.<kind>[<j>]`` of every constraint item (``<component>.k...`` with components)."""
         from ffdcli.constraints import constraint_names
 
-        return constraint_names(self.constraints)
+        return [self.run.components[c].spec.prefix + n for c, group in self.constraint_groups
+                for n in constraint_names(group)]
 
     @property
     def constraint_lower(self) -> np.ndarray:
@@ -237,29 +253,45 @@ class DesignModel:
 
         return constraint_bounds(self.constraints)[1]
 
-    def _constraint_inputs(self):
+    def _constraint_inputs(self, c: int = 0):
+        """What component ``c``'s constraints read: its lattice, its rows of dP'/dv (every variable's
+        column), its surface points and basis."""
         from ffdcli.constraints import ConstraintInputs
 
-        emb = self.run.prep.embedding
-        rmatvec = emb.rmatvec if self.run.box.dim == 3 else None       # 3D: core = mesh coordinates
-        return ConstraintInputs(self.lattice(), self.run.P0, self.values, self.lattice_jacobian,
-                                self.surface_points, lambda: self.basis, rmatvec)
+        if self.run.single:
+            emb = self.run.prep.embedding
+            rmatvec = emb.rmatvec if self.run.box.dim == 3 else None       # 3D: core = mesh coordinates
+            return ConstraintInputs(self.lattice(), self.run.P0, self.values, self.lattice_jacobian,
+                                    self.surface_points, lambda: self.basis, rmatvec)
+        comp, lay = self.run.components[c], self.run.layout
+        o0, o1, rows = lay.ctrl_offsets[c], lay.ctrl_offsets[c + 1], lay.rows[c]
+        emb = comp.prep.embedding
+        return ConstraintInputs(self.lattices()[c], comp.P0, self.values,
+                                lambda: self.lattice_jacobian()[3 * o0:3 * o1],
+                                lambda: self.surface_points()[rows],
+                                lambda: emb.basis_matrix().tocsr(), emb.rmatvec if comp.box.dim == 3 else None)
+
+    def _evaluate_constraints(self, jacobian: bool):
+        from ffdcli.constraints import evaluate
+
+        vals, jacs = [np.zeros(0)], [np.zeros((0, self.n_vars))]
+        for c, group in self.constraint_groups:
+            v, j = evaluate(group, self._constraint_inputs(c), jacobian=jacobian)
+            vals.append(v)
+            if jacobian:
+                jacs.append(j)
+        return np.concatenate(vals), (np.concatenate(jacs, axis=0) if jacobian else None)
 
     def constraint_values(self) -> np.ndarray:
         """(C,) the constraint items at the current values."""
         if "cv" not in self._cache:
-            from ffdcli.constraints import evaluate
-
-            self._cache["cv"] = evaluate(self.constraints, self._constraint_inputs())[0]
+            self._cache["cv"] = self._evaluate_constraints(False)[0]
         return self._cache["cv"]
 
     def constraint_jacobian(self) -> np.ndarray:
         """(C, n_vars) exact d(constraint item)/d(design variable) at the current values."""
         if "cj" not in self._cache:
-            from ffdcli.constraints import evaluate
-
-            self._cache["cv"], self._cache["cj"] = evaluate(self.constraints, self._constraint_inputs(),
-                                                            jacobian=True)
+            self._cache["cv"], self._cache["cj"] = self._evaluate_constraints(True)
         return self._cache["cj"]
 
     # -- reports (what ffd vars / ffd constraints print) ------------------------------------------

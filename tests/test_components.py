@@ -433,3 +433,30 @@ def test_dpw4_wing_and_tail_lattice_imports_as_two_components(tmp_path):
     bad = [{**comps[0], "box": {"file": str(DPW4), "block": 5}}]
     r = run_ffd("deform", str(write_components(tmp_path, path, bad, name="bad.yaml")))
     assert r.returncode == 2 and "block" in r.stderr
+
+
+def test_constraints_per_component_are_named_after_it_with_exact_jacobians(tmp_path):
+    mesh = write_parts(tmp_path, "span-y")
+    comps = [{**THREE[0], "changes": [{"twist": {"tip": 3}}, {"chord": {"tip": 0.8}}]},
+             {**THREE[1], "changes": [{"dihedral": 5}, {"shape": {"upper": [0, 0.01, 0.01, 0]}}]}, THREE[2]]
+    model = DesignModel.from_file(write_components(tmp_path, mesh, comps), use_cache=False)
+    model.set_constraints([{"volume": {"lower": 1.0}}], component=0)
+    model.set_constraints([{"thickness": {"chord": [0.3, 0.6], "span": [0.3, 0.7], "lower": 1.0}}], component=1)
+    assert model.constraint_names == ["wing.k0.volume"] + [f"htail.k0.thickness[{j}]" for j in range(4)]
+    J = model.constraint_jacobian()
+    v0 = model.values.copy()
+    for i in range(model.n_vars):
+        h = 1e-3 if "shape" in model.names[i] else 1e-2
+        vals = []
+        for sgn in (1, -1):
+            v = v0.copy()
+            v[i] += sgn * h
+            model.set_values(v)
+            vals.append(model.constraint_values())
+        np.testing.assert_allclose(J[:, i], (vals[0] - vals[1]) / (2 * h), rtol=1e-5, atol=1e-8,
+                                   err_msg=model.names[i])
+    model.set_values(v0)
+    # a wing constraint does not see the tail's variables, and the other way round
+    tail = [i for i, n in enumerate(model.names) if n.startswith("htail.")]
+    assert np.all(J[0, tail] == 0)
+    assert np.any(J[1:, tail] != 0)

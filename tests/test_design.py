@@ -37,11 +37,6 @@ changes:
 """
 
 
-def lattice_size(design):
-    pts = design.box.points
-    return (pts[0], pts[1], pts[2], 3) if len(pts) == 3 else (pts[0], 1, pts[1], 2)
-
-
 # ------------------------------------------------------------------------------------- configs/
 
 def test_the_schema_is_a_valid_draft_2020_12_schema():
@@ -61,10 +56,15 @@ def test_every_config_validates_loads_and_builds(config):
     design = load_design(config, check_files=(REPO / "samples").is_dir())
     assert design.mesh.parent == (REPO / "samples").resolve()
     assert design.output["mesh"].parent == (REPO / "out").resolve()
-    n, m, l, dim = lattice_size(design)
-    changes = build_changes(design, n, m, l, dim)
-    names, values = design_variables(changes)
-    assert len(names) == len(values) > 0 and np.all(np.isfinite(values))
+    from ffdcli.components import specs_of
+    from ffdcli.design import changes_from_spec
+
+    for spec in specs_of(design):            # a design with components: each one's box and changes
+        pts = spec.box.points
+        n, m, l, dim = (pts[0], pts[1], pts[2], 3) if len(pts) == 3 else (pts[0], 1, pts[1], 2)
+        changes = changes_from_spec(list(spec.changes_spec), n, m, l, dim)
+        names, values = design_variables(changes)
+        assert len(names) == len(values) > 0 and np.all(np.isfinite(values))
 
 
 def test_config_values_are_the_papers():
