@@ -209,16 +209,24 @@ def marker_ids(mesh, name: str) -> np.ndarray:
     return np.unique(np.concatenate([b.data.ravel() for b in blocks]))
 
 
-def _plane_normal_to(points: np.ndarray, axis: int, size: float) -> bool:
-    """The points lie in one plane normal to mesh axis ``axis`` (a symmetry plane of the span)."""
-    return len(points) > 0 and float(np.ptp(points[:, axis])) <= 1e-6 * max(size, 1e-300)
+def _flat_normal_to(mesh, name: str, axis: int, size: float) -> bool:
+    """Every face of marker ``name`` lies in a plane normal to mesh axis ``axis``: a symmetry plane
+    of the span, or several (the two side planes of an extruded airfoil under one name)."""
+    tol = 1e-6 * max(size, 1e-300)
+    for blk in mesh.markers[name]:
+        if len(blk.data) and blk.type != "vertex":
+            c = mesh.points[blk.data, axis]
+            if float(np.max(c.max(axis=1) - c.min(axis=1))) > tol:
+                return False
+    return True
 
 
 def root_contact(mesh, surface_ids: np.ndarray, span_axis: int, skip=()) -> tuple[str, np.ndarray] | None:
     """(marker, shared node ids) of the body a surface meets, or None.
 
     A body is a marker not in ``skip`` (the surface's own and the other components' markers) that
-    shares nodes with the surface and is not a plane normal to the span axis (a symmetry plane).
+    shares nodes with the surface and whose faces do not all lie in planes normal to the span axis
+    (a symmetry plane, or the side planes of an extruded airfoil).
     With several, the one sharing the most nodes."""
     pts = mesh.points[surface_ids]
     size = float(np.linalg.norm(np.ptp(pts, axis=0))) if len(pts) else 0.0
@@ -228,7 +236,7 @@ def root_contact(mesh, surface_ids: np.ndarray, span_axis: int, skip=()) -> tupl
             continue
         ids = marker_ids(mesh, name)
         shared = np.intersect1d(ids, surface_ids, assume_unique=True)
-        if not len(shared) or _plane_normal_to(mesh.points[ids], span_axis, size):
+        if not len(shared) or _flat_normal_to(mesh, name, span_axis, size):
             continue
         if best is None or len(shared) > len(best[1]):
             best = (name, shared)
