@@ -48,7 +48,7 @@ class ComponentSpec:
     surface
         Marker names, or None for the default surface rule (single-component form only).
     box
-        :class:`ffdcli.box.BoxSettings`.
+        :class:`ffdcli.settings.BoxSettings`.
     changes_spec
         The ``changes`` list as written.
     key
