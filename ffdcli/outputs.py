@@ -263,7 +263,14 @@ def plan_deform(design, *, mesh: str | Path | None = None, lattice: str | Path |
             png_item = ("plot", carried_name(design.output["mesh"], "plot"), "mesh" not in given, None)
     png = png_item[1] if len(png_item) > 1 else None
     view_item = ("plot_3d", carried_name(png, "plot_3d") if png is not None else None)
-    return plan_outputs([mesh_item, lat_item, png_item, view_item, *extra],
+    lat_items = [lat_item]
+    if getattr(design, "components", None) and len(lat_item) > 1 and lat_item[1] is not None:
+        from ffdcli.components import component_lattice_path, lattice_kind
+
+        # several components: one lattice file per component, named after it
+        lat_items = [(lattice_kind(c.name), component_lattice_path(lat_item[1], c.name), *lat_item[2:])
+                     for c in design.components]
+    return plan_outputs([mesh_item, *lat_items, png_item, view_item, *extra],
                         inputs=(design.mesh, design.path, *_box_inputs(design), *inputs))
 
 

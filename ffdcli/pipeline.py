@@ -656,12 +656,13 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
         return run.box.dim == 3 and render(run, result, tmp) is not None
 
     writers = {"mesh": mesh, "surface_file": surface_file, "plot": plot, "plot_3d": plot_3d}
-    if run.single:
+    if not getattr(run.design, "components", None):
         writers["lattice"] = lattice
-    else:
+    else:                            # components: (even one) -> a file per component, named after it
         from ffdcli.components import lattice_kind
 
-        for comp, P in zip(run.components, result.lattice, strict=True):
+        Ps = [result.lattice] if run.single else list(result.lattice)
+        for comp, P in zip(run.components, Ps, strict=True):
             writers[lattice_kind(comp.name)] = component_lattice(comp, P)
     return writers
 
@@ -685,13 +686,3 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     written = plan.write(writers)
     written.update(notes)
     return written
-
-
-def lattice_files(run: DesignRun, lattice_path) -> list[Path]:
-    """Where the lattices go: ``lattice_path`` for one component; for several, one legacy VTK per
-    component named after it (:func:`ffdcli.components.component_lattice_path`)."""
-    from ffdcli.components import component_lattice_path
-
-    if run.single:
-        return [Path(lattice_path)]
-    return [component_lattice_path(lattice_path, c.name) for c in run.components]

@@ -128,7 +128,8 @@ def test_each_component_follows_its_own_lattice_exactly(tmp_path, config):
                                        atol=EXACT)
     # the lattices: one file per component, named after it
     written = write_outputs(run, res)
-    assert [Path(p).name for p in written["lattice"]] == [f"out_design_lattice_{n}.vtk" for n in comps]
+    assert [Path(written[f"lattice.{n}"]).name for n in comps] == [f"out_design_lattice_{n}.vtk" for n in comps]
+    assert "lattice" not in written
 
 
 def test_variable_names_carry_the_component_and_set_addresses_one(tmp_path):

@@ -186,7 +186,8 @@ def _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, cons
                          ("plot3d", export_plot3d, False, "--export-plot3d")],
                         inputs=(mpath, design.path))          # every output checked before the work
     run = load_run(design, cache_dir=cache_dir, rebuild=rebuild, progress=console.progress, comm=console.comm)
-    writers = {lattice_kind(c.name): (lambda tmp, c=c: write_lattice_vtk(tmp, c.P0)) for c in run.components}
+    writers = {lattice_kind(c.name): (lambda tmp, c=c: write_lattice_vtk(tmp, c.P0))
+               for c in run.components}
     if export_plot3d:
         from ffdcli.formats.plot3d import write_plot3d
 
