@@ -176,6 +176,7 @@ def _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, cons
     """``ffd box DESIGN.yaml`` of a design with ``components:``: every component's box, one lattice
     file per component (``<stem>_<component>.vtk``), one Plot3D file with a block per component."""
     from ffdcli.components import component_lattice_path, lattice_kind
+    from ffdcli.formats.lattice_vtk import write_lattice_vtk
     from ffdcli.outputs import plan_outputs
     from ffdcli.pipeline import load_run
 
