@@ -80,7 +80,6 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
 
     if points is not None:           # refused in a fraction of a second, before the heavy imports
         check_lattice_size(points, path=mesh, key="--points")
-    import numpy as np
 
     from ffdcli.formats.lattice_vtk import write_lattice_vtk
     from ffdcli.pipeline import prepare_box
