@@ -22,9 +22,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from ffdcli.testing import wings  # noqa: E402
 from ffdcli.atomic import atomic_write  # noqa: E402
 from ffdcli.mesh import VTK_ID  # noqa: E402
+from ffdcli.testing import wings  # noqa: E402
 
 # ----------------------------------------------------------------------------------------------
 # A minimal SU2 writer and checks

@@ -23,7 +23,7 @@ from ffdcli.errors import InputError
 from ffdcli.formats import read_mesh, write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.pipeline import deform, load_run, write_outputs
-from ffdcli.wings import Planform, surface_mesh
+from ffdcli.testing.wings import Planform, surface_mesh
 
 SAMPLES = Path(__file__).resolve().parent.parent / "samples"
 EXACT = 1e-12

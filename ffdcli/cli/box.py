@@ -102,7 +102,7 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
     from ffdcli.outputs import plan_outputs
 
     if is_design_file(mesh) and getattr(design, "components", None):
-        if overrides or surfaces:
+        if surfaces or any(v is not None for v in (points, degree, sections, root, margin, from_file)):
             raise InputError("with components:, the box settings come from each component of the design "
                              "file; drop the --surface/--points/... options", path=design.path)
         return _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, console)
