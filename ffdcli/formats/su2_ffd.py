@@ -43,6 +43,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.mesh import diagonal
 from ffdcli.spline import basis_derivs, clamped_knots
 
 #: SU2's ``FFD_TOLERANCE`` default: parameters within it of [0, 1] belong to the box, and are clipped to
@@ -369,7 +370,7 @@ def refresh(section: Su2FfdSection, points: np.ndarray, *, tol: float = SU2_FFD_
         if len(ids) and (ids.min() < 0 or ids.max() >= len(points)):
             raise InputError(f"SU2 FFD box {box.tag}: surface point ids outside the mesh's "
                              f"0..{len(points) - 1}")
-        size = float(np.linalg.norm(np.ptp(box.control_points, axis=0)))
+        size = diagonal(box.control_points)
         u, res = invert(box, points[ids], box.surface_params, tol=RESIDUAL_TOL * size)
         inside = np.all(u >= -tol, axis=1) & np.all(u <= 1.0 + tol, axis=1) & (res <= RESIDUAL_TOL * size)
         u = np.clip(u, tol, 1.0 - tol)
