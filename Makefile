@@ -11,7 +11,7 @@ OUT    ?= out
 
 help:
 	@echo "make demo    create .venv, install ffd (with the 3D viewer), run the paper's cases into $(OUT)/"
-	@echo "make test    create .venv, install ffd with test tools, run the test suite"
+	@echo "make test    create .venv, install ffd with test tools and the optional extras (mpi, openmdao, viz), run the test suite"
 	@echo "make bench   print the speed/memory table (embedding, deform, I/O, volume follow, Jacobian) and the robustness matrix"
 	@echo "make lint    ruff"
 	@echo "make samples regenerate samples/ with gmsh (needs the [samples] extra)"
@@ -41,7 +41,7 @@ venv: $(VENV)/.stamp-test
 demo: $(VENV)/.stamp-viz
 	$(BIN)/python -m ffdcli.demo --out $(OUT)
 
-test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao
+test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz
 	$(BIN)/python -m pytest -q
 
 bench: $(VENV)/.stamp-test
