@@ -150,15 +150,9 @@ def component_lattice_path(lattice_path, name: str) -> Path:
 
 
 def lattice_kind(name: str) -> str:
-    """The output kind (:mod:`ffdcli.outputs`) of component ``name``'s lattice file (registered on
-    first use: a legacy VTK like the single lattice)."""
-    from ffdcli.outputs import KINDS, OutputKind, register
-
-    kind = f"lattice.{name}"
-    if kind not in KINDS:
-        register(OutputKind(kind, f"the lattice of {name}", (".vtk",),
-                            "the lattice is written as legacy VTK: give it a .vtk name"))
-    return kind
+    """The output kind (:mod:`ffdcli.outputs`) of component ``name``'s lattice file: ``lattice.<name>``,
+    a legacy VTK like the single lattice (:func:`ffdcli.outputs.kind_spec`)."""
+    return f"lattice.{name}"
 
 
 # ----------------------------------------------------------------------------------------------

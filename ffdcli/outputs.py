@@ -26,7 +26,7 @@ from __future__ import annotations
 import contextlib
 import os
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from ffdcli.atomic import (
@@ -77,6 +77,19 @@ register(OutputKind("design", "the design file", (".yaml", ".yml"),
                     "design files are YAML: give it a .yaml name"))
 
 
+def kind_spec(kind: str) -> OutputKind:
+    """The :class:`OutputKind` of ``kind``; ``<kind>.<name>`` is one of several outputs of a kind, e.g.
+    ``lattice.htail``, the lattice of component ``htail`` (same rules, named in messages). The table
+    :data:`KINDS` is filled once, at import: nothing is registered while a run plans its outputs."""
+    if kind in KINDS:
+        return KINDS[kind]
+    base, _, name = kind.partition(".")
+    if base in KINDS and name:
+        spec = KINDS[base]
+        return replace(spec, name=kind, what=f"{spec.what} of {name}")
+    raise KeyError(f"unknown output kind {kind!r}")
+
+
 @dataclass(frozen=True)
 class Output:
     """One planned output file."""
@@ -86,7 +99,7 @@ class Output:
 
     @property
     def what(self) -> str:
-        return KINDS[self.kind].what
+        return kind_spec(self.kind).what
 
 
 @dataclass(frozen=True)
@@ -174,7 +187,7 @@ def check_output(kind: str, path: str | Path, *, inputs: Iterable[str | Path | N
     ``inputs``: files of the run that must never be overwritten (the first is the mesh);
     ``others``: outputs already planned; ``create_folder``: a default location whose folder is made;
     ``option``: the command-line option or design key that gave the path (for messages)."""
-    spec = KINDS[kind]
+    spec = kind_spec(kind)
     if str(path) == "":
         raise InputError(f"the file name of {spec.what} is empty", key=option, hint="give a file name")
     p = Path(path)
@@ -292,5 +305,5 @@ def _box_inputs(design) -> tuple:
     return (f,) if f else ()
 
 
-__all__ = ["KINDS", "Output", "OutputKind", "OutputPlan", "carried_name", "check_output", "plan_deform",
+__all__ = ["KINDS", "Output", "OutputKind", "kind_spec", "OutputPlan", "carried_name", "check_output", "plan_deform",
            "plan_outputs", "plan_plot", "register"]
