@@ -73,11 +73,13 @@ def test_a_failing_setting_is_recovered_and_reported(tmp_path):
 
 @pytest.mark.slow
 def test_a_large_twist_is_recovered_without_the_fade(tmp_path):
-    """configs/rect_twist_linear.yaml (45 degrees at the tip): the faded rotation makes 2 cells
-    markedly worse; carried whole (rotation_reach: null) the mesh passes."""
+    """configs/rect_twist_linear.yaml (45 degrees at the tip) passes with the defaults: directly since
+    the gate judges cells made worse only below 0.01 (it made 2 cells markedly worse with the faded
+    rotation before), else by carrying the rotation whole (rotation_reach: null), never by more."""
     run = load_run(load_design(REPO / "configs" / "rect_twist_linear.yaml"), cache_dir=tmp_path)
     res = deform(run)
-    assert res.quality.ok and res.recovered_with == "rotations not faded (volume.rotation_reach: null)"
+    assert res.quality.ok and res.quality.n_inverted == 0
+    assert res.recovered_with in (None, "rotations not faded (volume.rotation_reach: null)")
 
 
 @pytest.mark.slow
