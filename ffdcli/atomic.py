@@ -201,23 +201,12 @@ def _pid_alive(pid: int) -> bool:
 # ----------------------------------------------------------------------------------------------
 
 @contextlib.contextmanager
-def signals_raise() -> Iterator[None]:
-    """During the block SIGTERM and SIGHUP raise :class:`Terminated` (SIGINT raises KeyboardInterrupt as
-    always), so the temporary files are removed on the way out. A handler set by the user's program
-    (not the default) is left alone. Outside the main thread: a no-op."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    old = {}
-
-    def handler(signum, frame):
-        raise Terminated(signum)
-
-    for s in HANDLED_SIGNALS:
-        if s == signal.SIGINT:
-            continue
+def _handlers(signals, handler, old: dict, *, keep_user: bool) -> Iterator[None]:
+    """``handler`` for ``signals`` during the block, the previous handlers (recorded in ``old``) after.
+    ``keep_user``: leave a signal alone whose handler is not the default (the user program's own)."""
+    for s in signals:
         try:
-            if signal.getsignal(s) == signal.SIG_DFL:
+            if not keep_user or signal.getsignal(s) == signal.SIG_DFL:
                 old[s] = signal.signal(s, handler)
         except (ValueError, OSError):
             pass
@@ -227,6 +216,22 @@ def signals_raise() -> Iterator[None]:
         for s, h in old.items():
             with contextlib.suppress(ValueError, OSError):
                 signal.signal(s, h)
+
+
+@contextlib.contextmanager
+def signals_raise() -> Iterator[None]:
+    """During the block SIGTERM and SIGHUP raise :class:`Terminated` (SIGINT raises KeyboardInterrupt as
+    always), so the temporary files are removed on the way out. A handler set by the user's program
+    (not the default) is left alone. Outside the main thread: a no-op."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        raise Terminated(signum)
+
+    with _handlers([s for s in HANDLED_SIGNALS if s != signal.SIGINT], handler, {}, keep_user=True):
+        yield
 
 
 @contextlib.contextmanager
@@ -240,18 +245,11 @@ def signals_deferred() -> Iterator[None]:
         yield
         return
     got: list[int] = []
-    old = {}
-    for s in HANDLED_SIGNALS:
-        try:
-            old[s] = signal.signal(s, lambda signum, frame: got.append(signum))
-        except (ValueError, OSError):
-            pass
+    old: dict = {}
     try:
-        yield
+        with _handlers(HANDLED_SIGNALS, lambda signum, frame: got.append(signum), old, keep_user=False):
+            yield
     finally:
-        for s, h in old.items():
-            with contextlib.suppress(ValueError, OSError):
-                signal.signal(s, h)
         if got:
             s = got[0]
             h = old.get(s, signal.SIG_DFL)
@@ -261,10 +259,6 @@ def signals_deferred() -> Iterator[None]:
                 if s == signal.SIGINT:
                     raise KeyboardInterrupt
                 raise Terminated(s)
-
-
-# kept for callers of the earlier name
-_sigint_deferred = signals_deferred
 
 
 # ----------------------------------------------------------------------------------------------

@@ -78,3 +78,8 @@ def jsonable(o):
     if isinstance(o, np.ndarray):
         return o.tolist()
     return str(o)
+
+
+def bound_text(x) -> str:
+    """A bound in the tables of ``ffd vars`` and ``ffd constraints``: ``-`` for none, else 6 digits."""
+    return "-" if x is None else f"{x:.6g}"

@@ -5,10 +5,7 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
-
-
-def _num(x) -> str:
-    return "-" if x is None else f"{x:.6g}"
+from ffdcli.cli.console import bound_text
 
 
 @cli.command("constraints")
@@ -61,7 +58,7 @@ def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
     rows = model.constraints_table()
     width = max([len(r["name"]) for r in rows] + [10])
     lines = [f"{'constraint':<{width}}  {'value':>12}  {'lower':>10}  {'upper':>10}  satisfied"]
-    lines += [f"{r['name']:<{width}}  {r['value']:>12.8g}  {_num(r['lower']):>10}  {_num(r['upper']):>10}  "
+    lines += [f"{r['name']:<{width}}  {r['value']:>12.8g}  {bound_text(r['lower']):>10}  {bound_text(r['upper']):>10}  "
               f"{'yes' if r['satisfied'] else 'NO'}" for r in rows]
     if not rows:
         lines.append("(the design file has no constraints:)")

@@ -5,10 +5,7 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
-
-
-def _num(x) -> str:
-    return "-" if x is None else f"{x:.6g}"
+from ffdcli.cli.console import bound_text
 
 
 @cli.command("vars")
@@ -39,8 +36,8 @@ def vars_cmd(design_file, overrides, cache_dir, console):
     rows = model.variables_table()
     width = max([len(r["name"]) for r in rows] + [8])
     lines = [f"{'variable':<{width}}  {'value':>12}  {'unit':<6}  {'lower':>12}  {'upper':>12}"]
-    lines += [f"{r['name']:<{width}}  {r['value']:>12.6g}  {r['unit']:<6}  {_num(r['lower']):>12}  "
-              f"{_num(r['upper']):>12}" for r in rows]
+    lines += [f"{r['name']:<{width}}  {r['value']:>12.6g}  {r['unit']:<6}  {bound_text(r['lower']):>12}  "
+              f"{bound_text(r['upper']):>12}" for r in rows]
     if not rows:
         lines.append("(no design variables: changes: is empty)")
     console.result({"variables": rows}, "\n".join(lines))
