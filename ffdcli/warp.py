@@ -32,21 +32,8 @@ bounding box of the surface nodes.
 Area weights are vertex areas: each boundary face (a line in 2D) gives an equal share of its area
 (length) to each of its nodes (:func:`vertex_areas`).
 
-**Marker rules** (the README copies this list):
-
-- The deforming surface: its nodes get exactly the FFD displacement, bit for bit.
-- ``fixed`` markers: their nodes do not move, and they are sources of zero motion.
-- ``sliding`` markers: their nodes get the IDW displacement with its component normal to the
-  marker's plane removed, so they stay on the plane (exactly, when the plane is normal to a mesh
-  axis). They are targets, not sources.
-- Default rule, for every marker other than the surface that ``volume.fixed`` / ``volume.sliding``
-  do not name: the marker is *sliding* when all its nodes lie in one plane (within
-  :data:`PLANE_TOLERANCE` x the diagonal of the mesh's bounding box; in 2D: on one straight line
-  of the mesh plane) **and** it shares at least one node with the surface — a symmetry plane at
-  the wing root. Every other marker is *fixed*: the farfield, inlets and outlets, other bodies.
-  A marker named in ``volume.sliding`` must be planar.
-- A node on several markers takes the strongest role: surface, then fixed, then sliding. A node on
-  two sliding planes moves along their intersection line (three or more: it does not move).
+**Marker rules**: :mod:`ffdcli.warp_roles` (which markers are fixed, which slide; the README
+copies its list). **The source tree**: :mod:`ffdcli.warp_tree`.
 
 **Tree approximation.** The exact sum costs O(N_targets x N_sources). Sources are held in a k-d
 tree (median splits on the widest coordinate, leaves of up to 16 sources; the surface sources and
@@ -71,6 +58,7 @@ criterion, not a bound on the total: the error measured against the exact sum is
 ``tolerance x max |b|`` (``benchmarks/bench_warp.py``); the tests check
 ``<= tolerance x max |b|`` on small meshes.
 
+
 Numba kernels (``prange`` over blocks of targets, explicit stack traversal) have NumPy references
 (:func:`idw_reference`) used by the tests.
 """
@@ -79,169 +67,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba import njit, prange
 
-from ffdcli.errors import InputError
-from ffdcli.mesh import CellBlock, check_markers, diagonal
+from ffdcli.mesh import CellBlock, diagonal
 from ffdcli.progress import chunks, no_progress
 from ffdcli.rotations import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
 from ffdcli.settings import METHODS, WarpSettings  # noqa: F401  (WarpSettings: re-exported)
 from ffdcli.surface import vertex_areas
+from ffdcli.warp_roles import (  # noqa: F401  (re-exported: the public names of the warp)
+    PLANE_TOLERANCE,
+    MarkerRoles,
+    SlidingPlane,
+    marker_roles,
+    sliding_projectors,
+)
+from ffdcli.warp_tree import LEAF_SIZE, build_forest, morton_order, node_geometry  # noqa: F401
 
-#: A marker is planar when all its nodes are within this fraction of the mesh's bounding-box
-#: diagonal from one plane (2D: one line).
-PLANE_TOLERANCE = 1e-9
-#: Sources per tree leaf.
-LEAF_SIZE = 16
 #: Targets per parallel work item (inside a chunk).
 _BLOCK = 128
 #: Traversal stack size: the tree depth is at most log2(sources) + 1 < 64.
 _STACK = 160
-
-class SlidingPlane(NamedTuple):
-    """Nodes that slide in a plane: mesh node ids, unit plane normal (3,), a point of the plane."""
-
-    ids: np.ndarray
-    normal: np.ndarray
-    point: np.ndarray
-
-
-@dataclass
-class MarkerRoles:
-    """What each marker does while the volume follows the surface (see the module docstring).
-
-    roles
-        ``{marker name: "surface" | "fixed" | "sliding"}``.
-    surface_ids, fixed_ids
-        Sorted unique mesh node ids; fixed ids exclude surface nodes.
-    sliding
-        One :class:`SlidingPlane` per sliding marker; ids exclude surface and fixed nodes.
-    faces
-        Boundary faces (lines in 2D) of the surface and fixed markers: the area weights.
-    """
-
-    roles: dict[str, str]
-    surface_ids: np.ndarray
-    fixed_ids: np.ndarray
-    sliding: list[SlidingPlane]
-    faces: list[CellBlock]
-
-
-def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surface, dim: int = 3,
-                 settings: WarpSettings | None = None, *, path=None) -> MarkerRoles:
-    """Decide which markers are fixed and which slide, by the rules of the module docstring.
-
-    Parameters
-    ----------
-    points
-        (N, 3) mesh points.
-    markers
-        ``{name: [CellBlock, ...]}`` as in :class:`ffdcli.mesh.Mesh`.
-    surface
-        Name or names of the deforming surface markers.
-    dim
-        2 for an airfoil mesh (planes become lines of the mesh plane), 3 otherwise.
-    settings
-        ``fixed``/``sliding`` name markers whose role the user chose.
-    """
-    settings = settings or WarpSettings()
-    pts = np.asarray(points, dtype=np.float64)
-    surface = (surface,) if isinstance(surface, str) else tuple(surface)
-    for key, names in (("surface", surface), ("volume.fixed", settings.fixed or ()),
-                       ("volume.sliding", settings.sliding or ())):
-        check_markers(markers, names, path=path, key=key)
-    clash = set(surface) & (set(settings.fixed or ()) | set(settings.sliding or ()))
-    if clash:
-        raise InputError(f"{', '.join(sorted(clash))} is the deforming surface; it cannot also be "
-                         "fixed or sliding", key="volume", path=path)
-
-    def ids_of(name):
-        blocks = markers[name]
-        if not blocks:
-            return np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate([b.data.ravel() for b in blocks]))
-
-    surface_ids = (np.unique(np.concatenate([ids_of(n) for n in surface])) if surface
-                   else np.zeros(0, dtype=np.int64))
-    size = diagonal(pts)
-    mesh_normal = _plane_normal(pts) if dim == 2 else None
-    roles: dict[str, str] = {n: "surface" for n in surface}
-    planes: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    for name in markers:
-        if name in roles:
-            continue
-        ids = ids_of(name)
-        plane = _fit_plane(pts[ids], size, mesh_normal)
-        if settings.sliding is not None and name in settings.sliding:
-            if plane is None:
-                raise InputError(f"marker {name!r} is not planar, so its nodes cannot slide in a "
-                                 f"plane", key="volume.sliding", path=path)
-            roles[name] = "sliding"
-        elif settings.fixed is not None and name in settings.fixed:
-            roles[name] = "fixed"
-        elif plane is not None and np.intersect1d(ids, surface_ids, assume_unique=True).size:
-            roles[name] = "sliding"
-        else:
-            roles[name] = "fixed"
-        if roles[name] == "sliding":
-            planes[name] = plane
-    fixed = [ids_of(n) for n, r in roles.items() if r == "fixed"]
-    fixed_ids = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=np.int64)
-    fixed_ids = np.setdiff1d(fixed_ids, surface_ids, assume_unique=True)
-    taken = np.union1d(surface_ids, fixed_ids)
-    sliding = []
-    for name, (normal, point) in planes.items():
-        ids = np.setdiff1d(ids_of(name), taken, assume_unique=True)
-        sliding.append(SlidingPlane(ids, normal, point))
-    faces = [b for n, r in roles.items() if r in ("surface", "fixed") for b in markers[n]
-             if b.type != "vertex"]
-    return MarkerRoles(roles, surface_ids, fixed_ids, sliding, faces)
-
-
-def _snap_axis(n: np.ndarray) -> np.ndarray:
-    """A unit normal within 1e-12 of a mesh axis becomes that axis exactly."""
-    n = n / np.linalg.norm(n)
-    k = int(np.argmax(np.abs(n)))
-    if abs(n[k]) >= 1.0 - 1e-12:
-        e = np.zeros(3)
-        e[k] = np.sign(n[k])
-        return e
-    return n
-
-
-def _plane_normal(pts: np.ndarray) -> np.ndarray:
-    """Unit normal of the best-fit plane of points (smallest principal direction)."""
-    c = pts - pts.mean(axis=0)
-    _, _, vt = np.linalg.svd(c, full_matrices=False)
-    return _snap_axis(vt[-1])
-
-
-def _fit_plane(pts: np.ndarray, size: float, mesh_normal: np.ndarray | None):
-    """(normal, point) when the points lie in one plane (3D) / on one line of the mesh plane (2D)."""
-    tol = PLANE_TOLERANCE * max(size, np.finfo(float).tiny)
-    if len(pts) < (3 if mesh_normal is None else 2):
-        return None
-    center = pts.mean(axis=0)
-    c = pts - center
-    if mesh_normal is None:
-        _, s, vt = np.linalg.svd(c, full_matrices=False)
-        if s[1] <= tol:                 # all on a line or a point: no unique plane
-            return None
-        normal = _snap_axis(vt[-1])
-    else:
-        inplane = c - np.outer(c @ mesh_normal, mesh_normal)
-        _, s, vt = np.linalg.svd(inplane, full_matrices=False)
-        if s[0] <= tol:
-            return None
-        normal = _snap_axis(np.cross(mesh_normal, vt[0]))
-    if np.max(np.abs(c @ normal)) > tol:
-        return None
-    return normal, center
-
 
 # ----------------------------------------------------------------------------------------------
 # The model
@@ -354,7 +202,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     surface_pos = pts[surface_ids] - origin
 
     # sliding projectors, per target row
-    slide_rows, slide_proj = _sliding_projectors(sliding, is_target, n)
+    slide_rows, slide_proj = sliding_projectors(sliding, is_target, n)
     rows_of = np.full(n, -1, dtype=np.int64)
 
     empty_tree = dict(src_pos=np.zeros((0, 3)), src_area=np.zeros(0), src_index=np.zeros(0, np.int64),
@@ -390,7 +238,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
 
     # targets in Morton order: neighbours in memory walk the same tree nodes
     tpos = pts[target_ids] - origin
-    order = _morton_order(tpos)
+    order = morton_order(tpos)
     target_ids = target_ids[order]
     tpos = np.ascontiguousarray(tpos[order])
     rows_of[target_ids] = np.arange(len(target_ids))
@@ -401,10 +249,10 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     spos = np.ascontiguousarray(pts[src_ids] - origin)
     with progress("warp tree", 1) as bar:
         if len(spos):
-            perm, nlo, nhi, nleft, nright = _build_forest(spos, len(surface_ids))
+            perm, nlo, nhi, nleft, nright = build_forest(spos, len(surface_ids))
             spos_t = np.ascontiguousarray(spos[perm])
             a_t = a[perm]
-            center, radius, narea = _node_geometry(spos_t, a_t, nlo, nhi)
+            center, radius, narea = node_geometry(spos_t, a_t, nlo, nhi)
         else:
             return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos,
                              slide_rows, slide_proj, origin, ldef, chord, **empty_tree)
@@ -427,171 +275,6 @@ def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, pr
     model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
                          faces=roles.faces, progress=progress)
     return model, roles
-
-
-def _sliding_projectors(sliding, is_target: np.ndarray, n: int):
-    """Mesh ids of sliding target nodes and the projector onto their allowed directions."""
-    if not sliding:
-        return np.zeros(0, np.int64), np.zeros((0, 3, 3))
-    ids_all, normals_all = [], []
-    for plane in sliding:
-        ids, normal = np.asarray(plane[0], dtype=np.int64).ravel(), np.asarray(plane[1], dtype=float)
-        nrm = np.linalg.norm(normal)
-        if nrm == 0 or not np.isfinite(nrm):
-            raise ValueError("a sliding plane needs a non-zero normal")
-        normal = _snap_axis(normal)
-        ids = ids[is_target[ids]]
-        ids_all.append(ids)
-        normals_all.append(np.broadcast_to(normal, (len(ids), 3)))
-    ids = np.concatenate(ids_all)
-    normals = np.concatenate(normals_all)
-    uniq, inv = np.unique(ids, return_inverse=True)
-    nnt = np.zeros((len(uniq), 3, 3))
-    np.add.at(nnt, inv, normals[:, :, None] * normals[:, None, :])
-    counts = np.bincount(inv, minlength=len(uniq))
-    proj = np.empty_like(nnt)
-    one = counts == 1
-    # one plane: I - n n^T, exact zeros along an axis-aligned normal
-    proj[one] = np.eye(3) - nnt[one]
-    many = ~one
-    if np.any(many):
-        w, v = np.linalg.eigh(nnt[many])
-        keep = (w <= 1e-9).astype(float)          # directions orthogonal to every normal
-        proj[many] = np.einsum("nik,nk,njk->nij", v, keep, v)
-    return uniq, proj
-
-
-def _morton_order(pos: np.ndarray) -> np.ndarray:
-    """Permutation sorting points along a Z-order curve (21 bits per axis)."""
-    if len(pos) == 0:
-        return np.zeros(0, dtype=np.int64)
-    lo = pos.min(axis=0)
-    ext = np.maximum(pos.max(axis=0) - lo, 1e-300)
-    q = np.minimum(((pos - lo) / ext * (2 ** 21 - 1)).astype(np.uint64), 2 ** 21 - 1)
-    code = np.zeros(len(pos), dtype=np.uint64)
-    for k in range(3):
-        code |= _spread_bits(q[:, k]) << np.uint64(k)
-    return np.argsort(code, kind="stable")
-
-
-def _spread_bits(v: np.ndarray) -> np.ndarray:
-    v = v & np.uint64(0x1FFFFF)
-    v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
-    v = (v | (v << np.uint64(16))) & np.uint64(0x1F0000FF0000FF)
-    v = (v | (v << np.uint64(8))) & np.uint64(0x100F00F00F00F00F)
-    v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
-    v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
-    return v
-
-
-def _build_forest(pos: np.ndarray, n_first: int):
-    """One tree over pos whose root splits [0, n_first) (surface) from the rest (fixed markers).
-
-    Median splits over a far-field sphere and a wing together would put far-field and wing nodes
-    in the same groups for a dozen levels (groups of radius ~ the farfield radius, which no wing
-    target can aggregate); a subtree per kind keeps every group compact.
-    """
-    m = len(pos)
-    if n_first in (0, m):
-        return _build_tree(pos, LEAF_SIZE)
-    parts = [_build_tree(np.ascontiguousarray(pos[:n_first]), LEAF_SIZE),
-             _build_tree(np.ascontiguousarray(pos[n_first:]), LEAF_SIZE)]
-    perm = [np.zeros(0, np.int64)]
-    lo, hi, left, right = [np.array([0])], [np.array([m])], [np.array([1])], [np.array([0])]
-    node_off, src_off = 1, 0
-    for p, plo, phi, pl, pr in parts:
-        perm.append(p + src_off)
-        lo.append(plo + src_off)
-        hi.append(phi + src_off)
-        left.append(np.where(pl >= 0, pl + node_off, -1))
-        right.append(np.where(pr >= 0, pr + node_off, -1))
-        src_off += len(p)
-        node_off += len(plo)
-    right[0][0] = 1 + len(parts[0][1])
-    return tuple(np.concatenate(x).astype(np.int64) for x in (perm, lo, hi, left, right))
-
-
-@njit(cache=True)
-def _build_tree(pos, leaf_size):
-    """k-d tree over pos (M, 3): permutation and per-node [lo, hi) ranges and children."""
-    m = pos.shape[0]
-    cap = 2 * m + 1
-    lo = np.empty(cap, np.int64)
-    hi = np.empty(cap, np.int64)
-    left = np.full(cap, -1, np.int64)
-    right = np.full(cap, -1, np.int64)
-    perm = np.arange(m)
-    stack = np.empty(200, np.int64)
-    lo[0] = 0
-    hi[0] = m
-    nn = 1
-    stack[0] = 0
-    sp = 1
-    while sp > 0:
-        sp -= 1
-        k = stack[sp]
-        a, b = lo[k], hi[k]
-        if b - a <= leaf_size:
-            continue
-        best, axis = -1.0, 0
-        for c in range(3):
-            vmin, vmax = np.inf, -np.inf
-            for j in range(a, b):
-                v = pos[perm[j], c]
-                vmin = min(vmin, v)
-                vmax = max(vmax, v)
-            if vmax - vmin > best:
-                best, axis = vmax - vmin, c
-        seg = perm[a:b].copy()
-        keys = np.empty(b - a)
-        for j in range(b - a):
-            keys[j] = pos[seg[j], axis]
-        o = np.argsort(keys, kind="mergesort")
-        for j in range(b - a):
-            perm[a + j] = seg[o[j]]
-        mid = (a + b) // 2
-        lo[nn], hi[nn] = a, mid
-        lo[nn + 1], hi[nn + 1] = mid, b
-        left[k], right[k] = nn, nn + 1
-        stack[sp] = nn
-        stack[sp + 1] = nn + 1
-        sp += 2
-        nn += 2
-    return perm, lo[:nn].copy(), hi[:nn].copy(), left[:nn].copy(), right[:nn].copy()
-
-
-@njit(cache=True)
-def _node_geometry(pos, area, lo, hi):
-    nn = lo.shape[0]
-    center = np.zeros((nn, 3))
-    radius = np.zeros(nn)
-    narea = np.zeros(nn)
-    for k in range(nn):
-        s = 0.0
-        c0 = c1 = c2 = 0.0
-        for j in range(lo[k], hi[k]):
-            s += area[j]
-            c0 += area[j] * pos[j, 0]
-            c1 += area[j] * pos[j, 1]
-            c2 += area[j] * pos[j, 2]
-        if s > 0:
-            c0, c1, c2 = c0 / s, c1 / s, c2 / s
-        else:
-            cnt = hi[k] - lo[k]
-            c0 = c1 = c2 = 0.0
-            for j in range(lo[k], hi[k]):
-                c0 += pos[j, 0] / cnt
-                c1 += pos[j, 1] / cnt
-                c2 += pos[j, 2] / cnt
-        r2 = 0.0
-        for j in range(lo[k], hi[k]):
-            d = (pos[j, 0] - c0) ** 2 + (pos[j, 1] - c1) ** 2 + (pos[j, 2] - c2) ** 2
-            r2 = max(r2, d)
-        center[k, 0], center[k, 1], center[k, 2] = c0, c1, c2
-        # a hair larger than the largest distance so rounding never makes it too small
-        radius[k] = math.sqrt(r2) * (1.0 + 1e-12)
-        narea[k] = s
-    return center, radius, narea
 
 
 # ----------------------------------------------------------------------------------------------
