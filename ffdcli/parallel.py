@@ -94,6 +94,14 @@ class SerialComm:
         The trailing shape and dtype must agree across ranks."""
         return np.array(a, copy=True)
 
+    def gather_rows(self, a: np.ndarray) -> np.ndarray | None:
+        """Concatenate every rank's array along axis 0, in rank order, on rank 0 (None elsewhere)."""
+        return np.array(a, copy=True)
+
+    def alltoall(self, objs: list) -> list:
+        """``objs[r]`` goes to rank r; returns what every rank sent to this one, in rank order."""
+        return list(objs)
+
     def allreduce_sum(self, x):
         """The sum over ranks of ``x`` (a number or an array of the same shape on every rank)."""
         return np.array(x, dtype=np.float64, copy=True) if isinstance(x, np.ndarray) else x
@@ -162,6 +170,26 @@ class MPIComm(SerialComm):
         self.comm.Allgatherv(send, [recv, counts, displs, _mpi_type(send.dtype)])
         return out
 
+    def gather_rows(self, a: np.ndarray) -> np.ndarray | None:
+        a = np.ascontiguousarray(a)
+        shapes = self.comm.allgather((a.shape, a.dtype.str))
+        if len({s[1:] for s, _ in shapes}) != 1 or len({d for _, d in shapes}) != 1:
+            raise ValueError(f"gather_rows: the ranks' arrays differ in trailing shape or dtype: {shapes}")
+        row = int(np.prod(a.shape[1:], dtype=np.int64))
+        counts = np.array([s[0] * row for s, _ in shapes], dtype=np.int64)
+        send = a.view(np.uint8).reshape(-1) if a.dtype == np.bool_ else a.reshape(-1)
+        if not self.is_root:
+            self.comm.Gatherv(send, None, root=0)
+            return None
+        out = np.empty((sum(s[0] for s, _ in shapes),) + a.shape[1:], dtype=a.dtype)
+        recv = out.view(np.uint8).reshape(-1) if a.dtype == np.bool_ else out.reshape(-1)
+        displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        self.comm.Gatherv(send, [recv, counts, displs, _mpi_type(send.dtype)], root=0)
+        return out
+
+    def alltoall(self, objs: list) -> list:
+        return self.comm.alltoall(objs)
+
     def allreduce_sum(self, x):
         from mpi4py import MPI
 
@@ -182,7 +210,7 @@ class MPIComm(SerialComm):
 
     def agree(self, error: BaseException | None = None) -> None:
         mine = None if error is None else _describe(error) + (self.rank,)
-        failures = [f for f in self.comm.allgather(mine) if f is not None]
+        failures = [f for f in self.allgather(mine) if f is not None]
         if not failures:
             return
         message, code, report, rank = failures[0]          # the lowest failing rank's, on every rank

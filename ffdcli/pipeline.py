@@ -30,8 +30,9 @@ from ffdcli.lattice import derivatives
 from ffdcli.limits import check_box_memory, check_lattice_size
 from ffdcli.mesh import Mesh, check_markers
 from ffdcli.parallel import SerialComm
+from ffdcli.partition import rank_part
 from ffdcli.progress import no_progress
-from ffdcli.quality import QualityReport, check_quality, quality_reference
+from ffdcli.quality import QualityReport, check_quality, check_quality_part, part_reference, quality_reference
 from ffdcli.rotations import rotations_from_deformation_gradient, surface_frame_gradient
 from ffdcli.settings import BoxSettings
 from ffdcli.surface import Surface, default_surface, extract_surface
@@ -253,6 +254,7 @@ class DesignRun:
     _warp: WarpModel | None = field(default=None, repr=False)   # the volume warp model, built on first use
     comm: object = field(default=None, repr=False)    # ffdcli.parallel communicator (None: serial)
     _quality_ref: object = field(default=None, repr=False)   # the gate's view of the input mesh, built once
+    _quality_part: object = field(default=None, repr=False)  # MPI: (this rank's MeshPart, its PartReference)
 
     def quality_reference(self):
         """The quality gate's :class:`~ffdcli.quality.QualityReference` of the input mesh, computed
@@ -260,6 +262,20 @@ class DesignRun:
         if self._quality_ref is None:
             self._quality_ref = quality_reference(self.prep.mesh)
         return self._quality_ref
+
+    def check_quality(self, points: np.ndarray, **kw) -> QualityReport:
+        """The gate's report of the mesh at ``points`` (N, 3) against the input mesh. Under MPI
+        (``comm`` of several ranks) a collective: each rank judges the cells and nodes of its
+        :class:`~ffdcli.partition.MeshPart` and the counts are reduced (the same report, equal to
+        the serial one, on every rank)."""
+        mesh, comm = self.prep.mesh, self.comm
+        if comm is None or comm.size == 1:
+            return check_quality(mesh, points, points_before=mesh.points, reference=self.quality_reference(), **kw)
+        if self._quality_part is None:
+            part = rank_part(mesh, comm)
+            self._quality_part = (part, part_reference(part, comm))
+        part, ref = self._quality_part
+        return check_quality_part(part, comm, part.take(points), part.points, reference=ref, **kw)
 
     @property
     def prep(self) -> PreparedBox:
@@ -593,7 +609,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         t2 = time.perf_counter()
         threshold = (run.design.volume or {}).get("threshold")
         kw = {} if threshold is None else {"threshold": float(threshold)}
-        quality = check_quality(mesh, points, points_before=mesh.points, reference=run.quality_reference(), **kw)
+        quality = run.check_quality(points, **kw)
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
     if quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw":
@@ -607,7 +623,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
             if not np.all(np.isfinite(pts)):
                 tried.append({"attempt": what, "failed": None, "ok": False})
                 continue
-            q = check_quality(mesh, pts, points_before=mesh.points, reference=run.quality_reference(), **kw)
+            q = run.check_quality(pts, **kw)
             tried.append({"attempt": what, "failed": q.n_failed, "ok": q.ok})
             if q.n_failed < best[0]:
                 best = (q.n_failed, pts, q, what)

@@ -193,15 +193,8 @@ def cell_orientation(points: np.ndarray, cells: list[CellBlock], dim: int = 3) -
             for lo in range(0, len(d), CHUNK):
                 c = d[lo:lo + CHUNK]
                 total += np.cross(pts[c[:, 1]] - pts[c[:, 0]], pts[c[:, 2]] - pts[c[:, 0]]).sum(axis=0)
-        nrm = np.linalg.norm(total)
-        if nrm > 0:
-            normal = total / nrm
-        else:          # no cells or no area at all: the axis of least extent
-            ext = np.ptp(pts, axis=0) if len(pts) else np.ones(3)
-            normal = np.eye(3)[int(np.argmin(ext))]
-        k = int(np.argmax(np.abs(normal)))
-        if abs(normal[k]) >= 1 - 1e-12:                        # a mesh in a coordinate plane
-            normal = np.sign(normal[k]) * np.eye(3)[k]
+        # no cells or no area at all: the axis of least extent
+        normal = _plane_normal_of(total, np.ptp(pts, axis=0) if len(pts) else np.ones(3))
         return Orientation(np.ones(len(cells)), normal)
     return Orientation(_majority_signs([_raw_quality(pts, b.data, b.type, None) for b in cells]), None)
 
@@ -829,17 +822,14 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
             rows.append(row)
         return rows
 
-    inverted = q <= 0
-    below = ~inverted & (q < threshold)
-    out = {"n_inverted": int(inverted.sum()), "n_below": int(below.sum()), "min_after": float(q.min())}
-    failed = np.zeros(len(q), dtype=bool)
+    floor = None
     if has_before:
-        bad_in = qb <= 0
+        valid = qb > 0
+        floor = collapse_floor(float(qb[valid].min()) if valid.any() else None, collapse)
+    inverted, below, bad_in, new_inv, worse, failed = cell_rule(q, qb, threshold, relative, floor)
+    out = {"n_inverted": int(inverted.sum()), "n_below": int(below.sum()), "min_after": float(q.min())}
+    if has_before:
         valid = ~bad_in
-        floor = min(float(qb[valid].min()) if valid.any() else 0.0, collapse)
-        new_inv = inverted & valid
-        worse = valid & ~inverted & (q < threshold) & (q < relative * qb) & (q < floor)
-        failed = new_inv | worse
         out.update(n_inverted_before=int(bad_in.sum()), n_below_before=int((valid & (qb < threshold)).sum()),
                    n_input_bad=int(bad_in.sum()), n_new_inverted=int(new_inv.sum()), n_worse=int(worse.sum()),
                    min_before=float(qb.min()))
@@ -848,13 +838,42 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
             out["input_bad"] = cell_rows(idx[np.argsort(qb[idx], kind="stable")][:n_worst], qb, coords=ref)
     else:
         out["min_before"] = None
-        failed = inverted
     worst = np.argsort(q, kind="stable")[:n_worst]
     out["worst"] = cell_rows(worst, q, failed)
     if orthogonality:
         out.update(_orthogonality_counts(ref, after if has_before else None, cells, mesh.dim, reference,
                                          ortho_min, ortho_loss, n_worst))
     return QualityReport(len(q), **out, **kw)
+
+
+def collapse_floor(min_valid_before: float | None, collapse: float) -> float:
+    """The quality under which a cell made worse fails: the lower of ``collapse`` and the input
+    mesh's worst valid cell (0 when the input has no valid cell)."""
+    return min(0.0 if min_valid_before is None else float(min_valid_before), collapse)
+
+
+def cell_rule(q: np.ndarray, qb: np.ndarray | None, threshold: float, relative: float, floor: float | None):
+    """The gate's rule on cells (the one home, see the module docstring), for any set of cells.
+
+    ``q``, ``qb``: (k,) scaled Jacobians after and before (``qb`` None: no mesh before); ``floor``:
+    :func:`collapse_floor` of the WHOLE input mesh. Returns the (k,) masks ``(inverted, below,
+    bad_in, new_inv, worse, failed)`` (the three of the before None without one)."""
+    inverted = q <= 0
+    below = ~inverted & (q < threshold)
+    if qb is None:
+        return inverted, below, None, None, None, inverted
+    bad_in = qb <= 0
+    valid = ~bad_in
+    new_inv = inverted & valid
+    worse = valid & ~inverted & (q < threshold) & (q < relative * qb) & (q < floor)
+    return inverted, below, bad_in, new_inv, worse, new_inv | worse
+
+
+def node_rule(o: np.ndarray, o_ref: np.ndarray, has: np.ndarray, ortho_min: float, ortho_loss: float):
+    """The gate's rule on nodes (the one home): ``(loss, fail)`` of orthogonality after ``o`` and
+    before ``o_ref`` (degrees), where ``has`` (nodes of some cell)."""
+    loss = np.where(has, o_ref - o, 0.0)
+    return loss, has & (o < ortho_min) & (loss > ortho_loss)
 
 
 @dataclass(frozen=True)
@@ -906,8 +925,7 @@ def _orthogonality_counts(ref, after, cells, dim, reference, ortho_min, ortho_lo
         return {"n_nodes": int(has.sum()), "ortho_after": float(np.min(o[has])), "n_ortho_low": int(low.sum()),
                 "worst_nodes": rows}
     o = node_orthogonality(after, cells, dim, orientation=orientation, topology=topo)
-    loss = np.where(has, o_ref - o, 0.0)
-    fail = has & (o < ortho_min) & (loss > ortho_loss)
+    loss, fail = node_rule(o, o_ref, has, ortho_min, ortho_loss)
     idx = np.flatnonzero(has)
     worst = idx[np.lexsort((o[idx], ~fail[idx]))][:n_worst]          # failing first, then lowest after
     rows = [{"node": int(i), "before": float(o_ref[i]), "after": float(o[i]), "point": after[i].tolist(),
@@ -957,3 +975,240 @@ def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, f
                                report=report.to_dict())
         warnings.append(msg + "; written anyway (--force)")
     return warnings
+
+
+# ----------------------------------------------------------------------------------------------
+# The gate on partitions (MPI): each rank its share of the cells and nodes, the counts reduced
+# ----------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class PartReference(QualityReference):
+    """:class:`QualityReference` of one rank's :class:`~ffdcli.partition.MeshPart`: the orientation
+    of the WHOLE mesh (agreed between the ranks), ``q`` of the cells this rank counts (blocks
+    concatenated), the topology and node orthogonality of the part (valid at its owned nodes),
+    and the input's worst cells over every rank (the gate's collapse floor needs them)."""
+
+    q_min: float | None = None          # min q of the whole input mesh
+    q_min_valid: float | None = None    # min q > 0 of the whole input mesh (None: no valid cell)
+
+
+def _counted_blocks(part) -> list[CellBlock]:
+    return [CellBlock(t, b.data[c]) for t, b, c in zip(part.types, part.cells, part.counted, strict=True)]
+
+
+def part_reference(part, comm, points=None, *, orthogonality: bool = True) -> PartReference:
+    """The :class:`PartReference` of a part at ``points`` (local rows; default its own): a
+    collective (every rank calls it). The orientation is that of :func:`cell_orientation` of the
+    whole mesh: each block's sign from the counts of every rank, the 2D plane normal from the sum
+    over every rank's cells."""
+    pts = part.points if points is None else np.asarray(points, dtype=np.float64)
+    counted = _counted_blocks(part)
+    _check_types(counted, part.dim)
+    normal = None
+    if part.dim == 2:
+        total = np.zeros(3)
+        for blk in counted:
+            d = blk.data
+            for lo in range(0, len(d), CHUNK):
+                c = d[lo:lo + CHUNK]
+                total += np.cross(pts[c[:, 1]] - pts[c[:, 0]], pts[c[:, 2]] - pts[c[:, 0]]).sum(axis=0)
+        total = comm.allreduce_sum(total)
+        own = pts[part.owned]
+        box = np.concatenate([own.min(axis=0), -own.max(axis=0)]) if len(own) else np.full(6, np.inf)
+        box = np.array([min(v) for v in zip(*comm.allgather(box), strict=True)])
+        ext = -box[3:] - box[:3] if np.all(np.isfinite(box)) else np.ones(3)
+        normal = _plane_normal_of(total, ext)
+    raws = comm.run(lambda: [_raw_quality(pts, b.data, b.type, normal) for b in counted])
+    if part.dim == 2:
+        signs = np.ones(len(counted))
+    else:
+        tally = np.array([[np.count_nonzero(r < 0), np.count_nonzero(r > 0)] for r in raws], dtype=np.float64)
+        tally = comm.allreduce_sum(tally.reshape(-1, 2)) if len(raws) else tally
+        signs = np.array([-1.0 if neg > pos else 1.0 for neg, pos in tally])
+    orientation = Orientation(signs, normal)
+    q = (np.concatenate([np.clip(sg * r, -1.0, 1.0) for sg, r in zip(signs, raws, strict=True)]) if raws
+         else np.zeros(0))
+    mins = comm.allgather((float(q.min()) if len(q) else None,
+                           float(q[q > 0].min()) if np.any(q > 0) else None))
+    q_min = min((a for a, _ in mins if a is not None), default=None)
+    q_valid = min((b for _, b in mins if b is not None), default=None)
+    topo = ortho = None
+    if orthogonality:
+        def dual():
+            t = edge_topology(list(part.cells), len(pts))
+            return t, node_orthogonality(pts, list(part.cells), part.dim, orientation=orientation, topology=t)
+
+        topo, ortho = comm.run(dual)
+    return PartReference(orientation, q, topo, ortho, q_min=q_min, q_min_valid=q_valid)
+
+
+def _plane_normal_of(total: np.ndarray, ext: np.ndarray) -> np.ndarray:
+    """The 2D mesh-plane normal of :func:`cell_orientation` from the summed cell normals ``total``
+    (or, with no area at all, the axis of least extent ``ext``)."""
+    nrm = np.linalg.norm(total)
+    normal = total / nrm if nrm > 0 else np.eye(3)[int(np.argmin(ext))]
+    k = int(np.argmax(np.abs(normal)))
+    if abs(normal[k]) >= 1 - 1e-12:                        # a mesh in a coordinate plane
+        normal = np.sign(normal[k]) * np.eye(3)[k]
+    return normal
+
+
+def check_quality_part(part, comm, points_after=None, points_before=None, threshold: float = DEFAULT_THRESHOLD,
+                       *, relative: float = DEFAULT_RELATIVE, collapse: float = DEFAULT_COLLAPSE,
+                       ortho_min: float = DEFAULT_ORTHO_MIN, ortho_loss: float = DEFAULT_ORTHO_LOSS,
+                       orthogonality: bool = True, n_worst: int = 10,
+                       reference: PartReference | None = None) -> QualityReport:
+    """:func:`check_quality` shared between MPI ranks: a collective; every rank returns the same
+    :class:`QualityReport`, equal to the serial one of the whole mesh.
+
+    Each rank judges the cells it counts and the nodes it owns of its
+    :class:`~ffdcli.partition.MeshPart` (the cells around its nodes give their orthogonality); the
+    counts, minima and worst places are gathered (a few numbers and ``n_worst`` rows a rank).
+
+    Parameters
+    ----------
+    part
+        This rank's part (:func:`ffdcli.partition.part_of`, or read by rank).
+    comm
+        :mod:`ffdcli.parallel` communicator.
+    points_after, points_before
+        (n, 3) coordinates of the part's local nodes (``part.ids``); as in :func:`check_quality`
+        (``points_after`` None: the part's own points, and no before unless given).
+    reference
+        :func:`part_reference` of the reference geometry, to reuse.
+    """
+    if points_after is None:
+        after, before = part.points, points_before
+    else:
+        after = np.asarray(points_after, dtype=np.float64)
+        before = part.points if points_before is None else np.asarray(points_before, dtype=np.float64)
+    if after.shape != part.points.shape:
+        raise ValueError(f"points {after.shape} do not match the part {part.points.shape}")
+    ref = after if before is None else before
+    kw = {"threshold": float(threshold), "relative": float(relative), "ortho_min": float(ortho_min),
+          "ortho_loss_max": float(ortho_loss), "collapse": float(collapse)}
+    if part.n_cells == 0:
+        return QualityReport(0, 0, 0, min_before=None, min_after=None, **kw)
+    if reference is None or (orthogonality and reference.ortho is None):
+        reference = part_reference(part, comm, ref, orthogonality=orthogonality)
+    # the rank's own figures, agreed on (an error on one rank ends every rank), then gathered
+    mine = comm.run(_part_figures, part, after, before, ref, reference, threshold, relative, collapse,
+                    ortho_min, ortho_loss, orthogonality, n_worst)
+    return _merge_parts(comm.allgather(mine), before is not None, orthogonality, reference, n_worst, kw)
+
+
+def _part_figures(part, after, before, ref, reference, threshold, relative, collapse, ortho_min, ortho_loss,
+                  orthogonality, n_worst) -> dict:
+    """One rank's counts, minima and worst rows of :func:`check_quality_part` (no communication)."""
+    counted = _counted_blocks(part)
+    has_before = before is not None
+    q_ref = reference.q
+    q = q_ref if not has_before else cell_quality(after, counted, part.dim, orientation=reference.orientation)
+    qb = q_ref if has_before else None
+    gid = np.concatenate([c[m] for c, m in zip(part.cell_ids, part.counted, strict=True)])
+    kind = np.concatenate([np.full(len(b), k, dtype=np.int64) for k, b in enumerate(counted)])
+    rows_of = np.concatenate([np.flatnonzero(m) for m in part.counted])
+    floor = collapse_floor(reference.q_min_valid, collapse) if has_before else None
+    inverted, below, bad_in, new_inv, worse, failed = cell_rule(q, qb, threshold, relative, floor)
+
+    def cell_rows(index, values, with_failed=None, coords=after):
+        rows = []
+        for w in index.tolist():
+            k = int(kind[w])
+            nodes = part.cells[k].data[rows_of[w]]
+            row = {"cell": int(gid[w]), "type": part.types[k], "quality": float(values[w])}
+            if with_failed is not None:
+                row["quality_before"] = None if qb is None else float(qb[w])
+            row["centroid"] = coords[nodes].mean(axis=0).tolist()
+            if with_failed is not None:
+                row["failed"] = bool(with_failed[w])
+            rows.append(row)
+        return rows
+
+    mine = {"count": len(q), "n_inverted": int(inverted.sum()), "n_below": int(below.sum()),
+            "min_after": float(q.min()) if len(q) else None}
+    if has_before:
+        valid = ~bad_in
+        mine.update(n_inverted_before=int(bad_in.sum()), n_below_before=int((valid & (qb < threshold)).sum()),
+                    n_input_bad=int(bad_in.sum()), n_new_inverted=int(new_inv.sum()), n_worse=int(worse.sum()))
+        idx = np.flatnonzero(bad_in)
+        idx = idx[np.lexsort((gid[idx], qb[idx]))][:n_worst]
+        mine["input_bad"] = cell_rows(idx, qb, coords=ref)
+    worst = np.lexsort((gid, q))[:n_worst]
+    mine["worst"] = cell_rows(worst, q, failed)
+    if orthogonality and reference.ortho is not None:
+        mine["ortho"] = _part_orthogonality(part, ref, after if has_before else None, reference, ortho_min,
+                                            ortho_loss, n_worst)
+    return mine
+
+
+def _part_orthogonality(part, ref, after, reference, ortho_min, ortho_loss, n_worst) -> dict:
+    """This rank's orthogonality figures of its owned nodes (see :func:`_orthogonality_counts`)."""
+    own = part.owned
+    o_ref = reference.ortho
+    has = np.isfinite(o_ref) & own
+    gids = part.ids
+    out = {"n_nodes": int(has.sum())}
+    idx = np.flatnonzero(has)
+    if after is None:
+        o = o_ref
+        out.update(ortho_after=float(o[has].min()) if has.any() else None,
+                   n_ortho_low=int((has & (o < ortho_min)).sum()))
+        worst = idx[np.lexsort((gids[idx], o[idx]))][:n_worst]
+        out["worst_nodes"] = [((float(o[i]), int(gids[i])), {"node": int(gids[i]), "before": None,
+                               "after": float(o[i]), "point": ref[i].tolist(), "failed": False})
+                              for i in worst.tolist()]
+        return out
+    o = node_orthogonality(after, list(part.cells), part.dim, orientation=reference.orientation,
+                           topology=reference.topology)
+    loss, fail = node_rule(o, o_ref, has, ortho_min, ortho_loss)
+    out.update(ortho_before=float(o_ref[has].min()) if has.any() else None,
+               ortho_after=float(o[has].min()) if has.any() else None,
+               ortho_loss=float(loss[own].max()) if own.any() else None,
+               n_ortho_low=int((has & (o < ortho_min)).sum()),
+               n_ortho_low_before=int((has & (o_ref < ortho_min)).sum()),
+               n_ortho_failed=int(fail.sum()))
+    worst = idx[np.lexsort((gids[idx], o[idx], ~fail[idx]))][:n_worst]
+    out["worst_nodes"] = [((bool(~fail[i]), float(o[i]), int(gids[i])),
+                           {"node": int(gids[i]), "before": float(o_ref[i]), "after": float(o[i]),
+                            "point": after[i].tolist(), "failed": bool(fail[i])}) for i in worst.tolist()]
+    return out
+
+
+def _merge_parts(parts: list[dict], has_before: bool, orthogonality: bool, reference, n_worst: int,
+                 kw: dict) -> QualityReport:
+    """The :class:`QualityReport` of the whole mesh from every rank's figures (same on every rank)."""
+
+    def total(key):
+        return sum(p[key] for p in parts)
+
+    def least(values):
+        values = [v for v in values if v is not None]
+        return min(values) if values else None
+
+    out = {"n_inverted": total("n_inverted"), "n_below": total("n_below"),
+           "min_after": least(p["min_after"] for p in parts)}
+    rows = sorted((r for p in parts for r in p["worst"]), key=lambda r: (r["quality"], r["cell"]))
+    out["worst"] = rows[:n_worst]
+    if has_before:
+        for key in ("n_inverted_before", "n_below_before", "n_input_bad", "n_new_inverted", "n_worse"):
+            out[key] = total(key)
+        out["min_before"] = reference.q_min
+        bad = sorted((r for p in parts for r in p["input_bad"]), key=lambda r: (r["quality"], r["cell"]))
+        if bad:
+            out["input_bad"] = bad[:n_worst]
+    else:
+        out["min_before"] = None
+    ortho = [p["ortho"] for p in parts if "ortho" in p]
+    if orthogonality and ortho and sum(o["n_nodes"] for o in ortho):
+        out["n_nodes"] = sum(o["n_nodes"] for o in ortho)
+        out["ortho_after"] = least(o["ortho_after"] for o in ortho)
+        out["n_ortho_low"] = sum(o["n_ortho_low"] for o in ortho)
+        if has_before:
+            out["ortho_before"] = least(o["ortho_before"] for o in ortho)
+            out["ortho_loss"] = max(o["ortho_loss"] for o in ortho if o["ortho_loss"] is not None)
+            out["n_ortho_low_before"] = sum(o["n_ortho_low_before"] for o in ortho)
+            out["n_ortho_failed"] = sum(o["n_ortho_failed"] for o in ortho)
+        nodes = sorted((w for o in ortho for w in o["worst_nodes"]), key=lambda w: w[0])
+        out["worst_nodes"] = [row for _, row in nodes[:n_worst]]
+    return QualityReport(sum(p["count"] for p in parts), **out, **kw)

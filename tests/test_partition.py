@@ -1,0 +1,143 @@
+"""Partitioned meshes (ffdcli.partition) and the quality gate shared between ranks: the report of
+2, 3 or 5 ranks (threads standing in for MPI ranks, :mod:`ffdcli.testing.threadcomm`) equals the
+serial report field for field (bit for bit), on meshes of every cell type, well and badly numbered,
+with cells inverted and made worse by the "design", and cells already bad in the input."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import SAMPLES
+
+from ffdcli.formats import read_mesh
+from ffdcli.mesh import CellBlock, Mesh
+from ffdcli.parallel import share
+from ffdcli.partition import part_of
+from ffdcli.quality import check_quality, check_quality_part
+from ffdcli.testing.threadcomm import run_ranks
+from ffdcli.testing.wings import extruded_wing_mesh
+
+
+def _renumber(mesh: Mesh, seed: int) -> Mesh:
+    """The same mesh with its nodes in a random order (a partition of it has large halos)."""
+    perm = np.random.default_rng(seed).permutation(mesh.n_points)
+    inv = np.empty_like(perm)
+    inv[perm] = np.arange(len(perm))
+    return Mesh(mesh.points[perm], mesh.dim, [CellBlock(b.type, inv[b.data]) for b in mesh.cells],
+                {k: [CellBlock(b.type, inv[b.data]) for b in v] for k, v in mesh.markers.items()})
+
+
+def _mixed_mesh() -> Mesh:
+    """A hexahedral grid whose second half is split into wedges, tetrahedra and pyramids... kept
+    simple: hexahedra and the wedges of the split hexahedra of alternate columns."""
+    n = 7
+    g = np.stack(np.meshgrid(*[np.linspace(0, 1, n)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    g[:, 2] = g[:, 2] ** 2                                   # thin cells near z = 0
+    idx = np.arange(n ** 3).reshape(n, n, n)
+    hexes, wedges = [], []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            for k in range(n - 1):
+                c = [idx[i, j, k], idx[i + 1, j, k], idx[i + 1, j + 1, k], idx[i, j + 1, k],
+                     idx[i, j, k + 1], idx[i + 1, j, k + 1], idx[i + 1, j + 1, k + 1], idx[i, j + 1, k + 1]]
+                if (i + j) % 2:
+                    hexes.append(c)
+                else:                                         # two wedges along the diagonal 0-2
+                    wedges.append([c[0], c[1], c[2], c[4], c[5], c[6]])
+                    wedges.append([c[0], c[2], c[3], c[4], c[6], c[7]])
+    return Mesh(g, 3, [CellBlock("hexahedron", hexes), CellBlock("wedge", wedges)], {})
+
+
+def _cases():
+    rect = read_mesh(SAMPLES / "rect_wing.su2")
+    naca = read_mesh(SAMPLES / "naca0012_2d.su2")
+    hexa = extruded_wing_mesh(n_around=33, n_radial=9, n_span=5)
+    mixed = _mixed_mesh()
+    return {"rect_wing_tets": rect, "naca_quads_2d": naca, "wing_hexes": hexa, "mixed_hex_wedge": mixed,
+            "rect_wing_shuffled": _renumber(rect, 3), "mixed_shuffled": _renumber(mixed, 4)}
+
+
+CASES = _cases()
+
+
+def _motion(mesh: Mesh, kind: str) -> np.ndarray:
+    """Coordinates after a "design": smooth (passes), or with cells crushed and inverted."""
+    rng = np.random.default_rng(7)
+    size = np.ptp(mesh.points, axis=0).max()
+    pts = mesh.points.copy()
+    flat = int(np.argmin(np.ptp(pts, axis=0))) if mesh.dim == 2 else None
+    if kind == "smooth":
+        pts += 1e-3 * size * np.sin(pts[:, ::-1] / size * 3)
+    else:                                                   # a few nodes thrown across their cells
+        hit = rng.choice(mesh.n_points, size=max(8, mesh.n_points // 100), replace=False)
+        pts[hit] += rng.normal(scale=2 * size / mesh.n_points ** (1 / mesh.dim), size=(len(hit), 3))
+    if flat is not None:
+        pts[:, flat] = mesh.points[:, flat]
+    return pts
+
+
+def _parts_report(mesh, size, after=None, before=None, **kw):
+    def one(comm):
+        lo, hi = share(mesh.n_points, comm.rank, size)
+        part = part_of(mesh, lo, hi)
+        a = None if after is None else after[part.ids]
+        b = None if before is None else before[part.ids]
+        return check_quality_part(part, comm, a, b, **kw)
+
+    return run_ranks(size, one)
+
+
+@pytest.mark.parametrize("name", list(CASES))
+@pytest.mark.parametrize("kind", ["smooth", "broken"])
+def test_the_gate_of_the_parts_is_the_serial_gate(name, kind):
+    mesh = CASES[name]
+    after = _motion(mesh, kind)
+    serial = check_quality(mesh, after, points_before=mesh.points)
+    if kind == "broken":
+        assert not serial.ok and serial.n_new_inverted and serial.worst[0]["failed"]
+    for size in (2, 3, 5):
+        reports = _parts_report(mesh, size, after, mesh.points)
+        for r in reports:
+            assert r == serial, (name, size)
+            assert r.to_dict() == serial.to_dict()
+
+
+@pytest.mark.parametrize("name", ["rect_wing_tets", "naca_quads_2d", "mixed_shuffled"])
+def test_the_check_of_a_mesh_alone_and_input_cells_already_bad(name):
+    """``ffd check`` (no before) and an input mesh with inverted cells (exit-2 rows)."""
+    mesh = CASES[name]
+    broken = _motion(mesh, "broken")
+    alone = check_quality(mesh.with_points(broken))
+    for r in _parts_report(mesh.with_points(broken), 3):
+        assert r == alone
+    # the broken mesh as the INPUT, smoothed "after": input_bad rows, the floor of the input
+    bad_in = mesh.with_points(broken)
+    serial = check_quality(bad_in, broken + 1e-6, points_before=broken)
+    assert serial.n_input_bad and serial.input_bad
+    for r in _parts_report(bad_in, 2, broken + 1e-6, broken):
+        assert r == serial
+    # other gate settings travel too
+    kw = {"threshold": 0.2, "relative": 0.9, "ortho_min": 60.0, "ortho_loss": 1.0, "n_worst": 4}
+    serial = check_quality(mesh, _motion(mesh, "smooth"), points_before=mesh.points, **kw)
+    for r in _parts_report(mesh, 3, _motion(mesh, "smooth"), mesh.points, **kw):
+        assert r == serial
+
+
+def test_parts_cover_every_cell_once_and_hold_their_halo():
+    mesh = CASES["rect_wing_shuffled"]
+    total = np.zeros(mesh.n_cells, dtype=int)
+    for size in (1, 4):
+        total[:] = 0
+        for r in range(size):
+            part = part_of(mesh, *share(mesh.n_points, r, size))
+            for blk, gid, counted in zip(part.cells, part.cell_ids, part.counted, strict=True):
+                total[gid[counted]] += 1
+                np.testing.assert_array_equal(part.ids[blk.data], mesh.cells[0].data[gid])
+            np.testing.assert_array_equal(part.points, mesh.points[part.ids])
+            assert np.all(np.diff(part.ids) > 0)
+            owned = part.ids[part.owned]
+            np.testing.assert_array_equal(owned, np.arange(part.lo, part.hi))
+            # every cell around an owned node is here
+            around = np.flatnonzero(np.isin(mesh.cells[0].data, owned).any(axis=1))
+            np.testing.assert_array_equal(np.sort(part.cell_ids[0]), around)
+        assert np.all(total == 1)
