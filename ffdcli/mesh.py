@@ -62,6 +62,10 @@ class Mesh:
     source
         Reader-private information used by the writer of the same format to patch a copy of the
         input file. ``None`` for meshes built in memory.
+    partial
+        True for one MPI rank's view of a mesh read by parts (:func:`ffdcli.formats.read_part`):
+        every point and marker, but ``cells`` only those around the rank's block of nodes (global
+        ids). Writing it in another format reads the whole file again (the writing rank only).
     """
 
     points: np.ndarray
@@ -71,6 +75,7 @@ class Mesh:
     path: Path | None = None
     format: str = ""
     source: Any = None
+    partial: bool = False
 
     def __post_init__(self):
         self.points = np.asarray(self.points, dtype=np.float64)
@@ -111,7 +116,7 @@ class Mesh:
         """A copy sharing cells and markers, with new point coordinates."""
         return Mesh(points=np.asarray(points, dtype=np.float64).reshape(self.points.shape),
                     dim=self.dim, cells=self.cells, markers=self.markers, path=self.path,
-                    format=self.format, source=self.source)
+                    format=self.format, source=self.source, partial=self.partial)
 
 
 def check_markers(markers, names, *, path=None, key: str | None = None) -> None:

@@ -1,8 +1,10 @@
 """One rank's share of a mesh: a contiguous block of nodes, the cells around them and their halo.
 
-An MPI run (:mod:`ffdcli.parallel`) splits the nodes into contiguous blocks of global ids
-(:func:`ffdcli.parallel.share`): rank r owns ``[lo, hi)``. What a rank needs of the volume mesh to
-judge its nodes and cells (the quality gate) is a :class:`MeshPart`:
+An MPI run (:mod:`ffdcli.parallel`) gives every node an owner rank (:func:`node_owners`): the
+nodes sorted along a Z-order (Morton) curve of their coordinates, cut into ``size`` runs of equal
+length, so that a rank owns a compact piece of space whatever the file's numbering (contiguous
+blocks of ids would give every rank cells all over a mesh numbered by a mesher's entities). What a
+rank needs of the volume mesh to judge its nodes and cells (the quality gate) is a :class:`MeshPart`:
 
 * the cells that touch an owned node, in global order within each cell block (so every edge of an
   owned node has all its cells here: its dual face, and so the node's orthogonality, is computed
@@ -24,6 +26,7 @@ import numpy as np
 
 from ffdcli.mesh import CELL_NODES, CellBlock, Mesh
 from ffdcli.parallel import share
+from ffdcli.warp import _morton_order  # the one Z-order curve (the warp's targets use it too)
 
 
 @dataclass(frozen=True, eq=False)
@@ -32,12 +35,14 @@ class MeshPart:
 
     n_points, n_cells
         Global node and cell counts.
-    lo, hi
-        The owned block of global node ids ``[lo, hi)``.
+    rank
+        The rank whose part this is.
     ids
-        (n,) sorted global ids of the local nodes (owned block and halo).
+        (n,) sorted global ids of the local nodes (owned and halo).
     points
         (n, 3) their coordinates.
+    owned
+        (n,) bool: the local nodes this rank owns.
     dim
         Topological dimension of the cells.
     types
@@ -48,106 +53,104 @@ class MeshPart:
     cell_ids
         Per block: (k,) global index of each local cell in the concatenation of the mesh's blocks.
     counted
-        Per block: (k,) bool, the cells this rank counts (its first node is owned).
+        Per block: (k,) bool, the cells this rank counts (it owns their first node).
     """
 
     n_points: int
     n_cells: int
-    lo: int
-    hi: int
+    rank: int
     ids: np.ndarray
     points: np.ndarray
+    owned: np.ndarray
     dim: int
     types: tuple
     cells: tuple
     cell_ids: tuple
     counted: tuple
 
-    @property
-    def owned(self) -> np.ndarray:
-        """(n,) bool: the local nodes of the owned block."""
-        return (self.ids >= self.lo) & (self.ids < self.hi)
-
-    def local(self, global_ids: np.ndarray) -> np.ndarray:
-        """Local rows of global node ids (which must be local nodes)."""
-        return np.searchsorted(self.ids, global_ids)
-
     def take(self, points: np.ndarray) -> np.ndarray:
-        """The local rows of an (N, 3) array of every node (a rank that holds the whole mesh)."""
+        """The local rows of an (N, 3) array of every node."""
         return np.asarray(points, dtype=np.float64)[self.ids]
 
     def nbytes(self) -> int:
         """Bytes held by the part's arrays (points, ids, cells)."""
-        return int(self.ids.nbytes + self.points.nbytes + sum(b.data.nbytes for b in self.cells)
+        return int(self.ids.nbytes + self.points.nbytes + self.owned.nbytes + sum(b.data.nbytes for b in self.cells)
                    + sum(c.nbytes for c in self.cell_ids) + sum(c.nbytes for c in self.counted))
 
 
-def touching(data: np.ndarray, lo: int, hi: int) -> np.ndarray:
-    """(k,) bool: the cells (rows of ``data``, global node ids) with a node in ``[lo, hi)``."""
+def node_owners(points: np.ndarray, size: int) -> np.ndarray:
+    """(N,) int32 owner rank of every node: the Morton order of ``points`` cut into ``size`` runs
+    of equal length (:func:`ffdcli.parallel.share`). The same on every rank (same points)."""
+    n = len(points)
+    owner = np.empty(n, dtype=np.int32)
+    order = _morton_order(np.asarray(points, dtype=np.float64))
+    for r in range(size):
+        lo, hi = share(n, r, size)
+        owner[order[lo:hi]] = r
+    return owner
+
+
+def touching(data: np.ndarray, owner: np.ndarray, rank: int) -> np.ndarray:
+    """(k,) bool: the cells (rows of ``data``, global node ids) with a node that ``rank`` owns."""
     if not len(data):
         return np.zeros(0, dtype=bool)
-    return np.any((data >= lo) & (data < hi), axis=1)
+    return np.any(owner[data] == rank, axis=1)
 
 
-def assemble_part(n_points: int, n_cells: int, lo: int, hi: int, dim: int, types, blocks, cell_ids,
-                  coordinates) -> MeshPart:
-    """A :class:`MeshPart` from the cells touching ``[lo, hi)`` (global node ids).
+def assemble_part(n_points: int, n_cells: int, owner: np.ndarray, rank: int, dim: int, types, blocks,
+                  cell_ids, coordinates) -> MeshPart:
+    """A :class:`MeshPart` from the cells touching the nodes ``rank`` owns (global node ids).
 
     Parameters
     ----------
+    owner
+        (N,) owner rank of every node (:func:`node_owners`).
     blocks
-        Per entry of ``types``: (k, nodes) global node ids of the cells touching the owned block,
+        Per entry of ``types``: (k, nodes) global node ids of the cells touching the owned nodes,
         in global order.
     cell_ids
         Per block: (k,) their global cell indices.
     coordinates
-        ``coordinates(ids) -> (len(ids), 3)``: the coordinates of sorted global node ids (a slice of
-        an array in memory, or a read from the file).
+        ``coordinates(ids) -> (len(ids), 3)``: the coordinates of sorted global node ids.
     """
-    parts = [np.asarray(b, dtype=np.int64).ravel() for b in blocks]
-    ids = np.union1d(np.arange(lo, hi, dtype=np.int64),
-                     np.unique(np.concatenate(parts)) if parts else np.zeros(0, np.int64))
-    cells = tuple(CellBlock(t, np.searchsorted(ids, np.asarray(b, dtype=np.int64)).reshape(len(b), -1))
-                  for t, b in zip(types, blocks, strict=True))
-    counted = tuple((np.asarray(b, dtype=np.int64)[:, 0] >= lo) & (np.asarray(b, dtype=np.int64)[:, 0] < hi)
-                    if len(b) else np.zeros(0, dtype=bool) for b in blocks)
+    blocks = [np.asarray(b, dtype=np.int64) for b in blocks]
+    mine = np.flatnonzero(owner == rank)
+    ids = np.union1d(mine, np.unique(np.concatenate([b.ravel() for b in blocks])) if blocks
+                     else np.zeros(0, np.int64))
+    cells = tuple(CellBlock(t, np.searchsorted(ids, b).reshape(len(b), -1)) for t, b in zip(types, blocks, strict=True))
+    counted = tuple(owner[b[:, 0]] == rank if len(b) else np.zeros(0, dtype=bool) for b in blocks)
     pts = np.ascontiguousarray(coordinates(ids), dtype=np.float64).reshape(len(ids), 3)
-    return MeshPart(int(n_points), int(n_cells), int(lo), int(hi), ids, pts, int(dim), tuple(types), cells,
-                    tuple(np.asarray(c, dtype=np.int64) for c in cell_ids), counted)
+    return MeshPart(int(n_points), int(n_cells), int(rank), ids, pts, owner[ids] == rank, int(dim), tuple(types),
+                    cells, tuple(np.asarray(c, dtype=np.int64) for c in cell_ids), counted)
 
 
-def part_of(mesh: Mesh, lo: int, hi: int) -> MeshPart:
-    """The :class:`MeshPart` of the owned block ``[lo, hi)`` of a whole mesh in memory."""
+def part_of(mesh: Mesh, owner: np.ndarray, rank: int) -> MeshPart:
+    """The :class:`MeshPart` of ``rank`` of a whole mesh in memory (``owner``: :func:`node_owners`)."""
     cells = [b for b in mesh.cells if len(b)]
     types, blocks, cell_ids, start = [], [], [], 0
     for b in cells:
-        mask = touching(b.data, lo, hi)
+        mask = touching(b.data, owner, rank)
         types.append(b.type)
         blocks.append(b.data[mask])
         cell_ids.append(start + np.flatnonzero(mask))
         start += len(b)
-    return assemble_part(mesh.n_points, start, lo, hi, mesh.dim, types, blocks, cell_ids,
+    return assemble_part(mesh.n_points, start, owner, rank, mesh.dim, types, blocks, cell_ids,
                          lambda ids: mesh.points[ids])
 
 
 def rank_part(mesh: Mesh, comm) -> MeshPart:
     """This rank's part of a whole mesh that every rank holds (``comm``: :mod:`ffdcli.parallel`)."""
-    lo, hi = comm.share(mesh.n_points)
-    return part_of(mesh, lo, hi)
+    return part_of(mesh, node_owners(mesh.points, comm.size), comm.rank)
 
 
-def redistribute(comm, n_points: int, types, blocks, cell_ids) -> tuple[list, list]:
-    """Cells read in blocks of cells (any split) sent to every rank that owns one of their nodes.
+def redistribute(comm, owner: np.ndarray, types, blocks, cell_ids) -> tuple[list, list]:
+    """Cells read in any split sent to every rank that owns one of their nodes (an all-to-all).
 
     ``blocks``/``cell_ids``: per cell type, the (k, nodes) global node ids and (k,) global indices
-    of the cells this rank read. Returns, per type, the cells touching this rank's node block,
-    sorted by global index (one all-to-all of the ranks)."""
-    size = comm.size
-    bounds = [share(n_points, r, size) for r in range(size)]
-    outgoing = []
-    for lo, hi in bounds:
-        outgoing.append([(b[m], c[m]) for b, c in zip(blocks, cell_ids, strict=True)
-                         for m in [touching(b, lo, hi)]])
+    of the cells this rank read. Returns, per type, the cells touching this rank's nodes, sorted by
+    global index."""
+    outgoing = [[(b[m], c[m]) for b, c in zip(blocks, cell_ids, strict=True) for m in [touching(b, owner, r)]]
+                for r in range(comm.size)]
     incoming = comm.alltoall(outgoing)
     out_blocks, out_ids = [], []
     for k, t in enumerate(types):
@@ -155,12 +158,6 @@ def redistribute(comm, n_points: int, types, blocks, cell_ids) -> tuple[list, li
         data = np.concatenate([g[0] for g in got]) if got else np.zeros((0, CELL_NODES[t]), np.int64)
         ids = np.concatenate([g[1] for g in got]) if got else np.zeros(0, np.int64)
         order = np.argsort(ids, kind="stable")
-        out_blocks.append(data[order].reshape(len(ids), -1))
+        out_blocks.append(data[order].reshape(len(ids), CELL_NODES[t]))
         out_ids.append(ids[order])
     return out_blocks, out_ids
-
-
-def gather_owned(comm, part: MeshPart, values: np.ndarray) -> np.ndarray | None:
-    """The owned rows of ``values`` (local rows, (n, k)) of every rank, in global order, on rank 0
-    ((n_points, k); None on the other ranks): what rank 0 writes."""
-    return comm.gather_rows(np.ascontiguousarray(np.asarray(values)[part.owned]))

@@ -271,10 +271,10 @@ class DesignRun:
         mesh, comm = self.prep.mesh, self.comm
         if comm is None or comm.size == 1:
             return check_quality(mesh, points, points_before=mesh.points, reference=self.quality_reference(), **kw)
-        if self._quality_part is None:
-            part = rank_part(mesh, comm)
-            self._quality_part = (part, part_reference(part, comm))
-        part, ref = self._quality_part
+        part, ref = self._quality_part or (rank_part(mesh, comm), None)
+        if ref is None:
+            ref = part_reference(part, comm)
+            self._quality_part = (part, ref)
         return check_quality_part(part, comm, part.take(points), part.points, reference=ref, **kw)
 
     @property
@@ -489,7 +489,12 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
         m = read_mesh(design.mesh, progress=progress)
         return m, (file_hash(m.path) if m.path is not None else None)
 
-    mesh, mesh_hash = (comm or SerialComm()).root_then_bcast(read)
+    part = None
+    if comm is not None and comm.size > 1:       # each rank reads its part (where the format allows it)
+        mesh, part = formats.read_part(design.mesh, comm, progress=progress)
+        mesh_hash = comm.root_then_bcast(lambda: file_hash(mesh.path) if mesh.path is not None else None)
+    else:
+        mesh, mesh_hash = (comm or SerialComm()).root_then_bcast(read)
     if len(specs) > 1 or specs[0].name:
         comp_mod.check_markers(specs, mesh, path=design.path)
     comps = []
@@ -527,7 +532,7 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     if len(comps) > 1:
         comp_mod.check_shared_nodes(comps, path=design.path)
         comp_mod.check_overlap(comps, path=design.path)
-    return DesignRun(design=design, components=comps, comm=comm)
+    return DesignRun(design=design, components=comps, comm=comm, _quality_part=None if part is None else (part, None))
 
 
 @dataclass(frozen=True, eq=False)

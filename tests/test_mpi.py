@@ -354,3 +354,21 @@ def test_mpiexec_constraints_equal_the_serial_run(tmp_path):
         assert A.files == B.files
         for k in A.files:
             np.testing.assert_array_equal(A[k], B[k])
+
+
+@needs_mpi
+def test_mpiexec_deform_to_another_format_writes_every_cell(tmp_path):
+    """Each rank reads only the cells around its nodes; rank 0 writing a new format (.su2 -> .vtu,
+    from scratch) reads the whole mesh again: every cell and marker of the serial output."""
+    from ffdcli.formats import read_mesh
+
+    design = _design(tmp_path)
+    ser = run_ffd("deform", design, "-o", tmp_path / "s.vtu", "--no-cache", cwd=tmp_path)
+    par = mpi_ffd(2, "deform", design, "-o", tmp_path / "p.vtu", "--no-cache", cwd=tmp_path)
+    assert ser.returncode == 0 and par.returncode == 0, par.stderr
+    a, b = read_mesh(tmp_path / "s.vtu"), read_mesh(tmp_path / "p.vtu")
+    np.testing.assert_array_equal(a.points, b.points)
+    assert a.n_cells == b.n_cells == read_mesh(SAMPLES / "rect_wing.su2").n_cells
+    for x, y in zip(a.cells, b.cells, strict=True):
+        np.testing.assert_array_equal(x.data, y.data)
+    assert list(a.markers) == list(b.markers)

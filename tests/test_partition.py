@@ -12,7 +12,7 @@ from conftest import SAMPLES
 from ffdcli.formats import read_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.parallel import share
-from ffdcli.partition import part_of
+from ffdcli.partition import node_owners, part_of
 from ffdcli.quality import check_quality, check_quality_part
 from ffdcli.testing.threadcomm import run_ranks
 from ffdcli.testing.wings import extruded_wing_mesh
@@ -78,8 +78,7 @@ def _motion(mesh: Mesh, kind: str) -> np.ndarray:
 
 def _parts_report(mesh, size, after=None, before=None, **kw):
     def one(comm):
-        lo, hi = share(mesh.n_points, comm.rank, size)
-        part = part_of(mesh, lo, hi)
+        part = part_of(mesh, node_owners(mesh.points, size), comm.rank)
         a = None if after is None else after[part.ids]
         b = None if before is None else before[part.ids]
         return check_quality_part(part, comm, a, b, **kw)
@@ -128,16 +127,84 @@ def test_parts_cover_every_cell_once_and_hold_their_halo():
     total = np.zeros(mesh.n_cells, dtype=int)
     for size in (1, 4):
         total[:] = 0
+        owner = node_owners(mesh.points, size)
+        assert np.bincount(owner).tolist() == [hi - lo for lo, hi in (share(mesh.n_points, r, size)
+                                                                      for r in range(size))]
         for r in range(size):
-            part = part_of(mesh, *share(mesh.n_points, r, size))
+            part = part_of(mesh, owner, r)
             for blk, gid, counted in zip(part.cells, part.cell_ids, part.counted, strict=True):
                 total[gid[counted]] += 1
                 np.testing.assert_array_equal(part.ids[blk.data], mesh.cells[0].data[gid])
             np.testing.assert_array_equal(part.points, mesh.points[part.ids])
             assert np.all(np.diff(part.ids) > 0)
             owned = part.ids[part.owned]
-            np.testing.assert_array_equal(owned, np.arange(part.lo, part.hi))
-            # every cell around an owned node is here
+            np.testing.assert_array_equal(owned, np.flatnonzero(owner == r))
+            # every cell around an owned node is here, and only those
             around = np.flatnonzero(np.isin(mesh.cells[0].data, owned).any(axis=1))
-            np.testing.assert_array_equal(np.sort(part.cell_ids[0]), around)
+            np.testing.assert_array_equal(part.cell_ids[0], around)
+            if size == 4:       # a compact piece of space: far fewer cells than the whole, shuffled ids or not
+                assert len(around) < 0.45 * mesh.n_cells
         assert np.all(total == 1)
+
+
+# ---------------------------------------------------------------------------------------------- reading by parts
+
+
+def _same_part(a, b):
+    for f in ("n_points", "n_cells", "rank", "dim", "types"):
+        assert getattr(a, f) == getattr(b, f), f
+    for f in ("ids", "points", "owned"):
+        np.testing.assert_array_equal(getattr(a, f), getattr(b, f))
+    for x, y in zip(a.cells, b.cells, strict=True):
+        assert x.type == y.type
+        np.testing.assert_array_equal(x.data, y.data)
+    for f in ("cell_ids", "counted"):
+        for x, y in zip(getattr(a, f), getattr(b, f), strict=True):
+            np.testing.assert_array_equal(x, y)
+
+
+@pytest.mark.parametrize("sample", ["rect_wing.su2", "naca0012_2d.su2", "wing_body.su2"])
+def test_su2_read_by_parts_is_the_part_of_the_whole_read(sample, monkeypatch):
+    """Each rank parses only its chunks of the element rows (small chunks here: many per rank); its
+    mesh has every point and marker of the serial read, its part is that of the whole mesh."""
+    from ffdcli.formats import su2
+
+    monkeypatch.setattr(su2, "CHUNK_BYTES", 1 << 14)
+    whole = su2.read(SAMPLES / sample)
+    for size in (2, 3):
+        owner = node_owners(whole.points, size)
+        for r, (mesh, part) in enumerate(run_ranks(size, lambda c: su2.read_part(SAMPLES / sample, c))):
+            assert mesh.partial and not whole.partial
+            np.testing.assert_array_equal(mesh.points, whole.points)
+            assert list(mesh.markers) == list(whole.markers)
+            for k, blocks in whole.markers.items():
+                for x, y in zip(mesh.markers[k], blocks, strict=True):
+                    assert x.type == y.type and np.array_equal(x.data, y.data)
+            _same_part(part, part_of(whole, owner, r))
+            # the rank's cells (global ids) are its part's
+            assert sum(len(b) for b in mesh.cells) == sum(len(b) for b in part.cells) < whole.n_cells
+
+
+def test_su2_read_by_parts_names_a_bad_line_in_one_ranks_share_on_every_rank(tmp_path, monkeypatch):
+    from ffdcli.errors import InputError
+    from ffdcli.formats import su2
+
+    monkeypatch.setattr(su2, "CHUNK_BYTES", 1 << 14)
+    text = (SAMPLES / "rect_wing.su2").read_text().splitlines(keepends=True)
+    at = next(i for i, ln in enumerate(text) if ln.startswith("NELEM")) + 90_000    # in the last rank's share
+    text[at] = "10 1 2 x 4 7\n"
+    bad = tmp_path / "bad.su2"
+    bad.write_text("".join(text))
+    with pytest.raises(InputError) as serial:
+        su2.read(bad)
+    said = []
+
+    def one(comm):
+        try:
+            su2.read_part(bad, comm)
+        except Exception as e:          # noqa: BLE001 - the test looks at what each rank raised
+            said.append((comm.rank, type(e).__name__, str(e)))
+
+    run_ranks(3, one)
+    assert len(said) == 3 and {s[2] for s in said} == {str(serial.value)}
+    assert f":{at + 1}: " in str(serial.value)

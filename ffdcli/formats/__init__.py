@@ -49,6 +49,32 @@ def read_mesh(path: str | Path, *, progress=None) -> Mesh:
     return mesh
 
 
+#: Formats whose reader reads one MPI rank's part itself (:func:`read_part`).
+READ_BY_PARTS = ("su2",)
+
+
+def read_part(path: str | Path, comm, *, progress=None):
+    """One MPI rank's read of a mesh: ``(mesh, part)``, a collective (``comm``: :mod:`ffdcli.parallel`).
+
+    ``mesh`` has every point and marker (the surface and the volume nodes every rank warps) and,
+    ``partial``, only the cells around the rank's nodes; ``part`` is the rank's
+    :class:`~ffdcli.partition.MeshPart` (the quality gate's share). SU2 files are read by parts
+    (each rank parses its share of the element rows: :func:`ffdcli.formats.su2.read_part`); other
+    formats are read by rank 0 and broadcast, each rank then taking its part. Errors are agreed on.
+    """
+    from ffdcli.partition import rank_part
+
+    p = Path(path)
+    fmt = comm.run(format_of, p)
+    comm.run(check_input_file, p, "mesh file")
+    if fmt in READ_BY_PARTS:
+        mesh, part = _module(fmt).read_part(p, comm, progress=progress)
+        comm.run(check_finite_points, mesh)
+        return mesh, part
+    mesh = comm.root_then_bcast(read_mesh, p, progress=progress)
+    return mesh, rank_part(mesh, comm)
+
+
 def check_finite_points(mesh: Mesh) -> None:
     """InputError naming the file and the first node (0-based, as in the file) with a NaN or infinite
     coordinate; every reader's mesh passes here (SU2's reader also names the line)."""
@@ -73,6 +99,8 @@ def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *
 
     p = check_writable(path, inputs=(mesh.path,) if mesh.path else ())
     fmt = format_of(p)
+    if mesh.partial and fmt != mesh.format:      # written from scratch: every cell, read again here
+        mesh = read_mesh(mesh.path, progress=progress)
     pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
     if pts.shape != mesh.points.shape:
         raise ValueError(f"points {pts.shape} do not match the mesh {mesh.points.shape}")

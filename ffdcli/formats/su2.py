@@ -135,6 +135,64 @@ def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
     return parser.mesh(st)
 
 
+def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
+    """One MPI rank's read of an SU2 mesh: ``(mesh, part)``, a collective.
+
+    Every rank parses the point block and the markers (the coordinates of every node and the
+    surface are needed everywhere), but only its share of the element block: the chunks of whole
+    lines (:data:`CHUNK_BYTES`) whose first row falls in its share of the NELEM rows, the others
+    only counted. The cells are then sent to the ranks owning their nodes (:func:`ffdcli.partition.
+    node_owners`, :func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s mesh with ``partial`` set and
+    ``cells`` the rank's (global ids); ``part`` its :class:`~ffdcli.partition.MeshPart`, equal to
+    :func:`ffdcli.partition.part_of` of the whole mesh. Errors (a bad line in one rank's share)
+    are agreed on: every rank raises the lowest failing rank's.
+    """
+    from ffdcli.partition import assemble_part, node_owners, redistribute
+
+    path = Path(path)
+    progress = progress or no_progress
+
+    def parse():
+        try:
+            fh = open(path, "rb")
+        except OSError as e:
+            raise InputError(f"cannot open: {e.strerror or e}", path=path) from None
+        with fh:
+            st = os.fstat(fh.fileno())
+            if st.st_size == 0:
+                raise InputError("the file is empty; expected an SU2 mesh (NDIME=, NELEM=, NPOIN=, NMARK=)",
+                                 path=path)
+            mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        try:
+            with progress(f"reading {path.name}", st.st_size) as bar:
+                parser = _Parser(mm, path, bar, fast_ints=fast_ints, share=comm.share)
+                parser.parse()
+        finally:
+            mm.close()
+        return parser.mesh(st)
+
+    mesh = comm.run(parse)
+    local = {b.type: b.data for b in mesh.cells}
+    every = comm.allgather([(b.type, len(b)) for b in mesh.cells])
+    order: list[str] = []
+    for lst in every:
+        order += [t for t, _ in lst if t not in order]
+    blocks, ids, start = [], [], 0
+    for t in order:
+        counts = [dict(lst).get(t, 0) for lst in every]
+        data = local.get(t, np.zeros((0, CELL_NODES[t]), dtype=np.int64))
+        blocks.append(data)
+        ids.append(start + sum(counts[:comm.rank]) + np.arange(len(data), dtype=np.int64))
+        start += sum(counts)
+    owner = node_owners(mesh.points, comm.size)
+    blocks, ids = redistribute(comm, owner, order, blocks, ids)
+    part = assemble_part(mesh.n_points, start, owner, comm.rank, mesh.dim, order, blocks, ids,
+                         lambda i: mesh.points[i])
+    mesh.cells = [CellBlock(t, b) for t, b in zip(order, blocks, strict=True)]
+    mesh.partial = True
+    return mesh, part
+
+
 @dataclass
 class _Block:
     """A numeric block as found in the file: where it starts and how many rows it has."""
@@ -149,8 +207,10 @@ class _Block:
 class _Parser:
     """Walks the file once: header lines one by one, numeric blocks a chunk of lines at a time."""
 
-    def __init__(self, mm: mmap.mmap, path: Path, bar, fast_ints: bool = True):
+    def __init__(self, mm: mmap.mmap, path: Path, bar, fast_ints: bool = True, share: tuple | None = None):
         self.mm, self.path, self.bar = mm, path, bar
+        self.share = share          # share(rows) -> (lo, hi): the NELEM rows to parse (one MPI rank's)
+        self.rows_share = None
         self.size = len(mm)
         self.pos = 0          # byte offset of the next line
         self.line = 1         # its line number (1-based)
@@ -424,6 +484,11 @@ class _Parser:
         parts: dict[int, list[np.ndarray]] = {}
         lo, hi = np.iinfo(np.int64).max, -1
         for _, buf, starts, ends, line in self.chunks(b, advance=npoin is None):
+            if interior and self.share is not None and self.rows_share is None:
+                self.rows_share = self.share(b.rows)
+            mine = self.rows_share
+            if interior and mine is not None and not mine[0] <= line - b.first_line < mine[1]:
+                continue            # another rank's chunk of whole lines: only its line count is used
             values, first, count = self.int_rows(buf, starts, ends, line, b)
             if np.any(count == 0):
                 i = int(np.flatnonzero(count == 0)[0])
