@@ -26,7 +26,7 @@ import numpy as np
 
 from ffdcli.mesh import CELL_NODES, CellBlock, Mesh
 from ffdcli.parallel import share
-from ffdcli.warp import _morton_order  # the one Z-order curve (the warp's targets use it too)
+from ffdcli.warp_tree import morton_order  # the one Z-order curve (the warp orders its targets by it)
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,7 +83,7 @@ def node_owners(points: np.ndarray, size: int) -> np.ndarray:
     of equal length (:func:`ffdcli.parallel.share`). The same on every rank (same points)."""
     n = len(points)
     owner = np.empty(n, dtype=np.int32)
-    order = _morton_order(np.asarray(points, dtype=np.float64))
+    order = morton_order(np.asarray(points, dtype=np.float64))
     for r in range(size):
         lo, hi = share(n, r, size)
         owner[order[lo:hi]] = r
