@@ -79,11 +79,20 @@ class MeshPart:
 
 
 def node_owners(points: np.ndarray, size: int) -> np.ndarray:
-    """(N,) int32 owner rank of every node: the Morton order of ``points`` cut into ``size`` runs
-    of equal length (:func:`ffdcli.parallel.share`). The same on every rank (same points)."""
-    n = len(points)
+    """(N,) int32 owner rank of every node: the Morton order of ``points`` (in their bounding cube)
+    cut into ``size`` runs of equal length (:func:`ffdcli.parallel.share`). The same on every rank
+    (same points)."""
+    pts = np.asarray(points, dtype=np.float64)
+    n = len(pts)
     owner = np.empty(n, dtype=np.int32)
-    order = morton_order(np.asarray(points, dtype=np.float64))
+    if not n:
+        return owner
+    # the same scale on every axis: two corners of the bounding cube join the points (a thin mesh,
+    # one cell thick or a planar 2D mesh, is then cut across its plane, not through its thickness)
+    lo = pts.min(axis=0)
+    cube = np.vstack([pts, lo, lo + np.ptp(pts, axis=0).max()])
+    order = morton_order(cube)
+    order = order[order < n]
     for r in range(size):
         lo, hi = share(n, r, size)
         owner[order[lo:hi]] = r

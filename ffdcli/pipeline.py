@@ -216,9 +216,10 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
 
 
 def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, progress, mesh_hash, comm):
-    """:func:`prepare_box` over ranks: rank 0 reads (and hashes) the mesh, every rank gets it by
-    broadcast, then every rank runs :func:`_prepare_box` with the communicator (rank 0 reads and
-    writes the cache; on a miss every rank fits the box, each embedding its block of the surface)."""
+    """:func:`prepare_box` over ranks: each rank reads its part of the mesh
+    (:func:`ffdcli.formats.read_part`: every point and marker), rank 0 hashes it, then every rank
+    runs :func:`_prepare_box` with the communicator (rank 0 reads and writes the cache; on a miss
+    every rank fits the box, each embedding its block of the surface)."""
 
     def read():
         m = mesh if isinstance(mesh, Mesh) else formats.read_mesh(mesh, progress=progress or no_progress)
@@ -228,7 +229,11 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
     t0 = time.perf_counter()
     if settings is not None:         # an absurd lattice is refused before minutes of reading
         check_lattice_size(settings.points, path=None if isinstance(mesh, Mesh) else mesh)
-    got_mesh, mh = comm.root_then_bcast(read)
+    if isinstance(mesh, Mesh):
+        got_mesh, mh = comm.root_then_bcast(read)
+    else:                        # each rank reads its part (the box needs the surface only)
+        got_mesh, _ = formats.read_part(mesh, comm, progress=progress or no_progress)
+        mh = mesh_hash or comm.root_then_bcast(cache_mod.file_hash, got_mesh.path)
     prep = _prepare_box(got_mesh, surface, settings, cache_dir=cache_dir, use_cache=use_cache, rebuild=rebuild,
                         progress=progress, mesh_hash=mh, comm=comm)
     prep.seconds = time.perf_counter() - t0

@@ -372,3 +372,22 @@ def test_mpiexec_deform_to_another_format_writes_every_cell(tmp_path):
     for x, y in zip(a.cells, b.cells, strict=True):
         np.testing.assert_array_equal(x.data, y.data)
     assert list(a.markers) == list(b.markers)
+
+
+@needs_mpi
+def test_mpiexec_deform_of_a_cgns_mesh_read_by_parts_equals_serial(tmp_path):
+    """CGNS/HDF5: each rank reads hyperslabs of its rows of the connectivity; the output (the input
+    file with its coordinates patched, by rank 0) and the report are the serial run's."""
+    from ffdcli.formats import read_mesh, write_mesh
+
+    write_mesh(read_mesh(SAMPLES / "rect_wing.su2"), tmp_path / "wing.cgns")
+    design = _design(tmp_path)
+    design.write_text(design.read_text().replace(str(SAMPLES / "rect_wing.su2"), str(tmp_path / "wing.cgns")))
+    ser = run_ffd("deform", design, "-o", tmp_path / "s.cgns", "--no-cache", "--json", cwd=tmp_path)
+    par = mpi_ffd(2, "deform", design, "-o", tmp_path / "p.cgns", "--no-cache", "--json", cwd=tmp_path)
+    assert ser.returncode == 0 and par.returncode == 0, par.stderr
+    a, b = json.loads(ser.stdout), json.loads(par.stdout)
+    assert a["quality"] == b["quality"] and a["max_displacement"] == b["max_displacement"]
+    sm, pm = read_mesh(tmp_path / "s.cgns"), read_mesh(tmp_path / "p.cgns")
+    np.testing.assert_array_equal(sm.points, pm.points)
+    assert sm.n_cells == pm.n_cells and list(sm.markers) == list(pm.markers)

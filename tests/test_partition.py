@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import SAMPLES
+from conftest import SAMPLES, shared_file
 
 from ffdcli.formats import read_mesh
 from ffdcli.mesh import CellBlock, Mesh
@@ -208,3 +208,42 @@ def test_su2_read_by_parts_names_a_bad_line_in_one_ranks_share_on_every_rank(tmp
     run_ranks(3, one)
     assert len(said) == 3 and {s[2] for s in said} == {str(serial.value)}
     assert f":{at + 1}: " in str(serial.value)
+
+
+CGNS_SHARED = ["cgns/disc_adj_euler__cylinder3D__cylinder3D.cgns", "cgns/euler__wedge__mesh_wedge_inv.cgns",
+               "cgns/incomp_navierstokes__bend__mesh_bend_coarse.cgns", "cgns/airfoil__analysis__n0012.cgns",
+               "cgns/vandv__rans__bump_in_channel__mesh_bump_2d_0089x041.cgns", "cgns/aero__meshing__volume__wing.cgns",
+               "cgns/overset__mesh__near_tip.cgns"]
+
+
+def _check_cgns_parts(path):
+    from ffdcli.formats import cgns
+
+    whole = cgns.read(path)
+    for size in (2, 3):
+        owner = node_owners(whole.points, size)
+        for r, (mesh, part) in enumerate(run_ranks(size, lambda c: cgns.read_part(path, c))):
+            assert mesh.partial
+            np.testing.assert_array_equal(mesh.points, whole.points)
+            assert list(mesh.markers) == list(whole.markers)
+            for k, blocks in whole.markers.items():
+                for x, y in zip(mesh.markers[k], blocks, strict=True):
+                    assert x.type == y.type and np.array_equal(x.data, y.data)
+            _same_part(part, part_of(whole, owner, r))
+
+
+@pytest.mark.parametrize("rel", CGNS_SHARED)
+def test_cgns_read_by_parts_is_the_part_of_the_whole_read(rel):
+    """Structured and unstructured zones, several zones, 2D and 3D, surface meshes: hyperslabs of
+    each rank's rows, the serial read's part."""
+    _check_cgns_parts(shared_file(rel))
+
+
+def test_cgns_read_by_parts_of_written_meshes(tmp_path):
+    """Meshes written here (one zone, a section per type: tetrahedra; hexahedra and wedges)."""
+    from ffdcli.formats import write_mesh
+
+    for name in ("rect_wing_tets", "mixed_hex_wedge", "wing_hexes", "naca_quads_2d"):
+        path = tmp_path / f"{name}.cgns"
+        write_mesh(CASES[name], path)
+        _check_cgns_parts(path)

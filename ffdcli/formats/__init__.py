@@ -50,7 +50,7 @@ def read_mesh(path: str | Path, *, progress=None) -> Mesh:
 
 
 #: Formats whose reader reads one MPI rank's part itself (:func:`read_part`).
-READ_BY_PARTS = ("su2",)
+READ_BY_PARTS = ("su2", "cgns")
 
 
 def read_part(path: str | Path, comm, *, progress=None):

@@ -662,7 +662,10 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
     return pts, zone
 
 
-def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
+def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) -> Mesh:
+    """The mesh of the file. ``share`` (``share(n) -> (a, b)``, one MPI rank's): the interior cells
+    are read as rows ``[a, b)`` of each section / zone (hyperslabs of ``ElementConnectivity``), and
+    ``mesh.cells`` is then a list of :class:`_Rows` (see :func:`read_part`)."""
     bases = _children(h5, "CGNSBase_t")
     if not bases:
         raise InputError("no CGNSBase_t node: not a CGNS file", path=file, key="/")
@@ -712,14 +715,27 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
                     bc_name, name = _bc_marker_name(bc)
                     ms.add_bc(bc_name, name, _structured_bc(bc, zone, file, handed))
         else:
-            sections = [s for s in (_read_section(sec, offset, n_points, file, skipped)
-                                    for sec in _children(zn, "Elements_t")) if s is not None]
+            sections, in_order = [], []      # in_order: per Elements_t, its _Rows or its index in sections
+            for sec in _children(zn, "Elements_t"):
+                rows = _interior_rows(sec, offset, n_points, cell_dim, file, share) \
+                    if share is not None and cell_dim in (phys_dim, 3) else None
+                if rows is not None:        # one rank's rows of a volume section (BCs never name them)
+                    in_order.append(rows)
+                    continue
+                got = _read_section(sec, offset, n_points, file, skipped)
+                if got is not None:
+                    in_order.append(len(sections))
+                    sections.append(got)
             used: set[int] = set()
             for zbc in _children(zn, "ZoneBC_t"):
                 for bc in _children(zbc, "BC_t"):
                     bc_name, name = _bc_marker_name(bc)
                     ms.add_bc(bc_name, name, _unstructured_bc(bc, zone, sections, cell_dim, file, used))
-            for si, s in enumerate(sections):
+            for si in in_order:
+                if isinstance(si, _Rows):
+                    zone_blocks.append(si)
+                    continue
+                s = sections[si]
                 # a MIXED section may hold both volume cells and boundary faces: split by dimension
                 inner = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
                          if t in s.blocks and CELL_DIM[t] >= cell_dim]
@@ -729,7 +745,10 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
                 if outer and si not in used:
                     section_markers.append((s.name, outer))
         for b in zone_blocks:
-            cells.setdefault(b.type, []).append(b.data)
+            if share is not None and not isinstance(b, _Rows):      # read whole: keep this rank's rows
+                a, e = share(len(b))
+                b = _Rows(b.type, len(b), a, b.data[a:e])
+            cells.setdefault(b.type, []).append(b if share is not None else b.data)
         if cell_dim < phys_dim and zone_blocks:
             surface_cells.setdefault(base.name.rsplit("/", 1)[-1], []).append((pts, zone_blocks))
         points.append(pts)
@@ -752,11 +771,107 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress) -> Mesh:
     markers = {k: _merge(v) for k, v in markers.items()}
     if skipped:
         warnings.warn(f"{file}: " + "; ".join(skipped), stacklevel=3)
-    cell_blocks = [CellBlock(t, np.vstack(cells[t])) for t in _TYPE_ORDER if t in cells]
+    cell_blocks = ([CellBlock(t, np.vstack(cells[t])) for t in _TYPE_ORDER if t in cells] if share is None
+                   else [r for t in _TYPE_ORDER for r in cells.get(t, [])])
     source = CgnsSource(container, zones, {k: _merge(v) for k, v in ms.by_bc.items()}, ms.bc_family,
                         skipped)
     return Mesh(points=np.vstack(points), dim=dim, cells=cell_blocks, markers=markers, path=file,
                 format="cgns", source=source)
+
+
+@dataclass
+class _Rows:
+    """Rows ``[start, start + len(data))`` of ``n`` cells of one type (a section or zone) that one
+    rank read (global 0-based node ids, VTK order)."""
+
+    type: str
+    n: int
+    start: int
+    data: np.ndarray
+
+    def __len__(self) -> int:
+        return self.n
+
+
+def _interior_rows(sec, offset: int, n_points: int, cell_dim: int, file: Path, share) -> _Rows | None:
+    """This rank's rows of an Elements_t node of volume cells of one type, read as a hyperslab of
+    its connectivity; None for anything else (MIXED, faces, polyhedra, unknown types: read whole)."""
+    head = _data(sec)
+    rng = _index_data(sec, "ElementRange")
+    node = sec.get("ElementConnectivity")
+    ds = node.get(" data") if isinstance(node, h5py.Group) else None
+    if head is None or rng is None or rng.size != 2 or ds is None:
+        return None
+    code = int(np.asarray(head).ravel()[0])
+    if code not in ELEMENT_TYPES or CELL_DIM[ELEMENT_TYPES[code][0]] < cell_dim:
+        return None
+    t, npe = ELEMENT_TYPES[code]
+    start, end = (int(v) for v in rng.ravel())
+    n = end - start + 1
+    if ds.size != n * npe:
+        raise InputError(f"ElementConnectivity has {ds.size} entries, expected {n} x {npe}",
+                         path=file, key=sec.name)
+    a, b = share(n)
+    ids = np.asarray(ds[a * npe:b * npe], dtype=np.int64).reshape(b - a, npe)[:, :CELL_NODES[t]] - 1
+    if t == "wedge":
+        ids = ids[:, WEDGE_CGNS_TO_VTK]
+    if len(ids) and (ids.min() < 0 or ids.max() >= n_points):
+        raise InputError(f"element connectivity refers to point ids outside 1..{n_points}",
+                         path=file, key=sec.name)
+    return _Rows(t, n, a, ids + offset)
+
+
+def read_part(path: str | Path, comm, progress=None):
+    """One MPI rank's read of a CGNS/HDF5 mesh: ``(mesh, part)``, a collective.
+
+    Every rank reads the coordinates and the boundary (markers); of the volume cells only its
+    share of the rows of each section, as hyperslabs of ``ElementConnectivity`` (MIXED sections and
+    structured zones are read or built whole and cut the same way); the cells are then sent to the
+    ranks owning their nodes (:func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s
+    mesh with ``partial`` set and ``cells`` the rank's (global ids); ``part`` equals
+    :func:`ffdcli.partition.part_of` of the whole mesh. An ADF file is read by rank 0 and broadcast.
+    A surface mesh (cells of a lower dimension than the space) is read whole by every rank.
+    """
+    from ffdcli.partition import assemble_part, node_owners, rank_part, redistribute
+
+    p = Path(path)
+    if comm.run(container_of, p) == "adf":
+        mesh = comm.root_then_bcast(read, p, progress)
+        return mesh, rank_part(mesh, comm)
+
+    def parse():
+        try:
+            h5 = h5py.File(p, "r")
+        except OSError as exc:
+            raise InputError(f"cannot open as CGNS/HDF5: {exc}", path=p) from None
+        with h5:
+            try:
+                return _read_tree(h5, p, "hdf5", progress, share=comm.share)
+            except (KeyError, OSError, ValueError, TypeError, IndexError) as exc:
+                raise InputError(f"corrupt or unsupported CGNS file: {exc}", path=p) from None
+
+    mesh = comm.run(parse)
+    rows = mesh.cells
+    types, blocks, ids, start = [], [], [], 0
+    for t in _TYPE_ORDER:                   # the serial blocks: one per type, sections in file order
+        mine = [r for r in rows if r.type == t]
+        if not mine or not sum(r.n for r in mine):
+            continue
+        parts, base = [], start
+        for r in mine:
+            parts.append(base + r.start + np.arange(len(r.data), dtype=np.int64))
+            base += r.n
+        types.append(t)
+        blocks.append(np.vstack([r.data for r in mine]))
+        ids.append(np.concatenate(parts))
+        start = base
+    owner = node_owners(mesh.points, comm.size)
+    blocks, ids = redistribute(comm, owner, types, blocks, ids)
+    part = assemble_part(mesh.n_points, start, owner, comm.rank, mesh.dim, types, blocks, ids,
+                         lambda i: mesh.points[i])
+    mesh.cells = [CellBlock(t, b) for t, b in zip(types, blocks, strict=True)]
+    mesh.partial = True
+    return mesh, part
 
 
 def _merge(blocks: list[CellBlock]) -> list[CellBlock]:
