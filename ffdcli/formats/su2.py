@@ -143,7 +143,8 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
     lines (:data:`CHUNK_BYTES`) whose first row falls in its share of the NELEM rows, the others
     only counted. The cells are then sent to the ranks owning their nodes (:func:`ffdcli.partition.
     node_owners`, :func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s mesh with ``partial`` set and
-    ``cells`` the rank's (global ids); ``part`` its :class:`~ffdcli.partition.MeshPart`, equal to
+    ``cells`` the rank's (global ids), and ``source`` (the point block's layout, for the writer) on
+    rank 0 only; ``part`` its :class:`~ffdcli.partition.MeshPart`, equal to
     :func:`ffdcli.partition.part_of` of the whole mesh. Errors (a bad line in one rank's share)
     are agreed on: every rank raises the lowest failing rank's.
     """
@@ -190,6 +191,8 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
                          lambda i: mesh.points[i])
     mesh.cells = [CellBlock(t, b) for t, b in zip(order, blocks, strict=True)]
     mesh.partial = True
+    if not comm.is_root:         # the point block's layout is the writer's (rank 0): 48 bytes a node less
+        mesh.source = None
     return mesh, part
 
 
