@@ -162,7 +162,7 @@ def warp_only(design: str) -> dict:
     run = load_run(load_design(design))
     mesh, surf = run.prep.mesh, run.prep.surface
     P1 = run.lattice_after()
-    disp, rot = run.surface_displacement(P1), run.surface_rotations(P1)
+    disp, rot = run.surface_displacement(P1), run.surface_frames(P1)
     t0 = time.perf_counter()
     model, _ = prepare_mesh_warp(mesh, list(surf.names), WarpSettings())
     t1 = time.perf_counter()

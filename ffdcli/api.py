@@ -13,11 +13,13 @@ Nothing is re-embedded: the box and embedding are loaded (or built and cached) o
 Derivatives are exact (no finite differences):
 
 * surface: ``dX/dv = B dP'/dv`` (:mod:`ffdcli.derivatives`);
-* volume (``volume.method: idw``): the warp is linear in the surface translations ``b`` and rotation
-  parts ``M = R - I`` (:func:`ffdcli.warp.warp_vjp` is its transpose), and the rotation ``R`` of a
-  surface point is the polar factor of the surface-frame gradient F_s of ``F = J(P') J(P0)^-1``
-  (:mod:`ffdcli.rotations`, with its derivative). The polar factor's derivative is ``dR = R Omega``
-  with ``Omega`` skew solving ``Omega U + U Omega = R^T dF - dF^T R`` (``U = R^T F``), i.e. in 3D
+* volume (``volume.method: idw``): the warp is linear in the surface translations ``b`` and frame
+  parts ``M = F - I`` (:func:`ffdcli.warp.warp_vjp` is its transpose). With ``volume.carry:
+  gradient`` (the default) the frame of a surface point is the FFD map's deformation gradient
+  ``F = J(P') J(P0)^-1``, linear in the control points (``dF = J(dP') J(P0)^-1``). With ``carry:
+  rotation`` it is the rotation ``R``, the polar factor of the surface-frame gradient F_s of F
+  (:mod:`ffdcli.rotations`, with its derivative): ``dR = R Omega`` with ``Omega`` skew solving
+  ``Omega U + U Omega = R^T dF - dF^T R`` (``U = R^T F``), i.e. in 3D
   ``(tr(U) I - U) omega = axial(R^T dF - dF^T R)``; in 2D the angle's derivative in closed form.
 """
 
@@ -445,19 +447,21 @@ class DesignModel:
         enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force)
         return self.comm.root_then_bcast(write_outputs, self.run, result, plan=plan, progress=progress)
 
-    def _rotation_jacobian(self):
-        """dR/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice)."""
+    def _frame_jacobian(self):
+        """d(frame)/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice):
+        the derivative of :meth:`ffdcli.pipeline.DesignRun.surface_frames` (``volume.carry``)."""
         if "dR" not in self._cache:
-            self._cache["dR"] = self._rotation_jacobian_uncached()
+            self._cache["dR"] = self._frame_jacobian_uncached()
         return self._cache["dR"]
 
-    def _rotation_jacobian_uncached(self):
+    def _frame_jacobian_uncached(self):
         from ffdcli.lattice import derivatives
         from ffdcli.pipeline import frame_gradient_inputs, full3
         from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
 
         run = self.run
         lay = run.layout
+        gradient = run.warp_settings.carry == "gradient"
         out = np.zeros((self.n_vars, len(self.surface_ids), 3, 3))
         for c, (comp, P1) in enumerate(zip(run.components, self.lattices(), strict=True)):
             box, emb = comp.box, comp.prep.embedding
@@ -468,14 +472,21 @@ class DesignModel:
                 continue
             J0inv = np.linalg.inv(derivatives(box.lattice(comp.P0), emb.params[ins]))
             D = comp.lattice_jacobian().reshape(*P1.shape, nv)
-            Fs = surface_frame_gradient(F, n0)
-            if box.dim == 3:
-                R = rotations_from_deformation_gradient(Fs)
-            else:
-                Fs3 = full3(box, Fs)
+            if not gradient:
+                Fs = surface_frame_gradient(F, n0)
+                if box.dim == 3:
+                    R = rotations_from_deformation_gradient(Fs)
+                else:
+                    Fs3 = full3(box, Fs)
             for k in range(nv):
                 v = lay.var_offsets[c] + k
                 dF = derivatives(box.lattice(D[..., k]), emb.params[ins]) @ J0inv
+                if gradient:          # the frame is F itself: linear in the control points
+                    dF3 = full3(box, dF)
+                    if box.dim == 2:
+                        dF3[:, box.axes.span, box.axes.span] = 0.0
+                    out[v, rows[ins]] = dF3
+                    continue
                 dFs = surface_frame_gradient_jvp(F, n0, dF)
                 if box.dim == 3:
                     out[v, rows[ins]] = polar_rotation_derivative(Fs, R, dFs)
@@ -488,8 +499,8 @@ class DesignModel:
     def mesh_jvp(self, dv, progress=None) -> np.ndarray:
         """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW.
 
-        The warp is a fixed linear map of the surface translations and rotation parts ``M = R - I``
-        (:func:`ffdcli.warp.warp`), so the product is the warp of ``(dX_s/dv dv, I + dR/dv dv)``; the
+        The warp is a fixed linear map of the surface translations and frame parts ``M = F - I``
+        (:func:`ffdcli.warp.warp`), so the product is the warp of ``(dX_s/dv dv, I + dF/dv dv)``; the
         surface nodes get ``dX_s/dv dv`` exactly. The transpose of :meth:`mesh_vjp`."""
         dv = self._check_dv(dv, "mesh_jvp")
         ids = self.surface_ids
@@ -498,7 +509,7 @@ class DesignModel:
         if self.uses_volume():
             from ffdcli.warp import warp
 
-            dR = np.tensordot(dv, self._rotation_jacobian(), axes=1)
+            dR = np.tensordot(dv, self._frame_jacobian(), axes=1)
             out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, progress=progress)
         out[ids] = dXs
         return out
@@ -522,7 +533,7 @@ class DesignModel:
         g_b, g_M = warp_vjp(self._warp_model(progress), gs, progress=progress, comm=comm)
         g_b = g_b + g[ids] - gs[ids]
         out = self.surface_vjp(g_b)
-        dR = self._rotation_jacobian()
+        dR = self._frame_jacobian()
         out += np.einsum("sij,vsij->v", g_M, dR)
         return out
 

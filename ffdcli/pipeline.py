@@ -10,6 +10,7 @@ These functions are what the commands call; they are also the Python API for scr
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -250,7 +251,7 @@ class DesignRun:
 
     The single-component form of the design file is a run of one component; ``prep``, ``box``,
     ``P0`` and ``changes`` are those of the first (the only) component. Surface arrays of the run
-    (:meth:`surface_displacement`, :meth:`surface_rotations`) are ordered as :attr:`surface_ids`, the
+    (:meth:`surface_displacement`, :meth:`surface_frames`) are ordered as :attr:`surface_ids`, the
     sorted union of every component's surface nodes.
     """
 
@@ -333,8 +334,7 @@ class DesignRun:
         there is not the warp's), built once and kept: a design loop does not rebuild its tree."""
         if self._warp is None:
 
-            vol = self.design.volume or {}      # the gate's keys are skipped by from_dict
-            settings = WarpSettings.from_dict(vol, path=self.design.path)
+            settings = self.warp_settings
             names = [n for c in self.components for n in c.prep.surface.names]
             model, _ = prepare_mesh_warp(self.prep.mesh, names, settings, progress=progress)
             if not np.array_equal(model.surface_ids, self.surface_ids):
@@ -398,21 +398,28 @@ class DesignRun:
             out[rows] = component_displacement(comp, Pc)
         return out
 
-    def surface_rotations(self, P) -> np.ndarray:
-        """(S, 3, 3) local rotation of the surface at each surface point (for the volume warp).
+    @property
+    def warp_settings(self) -> WarpSettings:
+        """The design's ``volume:`` settings of the warp (the gate's keys there are not the warp's)."""
+        return WarpSettings.from_dict(self.design.volume or {}, path=self.design.path)
 
-        The rotation of the surface frame under the FFD map (see :mod:`ffdcli.rotations`): the polar
-        factor of F on the tangent plane completed by the deformed unit normal. Points outside the
-        lattice (which do not move) get the identity, and so does every point of a component whose
-        ``P`` is its original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by
-        1e-18, and a design without changes must write the input back bit for bit)."""
+    def surface_frames(self, P, carry: str | None = None) -> np.ndarray:
+        """(S, 3, 3) the local frame matrix each surface point hands to the volume warp.
+
+        ``carry`` (default: the design's ``volume.carry``) says which (:func:`component_frames`):
+        ``"gradient"``, the FFD map's deformation gradient F at the point; ``"rotation"``, the
+        rotation of the surface frame (:mod:`ffdcli.rotations`). Points outside the lattice (which do
+        not move) get the identity, and so does every point of a component whose ``P`` is its
+        original lattice (exactly: the rounding of F = J1 J0^-1 would move the volume by 1e-18, and a
+        design without changes must write the input back bit for bit)."""
+        carry = carry or self.warp_settings.carry
         Ps = self._per_component(P)
         if self.single:
-            return component_rotations(self.components[0], Ps[0])
+            return component_frames(self.components[0], Ps[0], carry)
         lay = self.layout
         out = np.broadcast_to(np.eye(3), (len(lay.surface_ids), 3, 3)).copy()
         for comp, rows, Pc in zip(self.components, lay.rows, Ps, strict=True):
-            out[rows] = component_rotations(comp, Pc)
+            out[rows] = component_frames(comp, Pc, carry)
         return out
 
     def _frame_gradient_inputs(self, P: np.ndarray):
@@ -423,6 +430,39 @@ class DesignRun:
         return full3(self.box, Fc)
 
 
+#: The zone near the wall, in mean chords, where the gate compares cells with the design's own map.
+DESIGN_ZONE = 0.15
+
+
+def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
+    """``f(node_ids) -> (k, 3)``: where the design's own map puts those input mesh nodes near the wall.
+
+    A node within :data:`DESIGN_ZONE` mean chords of the surface goes where the FFD map, linearised
+    at the surface node ``j`` nearest to it, sends it: ``x_j + b_j + F_j (x - x_j)`` (``b`` the
+    surface displacement, ``F`` the map's deformation gradient there; inside the lattice this is
+    the FFD map itself to second order in the distance, and it extends the map past the lattice's
+    margin, as the volume warp with ``carry: gradient`` does); other nodes give NaN rows. The quality
+    gate compares the volume's cells with it (:func:`ffdcli.quality.check_quality`: what the design
+    itself does to a cell at the wall is not a failure of the volume motion)."""
+    from scipy.spatial import cKDTree
+
+    mesh, ids = run.prep.mesh, run.surface_ids
+    Xs = mesh.points[ids]
+    b = run.surface_displacement(P) if disp is None else disp
+    F = run.surface_frames(P, "gradient")
+    zone = DESIGN_ZONE * run.warp_model().chord
+    tree = cKDTree(Xs)
+
+    def moved(node_ids: np.ndarray) -> np.ndarray:
+        X = mesh.points[node_ids]
+        d, j = tree.query(X)
+        out = X + b[j] + np.einsum("kij,kj->ki", F[j] - np.eye(3), X - Xs[j])
+        out[d > zone] = np.nan
+        return out
+
+    return moved
+
+
 def component_displacement(comp, P: np.ndarray) -> np.ndarray:
     """(S_c, 3) displacement of one component's surface points: B @ (P - P0)."""
     box = comp.box
@@ -430,8 +470,14 @@ def component_displacement(comp, P: np.ndarray) -> np.ndarray:
     return box.mesh_vectors(comp.prep.embedding.displace(dP))
 
 
-def component_rotations(comp, P: np.ndarray) -> np.ndarray:
-    """(S_c, 3, 3) rotation of one component's surface frame (identity outside its lattice)."""
+def component_frames(comp, P: np.ndarray, carry: str = "gradient") -> np.ndarray:
+    """(S_c, 3, 3) local frame matrices of one component's surface points (identity outside its lattice).
+
+    ``carry="gradient"``: the deformation gradient ``F = J(P) J(P0)^-1`` of the FFD map at the point
+    (mesh axes; 2D: identity across the plane): the volume near the wall then moves as the FFD moves
+    space there, to first order, so the cells at a sharp trailing edge or at a tip, where faces of
+    different normals meet, all see one smooth map. ``carry="rotation"``: the polar rotation of the
+    surface frame (:func:`ffdcli.rotations.surface_frame_gradient`), IDWarp's form."""
 
     box = comp.box
     S = len(comp.prep.embedding.inside)
@@ -440,6 +486,9 @@ def component_rotations(comp, P: np.ndarray) -> np.ndarray:
         return R
     ins, F, n0 = frame_gradient_inputs(comp, P)
     if not len(ins):
+        return R
+    if carry == "gradient":
+        R[ins] = full3(box, F)
         return R
     Fs = surface_frame_gradient(F, n0)
     if box.dim == 2:
@@ -604,7 +653,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
 
         model = run.warp_model(progress)
-        rot = run.surface_rotations(P1)
+        rot = run.surface_frames(P1)
         points += warp(model, disp, rot, progress=progress, comm=run.comm)   # MPI: each rank its block
     else:
         points[ids] += disp
@@ -619,6 +668,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         t2 = time.perf_counter()
         threshold = (run.design.volume or {}).get("threshold")
         kw = {} if threshold is None else {"threshold": float(threshold)}
+        kw["design_map"] = design_map(run, P1, disp)
         quality = run.check_quality(points, **kw)
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
@@ -627,7 +677,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
 
         t3 = time.perf_counter()
         tried.append({"attempt": "the design's volume settings", "failed": quality.n_failed, "ok": False})
-        best = (quality.n_failed, points, quality, None)
+        best = (_badness(quality), points, quality, None)
         for what, settings, steps in attempts(run.warp_model(progress).settings):
             pts = incremental_warp(run, P1, settings, steps, progress=progress)
             if not np.all(np.isfinite(pts)):
@@ -635,14 +685,20 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
                 continue
             q = run.check_quality(pts, **kw)
             tried.append({"attempt": what, "failed": q.n_failed, "ok": q.ok})
-            if q.n_failed < best[0]:
-                best = (q.n_failed, pts, q, what)
+            if _badness(q) < best[0]:
+                best = (_badness(q), pts, q, what)
             if q.ok:
                 break
         _, points, quality, used = best
         t["recovery"] = time.perf_counter() - t3
     return Deformation(points=points, lattice=P1, surface_displacement=disp, volume_method=method,
                        quality=quality, seconds=t, recovery=tried, recovered_with=used)
+
+
+def _badness(q: QualityReport) -> tuple[int, int]:
+    """How recovery attempts are ranked: fewer inverted cells first (a solver cannot run on one),
+    then fewer failures of any kind."""
+    return (q.n_new_inverted, q.n_failed)
 
 
 # The writers are called through their modules (formats.write_mesh, ...), not bound names: a test or

@@ -48,6 +48,16 @@ before (``ffd deform``):
 - a node *fails* when its orthogonality falls below ``ortho_min`` (20 degrees) after losing more than
   ``ortho_loss`` (10 degrees) from the input.
 
+- *shaped by the design* (``ffd deform`` gives the gate the design's own map, ``design_map``): a cell
+  or node that would fail by the two rules above and lies near the wall is compared with what the
+  design's own map makes of it (the input nodes moved by the FFD map linearised at the nearest
+  surface node, :func:`ffdcli.pipeline.design_map`). When the volume's result keeps at least
+  ``DESIGN_SLACK`` (0.9) x that cell's scaled Jacobian, or its orthogonality is at most
+  ``DESIGN_SLACK_DEG`` (2 degrees) below the map's, the change of shape is the one the design asks
+  for (a tip chord halved squeezes the cells on the tip's faces whatever the volume does), not a
+  failure of the volume motion: it is counted and reported as *shaped by the design*, not refused.
+  An inverted cell is always refused.
+
 Without a mesh before (``ffd check``) nothing is relative: the counts are of the mesh as it is.
 
 **One set of words.** Both commands print the same counts of the mesh AS WRITTEN under the same
@@ -77,6 +87,11 @@ DEFAULT_COLLAPSE = 0.01
 DEFAULT_ORTHO_MIN = 20.0
 #: ... after losing more than this many degrees from the input mesh.
 DEFAULT_ORTHO_LOSS = 10.0
+#: A failing cell is the design's own (not refused) when its quality is at least this fraction of
+#: what the design's FFD map itself makes of it ...
+DESIGN_SLACK = 0.9
+#: ... and a failing node when its orthogonality is at most this many degrees below the map's.
+DESIGN_SLACK_DEG = 2.0
 #: Cells evaluated per vectorised step (bounds the temporary arrays to ~100 MB).
 CHUNK = 200_000
 
@@ -617,6 +632,9 @@ class QualityReport:
         Smallest node orthogonality (degrees) before / after, and the largest loss of one node.
     n_ortho_low, n_ortho_low_before
         Nodes below ``ortho_min`` after / before.
+    n_design_cells, n_design_nodes
+        Cells and nodes that the rules above would fail but that the design's own FFD map shapes
+        so (within ``DESIGN_SLACK``): reported, not refused.
     worst
         Up to ``n_worst`` cells of smallest q after: ``{"cell": index in the concatenation of the
         mesh's cell blocks, "type", "quality", "quality_before", "centroid": [x, y, z] after,
@@ -650,6 +668,8 @@ class QualityReport:
     n_ortho_low: int = 0
     n_ortho_low_before: int | None = None
     n_ortho_failed: int = 0
+    n_design_cells: int = 0
+    n_design_nodes: int = 0
     collapse: float = DEFAULT_COLLAPSE
     worst: list = field(default_factory=list)
     worst_nodes: list = field(default_factory=list)
@@ -683,7 +703,9 @@ class QualityReport:
                 f"{self.threshold:g}, below {self.relative:g} x its value before and below "
                 f"{_g(self.collapse_floor)} (the lower of {self.collapse:g} and the input mesh's worst); "
                 f"a node fails when its orthogonality falls below "
-                f"{self.ortho_min:g} deg after losing more than {self.ortho_loss_max:g} deg")
+                f"{self.ortho_min:g} deg after losing more than {self.ortho_loss_max:g} deg; "
+                f"unless the design's own FFD map shapes the cell or node so (within {DESIGN_SLACK:g} x "
+                f"its quality, {DESIGN_SLACK_DEG:g} deg)")
 
     def to_dict(self) -> dict:
         """The report for ``--json`` (the same keys for ``deform`` and ``check``)."""
@@ -693,6 +715,7 @@ class QualityReport:
                 "min_after": self.min_after, "inverted_before": self.n_inverted_before,
                 "below_threshold_before": self.n_below_before, "input_degenerate": self.n_input_bad,
                 "inverted_by_design": self.n_new_inverted, "made_worse": self.n_worse,
+                "shaped_by_design": {"cells": self.n_design_cells, "nodes": self.n_design_nodes},
                 "orthogonality": {"nodes": self.n_nodes, "min_before": self.ortho_before,
                                   "min_after": self.ortho_after, "largest_loss": self.ortho_loss,
                                   "below_min": self.n_ortho_low, "below_min_before": self.n_ortho_low_before,
@@ -719,6 +742,9 @@ class QualityReport:
             if rel:
                 text += (f" ({self.n_ortho_low_before} before), largest loss {_g(self.ortho_loss, '.1f')} deg, "
                          f"{self.n_ortho_failed} nodes lost orthogonality")
+        if self.n_design_cells or self.n_design_nodes:
+            text += (f"; shaped by the design's own map (accepted): {self.n_design_cells} cells, "
+                     f"{self.n_design_nodes} nodes")
         return text
 
     def describe_worst(self, n: int = 5) -> str:
@@ -760,7 +786,7 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
                   collapse: float = DEFAULT_COLLAPSE,
                   ortho_min: float = DEFAULT_ORTHO_MIN, ortho_loss: float = DEFAULT_ORTHO_LOSS,
                   orthogonality: bool = True, n_worst: int = 10,
-                  reference: QualityReference | None = None) -> QualityReport:
+                  reference: QualityReference | None = None, design_map=None) -> QualityReport:
     """The counts of the gate for the cells of ``mesh`` at ``points_after`` (default: its own points).
 
     Parameters
@@ -781,6 +807,10 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     reference
         :func:`quality_reference` of the reference geometry (``points_before``, or ``points_after``
         without a before), to skip recomputing it (a design loop, a recovery).
+    design_map
+        ``design_map(node_ids) -> (k, 3)``: where the design's own map puts those input nodes (NaN
+        rows for nodes it does not judge); with it, failing cells and nodes that the map itself
+        shapes so are *shaped by the design*, not failures (module docstring).
 
     Returns
     -------
@@ -828,6 +858,11 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
         floor = collapse_floor(float(qb[valid].min()) if valid.any() else None, collapse)
     inverted, below, bad_in, new_inv, worse, failed = cell_rule(q, qb, threshold, relative, floor)
     out = {"n_inverted": int(inverted.sum()), "n_below": int(below.sum()), "min_after": float(q.min())}
+    if has_before and design_map is not None and worse.any():
+        by_design = shaped_by_design(after, cells, np.flatnonzero(worse), q, design_map, orientation)
+        worse[by_design] = False
+        failed = new_inv | worse
+        out["n_design_cells"] = int(by_design.size)
     if has_before:
         valid = ~bad_in
         out.update(n_inverted_before=int(bad_in.sum()), n_below_before=int((valid & (qb < threshold)).sum()),
@@ -842,7 +877,7 @@ def check_quality(mesh: Mesh, points_after: np.ndarray | None = None, threshold:
     out["worst"] = cell_rows(worst, q, failed)
     if orthogonality:
         out.update(_orthogonality_counts(ref, after if has_before else None, cells, mesh.dim, reference,
-                                         ortho_min, ortho_loss, n_worst))
+                                         ortho_min, ortho_loss, n_worst, design_map))
     return QualityReport(len(q), **out, **kw)
 
 
@@ -909,7 +944,50 @@ def quality_reference(mesh: Mesh, points: np.ndarray | None = None, *, orthogona
     return QualityReference(orientation, q, topo, ortho)
 
 
-def _orthogonality_counts(ref, after, cells, dim, reference, ortho_min, ortho_loss, n_worst) -> dict:
+def shaped_by_design(after, cells, index, q, design_map, orientation) -> np.ndarray:
+    """The rule *shaped by the design* on cells (the one home): the cells of ``index`` (numbered in
+    the concatenation of ``cells``) whose quality ``q`` is at least ``DESIGN_SLACK`` x what the
+    design's own map (``design_map``, see :func:`check_quality`) makes of them, every node mapped."""
+    starts = np.cumsum([0] + [len(b) for b in cells])
+    blk = np.searchsorted(starts, index, side="right") - 1
+    per_block = [cells[k].data[index[blk == k] - starts[k]] for k in range(len(cells))]
+    nodes = np.unique(np.concatenate([d.ravel() for d in per_block]))
+    moved = np.asarray(design_map(nodes), dtype=np.float64)
+    good = np.isfinite(moved).all(axis=1)
+    pts = np.array(after, dtype=np.float64)
+    pts[nodes[good]] = moved[good]
+    mapped = np.zeros(len(pts), dtype=bool)
+    mapped[nodes[good]] = True
+    q_map = np.full(len(index), np.inf)
+    for k, data in enumerate(per_block):
+        if len(data):
+            raw = _raw_quality(pts, data, cells[k].type, orientation.normal)
+            q_map[blk == k] = np.where(mapped[data].all(axis=1),
+                                       np.clip(orientation.signs[k] * raw, -1.0, 1.0), np.inf)
+    return index[q[index] >= DESIGN_SLACK * q_map]
+
+
+def nodes_shaped_by_design(after, cells, dim, orientation, topology, fail, o, design_map) -> np.ndarray:
+    """The rule *shaped by the design* on nodes (the one home): the failing nodes (mask ``fail``)
+    whose orthogonality ``o`` is at most ``DESIGN_SLACK_DEG`` below what it is when the nodes of
+    their cells move by the design's own map (the node itself mapped)."""
+    cand = np.flatnonzero(fail)
+    near = np.zeros(len(after), dtype=bool)
+    near[cand] = True
+    around = [b.data[near[b.data].any(axis=1)] for b in cells]
+    nodes = np.unique(np.concatenate([d.ravel() for d in around]))
+    moved = np.asarray(design_map(nodes), dtype=np.float64)
+    good = np.isfinite(moved).all(axis=1)
+    pts = np.array(after, dtype=np.float64)
+    pts[nodes[good]] = moved[good]
+    o_map = node_orthogonality(pts, cells, dim, orientation=orientation, topology=topology)
+    mapped = np.zeros(len(pts), dtype=bool)
+    mapped[nodes[good]] = True
+    return cand[mapped[cand] & (o[cand] >= o_map[cand] - DESIGN_SLACK_DEG)]
+
+
+def _orthogonality_counts(ref, after, cells, dim, reference, ortho_min, ortho_loss, n_worst,
+                          design_map=None) -> dict:
     """The orthogonality fields of the report (``after`` None: only the mesh ``ref`` itself)."""
     topo, o_ref, orientation = reference.topology, reference.ortho, reference.orientation
     has = np.isfinite(o_ref)
@@ -926,6 +1004,11 @@ def _orthogonality_counts(ref, after, cells, dim, reference, ortho_min, ortho_lo
                 "worst_nodes": rows}
     o = node_orthogonality(after, cells, dim, orientation=orientation, topology=topo)
     loss, fail = node_rule(o, o_ref, has, ortho_min, ortho_loss)
+    n_design = 0
+    if design_map is not None and fail.any():
+        by_design = nodes_shaped_by_design(after, cells, dim, orientation, topo, fail, o, design_map)
+        fail[by_design] = False
+        n_design = int(by_design.size)
     idx = np.flatnonzero(has)
     worst = idx[np.lexsort((o[idx], ~fail[idx]))][:n_worst]          # failing first, then lowest after
     rows = [{"node": int(i), "before": float(o_ref[i]), "after": float(o[i]), "point": after[i].tolist(),
@@ -933,7 +1016,7 @@ def _orthogonality_counts(ref, after, cells, dim, reference, ortho_min, ortho_lo
     return {"n_nodes": int(has.sum()), "ortho_before": float(np.min(o_ref[has])), "ortho_after": float(np.min(o[has])),
             "ortho_loss": float(loss.max()), "n_ortho_low": int((has & (o < ortho_min)).sum()),
             "n_ortho_low_before": int((has & (o_ref < ortho_min)).sum()), "n_ortho_failed": int(fail.sum()),
-            "worst_nodes": rows}
+            "n_design_nodes": n_design, "worst_nodes": rows}
 
 
 def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, force: bool = False,
@@ -1057,7 +1140,7 @@ def check_quality_part(part, comm, points_after=None, points_before=None, thresh
                        *, relative: float = DEFAULT_RELATIVE, collapse: float = DEFAULT_COLLAPSE,
                        ortho_min: float = DEFAULT_ORTHO_MIN, ortho_loss: float = DEFAULT_ORTHO_LOSS,
                        orthogonality: bool = True, n_worst: int = 10,
-                       reference: PartReference | None = None) -> QualityReport:
+                       reference: PartReference | None = None, design_map=None) -> QualityReport:
     """:func:`check_quality` shared between MPI ranks: a collective; every rank returns the same
     :class:`QualityReport`, equal to the serial one of the whole mesh.
 
@@ -1076,6 +1159,8 @@ def check_quality_part(part, comm, points_after=None, points_before=None, thresh
         (``points_after`` None: the part's own points, and no before unless given).
     reference
         :func:`part_reference` of the reference geometry, to reuse.
+    design_map
+        As in :func:`check_quality`, of GLOBAL node ids.
     """
     if points_after is None:
         after, before = part.points, points_before
@@ -1092,13 +1177,14 @@ def check_quality_part(part, comm, points_after=None, points_before=None, thresh
     if reference is None or (orthogonality and reference.ortho is None):
         reference = part_reference(part, comm, ref, orthogonality=orthogonality)
     # the rank's own figures, agreed on (an error on one rank ends every rank), then gathered
+    local_map = None if design_map is None else (lambda local: design_map(part.ids[local]))
     mine = comm.run(_part_figures, part, after, before, ref, reference, threshold, relative, collapse,
-                    ortho_min, ortho_loss, orthogonality, n_worst)
+                    ortho_min, ortho_loss, orthogonality, n_worst, local_map)
     return _merge_parts(comm.allgather(mine), before is not None, orthogonality, reference, n_worst, kw)
 
 
 def _part_figures(part, after, before, ref, reference, threshold, relative, collapse, ortho_min, ortho_loss,
-                  orthogonality, n_worst) -> dict:
+                  orthogonality, n_worst, design_map=None) -> dict:
     """One rank's counts, minima and worst rows of :func:`check_quality_part` (no communication)."""
     counted = _counted_blocks(part)
     has_before = before is not None
@@ -1110,6 +1196,12 @@ def _part_figures(part, after, before, ref, reference, threshold, relative, coll
     rows_of = np.concatenate([np.flatnonzero(m) for m in part.counted])
     floor = collapse_floor(reference.q_min_valid, collapse) if has_before else None
     inverted, below, bad_in, new_inv, worse, failed = cell_rule(q, qb, threshold, relative, floor)
+    n_design = 0
+    if has_before and design_map is not None and worse.any():
+        by_design = shaped_by_design(after, counted, np.flatnonzero(worse), q, design_map, reference.orientation)
+        worse[by_design] = False
+        failed = new_inv | worse
+        n_design = int(by_design.size)
 
     def cell_rows(index, values, with_failed=None, coords=after):
         rows = []
@@ -1130,7 +1222,8 @@ def _part_figures(part, after, before, ref, reference, threshold, relative, coll
     if has_before:
         valid = ~bad_in
         mine.update(n_inverted_before=int(bad_in.sum()), n_below_before=int((valid & (qb < threshold)).sum()),
-                    n_input_bad=int(bad_in.sum()), n_new_inverted=int(new_inv.sum()), n_worse=int(worse.sum()))
+                    n_input_bad=int(bad_in.sum()), n_new_inverted=int(new_inv.sum()), n_worse=int(worse.sum()),
+                    n_design_cells=n_design)
         idx = np.flatnonzero(bad_in)
         idx = idx[np.lexsort((gid[idx], qb[idx]))][:n_worst]
         mine["input_bad"] = cell_rows(idx, qb, coords=ref)
@@ -1138,11 +1231,11 @@ def _part_figures(part, after, before, ref, reference, threshold, relative, coll
     mine["worst"] = cell_rows(worst, q, failed)
     if orthogonality and reference.ortho is not None:
         mine["ortho"] = _part_orthogonality(part, ref, after if has_before else None, reference, ortho_min,
-                                            ortho_loss, n_worst)
+                                            ortho_loss, n_worst, design_map)
     return mine
 
 
-def _part_orthogonality(part, ref, after, reference, ortho_min, ortho_loss, n_worst) -> dict:
+def _part_orthogonality(part, ref, after, reference, ortho_min, ortho_loss, n_worst, design_map=None) -> dict:
     """This rank's orthogonality figures of its owned nodes (see :func:`_orthogonality_counts`)."""
     own = part.owned
     o_ref = reference.ortho
@@ -1162,12 +1255,18 @@ def _part_orthogonality(part, ref, after, reference, ortho_min, ortho_loss, n_wo
     o = node_orthogonality(after, list(part.cells), part.dim, orientation=reference.orientation,
                            topology=reference.topology)
     loss, fail = node_rule(o, o_ref, has, ortho_min, ortho_loss)
+    n_design = 0
+    if design_map is not None and fail.any():
+        by_design = nodes_shaped_by_design(after, list(part.cells), part.dim, reference.orientation,
+                                           reference.topology, fail, o, design_map)
+        fail[by_design] = False
+        n_design = int(by_design.size)
     out.update(ortho_before=float(o_ref[has].min()) if has.any() else None,
                ortho_after=float(o[has].min()) if has.any() else None,
                ortho_loss=float(loss[own].max()) if own.any() else None,
                n_ortho_low=int((has & (o < ortho_min)).sum()),
                n_ortho_low_before=int((has & (o_ref < ortho_min)).sum()),
-               n_ortho_failed=int(fail.sum()))
+               n_ortho_failed=int(fail.sum()), n_design_nodes=n_design)
     worst = idx[np.lexsort((gids[idx], o[idx], ~fail[idx]))][:n_worst]
     out["worst_nodes"] = [((bool(~fail[i]), float(o[i]), int(gids[i])),
                            {"node": int(gids[i]), "before": float(o_ref[i]), "after": float(o[i]),
@@ -1191,7 +1290,8 @@ def _merge_parts(parts: list[dict], has_before: bool, orthogonality: bool, refer
     rows = sorted((r for p in parts for r in p["worst"]), key=lambda r: (r["quality"], r["cell"]))
     out["worst"] = rows[:n_worst]
     if has_before:
-        for key in ("n_inverted_before", "n_below_before", "n_input_bad", "n_new_inverted", "n_worse"):
+        for key in ("n_inverted_before", "n_below_before", "n_input_bad", "n_new_inverted", "n_worse",
+                    "n_design_cells"):
             out[key] = total(key)
         out["min_before"] = reference.q_min
         bad = sorted((r for p in parts for r in p["input_bad"]), key=lambda r: (r["quality"], r["cell"]))
@@ -1209,6 +1309,7 @@ def _merge_parts(parts: list[dict], has_before: bool, orthogonality: bool, refer
             out["ortho_loss"] = max(o["ortho_loss"] for o in ortho if o["ortho_loss"] is not None)
             out["n_ortho_low_before"] = sum(o["n_ortho_low_before"] for o in ortho)
             out["n_ortho_failed"] = sum(o["n_ortho_failed"] for o in ortho)
+            out["n_design_nodes"] = sum(o["n_design_nodes"] for o in ortho)
         nodes = sorted((w for o in ortho for w in o["worst_nodes"]), key=lambda w: w[0])
         out["worst_nodes"] = [row for _, row in nodes[:n_worst]]
     return QualityReport(sum(p["count"] for p in parts), **out, **kw)

@@ -183,6 +183,8 @@ class BoxSettings:
 
 #: Volume-motion methods.
 METHODS = ("idw", "none")
+#: What each surface node's neighbourhood carries along (``volume.carry``).
+CARRY = ("gradient", "rotation")
 
 
 def _doc(text: str) -> dict:
@@ -208,8 +210,14 @@ class WarpSettings:
         "scale of the short-range term: it dominates closer than alpha^(b/(b-a)) L"))
     ldef: float | None = field(default=None, metadata=_doc(
         "reference length L in mesh units; default: diagonal of the surface's bounding box"))
+    carry: str = field(default="gradient", metadata=_doc(
+        "what the volume near each surface node carries along besides its translation: gradient "
+        "(default): the FFD map's local deformation gradient F, so the cells at the wall deform "
+        "exactly as the FFD deforms space there, also where faces meet at a sharp trailing edge "
+        "or tip; rotation: only the rotation of the surface frame (IDWarp's form)"))
     rotation_reach: float | None = field(default=0.3, metadata=_doc(
-        "the rotation part of the motion fades with distance r from each surface node as "
+        "the local-frame part of the motion (F - I or R - I, see carry) fades with distance r "
+        "from each surface node as "
         "1 / (1 + (r / rho)^4), rho = rotation_reach x the mean chord (surface area / (2 x the "
         "diagonal of its bounding box)), "
         "so no node is carried further than the surface motion near it explains; null: no fade "
@@ -238,6 +246,9 @@ class WarpSettings:
                 raise InputError(f"expected a list of marker names, got {v!r}",
                                  key=f"volume.{name}") from None
             object.__setattr__(self, name, v)
+        if self.carry not in CARRY:
+            raise InputError(f"expected one of {', '.join(CARRY)}, got {self.carry!r}",
+                             key="volume.carry")
         if self.method not in METHODS:
             raise InputError(f"expected one of {', '.join(METHODS)}, got {self.method!r}",
                              key="volume.method")
@@ -292,7 +303,7 @@ class WarpSettings:
                 raise InputError(f"unknown key {k!r}; expected one of {', '.join(names + list(GATE_KEYS))}",
                                  path=path, key=f"{key}.{k}")
             if isinstance(v, bool) and k not in ("fixed", "sliding"):
-                raise InputError(f"expected a {'name' if k == 'method' else 'number'}, got {v!r}",
+                raise InputError(f"expected a {'name' if k in ('method', 'carry') else 'number'}, got {v!r}",
                                  path=path, key=f"{key}.{k}")
             if k in ("fixed", "sliding") and v is not None:
                 if isinstance(v, str):
@@ -323,6 +334,7 @@ class WarpSettings:
         pos = {"type": "number", "exclusiveMinimum": 0}
         props = {
             "method": {"enum": list(METHODS), "default": "idw"},
+            "carry": {"enum": list(CARRY), "default": "gradient"},
             "a": {**pos, "default": 3},
             "b": {**pos, "default": 5},
             "alpha": {**pos, "default": 1},
@@ -338,7 +350,8 @@ class WarpSettings:
         for k, v in GATE_KEYS.items():
             props[k] = dict(v)
         return {"type": "object", "description": "How the volume mesh follows the surface "
-                "(inverse-distance weighting with rotations, IDWarp style) and the quality gate.",
+                "(inverse-distance weighting carrying each surface node's local frame, IDWarp style) and the "
+                "quality gate.",
                 "properties": props, "additionalProperties": False}
 
 

@@ -360,7 +360,8 @@ def test_rotation_fade_bounds_the_overshoot(tmp_path):
     The bundled CRM-like wing (tip chord 0.3 inside the domain) twisted 10 degrees at the tip.
     Without the fade the rotation term carries the nodes a tip chord behind and above the tip
     round as a rigid body, 3.0 x further than any surface node moves; with it (the default
-    rotation_reach 0.3), 1.09 x.
+    rotation_reach 0.3), 1.09 x carrying the rotation, 1.11 x carrying the FFD gradient (the
+    default carry: the twist's spanwise rate is a shear the gradient keeps).
     """
     import yaml
 
@@ -374,14 +375,14 @@ def test_rotation_fade_bounds_the_overshoot(tmp_path):
                                       "changes": [{"twist": {"tip": 10}}]}))
     run = load_run(load_design(design), cache_dir=tmp_path)
     P = run.lattice_after()
-    b, R = run.surface_displacement(P), run.surface_rotations(P)
+    b, R = run.surface_displacement(P), run.surface_frames(P)
     bmax = np.linalg.norm(b, axis=1).max()
     out = {}
     for reach in (None, 0.3):
         model, _ = prepare_mesh_warp(run.prep.mesh, "wing", WarpSettings(rotation_reach=reach))
         out[reach] = np.linalg.norm(warp(model, b, R), axis=1).max() / bmax
     assert out[None] > 1.5, out
-    assert out[0.3] <= 1.1, out
+    assert out[0.3] <= 1.15, out
 
 
 def test_one_schema_for_volume():
