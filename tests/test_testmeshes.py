@@ -110,3 +110,37 @@ def test_default_volume_settings_invert_no_cell_on_generated_wings(tmp_path_fact
             row = br.run_one(path, "wing", d, work=folder)
             assert row["status"] in ("ok", "REFUSED"), row
             assert row["inverted"] == 0, (name, row)
+
+
+#: Prism-layer wings with sharp trailing edges meeting the tip (the cells that inverted for almost every
+#: design when the wall cells followed each face's own frame rotation), and one wing the defaults were
+#: not chosen on (span along y, right, dihedral, 8 thin layers, NACA 2410 -> 0008, round tip).
+SHARP_TIPS = {
+    "left_swept_round": tm.smaller(tm.CASES["left_swept_round"], 1.8),
+    "right_dihedral_zx_bl": tm.smaller(tm.WingCase(
+        "right_dihedral_zx_bl", tm.Planform(semi_span=2.0, root_chord=1.0, taper=0.35, le_sweep_deg=35.0,
+                                            dihedral_deg=7.0, root_airfoil="2410", tip_airfoil="0008",
+                                            sections="zx"),
+        tip="round", layers=8, first_layer=5e-5, growth=1.25, farfield=20.0, h_far=5.0), 1.8),
+}
+
+
+@pytest.mark.slow
+def test_default_settings_pass_the_gate_on_prism_wings_with_sharp_tips(tmp_path_factory):
+    """Issue 13's target on prism-layer wings: every design passes the gate with the defaults (no
+    inverted cell; cells squeezed by a halved tip chord are the design's own), while carrying only
+    each face's frame rotation (``volume.carry: rotation``, IDWarp's form) inverts the wedges at the
+    tip's sharp trailing edge under a plain tip twist."""
+    from benchmarks import bench_robustness as br
+
+    folder = tmp_path_factory.mktemp("sharp")
+    designs = ["twist_tip+10", "dihedral+5", "chord_tip0.5", "chord_tip1.5", "shape_random", "mix4_c"]
+    for name, case in SHARP_TIPS.items():
+        path = tm.write_case(case, folder / "meshes")
+        for d in designs:
+            row = br.run_one(path, "wing", d, work=folder)
+            assert row["status"] == "ok" and row["inverted"] == 0, (name, row)
+    path = tm.write_case(SHARP_TIPS["left_swept_round"], folder / "meshes")
+    row = br.run_one(path, "wing", "twist_tip+10", work=folder,
+                     overrides=["volume.carry=rotation", "volume.alpha=4"])
+    assert row["inverted"] > 0, row
