@@ -1,25 +1,28 @@
-"""The volume mesh follows the surface: inverse-distance weighting with rotations (IDWarp style).
+"""The volume mesh follows the surface: inverse-distance weighting carrying local frames (IDWarp style).
 
 Every mesh node that is not on the deforming surface or on a fixed marker moves by a weighted
 blend of the boundary motion, in the manner of IDWarp (Secco et al., AIAA J. 59(4), 2021). The
 *sources* are the surface nodes (moving) and the nodes of the fixed markers (not moving). Source
-``i`` at ``x_i`` with area weight ``A_i`` has a translation ``b_i`` and a frame rotation ``R_i``
-(``M_i = R_i - I``; zero for fixed sources). A target node at ``x`` moves by::
+``i`` at ``x_i`` with area weight ``A_i`` has a translation ``b_i`` and a frame matrix ``F_i``
+(``M_i = F_i - I``; zero for fixed sources). A target node at ``x`` moves by::
 
     d(x) = sum_i w_i(x) [b_i + g(r_i) M_i (x - x_i)] / sum_i w_i(x)
     w_i(x) = A_i [ (L/r_i)^a + (alpha L/r_i)^b ],   r_i = |x - x_i|
     g(r) = 1 / (1 + (r / rho)^4)
 
-The rotation term carries each surface node's local frame along, so cells near a twisted wing
-rotate with it instead of shearing (boundary-layer cells stay orthogonal). Because the weights are
-normalised, a rigid translation moves every node rigidly, and so does a rigid rotation near the
-surface. The *rotation fade* ``g`` keeps the rotation term from carrying nodes far from the surface
-round with it: ``|g(r) M (x - x_i)| <= 0.57 rho |M|`` whatever the distance, so a node outboard of
-a twisted tip or behind a root whose frame turns (a shear's polar rotation) moves no further than
-the surface motion near it explains. ``rho = rotation_reach x`` the mean chord
-(:attr:`WarpModel.rotation_length`; ``rotation_reach`` 0.3; null: no fade, IDWarp's form, which reproduces any rigid
-motion exactly). The fixed sources hold the far field still: without them a far node would move
-with the average surface motion.
+The frame term carries each surface node's neighbourhood along. Which frame is the caller's
+(``volume.carry``, :meth:`ffdcli.pipeline.DesignRun.surface_frames`): the FFD map's deformation
+gradient at the node (the default: the cells at the wall deform as the FFD deforms space there,
+also where faces of different normals meet at a sharp edge), or the rotation of the surface's
+frame (IDWarp's form: cells near a twisted wing rotate with it). This module only sees the
+matrices: the warp is linear in (b, M) whatever they are. Because the weights are normalised, a
+rigid translation moves every node rigidly, and so does a rigid rotation near the surface. The
+*fade* ``g`` keeps the frame term from carrying nodes far from the surface along with it:
+``|g(r) M (x - x_i)| <= 0.57 rho |M|`` whatever the distance, so a node outboard of a twisted tip
+or behind a root whose frame turns moves no further than the surface motion near it explains.
+``rho = rotation_reach x`` the mean chord (:attr:`WarpModel.rotation_length`; ``rotation_reach``
+0.3; null: no fade, IDWarp's form, which reproduces any rigid motion exactly). The fixed sources
+hold the far field still: without them a far node would move with the average surface motion.
 
 Settings (``volume:`` in the design file, :class:`WarpSettings`): ``a`` = 3, ``b`` = 5,
 ``alpha`` = 1 and ``ldef`` = L. Only the ratio of the two terms depends on L (the common factor
@@ -635,8 +638,9 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     surface_displacement
         (Ns, 3) translation ``b`` of each surface node, in the order of ``model.surface_ids``.
     surface_rotation
-        (Ns, 3, 3) rotation ``R`` of each surface node's local frame (see
-        :func:`rotations_from_deformation_gradient`), or None for translation only (M = 0).
+        (Ns, 3, 3) frame matrix ``F`` of each surface node (``M = F - I``: the FFD map's gradient
+        or the rotation of the surface frame, see :meth:`ffdcli.pipeline.DesignRun.surface_frames`),
+        or None for translation only (M = 0).
     exact
         Evaluate the direct O(N x Ns) sum instead of the tree (tests, error reports).
     progress
