@@ -104,12 +104,24 @@ def _cases() -> dict[str, WingCase]:
         WingCase("blunt_te_x", blunt, tip="round"),
         WingCase("m6like_ff50_bl", m6like, farfield=50.0, h_far=10.0, layers=4),
         WingCase("crm_metres", big, h_wing=0.06, h_edge=0.025),
+        # generated after the defaults were chosen (held out from that choice; they passed on first run)
+        WingCase("right_dihedral_zx_bl", Planform(semi_span=2.0, root_chord=1.0, taper=0.35, le_sweep_deg=35.0,
+                                                  dihedral_deg=7.0, root_airfoil="2410", tip_airfoil="0008",
+                                                  sections="zx"),
+                 tip="round", layers=8, first_layer=5e-5, growth=1.25, farfield=20.0, h_far=5.0),
+        WingCase("thick_left_x_ff50_bl", Planform(semi_span=2.5, root_chord=1.0, taper=0.8, root_airfoil="4418",
+                                                  sections="yz", span_sign=-1.0, twist_tip_deg=-4.0),
+                 layers=6, farfield=50.0, h_far=10.0),
+        WingCase("kinked_z_blunt_bl_ff5", crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.37,
+                                                       sections="xy", closed_te=False),
+                 layers=5, farfield=5.0),
     ]
     return {c.name: c for c in cases}
 
 
 #: Named cases with variety: span along x, y and z; left and right; kinked transport; flat and
-#: round tips; sharp and blunt trailing edges; prism layers; far field at 5, 10 and 50 chords.
+#: round tips; sharp and blunt trailing edges; prism layers (4 to 8, first layer 5e-5 to 2e-4
+#: chords); far field at 5, 10, 20 and 50 chords; thin (NACA 0008) to thick (4418) sections.
 CASES: dict[str, WingCase] = _cases()
 
 

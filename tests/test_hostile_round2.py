@@ -337,7 +337,7 @@ def _signal_inside_write(folder: Path, sig) -> tuple[subprocess.Popen, str]:
 def test_sigterm_and_sighup_during_a_write(mid_wing, sig):
     """Found: SIGTERM/SIGHUP (timeout, SLURM, CI, docker stop) left an 80-90 MB hidden .part file."""
     out = mid_wing / "out_mid.su2"
-    for _ in range(3):
+    for _ in range(8):          # a loaded machine can finish the write between the poll and the signal
         p, err = _signal_inside_write(mid_wing, sig)
         assert no_parts(mid_wing) == [], list(mid_wing.iterdir())
         if p.returncode == 128 + sig:

@@ -117,11 +117,7 @@ def test_default_volume_settings_invert_no_cell_on_generated_wings(tmp_path_fact
 #: not chosen on (span along y, right, dihedral, 8 thin layers, NACA 2410 -> 0008, round tip).
 SHARP_TIPS = {
     "left_swept_round": tm.smaller(tm.CASES["left_swept_round"], 1.8),
-    "right_dihedral_zx_bl": tm.smaller(tm.WingCase(
-        "right_dihedral_zx_bl", tm.Planform(semi_span=2.0, root_chord=1.0, taper=0.35, le_sweep_deg=35.0,
-                                            dihedral_deg=7.0, root_airfoil="2410", tip_airfoil="0008",
-                                            sections="zx"),
-        tip="round", layers=8, first_layer=5e-5, growth=1.25, farfield=20.0, h_far=5.0), 1.8),
+    "right_dihedral_zx_bl": tm.smaller(tm.CASES["right_dihedral_zx_bl"], 1.8),
 }
 
 
