@@ -16,16 +16,28 @@ from ffdcli.parallel import MPIComm
 
 
 class _Hub:
+    """The ranks' meeting point. One rank computes at a time (``turn``, released while waiting in a
+    collective): numba's default workqueue threading layer aborts when two threads launch parallel
+    kernels at once, and the tests are about results, not speed."""
+
     def __init__(self, size: int):
         self.size = size
-        self.barrier = threading.Barrier(size, timeout=120)
+        self.barrier = threading.Barrier(size, timeout=300)
+        self.turn = threading.Lock()
         self.slots: list = [None] * size
+
+    def _wait(self) -> None:
+        self.turn.release()
+        try:
+            self.barrier.wait()
+        finally:
+            self.turn.acquire()
 
     def exchange(self, rank: int, obj) -> list:
         self.slots[rank] = obj
-        self.barrier.wait()
+        self._wait()
         out = list(self.slots)
-        self.barrier.wait()
+        self._wait()
         return out
 
 
@@ -76,11 +88,12 @@ def run_ranks(size: int, fn) -> list:
     errors: list = [None] * size
 
     def main(r):
-        try:
-            results[r] = fn(ThreadComm(hub, r))
-        except BaseException as e:      # noqa: BLE001 - re-raised below
-            errors[r] = e
-            hub.barrier.abort()
+        with hub.turn:
+            try:
+                results[r] = fn(ThreadComm(hub, r))
+            except BaseException as e:      # noqa: BLE001 - re-raised below
+                errors[r] = e
+                hub.barrier.abort()
 
     threads = [threading.Thread(target=main, args=(r,)) for r in range(size)]
     for t in threads:
