@@ -1,4 +1,4 @@
-"""One rank's share of a mesh: a contiguous block of nodes, the cells around them and their halo.
+"""One rank's share of a mesh: the nodes it owns (a compact piece of space), the cells around them and their halo.
 
 An MPI run (:mod:`ffdcli.parallel`) gives every node an owner rank (:func:`node_owners`): the
 nodes sorted along a Z-order (Morton) curve of their coordinates, cut into ``size`` runs of equal
