@@ -138,6 +138,17 @@ class WarpModel:
     def n_targets(self) -> int:
         return len(self.target_ids)
 
+    @property
+    def fixed_node(self) -> int:
+        """First tree node of the fixed sources' subtree (every later node is in it; the node
+        count when there are no fixed sources). Sources in tree order: the surface ones first."""
+        nn, ms = len(self.node_lo), len(self.src_index)
+        if self.n_surface == 0:
+            return 0
+        if self.n_surface >= ms:
+            return nn
+        return int(self.node_right[0])
+
     def params(self) -> tuple:
         s = self.settings
         fast = s.a == 3.0 and s.b == 5.0
@@ -313,7 +324,8 @@ def _fade(r2, rho2):
 @njit(cache=True)
 def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left, node_right,
               node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab,
-              fast, eps2, tol, rho2, rot, stack_n, stack_d, acc_node, acc_src, res):
+              fast, eps2, tol, rho2, rot, fixed_node, src_soa, stack_n, stack_d, acc_node, acc_src,
+              res):
     """Walk the tree for one target. Returns the total weight W.
 
     mode 0: res[:15] = the numerator sums (b channel, c and M channels) of the forward map.
@@ -322,6 +334,11 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
     and acc_src (per source), scaled by 1 / wfinal.
     The decisions use only geometry and the running weight, identically in every mode: the map
     from the votes to the displacement is fixed by the undeformed mesh.
+    ``src_soa`` (19, Ms): the sources' x, y, z, area and the NV votes as rows (mode 0 with
+    a = 3, b = 5: the leaves are summed by the vectorised :func:`_leaf_forward`).
+    Nodes ``k >= fixed_node`` hold fixed sources only (zero votes): they add to W and nothing
+    else, and the surface subtree is walked before them (its near weights make the far-field
+    groups acceptable at once).
     """
     nv = NV if rot else 3
     if mode == 0:
@@ -357,10 +374,11 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                     err = node_a[k] * 0.5 * t * t * (pa * (pa + 1.0) * fa * u ** (pa + 2.0)
                                                      + pb * (pb + 1.0) * fb * u ** (pb + 2.0))
                 accept = err <= tol * W
+        md = 1 if k >= fixed_node else mode
         if accept:
             phi = fa + fb
             W += node_a[k] * phi
-            if mode != 1:
+            if md != 1:
                 psi = (pa * fa + pb * fb) / (dist2 + eps2)      # -phi'(D) / D
                 u0 = x0 - node_c[k, 0]
                 u1 = x1 - node_c[k, 1]
@@ -373,7 +391,7 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                     gf = 1.0 / (1.0 + q * q)
                     phr = phi * gf
                     psr = gf * (psi + 4.0 * phi * q * gf / rho2)
-            if mode == 0:
+            if md == 0:
                 for p in range(3):
                     res[p] += phi * node_bm[k, p] + psi * (u0 * node_bm[k, 15 + p]
                                                            + u1 * node_bm[k, 30 + p]
@@ -383,7 +401,7 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                         res[p] += phr * node_bm[k, p] + psr * (u0 * node_bm[k, 15 + p]
                                                                + u1 * node_bm[k, 30 + p]
                                                                + u2 * node_bm[k, 45 + p])
-            elif mode == 2:
+            elif md == 2:
                 cf = phi / wfinal
                 cs = psi / wfinal
                 acc_node[k, 0] += cf * g0
@@ -402,8 +420,12 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                     _outer_add(acc_node, k, 42, crs * u1, g0, g1, g2, x0, x1, x2)
                     _outer_add(acc_node, k, 51, crs * u2, g0, g1, g2, x0, x1, x2)
         elif node_left[k] < 0:
+            if md == 0 and fast:
+                W += _leaf_forward(x0, x1, x2, node_lo[k], node_hi[k], src_soa, l2, ab, eps2, rho2,
+                                   rot, res)
+                continue
             for j in range(node_lo[k], node_hi[k]):
-                W += _leaf_source(x0, x1, x2, j, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2,
+                W += _leaf_source(x0, x1, x2, j, md, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2,
                                   ha, hb, ab, fast, eps2, rho2, rot, acc_src, res)
         else:
             lc = node_left[k]
@@ -416,7 +438,7 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
             a1 = x1 - node_c[rc, 1]
             a2 = x2 - node_c[rc, 2]
             dr = a0 * a0 + a1 * a1 + a2 * a2
-            if dl <= dr:       # nearer child on top: popped first
+            if dl <= dr or rc == fixed_node:       # nearer child (the surface) on top: popped first
                 stack_n[sp], stack_d[sp] = rc, dr
                 stack_n[sp + 1], stack_d[sp + 1] = lc, dl
             else:
@@ -455,6 +477,76 @@ def _leaf_source(x0, x1, x2, j, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, 
             acc_src[j, 5] += cr * g2
             _outer_add(acc_src, j, 6, cr, g0, g1, g2, x0, x1, x2)
     return w
+
+
+@njit(cache=True, fastmath={"reassoc", "contract", "nsz"})
+def _leaf_forward(x0, x1, x2, lo, hi, soa, l2, ab, eps2, rho2, rot, res):
+    """The sources ``lo:hi`` of a leaf summed directly into res (mode 0, a = 3, b = 5); returns
+    their weight. The same sums as :func:`_leaf_source`, in scalar accumulators over the rows of
+    ``soa`` (x, y, z, area, NV votes) so that the loop vectorises (sums reassociated)."""
+    irho2 = 1.0 / rho2 if rho2 > 0.0 else 0.0
+    w_s = 0.0
+    b0 = b1 = b2 = 0.0
+    if not rot:
+        for j in range(lo, hi):
+            e0 = x0 - soa[0, j]
+            e1 = x1 - soa[1, j]
+            e2 = x2 - soa[2, j]
+            q = l2 / (e0 * e0 + e1 * e1 + e2 * e2 + eps2)
+            qa = q * math.sqrt(q)
+            w = soa[3, j] * (qa + ab * qa * q)
+            w_s += w
+            b0 += w * soa[4, j]
+            b1 += w * soa[5, j]
+            b2 += w * soa[6, j]
+        res[0] += b0
+        res[1] += b1
+        res[2] += b2
+        return w_s
+    c0 = c1 = c2 = 0.0
+    m0 = m1 = m2 = m3 = m4 = m5 = m6 = m7 = m8 = 0.0
+    for j in range(lo, hi):
+        e0 = x0 - soa[0, j]
+        e1 = x1 - soa[1, j]
+        e2 = x2 - soa[2, j]
+        r2 = e0 * e0 + e1 * e1 + e2 * e2
+        q = l2 / (r2 + eps2)
+        qa = q * math.sqrt(q)
+        w = soa[3, j] * (qa + ab * qa * q)
+        f = r2 * irho2
+        wr = w / (1.0 + f * f)
+        w_s += w
+        b0 += w * soa[4, j]
+        b1 += w * soa[5, j]
+        b2 += w * soa[6, j]
+        c0 += wr * soa[7, j]
+        c1 += wr * soa[8, j]
+        c2 += wr * soa[9, j]
+        m0 += wr * soa[10, j]
+        m1 += wr * soa[11, j]
+        m2 += wr * soa[12, j]
+        m3 += wr * soa[13, j]
+        m4 += wr * soa[14, j]
+        m5 += wr * soa[15, j]
+        m6 += wr * soa[16, j]
+        m7 += wr * soa[17, j]
+        m8 += wr * soa[18, j]
+    res[0] += b0
+    res[1] += b1
+    res[2] += b2
+    res[3] += c0
+    res[4] += c1
+    res[5] += c2
+    res[6] += m0
+    res[7] += m1
+    res[8] += m2
+    res[9] += m3
+    res[10] += m4
+    res[11] += m5
+    res[12] += m6
+    res[13] += m7
+    res[14] += m8
+    return w_s
 
 
 @njit(cache=True, inline="always")
@@ -504,7 +596,7 @@ def _finish(res, W, x0, x1, x2, rot, out, i):
 @njit(parallel=True, cache=True)
 def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right, node_c, node_r,
                  node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
-                 rho2, rot):
+                 rho2, rot, fixed_node, src_soa):
     n = tx.shape[0]
     dummy = np.zeros((1, NM))
     for bi in prange(blocks.shape[0]):
@@ -520,17 +612,18 @@ def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right
             else:
                 W = _traverse(x0, x1, x2, 0, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
                               node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2,
-                              ha, hb, pa, pb, ab, fast, eps2, tol, rho2, rot, stack_n, stack_d,
-                              dummy, dummy, res)
+                              ha, hb, pa, pb, ab, fast, eps2, tol, rho2, rot, fixed_node, src_soa,
+                              stack_n, stack_d, dummy, dummy, res)
             _finish(res, W, x0, x1, x2, rot, out, i)
 
 
 @njit(parallel=True, cache=True)
 def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, node_right, node_c,
                 node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
-                tol, rho2):
+                tol, rho2, fixed_node):
     """Per-thread accumulators acc_node[t], acc_src[t]; thread t takes every T-th block."""
     n = tx.shape[0]
+    no_soa = np.zeros((1, 1))
     nthreads = acc_node.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for t in prange(nthreads):
@@ -554,13 +647,13 @@ def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, no
                 else:
                     W = _traverse(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
                                   node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
-                                  l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, stack_n,
-                                  stack_d, an, asrc, res)
+                                  l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, fixed_node,
+                                  no_soa, stack_n, stack_d, an, asrc, res)
                     if W > 0:
                         _traverse(x0, x1, x2, 2, W, g0, g1, g2, node_lo, node_hi, node_left,
                                   node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
-                                  l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, stack_n,
-                                  stack_d, an, asrc, res)
+                                  l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, fixed_node,
+                                  no_soa, stack_n, stack_d, an, asrc, res)
 
 
 @njit(cache=True)
@@ -685,6 +778,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
     l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = model.params()
+    soa = np.ascontiguousarray(np.vstack([model.src_pos.T, model.src_area[None, :], bm.T]))
     d = np.empty((t_hi - t_lo, 3))
     with progress("volume mesh", t_hi - t_lo) as bar:
         for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
@@ -692,7 +786,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
                          model.node_lo, model.node_hi, model.node_left, model.node_right,
                          model.node_center, model.node_radius, model.node_area, node_bm,
                          model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
-                         rho2, use_rot)
+                         rho2, use_rot, model.fixed_node, soa)
             bar.update(hi - lo)
     if len(model.slide_rows):
         mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)
@@ -750,7 +844,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
                             acc_src, exact, model.node_lo, model.node_hi, model.node_left,
                             model.node_right, model.node_center, model.node_radius, model.node_area,
                             dummy_bm, model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab,
-                            fast, eps2, tol, rho2)
+                            fast, eps2, tol, rho2, model.fixed_node)
                 bar.update(hi - lo)
 
     if comm is None:
