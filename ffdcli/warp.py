@@ -345,6 +345,7 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
         for j in range(nv):
             res[j] = 0.0
     W = 0.0
+    inv_len = 1.0 / math.sqrt(l2)
     d0 = x0 - node_c[0, 0]
     d1 = x1 - node_c[0, 1]
     d2 = x2 - node_c[0, 2]
@@ -359,7 +360,24 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
         accept = False
         fa = 0.0
         fb = 0.0
-        if r * r < dist2:
+        if r * r < dist2 and fast:
+            # a = 3, b = 5: one square root and at most two divisions per group (t = r sqrt(q) / L);
+            # the bound without the (1 - t) factors (u >= 1) turns most groups down cheaply
+            q = l2 / (dist2 + eps2)
+            sq = math.sqrt(q)
+            fa = q * sq
+            fb = ab * fa * q
+            if r == 0.0:
+                accept = True
+            else:
+                t = r * sq * inv_len
+                tt = node_a[k] * t * t
+                tw = tol * W
+                if tt * (6.0 * fa + 15.0 * fb) <= tw:
+                    u = 1.0 / (1.0 - t)
+                    u2 = u * u
+                    accept = tt * u2 * u2 * u * (6.0 * fa + 15.0 * fb * u2) <= tw
+        elif r * r < dist2:
             fa, fb = _terms(l2 / (dist2 + eps2), ha, hb, ab, fast)
             if r == 0.0:
                 accept = True
@@ -392,15 +410,7 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                     phr = phi * gf
                     psr = gf * (psi + 4.0 * phi * q * gf / rho2)
             if md == 0:
-                for p in range(3):
-                    res[p] += phi * node_bm[k, p] + psi * (u0 * node_bm[k, 15 + p]
-                                                           + u1 * node_bm[k, 30 + p]
-                                                           + u2 * node_bm[k, 45 + p])
-                if rot:
-                    for p in range(3, NV):
-                        res[p] += phr * node_bm[k, p] + psr * (u0 * node_bm[k, 15 + p]
-                                                               + u1 * node_bm[k, 30 + p]
-                                                               + u2 * node_bm[k, 45 + p])
+                _group_forward(res, node_bm[k], phi, psi, phr, psr, u0, u1, u2, rot)
             elif md == 2:
                 cf = phi / wfinal
                 cs = psi / wfinal
@@ -477,6 +487,16 @@ def _leaf_source(x0, x1, x2, j, mode, wfinal, g0, g1, g2, src_x, src_a, src_bm, 
             acc_src[j, 5] += cr * g2
             _outer_add(acc_src, j, 6, cr, g0, g1, g2, x0, x1, x2)
     return w
+
+
+@njit(cache=True, fastmath={"reassoc", "contract", "nsz"})
+def _group_forward(res, m, phi, psi, phr, psr, u0, u1, u2, rot):
+    """An accepted group's monopole and dipole terms added to res (mode 0); ``m`` its NM moments."""
+    for p in range(3):
+        res[p] += phi * m[p] + psi * (u0 * m[15 + p] + u1 * m[30 + p] + u2 * m[45 + p])
+    if rot:
+        for p in range(3, NV):
+            res[p] += phr * m[p] + psr * (u0 * m[15 + p] + u1 * m[30 + p] + u2 * m[45 + p])
 
 
 @njit(cache=True, fastmath={"reassoc", "contract", "nsz"})
