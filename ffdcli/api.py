@@ -412,7 +412,9 @@ class DesignModel:
         if g.shape != (len(self.surface_ids), 3):
             raise InputError(f"surface_vjp: g must have shape ({len(self.surface_ids)}, 3) (one row per "
                              f"surface point, surface_ids order), got {g.shape}")
-        return vjp(self.basis, g, self.lattice_jacobian())
+        # one component: the embedding's compiled B.T @ g (its rows are the surface points)
+        B = self.run.components[0].prep.embedding if self.run.single else self.basis
+        return vjp(B, g, self.lattice_jacobian())
 
     # -- whole mesh ---------------------------------------------------------------------------
     def _warp_model(self, progress=None):

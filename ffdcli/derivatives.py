@@ -20,6 +20,7 @@ from numba import njit, prange
 from scipy.sparse.linalg import LinearOperator
 
 from ffdcli.changes import Change, LatticeFrame
+from ffdcli.embedding import Embedding
 
 
 def lattice_jacobian(P0: np.ndarray, frame: LatticeFrame, changes: Sequence[Change]) -> np.ndarray:
@@ -108,11 +109,18 @@ def surface_jvp(B, lattice_jac: np.ndarray, dv) -> np.ndarray:
 
 
 def vjp(B, g: np.ndarray, lattice_jac: np.ndarray) -> np.ndarray:
-    """dJ/dv (n_vars,) = sum over points of g . dX/dv, for g = dJ/dX (N, 3); never forms dX/dv."""
+    """dJ/dv (n_vars,) = sum over points of g . dX/dv, for g = dJ/dX (N, 3); never forms dX/dv.
+
+    ``B`` is the basis matrix (sparse or dense, N x n_ctrl) or the :class:`~ffdcli.embedding.Embedding`
+    itself: then ``B.T @ g`` is its compiled tensor-product kernel (:meth:`Embedding.rmatvec`), which
+    reads the per-axis basis values (about a third of the bytes of the CSR matrix) and is several
+    times faster than SciPy's product; ``(B.T @ g).reshape(-1) @ lattice_jac`` follows (n_ctrl*3 x
+    n_vars, small)."""
     g = np.asarray(g, dtype=float)
-    if g.shape != (B.shape[0], 3):
-        raise ValueError(f"g must have shape ({B.shape[0]}, 3), got {g.shape}")
-    gP = np.asarray(B.T @ g)                                    # (n_ctrl, 3)
+    n_points = B.n_points if isinstance(B, Embedding) else B.shape[0]
+    if g.shape != (n_points, 3):
+        raise ValueError(f"g must have shape ({n_points}, 3), got {g.shape}")
+    gP = B.rmatvec(g) if isinstance(B, Embedding) else np.asarray(B.T @ g)   # (n_ctrl, 3)
     return gP.reshape(-1) @ lattice_jac
 
 

@@ -42,12 +42,15 @@ from ffdcli.errors import InputError
 from ffdcli.lattice import Lattice, derivatives, eval_point_nb, evaluate, kernel_args
 from ffdcli.progress import chunks, no_progress
 from ffdcli.settings import MAX_DEGREE
-from ffdcli.spline import basis, basis_compiled
+from ffdcli.spline import basis, basis_row_nb, find_span_nb
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
 DEFAULT_TOL = 1e-10
 #: Parameters closer than this to 0 or 1 are snapped onto the bound (when the residual allows it).
 SNAP = 1e-10
+#: A point outside the lattice has reached its nearest lattice point when the cosine between its
+#: residual and the lattice's tangent directions is below this (first-order optimality).
+STATIONARY = 1e-10
 #: Points per Python-level chunk of :func:`embed` (bounds the k-d tree query memory, paces progress).
 CHUNK = 1 << 18
 
@@ -106,19 +109,22 @@ class Embedding:
         if inside.shape != (npts,) or residual.shape != (npts,):
             raise ValueError(f"inside and residual must have shape ({npts},), got {inside.shape} "
                              f"and {residual.shape}")
-        if npts and not (np.all(params >= 0.0) and np.all(params <= 1.0)):
+        first = tuple(np.empty(npts, dtype=np.int32) for _ in range(lattice.pdim))
+        values = tuple(np.empty((npts, p + 1)) for p in lattice.degree)
+        k, deg = lattice.knots, lattice.degree
+        if lattice.pdim == 3:
+            args = (k[0], deg[0], k[1], deg[1], k[2], deg[2], params, first[0], values[0], first[1],
+                    values[1], first[2], values[2])
+        else:
+            args = (k[0], deg[0], k[1], deg[1], _DUMMY_KNOTS, 0, params, first[0], values[0], first[1],
+                    values[1], _DUMMY_FIRST, _DUMMY_VALUES)
+        if npts and not _basis_axes_nb(*args):
             raise ValueError("params must lie in [0, 1]")
-        first, values = [], []
-        for axis in range(lattice.pdim):
-            f, v = basis_compiled(lattice.knots[axis], lattice.degree[axis],
-                                  np.ascontiguousarray(params[:, axis]))
-            first.append(f)
-            values.append(v)
         if tolerance is None:
             tolerance = DEFAULT_TOL * lattice.size
         return cls(shape=tuple(lattice.shape), degree=tuple(lattice.degree), knots=tuple(lattice.knots),
                    params=params, inside=inside, residual=residual, tolerance=float(tolerance),
-                   first=tuple(first), values=tuple(values))
+                   first=first, values=values)
 
     # ------------------------------------------------------------------ sizes
     @property
@@ -134,7 +140,8 @@ class Embedding:
         return int(np.prod(self.shape))
 
     def _control_array(self, control_points, name: str) -> tuple[np.ndarray, int]:
-        """Control points (or their change) as a C-contiguous (n_ctrl, 3) array, and gdim."""
+        """Control points (or their change) as a C-contiguous (n_ctrl, 4) array (zero-padded: a row is
+        one 4-wide vector for the kernels), and gdim."""
         cp = np.asarray(control_points, dtype=np.float64)
         if cp.ndim == self.pdim + 1 and cp.shape[:-1] == tuple(self.shape):
             cp = cp.reshape(self.n_ctrl, cp.shape[-1])
@@ -142,9 +149,9 @@ class Embedding:
             raise ValueError(f"{name} must have shape {(*self.shape, 'gdim')} or ({self.n_ctrl}, gdim), "
                              f"got {np.shape(control_points)}")
         gdim = cp.shape[1]
-        if gdim < 3:
-            cp = np.concatenate([cp, np.zeros((cp.shape[0], 3 - gdim))], axis=1)
-        return np.ascontiguousarray(cp), gdim
+        padded = np.zeros((cp.shape[0], 4))
+        padded[:, :gdim] = cp
+        return padded, gdim
 
     def _out_array(self, out, gdim: int) -> np.ndarray:
         if out is None:
@@ -224,10 +231,10 @@ class Embedding:
         if g.ndim != 2 or g.shape[0] != self.n_points or not 1 <= g.shape[1] <= 3:
             raise ValueError(f"g must have shape ({self.n_points}, gdim), got {g.shape}")
         nchunk = max(1, min(self.n_points, 4 * numba.get_num_threads()))
-        acc = np.zeros((nchunk, self.n_ctrl, g.shape[1]))
+        acc = np.zeros((nchunk, self.n_ctrl, 4))
         if self.n_points:
             _rmatvec_nb(*self._kernel_axes(), g, self.inside, acc)
-        return acc.sum(axis=0)
+        return acc.sum(axis=0)[:, : g.shape[1]]
 
     def basis_matrix(self) -> sparse.csr_matrix:
         """The sparse basis ``B`` (N x n_ctrl, CSR) with zero rows for outside points.
@@ -265,16 +272,61 @@ class Embedding:
 
 _DUMMY_FIRST = np.zeros(1, dtype=np.int32)
 _DUMMY_VALUES = np.ones((1, 1))
+_DUMMY_KNOTS = np.array([0.0, 1.0])
+
+
+@njit(cache=True, parallel=True)
+def _basis_axes_nb(k0, p0, k1, p1, k2, p2, params, f0, V0, f1, V1, f2, V2):
+    """Per-axis first index and basis values of every point, in one pass over ``params`` (N, pdim);
+    the third axis is skipped when ``params`` has two columns. The values are
+    :func:`ffdcli.spline.basis_compiled`'s, bit for bit. Returns False if a parameter is not in
+    [0, 1] (NaN included)."""
+    npts = params.shape[0]
+    pdim = params.shape[1]
+    nchunk = min(npts, 256)
+    bad = 0
+    for ch in prange(nchunk):
+        W = np.empty((3, MAX_DEGREE + 1))
+        lo = ch * npts // nchunk
+        hi = (ch + 1) * npts // nchunk
+        for i in range(lo, hi):
+            for e in range(pdim):
+                t = params[i, e]
+                if not (0.0 <= t <= 1.0):
+                    bad += 1
+                    t = 0.0
+                if e == 0:
+                    span = find_span_nb(k0, p0, t)
+                    basis_row_nb(k0, p0, span, t, W, 0, 1, 2)
+                    f0[i] = span - p0
+                    for a in range(p0 + 1):
+                        V0[i, a] = W[0, a]
+                elif e == 1:
+                    span = find_span_nb(k1, p1, t)
+                    basis_row_nb(k1, p1, span, t, W, 0, 1, 2)
+                    f1[i] = span - p1
+                    for a in range(p1 + 1):
+                        V1[i, a] = W[0, a]
+                else:
+                    span = find_span_nb(k2, p2, t)
+                    basis_row_nb(k2, p2, span, t, W, 0, 1, 2)
+                    f2[i] = span - p2
+                    for a in range(p2 + 1):
+                        V2[i, a] = W[0, a]
+    return bad == 0
 
 
 # ----------------------------------------------------------------------------------------------
 # B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
 # ----------------------------------------------------------------------------------------------
 
-# "contract" (fused multiply-add) and "reassoc" (reordered sums) make the loop ~15 % faster; results
-# move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"), and a zero dP still gives 0.
+# Control points as 4-wide rows (x, y, z, 0): each multiply-add of the tensor product is one vector
+# operation over the coordinates. "contract" (fused multiply-add) and "reassoc" (reordered sums)
+# make the loop faster; results move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"),
+# and a zero dP still gives 0.
 @njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
 def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
+    """``out = B @ P`` over the tensor-product form; ``P`` (n_ctrl, 4), ``out`` (N, gdim)."""
     npts = f0.shape[0]
     gdim = out.shape[1]
     a1 = V0.shape[1]
@@ -288,30 +340,28 @@ def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
         i0 = f0[i]
         i1 = f1[i]
         i2 = f2[i] if has_w else 0
-        x0 = x1 = x2 = 0.0
+        x0 = x1 = x2 = x3 = 0.0
         for a in range(a1):
-            r0 = r1 = r2 = 0.0
+            r0 = r1 = r2 = r3 = 0.0
             for b in range(b1):
                 base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-                if has_w:
-                    q0 = q1 = q2 = 0.0
-                    for c in range(c1):
-                        w = V2[i, c]
-                        q0 += w * P[base + c, 0]
-                        q1 += w * P[base + c, 1]
-                        q2 += w * P[base + c, 2]
-                else:
-                    q0 = P[base, 0]
-                    q1 = P[base, 1]
-                    q2 = P[base, 2]
+                q0 = q1 = q2 = q3 = 0.0
+                for c in range(c1):
+                    w = V2[i, c] if has_w else 1.0
+                    q0 += w * P[base + c, 0]
+                    q1 += w * P[base + c, 1]
+                    q2 += w * P[base + c, 2]
+                    q3 += w * P[base + c, 3]
                 w = V1[i, b]
                 r0 += w * q0
                 r1 += w * q1
                 r2 += w * q2
+                r3 += w * q3
             w = V0[i, a]
             x0 += w * r0
             x1 += w * r1
             x2 += w * r2
+            x3 += w * r3
         out[i, 0] = x0
         if gdim > 1:
             out[i, 1] = x1
@@ -342,8 +392,13 @@ def _basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, 
                     k += 1
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, fastmath={"contract"})
 def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
+    """``acc[chunk] += B[chunk rows].T @ g`` per chunk of points (one accumulator per chunk: no two
+    threads add into one array); ``acc`` (nchunk, n_ctrl, 4), zero on entry, the 4th column stays 0.
+
+    A point's g is read once into scalars (not re-read after every store into ``acc``, which the
+    compiler must assume could alias it) and each update is one 4-wide read-modify-write."""
     npts = f0.shape[0]
     gdim = g.shape[1]
     nchunk = acc.shape[0]
@@ -357,6 +412,9 @@ def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
         for i in range(lo, hi):
             if not inside[i]:
                 continue
+            g0 = g[i, 0]
+            g1 = g[i, 1] if gdim > 1 else 0.0
+            g2 = g[i, 2] if gdim > 2 else 0.0
             i0 = f0[i]
             i1 = f1[i]
             i2 = f2[i] if has_w else 0
@@ -367,8 +425,10 @@ def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
                     base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
                     for c in range(c1):
                         w = wab * V2[i, c] if has_w else wab
-                        for d in range(gdim):
-                            out[base + c, d] += w * g[i, d]
+                        out[base + c, 0] += w * g0
+                        out[base + c, 1] += w * g1
+                        out[base + c, 2] += w * g2
+                        out[base + c, 3] += w * 0.0
 
 
 def basis_matrix_reference(emb: Embedding) -> sparse.csr_matrix:
@@ -409,17 +469,20 @@ def dense_basis_reference(lattice: Lattice, params) -> np.ndarray:
 # Newton point inversion (compiled)
 # ----------------------------------------------------------------------------------------------
 
-@njit(cache=True, nogil=True)
-def _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, gdim, out, scratch):
-    eval_point_nb(P, k0, k1, k2, p0, p1, p2, u[0], u[1], u[2], out, scratch)
+@njit(cache=True, nogil=True, inline="always")
+def _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, out, W):
+    """|V(u) - X[i]|^2; ``out`` (12,) receives V and its derivatives (see ``eval_point_nb``)."""
+    res = eval_point_nb(P, k0, k1, k2, p0, p1, p2, u[0], u[1], u[2], W)
+    for k in range(12):
+        out[k] = res[k]
     s = 0.0
     for d in range(gdim):
-        r = out[d] - X[d]
+        r = res[d] - X[i, d]
         s += r * r
     return s
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def _solve_small(H, rhs, n, x):
     """Solve the n x n (n <= 3) system H x = rhs by Gaussian elimination with partial pivoting.
 
@@ -458,14 +521,14 @@ def _solve_small(H, rhs, n, x):
     return True
 
 
-@njit(cache=True, nogil=True)
-def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap, max_iter,
+@njit(cache=True, nogil=True, inline="always")
+def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
                   cur, trial, ut, step, grad, H, rhs, fixed, scratch):
-    """Projected Gauss-Newton for one point; ``u`` (3,) is the start and receives the result.
+    """Projected Gauss-Newton for point ``X[i]``; ``u`` (3,) is the start and receives the result.
 
     Returns the squared residual at the result.
     """
-    f = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, gdim, cur, scratch)
+    f = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, cur, scratch)
     for _ in range(max_iter):
         if f <= stop2:
             break
@@ -473,7 +536,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap
         for e in range(pdim):
             s = 0.0
             for d in range(gdim):
-                s += cur[3 + 3 * e + d] * (cur[d] - X[d])
+                s += cur[3 + 3 * e + d] * (cur[d] - X[i, d])
             grad[e] = s
             for e2 in range(pdim):
                 s = 0.0
@@ -499,6 +562,16 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap
             else:
                 rhs[e] = -grad[e]
                 trace += H[e, e]
+        if f > tol2:
+            # a point outside at its nearest lattice point: the residual is normal to the lattice
+            # (|J^T r| <= 1e-10 |J| |r|); stop here rather than in the line search's 40 halvings
+            # (the distance is flat there: further steps change it below rounding)
+            g2 = 0.0
+            for e in range(pdim):
+                if not fixed[e]:
+                    g2 += grad[e] * grad[e]
+            if g2 <= STATIONARY * STATIONARY * f * trace:
+                break
         ok = _solve_small(H, rhs, pdim, step)
         if not ok:
             # singular Jacobian (degenerate lattice cell): scaled steepest descent
@@ -512,7 +585,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap
             for e in range(pdim):
                 v = u[e] + alpha * step[e]
                 ut[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-            ft = _sqdist(P, k0, k1, k2, p0, p1, p2, ut, X, gdim, trial, scratch)
+            ft = _sqdist(P, k0, k1, k2, p0, p1, p2, ut, X, i, gdim, trial, scratch)
             if ft < f:
                 accepted = True
                 break
@@ -539,7 +612,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap
             if target >= 0.0:
                 keep = u[e]
                 u[e] = target
-                fs = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, gdim, trial, scratch)
+                fs = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, trial, scratch)
                 if fs <= tol2:
                     f = fs
                 else:
@@ -548,13 +621,17 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, u, tol2, stop2, snap
 
 
 @njit(cache=True, parallel=True)
-def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, residual):
+def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, residual, nchunk,
+               use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv):
+    """Newton for every point of ``X``, from ``params`` or (``use_table``) from the start table
+    ``t_*`` (:class:`StartTable`'s arrays), read in the same pass; writes ``params`` and ``residual``.
+    ``nchunk`` chunks of points share the threads, each with its work arrays."""
     npts = X.shape[0]
     gdim = X.shape[1]
     pdim = params.shape[1]
     tol2 = tol * tol
     stop2 = stop * stop
-    nchunk = min(npts, 1024)
+    nchunk = min(npts, nchunk)
     for ch in prange(nchunk):
         scratch = np.zeros((8, MAX_DEGREE + 1))
         cur = np.zeros(12)
@@ -569,9 +646,12 @@ def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, 
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
         for i in range(lo, hi):
-            for e in range(pdim):
-                u[e] = params[i, e]
-            f = _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X[i], u, tol2, stop2, snap, max_iter,
+            if use_table:
+                _start_point(X, i, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, u)
+            else:
+                for e in range(pdim):
+                    u[e] = params[i, e]
+            f = _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
                               cur, trial, ut, step, grad, H, rhs, fixed, scratch)
             for e in range(pdim):
                 params[i, e] = u[e]
@@ -620,7 +700,7 @@ class StartTable:
     params : ndarray, shape (n_cells, pdim)
         Parameters of the lattice point nearest each centre.
     jinv : ndarray, shape (n_cells, pdim, gdim)
-        Pseudo-inverse of dV/du at ``params`` (zero where the lattice is degenerate).
+        Pseudo-inverse ``(J^T J)^-1 J^T`` of J = dV/du at ``params`` (zero where J is singular).
     """
 
     lo: np.ndarray
@@ -632,9 +712,11 @@ class StartTable:
 
     @classmethod
     def build(cls, lattice: Lattice, samples: np.ndarray, sample_points: np.ndarray, tree: cKDTree,
-              tol_abs: float, cells_per_sample: float = 2.0, max_cells: int = 1 << 16) -> StartTable:
+              tol_abs: float, cells_per_sample: float = 1.0, max_cells: int = 1 << 13,
+              center_iter: int = 4) -> StartTable:
         """Grid over the bounding box of ``sample_points`` (S, gdim) with about ``cells_per_sample * S``
-        cells (at most ``max_cells``); the centres are embedded from their nearest samples."""
+        cells (at most ``max_cells``); the centres are embedded from their nearest samples by at most
+        ``center_iter`` Gauss-Newton steps."""
         gdim = sample_points.shape[1]
         lo = sample_points.min(axis=0)
         ext = sample_points.max(axis=0) - lo
@@ -644,12 +726,14 @@ class StartTable:
         dims = np.clip(np.ceil(ext / h), 1, 4096).astype(np.int64)
         axes = [lo[a] + (np.arange(dims[a]) + 0.5) * ext[a] / dims[a] for a in range(gdim)]
         centers = np.ascontiguousarray(np.stack([c.ravel() for c in np.meshgrid(*axes, indexing="ij")], axis=1))
-        _, nearest = tree.query(centers, k=1, workers=-1)
+        _, nearest = tree.query(centers, k=1)
         params = np.ascontiguousarray(samples[nearest])
         residual = np.empty(len(centers))
-        _run_newton(kernel_args(lattice), centers, params, residual, tol_abs, 1e-3 * tol_abs, SNAP, 50)
-        jinv = np.linalg.pinv(derivatives(lattice, params), rcond=1e-10)
-        jinv[~np.isfinite(jinv).all(axis=(1, 2))] = 0.0
+        # a start needs no 1e-13 accuracy: a few iterations (points outside the lattice, about half
+        # the centres of a swept and twisted box, would otherwise take most of the build's time)
+        _run_newton(kernel_args(lattice), centers, params, residual, tol_abs, tol_abs, SNAP, center_iter)
+        jinv = np.zeros((len(centers), lattice.pdim, gdim))
+        _pinv_nb(derivatives(lattice, params), jinv)
         lo3, inv3, dims3 = np.zeros(3), np.zeros(3), np.ones(3, dtype=np.int64)
         lo3[:gdim], inv3[:gdim], dims3[:gdim] = lo, dims / ext, dims
         return cls(lo=lo3, inv_h=inv3, dims=dims3, centers=centers, params=params,
@@ -664,25 +748,56 @@ class StartTable:
         return out
 
 
-@njit(cache=True, parallel=True)
-def _start_nb(X, lo, inv_h, dims, centers, params, jinv, out):
-    npts = X.shape[0]
+@njit(cache=True)
+def _pinv_nb(J, out):
+    """``out[c] = (J^T J)^-1 J^T`` of each (gdim, pdim) ``J[c]`` (zero where J^T J is singular)."""
+    gdim = J.shape[1]
+    pdim = J.shape[2]
+    H = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    x = np.zeros(3)
+    for c in range(J.shape[0]):
+        for d in range(gdim):
+            for e in range(pdim):
+                for e2 in range(pdim):
+                    s = 0.0
+                    for k in range(gdim):
+                        s += J[c, k, e] * J[c, k, e2]
+                    H[e, e2] = s
+                rhs[e] = J[c, d, e]
+            if not _solve_small(H, rhs, pdim, x):
+                for e in range(pdim):
+                    for d2 in range(gdim):
+                        out[c, e, d2] = 0.0
+                break
+            for e in range(pdim):
+                out[c, e, d] = x[e]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _start_point(X, i, lo, inv_h, dims, centers, params, jinv, u):
+    """The start of point ``X[i]`` into ``u``: ``clip(u_c + J_c^+ (X - C), 0, 1)`` of its cell."""
     gdim = X.shape[1]
     pdim = params.shape[1]
-    for i in prange(npts):
-        cell = 0
-        for a in range(3):
-            j = 0
-            if a < gdim:
-                t = (X[i, a] - lo[a]) * inv_h[a]
-                if t > 0.0:
-                    j = int(t) if t < dims[a] else dims[a] - 1
-            cell = cell * dims[a] + j
-        for e in range(pdim):
-            v = params[cell, e]
-            for d in range(gdim):
-                v += jinv[cell, e, d] * (X[i, d] - centers[cell, d])
-            out[i, e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
+    cell = 0
+    for a in range(3):
+        j = 0
+        if a < gdim:
+            t = (X[i, a] - lo[a]) * inv_h[a]
+            if t > 0.0:
+                j = int(t) if t < dims[a] else dims[a] - 1
+        cell = cell * dims[a] + j
+    for e in range(pdim):
+        v = params[cell, e]
+        for d in range(gdim):
+            v += jinv[cell, e, d] * (X[i, d] - centers[cell, d])
+        u[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
+
+
+@njit(cache=True, parallel=True)
+def _start_nb(X, lo, inv_h, dims, centers, params, jinv, out):
+    for i in prange(X.shape[0]):
+        _start_point(X, i, lo, inv_h, dims, centers, params, jinv, out[i])
 
 
 def start_reference(start: StartTable, points: np.ndarray) -> np.ndarray:
@@ -700,8 +815,20 @@ def start_reference(start: StartTable, points: np.ndarray) -> np.ndarray:
     return np.clip(u, 0.0, 1.0)
 
 
-def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_iter):
-    _newton_nb(*args, points, params, float(tol_abs), float(stop_abs), float(snap), int(max_iter), residual)
+_NO_TABLE = (np.zeros(3), np.zeros(3), np.ones(3, dtype=np.int64), np.zeros((1, 1)), np.zeros((1, 1)),
+             np.zeros((1, 1, 1)))
+
+
+def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_iter, table=None):
+    """Newton on ``points`` from ``params`` or, when ``table`` (a :class:`StartTable`) is given, from
+    its starts (``params`` is then only written)."""
+    t = _NO_TABLE if table is None else (table.lo, table.inv_h, table.dims, table.centers, table.params,
+                                         table.jinv)
+    # enough chunks per thread to balance the slower points outside the lattice; work arrays are
+    # allocated per chunk, not per point
+    nchunk = 16 * numba.get_num_threads()
+    _newton_nb(*args, points, params, float(tol_abs), float(stop_abs), float(snap), int(max_iter), residual,
+               nchunk, table is not None, *t)
 
 
 def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, samples_per_span: int = 4,
@@ -770,8 +897,8 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
     factory = progress or no_progress
     with factory("embedding", npts) as bar:
         for lo, hi in chunks(npts, CHUNK):
-            params[lo:hi] = start.start(pts[lo:hi])
-            _run_newton(args, pts[lo:hi], params[lo:hi], residual[lo:hi], tol_abs, stop_abs, snap, max_iter)
+            _run_newton(args, pts[lo:hi], params[lo:hi], residual[lo:hi], tol_abs, stop_abs, snap, max_iter,
+                        table=start)
             bar.update(hi - lo)
 
     # Retry the points left outside from their next-nearest samples, keeping the best result.

