@@ -38,7 +38,7 @@ NOTES = f"""
 Points: N random parameters of a curved, non-affine wing-shaped lattice (swept 31 deg, taper 0.45,
 12 deg linear twist, curved dihedral, thickness varying along the chord), mapped through the lattice,
 so every point is inside and its parameters are known.
-embed = `embed(lattice, X)` (k-d tree start + compiled Newton; includes building the Embedding);
+embed = `embed(lattice, X)` (start table + compiled Newton; includes building the Embedding);
 embed CPU = its process CPU time summed over threads (less sensitive to other jobs than wall time).
 deform = `Embedding.evaluate(P1, out=buf)`: B @ P1 with moved control points into a reused buffer, as
 in a design loop ("new array": the same without `out=`, allocating N x 3 each call); displace =

@@ -115,7 +115,10 @@ def measure(quick: bool = False, seed: int = 0) -> dict:
     P1 = P0 + 0.05 * lattice.size * np.sin(P0 * np.array([1.3, 0.7, 2.1]))
     buf = np.empty((n_def, 3))
     t = _times(lambda: emb.evaluate(P1, out=buf), 20)
-    out["deform"] = {"N": n_def, "min": t[0], "max": t[1]}
+    numba.set_num_threads(1)
+    t1 = _times(lambda: emb.evaluate(P1, out=buf), 10)
+    numba.set_num_threads(threads)
+    out["deform"] = {"N": n_def, "min": t[0], "max": t[1], "1 thread min": t1[0]}
 
     frame = LatticeFrame.from_lattice(SHAPE, (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
     D = lattice_jacobian(P0, frame, design_changes(SHAPE[1], SHAPE[0], SHAPE[2]))
@@ -128,8 +131,11 @@ def measure(quick: bool = False, seed: int = 0) -> dict:
         err = float(np.abs(fused - scipy_).max() / max(np.abs(scipy_).max(), 1e-300))
         tf = _times(lambda emb=emb, g=g: vjp(emb, g, D), 50)
         ts = _times(lambda B=B, g=g: vjp(B, g, D), 50)
+        numba.set_num_threads(1)
+        t1 = _times(lambda emb=emb, g=g: vjp(emb, g, D), 20)
+        numba.set_num_threads(threads)
         out["vjp"][n] = {"min": tf[0], "max": tf[1], "scipy min": ts[0], "scipy max": ts[1],
-                         "n_vars": int(D.shape[1]), "rel diff": err}
+                         "1 thread min": t1[0], "n_vars": int(D.shape[1]), "rel diff": err}
     out["load after"] = _load()
     return out
 
@@ -172,7 +178,8 @@ def run(quick: bool = False) -> list[dict]:
                  "measured": f"{_fmt(d['min'])} (max {_fmt(d['max'])})",
                  "target": f"<= {target:g} s" if target else "", "pyGeo reference": f"{pygeo:g} s" if pygeo else "",
                  "met": d["min"] <= target if target else None,
-                 "x pyGeo": f"{pygeo / d['min']:.1f}x" if pygeo else "", "detail": ""})
+                 "x pyGeo": f"{pygeo / d['min']:.1f}x" if pygeo else "",
+                 "detail": f"1 thread {_fmt(d['1 thread min'])}"})
     for n, v in r["vjp"].items():
         n = int(n)
         target, pygeo = TARGETS[("vjp", n)]
@@ -180,7 +187,8 @@ def run(quick: bool = False) -> list[dict]:
                      "measured": f"{_fmt(v['min'])} (max {_fmt(v['max'])})", "target": f"<= {target:g} s",
                      "pyGeo reference": f"{pygeo:g} s", "met": v["min"] <= target,
                      "x pyGeo": f"{pygeo / v['min']:.1f}x",
-                     "detail": f"SciPy CSR B.T @ g route {_fmt(v['scipy min'])} (max {_fmt(v['scipy max'])}): "
+                     "detail": f"1 thread {_fmt(v['1 thread min'])}; SciPy CSR B.T @ g route "
+                               f"{_fmt(v['scipy min'])} (max {_fmt(v['scipy max'])}): "
                                f"{v['scipy min'] / v['min']:.1f}x slower; rel. diff {v['rel diff']:.0e}"})
     rows.append({"case": "machine", "measured": f"{load} (2 cores, shared)", "target": "",
                  "pyGeo reference": "", "met": None, "x pyGeo": "",
