@@ -37,6 +37,22 @@ needs_mpi = pytest.mark.skipif(not (_have_mpi4py() and MPIEXEC),
                                reason="the [mpi] extra (mpi4py + mpich) is not installed: pip install -e '.[mpi]'")
 
 
+@pytest.fixture(scope="module", autouse=True)
+def _compiled_kernels(tmp_path_factory):
+    """Compile (and cache) the numba kernels once in this process before any ``mpiexec``: ranks that
+    compile the same ``cache=True`` kernel at the same moment race on writing its cache files (seen
+    once here as a failed 2-rank embedding right after a kernel changed)."""
+    if not (_have_mpi4py() and MPIEXEC):
+        return
+    from ffdcli.design import load_design
+    from ffdcli.pipeline import deform, load_run
+
+    design = tmp_path_factory.mktemp("warmup") / "design.yaml"
+    design.write_text(f"mesh: {SAMPLES / 'rect_wing.su2'}\nsurface: wing\n"
+                      "box: {points: [4, 4, 2], sections: xy}\nchanges: [{twist: {tip: 1}}]\n")
+    deform(load_run(load_design(design), use_cache=False))
+
+
 def _env():
     e = {k: v for k, v in os.environ.items() if not k.startswith(("PMI_", "OMPI_", "PMIX_", "SLURM_"))}
     e["PYTHONPATH"] = str(REPO) + os.pathsep + e.get("PYTHONPATH", "")

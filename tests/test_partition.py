@@ -181,6 +181,12 @@ def test_su2_read_by_parts_is_the_part_of_the_whole_read(sample, monkeypatch):
                 for x, y in zip(mesh.markers[k], blocks, strict=True):
                     assert x.type == y.type and np.array_equal(x.data, y.data)
             _same_part(part, part_of(whole, owner, r))
+            if r == 0:          # the writer: the point block's layout of the whole file
+                for f in ("row_start", "coord_start", "coord_end", "points"):
+                    np.testing.assert_array_equal(getattr(mesh.source, f), getattr(whole.source, f))
+                assert mesh.source.separator == whole.source.separator
+            else:
+                assert mesh.source is None
             # the rank's cells (global ids) are its part's
             assert sum(len(b) for b in mesh.cells) == sum(len(b) for b in part.cells) < whole.n_cells
 
@@ -190,24 +196,26 @@ def test_su2_read_by_parts_names_a_bad_line_in_one_ranks_share_on_every_rank(tmp
     from ffdcli.formats import su2
 
     monkeypatch.setattr(su2, "CHUNK_BYTES", 1 << 14)
-    text = (SAMPLES / "rect_wing.su2").read_text().splitlines(keepends=True)
-    at = next(i for i, ln in enumerate(text) if ln.startswith("NELEM")) + 90_000    # in the last rank's share
-    text[at] = "10 1 2 x 4 7\n"
-    bad = tmp_path / "bad.su2"
-    bad.write_text("".join(text))
-    with pytest.raises(InputError) as serial:
-        su2.read(bad)
-    said = []
+    original = (SAMPLES / "rect_wing.su2").read_text().splitlines(keepends=True)
+    for block, offset, row in (("NELEM", 90_000, "10 1 2 x 4 7\n"), ("NPOIN", 20_000, "0.5 nan 0.1 7\n")):
+        text = list(original)
+        at = next(i for i, ln in enumerate(text) if ln.startswith(block)) + offset    # in the last rank's share
+        text[at] = row
+        bad = tmp_path / "bad.su2"
+        bad.write_text("".join(text))
+        with pytest.raises(InputError) as serial:
+            su2.read(bad)
+        said = []
 
-    def one(comm):
-        try:
-            su2.read_part(bad, comm)
-        except Exception as e:          # noqa: BLE001 - the test looks at what each rank raised
-            said.append((comm.rank, type(e).__name__, str(e)))
+        def one(comm, bad=bad, said=said):
+            try:
+                su2.read_part(bad, comm)
+            except Exception as e:          # noqa: BLE001 - the test looks at what each rank raised
+                said.append((comm.rank, type(e).__name__, str(e)))
 
-    run_ranks(3, one)
-    assert len(said) == 3 and {s[2] for s in said} == {str(serial.value)}
-    assert f":{at + 1}: " in str(serial.value)
+        run_ranks(3, one)
+        assert len(said) == 3 and {s[2] for s in said} == {str(serial.value)}, said
+        assert f":{at + 1}: " in str(serial.value)
 
 
 CGNS_SHARED = ["cgns/disc_adj_euler__cylinder3D__cylinder3D.cgns", "cgns/euler__wedge__mesh_wedge_inv.cgns",
@@ -247,3 +255,14 @@ def test_cgns_read_by_parts_of_written_meshes(tmp_path):
         path = tmp_path / f"{name}.cgns"
         write_mesh(CASES[name], path)
         _check_cgns_parts(path)
+
+
+def test_su2_read_by_parts_with_a_rank_that_gets_no_chunk():
+    """Default chunks: the small sample's blocks are one chunk each, so rank 1 parses no row."""
+    from ffdcli.formats import su2
+
+    whole = su2.read(SAMPLES / "naca0012_2d.su2")
+    owner = node_owners(whole.points, 2)
+    for r, (mesh, part) in enumerate(run_ranks(2, lambda c: su2.read_part(SAMPLES / "naca0012_2d.su2", c))):
+        np.testing.assert_array_equal(mesh.points, whole.points)
+        _same_part(part, part_of(whole, owner, r))

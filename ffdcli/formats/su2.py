@@ -138,11 +138,12 @@ def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
 def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
     """One MPI rank's read of an SU2 mesh: ``(mesh, part)``, a collective.
 
-    Every rank parses the point block and the markers (the coordinates of every node and the
-    surface are needed everywhere), but only its share of the element block: the chunks of whole
-    lines (:data:`CHUNK_BYTES`) whose first row falls in its share of the NELEM rows, the others
-    only counted. The cells are then sent to the ranks owning their nodes (:func:`ffdcli.partition.
-    node_owners`, :func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s mesh with ``partial`` set and
+    Every rank parses its share of the point block and of the element block: the chunks of whole
+    lines (:data:`CHUNK_BYTES`) whose first row falls in its share of the NPOIN / NELEM rows, the
+    others only counted. The coordinates are then gathered on every rank (every node's are needed
+    everywhere: the warp's targets, the surface), the markers are parsed by every rank, and the
+    cells are sent to the ranks owning their nodes (:func:`ffdcli.partition.node_owners`,
+    :func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s mesh with ``partial`` set,
     ``cells`` the rank's (global ids), and ``source`` (the point block's layout, for the writer) on
     rank 0 only; ``part`` its :class:`~ffdcli.partition.MeshPart`, equal to
     :func:`ffdcli.partition.part_of` of the whole mesh. Errors (a bad line in one rank's share)
@@ -170,9 +171,18 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
                 parser.parse()
         finally:
             mm.close()
-        return parser.mesh(st)
+        return parser, st
 
-    mesh = comm.run(parse)
+    parser, st = comm.run(parse)
+    # every rank gets every point (in file order: the ranks' chunks are consecutive); rank 0, the
+    # writer, also the point block's layout
+    points = comm.allgather_rows(np.ascontiguousarray(parser.points))
+    rs, cs, ce = (comm.gather_rows(np.ascontiguousarray(a)) for a in parser.layout[:3])
+    empty = np.zeros(0, dtype=np.int64)
+    parser.layout = ((np.append(rs, parser.points_end).astype(np.int64), cs, ce, parser.layout[3]) if comm.is_root
+                     else (empty, empty, empty, parser.layout[3]))
+    parser.points = points
+    mesh = parser.mesh(st)
     local = {b.type: b.data for b in mesh.cells}
     every = comm.allgather([(b.type, len(b)) for b in mesh.cells])
     order: list[str] = []
@@ -438,7 +448,11 @@ class _Parser:
         ndim = self.ndim
         pts, rs, cs, ce = [], [], [], []
         sep, end = b"\t", b.start
+        mine = None if self.share is None else self.share(b.rows)
         for off, buf, starts, ends, line in self.chunks(b):
+            end = off + len(buf)
+            if mine is not None and not mine[0] <= line - b.first_line < mine[1]:
+                continue            # another rank's chunk of whole lines
             values, t0, t1, first, count = self.tokens(buf, starts, ends, line, np.float64, b)
             short = np.flatnonzero(count < ndim)
             if len(short):
@@ -457,10 +471,11 @@ class _Parser:
             rs.append(starts + off)
             cs.append(t0[first] + off)
             ce.append(t1[first + ndim - 1] + off)
-            end = off + len(buf)
         empty = np.zeros(0, dtype=np.int64)
         self.points = np.concatenate(pts) if pts else np.zeros((0, ndim))
-        self.layout = (np.concatenate(rs + [np.array([end])]).astype(np.int64),
+        self.points_end = end       # one rank's rows (share): the end is appended once they are gathered
+        tail = [np.array([end])] if mine is None else []
+        self.layout = (np.concatenate(rs + tail).astype(np.int64) if rs or tail else empty,
                        np.concatenate(cs).astype(np.int64) if cs else empty,
                        np.concatenate(ce).astype(np.int64) if ce else empty, sep)
 
