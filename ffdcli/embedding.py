@@ -193,7 +193,7 @@ class Embedding:
         cp, gdim = self._control_array(control_points, "control_points")
         out = self._out_array(out, gdim)
         if self.n_points:
-            _apply_nb(*self._kernel_axes(), cp, self.inside, False, out)
+            _apply(self._kernel_axes(), cp, self.inside, False, out)
         return out
 
     def displace(self, delta_control_points, out: np.ndarray | None = None) -> np.ndarray:
@@ -215,7 +215,7 @@ class Embedding:
         cp, gdim = self._control_array(delta_control_points, "delta_control_points")
         out = self._out_array(out, gdim)
         if self.n_points:
-            _apply_nb(*self._kernel_axes(), cp, self.inside, True, out)
+            _apply(self._kernel_axes(), cp, self.inside, True, out)
         return out
 
     def rmatvec(self, g) -> np.ndarray:
@@ -328,49 +328,77 @@ def _basis_axes_nb(k0, p0, k1, p1, k2, p2, params, f0, V0, f1, V1, f2, V2):
 # operation over the coordinates. "contract" (fused multiply-add) and "reassoc" (reordered sums)
 # make the loop faster; results move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"),
 # and a zero dP still gives 0.
+@njit(cache=True, nogil=True, inline="always")
+def _apply_point(i, f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, a1, b1, c1):
+    """Row ``i`` of ``B @ P``; ``a1, b1, c1`` are the basis widths (p + 1) per axis: constants in
+    :func:`_apply_442_nb`, so that its loops are unrolled."""
+    i0 = f0[i]
+    i1 = f1[i]
+    i2 = f2[i] if has_w else 0
+    x0 = x1 = x2 = x3 = 0.0
+    for a in range(a1):
+        r0 = r1 = r2 = r3 = 0.0
+        for b in range(b1):
+            base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
+            q0 = q1 = q2 = q3 = 0.0
+            for c in range(c1):
+                w = V2[i, c] if has_w else 1.0
+                q0 += w * P[base + c, 0]
+                q1 += w * P[base + c, 1]
+                q2 += w * P[base + c, 2]
+                q3 += w * P[base + c, 3]
+            w = V1[i, b]
+            r0 += w * q0
+            r1 += w * q1
+            r2 += w * q2
+            r3 += w * q3
+        w = V0[i, a]
+        x0 += w * r0
+        x1 += w * r1
+        x2 += w * r2
+        x3 += w * r3
+    return x0, x1, x2
+
+
 @njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
 def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
     """``out = B @ P`` over the tensor-product form; ``P`` (n_ctrl, 4), ``out`` (N, gdim)."""
-    npts = f0.shape[0]
     gdim = out.shape[1]
     a1 = V0.shape[1]
     b1 = V1.shape[1]
     c1 = V2.shape[1] if has_w else 1
-    for i in prange(npts):
+    for i in prange(f0.shape[0]):
         if use_mask and not inside[i]:
             for d in range(gdim):
                 out[i, d] = 0.0
             continue
-        i0 = f0[i]
-        i1 = f1[i]
-        i2 = f2[i] if has_w else 0
-        x0 = x1 = x2 = x3 = 0.0
-        for a in range(a1):
-            r0 = r1 = r2 = r3 = 0.0
-            for b in range(b1):
-                base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-                q0 = q1 = q2 = q3 = 0.0
-                for c in range(c1):
-                    w = V2[i, c] if has_w else 1.0
-                    q0 += w * P[base + c, 0]
-                    q1 += w * P[base + c, 1]
-                    q2 += w * P[base + c, 2]
-                    q3 += w * P[base + c, 3]
-                w = V1[i, b]
-                r0 += w * q0
-                r1 += w * q1
-                r2 += w * q2
-                r3 += w * q3
-            w = V0[i, a]
-            x0 += w * r0
-            x1 += w * r1
-            x2 += w * r2
-            x3 += w * r3
-        out[i, 0] = x0
-        if gdim > 1:
-            out[i, 1] = x1
-        if gdim > 2:
-            out[i, 2] = x2
+        x = _apply_point(i, f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, a1, b1, c1)
+        for d in range(gdim):
+            out[i, d] = x[d]
+
+
+@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
+def _apply_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
+    """:func:`_apply_nb` for the default box (cubic, cubic, linear: widths 4, 4, 2) with the widths
+    known when compiling (unrolled loops: ~20 % faster); 3D only."""
+    gdim = out.shape[1]
+    for i in prange(f0.shape[0]):
+        if use_mask and not inside[i]:
+            for d in range(gdim):
+                out[i, d] = 0.0
+            continue
+        x = _apply_point(i, f0, V0, f1, V1, f2, V2, True, n1, n2, P, 4, 4, 2)
+        for d in range(gdim):
+            out[i, d] = x[d]
+
+
+def _apply(axes, P, inside, use_mask, out):
+    """``B @ P`` by the kernel that fits the basis widths (``axes`` from ``Embedding._kernel_axes``)."""
+    f0, V0, f1, V1, f2, V2, has_w = axes[:7]
+    if has_w and V0.shape[1] == 4 and V1.shape[1] == 4 and V2.shape[1] == 2:
+        _apply_442_nb(*axes, P, inside, use_mask, out)
+    else:
+        _apply_nb(*axes, P, inside, use_mask, out)
 
 
 @njit(cache=True, parallel=True)
