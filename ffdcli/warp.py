@@ -334,8 +334,9 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
     and acc_src (per source), scaled by 1 / wfinal.
     The decisions use only geometry and the running weight, identically in every mode: the map
     from the votes to the displacement is fixed by the undeformed mesh.
-    ``src_soa`` (19, Ms): the sources' x, y, z, area and the NV votes as rows (mode 0 with
-    a = 3, b = 5: the leaves are summed by the vectorised :func:`_leaf_forward`).
+    ``src_soa`` (4 + NV, Ms): the sources' x, y, z, area and the NV votes as rows (mode 0, (4, Ms)
+    for modes 1 and 2). With a = 3, b = 5 the leaves of modes 0 and 1 (and of the fixed sources in
+    every mode) are summed by the vectorised :func:`_leaf_forward` and :func:`_leaf_weight`.
     Nodes ``k >= fixed_node`` hold fixed sources only (zero votes): they add to W and nothing
     else, and the surface subtree is walked before them (its near weights make the far-field
     groups acceptable at once).
@@ -434,6 +435,9 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                 W += _leaf_forward(x0, x1, x2, node_lo[k], node_hi[k], src_soa, l2, ab, eps2, rho2,
                                    rot, res)
                 continue
+            if md == 1 and fast:
+                W += _leaf_weight(x0, x1, x2, node_lo[k], node_hi[k], src_soa, l2, ab, eps2)
+                continue
             for j in range(node_lo[k], node_hi[k]):
                 W += _leaf_source(x0, x1, x2, j, md, wfinal, g0, g1, g2, src_x, src_a, src_bm, l2,
                                   ha, hb, ab, fast, eps2, rho2, rot, acc_src, res)
@@ -497,6 +501,20 @@ def _group_forward(res, m, phi, psi, phr, psr, u0, u1, u2, rot):
     if rot:
         for p in range(3, NV):
             res[p] += phr * m[p] + psr * (u0 * m[15 + p] + u1 * m[30 + p] + u2 * m[45 + p])
+
+
+@njit(cache=True, fastmath={"reassoc", "contract", "nsz"})
+def _leaf_weight(x0, x1, x2, lo, hi, soa, l2, ab, eps2):
+    """The weight of the sources ``lo:hi`` of a leaf (a = 3, b = 5; rows x, y, z, area of soa)."""
+    w_s = 0.0
+    for j in range(lo, hi):
+        e0 = x0 - soa[0, j]
+        e1 = x1 - soa[1, j]
+        e2 = x2 - soa[2, j]
+        q = l2 / (e0 * e0 + e1 * e1 + e2 * e2 + eps2)
+        qa = q * math.sqrt(q)
+        w_s += soa[3, j] * (qa + ab * qa * q)
+    return w_s
 
 
 @njit(cache=True, fastmath={"reassoc", "contract", "nsz"})
@@ -640,10 +658,9 @@ def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right
 @njit(parallel=True, cache=True)
 def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, node_right, node_c,
                 node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
-                tol, rho2, fixed_node):
+                tol, rho2, fixed_node, src_soa):
     """Per-thread accumulators acc_node[t], acc_src[t]; thread t takes every T-th block."""
     n = tx.shape[0]
-    no_soa = np.zeros((1, 1))
     nthreads = acc_node.shape[0]
     nblocks = (n + _BLOCK - 1) // _BLOCK
     for t in prange(nthreads):
@@ -668,12 +685,12 @@ def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, no
                     W = _traverse(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
                                   node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
                                   l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, fixed_node,
-                                  no_soa, stack_n, stack_d, an, asrc, res)
+                                  src_soa, stack_n, stack_d, an, asrc, res)
                     if W > 0:
                         _traverse(x0, x1, x2, 2, W, g0, g1, g2, node_lo, node_hi, node_left,
                                   node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
                                   l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, fixed_node,
-                                  no_soa, stack_n, stack_d, an, asrc, res)
+                                  src_soa, stack_n, stack_d, an, asrc, res)
 
 
 @njit(cache=True)
@@ -854,6 +871,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     acc_node = np.zeros((nthreads, nn, NM))
     acc_src = np.zeros((nthreads, ms, NV))
     dummy_bm = np.zeros((1, NM))
+    soa = np.ascontiguousarray(np.vstack([model.src_pos.T, model.src_area[None, :]]))
     t_lo, t_hi = (0, model.n_targets) if comm is None else comm.share(model.n_targets)
 
     def accumulate():
@@ -864,7 +882,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
                             acc_src, exact, model.node_lo, model.node_hi, model.node_left,
                             model.node_right, model.node_center, model.node_radius, model.node_area,
                             dummy_bm, model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab,
-                            fast, eps2, tol, rho2, model.fixed_node)
+                            fast, eps2, tol, rho2, model.fixed_node, soa)
                 bar.update(hi - lo)
 
     if comm is None:
