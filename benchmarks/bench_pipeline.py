@@ -46,10 +46,11 @@ Mesh: `extruded_wing_mesh(Planform(taper=0.5, le_sweep_deg=20), n_around=257, n_
 n_span=196)` = 1,003,520 hex-mesh nodes, 50,176 wing nodes, written as SU2 (ASCII). Design: box
 8 x 6 x 2 (sections xy), `twist: {tip: 5}`, output SU2 + lattice VTK; the box is built and cached once
 by `ffd box design.yaml` before the timed runs. `ffd deform` rows: wall time of the whole process
-(start-up, read, cached box, changes, volume, quality check, write), one run, peak RSS (VmHWM) of that
-process. Phase rows: the same steps through `ffdcli.pipeline` in one process (`Deformation.seconds`
-per phase). Issue-6 row: the `volume` phase (prepare_mesh_warp + surface rotations + warp, IDW with
-rotations, default tolerance) of the idw phases run.
+(start-up, read, cached box, changes, volume, quality check, write), the faster of two runs (the
+slower beside it, and the load average before and after), peak RSS (VmHWM) of that process. Phase
+rows: the same steps through `ffdcli.pipeline` in one process (`Deformation.seconds` per phase).
+Issue-6 row: the `volume` phase (prepare_mesh_warp + surface rotations + warp, IDW with rotations,
+default tolerance) of the idw phases run.
 Targets: issue 5 deform + write of a 1M-node mesh with a cached box <= 20 s; issue 6 1M volume
 nodes / 50k surface nodes <= 30 s and <= 4 GB. No pyGeo reference measured for these.
 """
@@ -179,7 +180,7 @@ def warp_only(design: str) -> dict:
 
 def run(quick: bool = False) -> list[dict]:
     sizes = QUICK if quick else FULL
-    repeats = 1      # the whole benchmark is run twice for the report (a 1M idw deform takes minutes)
+    repeats = 2      # min and max of two runs of each deform (the machine is shared: its load is shown)
     rows = []
     with tempfile.TemporaryDirectory(prefix="ffd-bench-pipeline-") as tmp:
         folder = Path(tmp)
@@ -196,14 +197,18 @@ def run(quick: bool = False) -> list[dict]:
                                f"{box['json'].get('residual', float('nan')):.1e}, "
                                f"cmd {box['json'].get('seconds')} s"})
         for method in ("idw", "none"):
+            load0 = os.getloadavg()[0]
             runs = [ffd(["deform", f"design_{method}.yaml", "--json", "--force"], folder)
                     for _ in range(repeats)]
+            load1 = os.getloadavg()[0]
             best = min(runs, key=lambda r: r["wall"])
             j = best["json"]
             q = j.get("quality") or {}
             walls = ", ".join(format(r["wall"], ".1f") for r in runs)
             rows.append({"case": f"ffd deform, volume {method} ({size})",
-                         "measured": f"{best['wall']:.1f} s, {best['rss_mb']:.0f} MB",
+                         "measured": f"{best['wall']:.1f} s (max of {len(runs)} "
+                                     f"{max(r['wall'] for r in runs):.1f} s), {best['rss_mb']:.0f} MB; "
+                                     f"load {load0:.1f}-{load1:.1f} on {os.cpu_count()} cores",
                          "target": TARGET_DEFORM if not quick else "",
                          "pyGeo reference": "",
                          "met": (best["wall"] <= 20.0 and best["rc"] == 0) if not quick else None,

@@ -47,8 +47,10 @@ area, the area-weighted centroid ``c_C``, the radius ``r`` (largest distance of 
 and dipole terms: ``phi(D) sum A_i v_i + psi(D) sum A_i ((x - c_C).(x_i - c_C)) v_i`` to the
 numerator and ``A_C phi(D)`` to W (the dipole of the weights is zero about the centroid), with
 ``phi(D) = (L/D)^a + (alpha L/D)^b`` and ``psi = -phi'(D)/D`` for the translation votes, and
-``phi g``, ``-(phi g)'/D`` for the rotation votes. Each target walks the tree nearest groups first
-and aggregates a group when the bound of the second-order remainder of its weights
+``phi g``, ``-(phi g)'/D`` for the rotation votes. Each target walks the surface subtree nearest
+groups first, then the fixed subtree (its groups carry no votes, so they add to W only, and the
+weight already summed near the wall lets most far-field groups be taken whole), and aggregates a
+group when the bound of the second-order remainder of its weights
 
     A_C (t^2 / 2) [a (a+1) (L/D)^a (1-t)^-(a+2) + b (b+1) (alpha L/D)^b (1-t)^-(b+2)],  t = r/D
 
@@ -63,7 +65,9 @@ criterion, not a bound on the total: the error measured against the exact sum is
 
 
 Numba kernels (``prange`` over blocks of targets, explicit stack traversal) have NumPy references
-(:func:`idw_reference`) used by the tests.
+(:func:`idw_reference`) used by the tests. With a = 3, b = 5 the leaves and the accepted groups of
+the forward map are summed by small kernels that vectorise (sources as rows of one array, scalar
+accumulators, sums reassociated): the same terms, rounded in another order.
 """
 
 from __future__ import annotations
