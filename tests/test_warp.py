@@ -250,6 +250,29 @@ def test_fixed_farfield_near_surface_moves_almost_rigidly():
     assert rel0.max() > 0.1
 
 
+@pytest.mark.parametrize("n_far", [400, 4000])
+def test_tree_with_a_fixed_farfield_keeps_the_error_bound(n_far):
+    """The fixed sources' subtree (walked after the surface, weight only) against the direct sum:
+    a far-field sphere of few and of many nodes around the sphere cloud."""
+    pts, sid, areas, rng = sphere_cloud()
+    far = rng.normal(size=(n_far, 3))
+    far = 8.0 * far / np.linalg.norm(far, axis=1)[:, None]
+    pts = np.vstack([pts, far])
+    areas = np.concatenate([areas, np.full(n_far, 4 * np.pi * 64 / n_far)])
+    fid = np.arange(len(pts) - n_far, len(pts))
+    st = WarpSettings(tolerance=1e-3)
+    m = prepare_warp(pts, sid, fid, settings=st, areas=areas)
+    assert 0 < m.fixed_node < len(m.node_lo)
+    b = 0.05 * rng.normal(size=(len(sid), 3))
+    R = np.stack([rot_z(a) for a in rng.uniform(-0.2, 0.2, len(sid))])
+    exact = warp(m, b, R, exact=True)
+    tree = warp(m, b, R)
+    np.testing.assert_array_equal(tree[fid], 0.0)
+    bmax = np.linalg.norm(b, axis=1).max()
+    err = np.linalg.norm(tree - exact, axis=1).max()
+    assert 0 < err <= st.tolerance * bmax, err / bmax
+
+
 @pytest.mark.parametrize("exact", [False, True])
 def test_vjp_is_the_transpose(mesh, exact):
     model, roles = prepare_mesh_warp(mesh, "wing")
