@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -50,6 +51,23 @@ def run_ffd(*args, cwd=None, input=None, env=None, timeout=600) -> subprocess.Co
         e.update(env)
     return subprocess.run([sys.executable, "-m", "ffdcli", *map(str, args)], cwd=cwd, input=input,
                           capture_output=True, text=True, env=e, timeout=timeout)
+
+
+def _default_signals() -> None:
+    """In the child: SIGINT, SIGTERM and SIGHUP back to their defaults. A test suite started under
+    ``nohup`` or in the background of a script inherits them ignored, and so would every ffd it starts
+    (Python keeps an inherited ignored SIGINT), so an interrupt test could never interrupt."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+
+
+def popen_ffd(*args, cwd=None) -> subprocess.Popen:
+    """Start ``ffd ARGS`` in a fresh interpreter with the default signal dispositions (to be signalled)."""
+    e = dict(os.environ)
+    e["PYTHONPATH"] = str(REPO) + os.pathsep + e.get("PYTHONPATH", "")
+    return subprocess.Popen([sys.executable, "-m", "ffdcli", *map(str, args)], cwd=cwd, env=e,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=_default_signals)
 
 
 def file_hash(path) -> str:

@@ -12,16 +12,13 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, file_hash, run_ffd
+from conftest import file_hash, popen_ffd, run_ffd
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from wingcase import write_design, write_volume_wing
@@ -152,10 +149,7 @@ def test_cli_design_writes_or_is_refused(wing, changes, code):
 # ----------------------------------------------------------------------------------------------
 
 def _popen_ffd(*args, cwd):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    return subprocess.Popen([sys.executable, "-m", "ffdcli", *map(str, args)], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return popen_ffd(*args, cwd=cwd)
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, assert_clean_failure, file_hash, run_ffd
+from conftest import REPO, assert_clean_failure, file_hash, popen_ffd, run_ffd
 from test_hostile import assert_hostile, error_line, ffd, snapshot
 from wingcase import write_design, write_volume_wing
 
@@ -299,10 +299,7 @@ def test_non_regular_input(odd_inputs, args, what):
 # ----------------------------------------------------------------------------------------------
 
 def _popen_ffd(*args, cwd):
-    env = dict(os.environ)
-    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    return subprocess.Popen([sys.executable, "-m", "ffdcli", *map(str, args)], cwd=cwd, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return popen_ffd(*args, cwd=cwd)
 
 
 @pytest.fixture(scope="module")
