@@ -64,8 +64,13 @@ class Mesh:
         input file. ``None`` for meshes built in memory.
     partial
         True for one MPI rank's view of a mesh read by parts (:func:`ffdcli.formats.read_part`):
-        every point and marker, but ``cells`` only those around the rank's block of nodes (global
-        ids). Writing it in another format reads the whole file again (the writing rank only).
+        ``cells`` only those around the rank's nodes. Writing it in another format reads the whole
+        file again (the writing rank only).
+    global_ids
+        ``None`` for a mesh that has every node. A *local* mesh (one MPI rank's, see
+        :func:`ffdcli.partition.localize`) has only some nodes: ``points`` are the rows of the sorted
+        global node ids ``global_ids`` (n,), and ``cells`` and ``markers`` use local ids (rows of
+        ``points``); ``n_global`` is the whole mesh's node count.
     """
 
     points: np.ndarray
@@ -76,6 +81,8 @@ class Mesh:
     format: str = ""
     source: Any = None
     partial: bool = False
+    global_ids: np.ndarray | None = None
+    n_global: int | None = None
 
     def __post_init__(self):
         self.points = np.asarray(self.points, dtype=np.float64)
@@ -85,6 +92,16 @@ class Mesh:
     @property
     def n_points(self) -> int:
         return len(self.points)
+
+    @property
+    def is_local(self) -> bool:
+        """True for one rank's local mesh (some nodes only, local ids: see ``global_ids``)."""
+        return self.global_ids is not None
+
+    @property
+    def n_points_global(self) -> int:
+        """The whole mesh's node count (``n_points`` unless the mesh is local)."""
+        return self.n_points if self.global_ids is None else int(self.n_global)
 
     @property
     def n_cells(self) -> int:
@@ -116,7 +133,8 @@ class Mesh:
         """A copy sharing cells and markers, with new point coordinates."""
         return Mesh(points=np.asarray(points, dtype=np.float64).reshape(self.points.shape),
                     dim=self.dim, cells=self.cells, markers=self.markers, path=self.path,
-                    format=self.format, source=self.source, partial=self.partial)
+                    format=self.format, source=self.source, partial=self.partial,
+                    global_ids=self.global_ids, n_global=self.n_global)
 
 
 def check_markers(markers, names, *, path=None, key: str | None = None) -> None:

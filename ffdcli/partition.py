@@ -20,7 +20,7 @@ rank (:func:`ffdcli.formats.cgns.read_part`, :func:`ffdcli.formats.su2.read_part
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -54,6 +54,9 @@ class MeshPart:
         Per block: (k,) global index of each local cell in the concatenation of the mesh's blocks.
     counted
         Per block: (k,) bool, the cells this rank counts (it owns their first node).
+    rows
+        (n,) the rows of ``ids`` in this rank's local mesh (:func:`localize`); ``None`` when the part
+        was taken from a mesh that has every node (then rows are ``ids``).
     """
 
     n_points: int
@@ -67,10 +70,12 @@ class MeshPart:
     cells: tuple
     cell_ids: tuple
     counted: tuple
+    rows: np.ndarray | None = None
 
     def take(self, points: np.ndarray) -> np.ndarray:
-        """The local rows of an (N, 3) array of every node."""
-        return np.asarray(points, dtype=np.float64)[self.ids]
+        """The part's rows of an (N, 3) array of every node, or of the rank's local mesh's rows
+        when the part belongs to a local mesh (``rows`` set)."""
+        return np.asarray(points, dtype=np.float64)[self.ids if self.rows is None else self.rows]
 
     def nbytes(self) -> int:
         """Bytes held by the part's arrays (points, ids, cells)."""
@@ -145,6 +150,33 @@ def part_of(mesh: Mesh, owner: np.ndarray, rank: int) -> MeshPart:
         start += len(b)
     return assemble_part(mesh.n_points, start, owner, rank, mesh.dim, types, blocks, cell_ids,
                          lambda ids: mesh.points[ids])
+
+
+def localize(mesh: Mesh, owner: np.ndarray, rank: int) -> tuple[Mesh, MeshPart]:
+    """One rank's local mesh and its part, from a mesh that has every node's coordinates.
+
+    The local mesh keeps the nodes a rank needs and no other: those it owns (``owner``), the halo
+    (the other nodes of the cells touching them) and every marker node (the surface and the
+    boundaries that every rank's warp and box need). Rows are sorted by global id (so every sum and
+    tie-break over them runs in the order of the whole mesh); ``global_ids`` maps rows to global
+    ids, ``cells`` (those touching the owned nodes, global order) and ``markers`` use local ids.
+    ``mesh`` may be whole or a partial mesh with global ids whose cells include those around the
+    rank's nodes. The part's ``rows`` are its nodes' rows of the local mesh.
+
+    This is the definition every reader by parts must reproduce (``read_part`` of a format gives
+    the same local mesh without any rank holding every node).
+    """
+    part = part_of(mesh, owner, rank)
+    marker = [b.data.ravel() for blocks in mesh.markers.values() for b in blocks]
+    keep = np.union1d(part.ids, np.concatenate(marker) if marker else np.zeros(0, np.int64)).astype(np.int64)
+    rows = np.searchsorted(keep, part.ids)
+    local = Mesh(points=mesh.points[keep], dim=mesh.dim,
+                 cells=[CellBlock(b.type, rows[b.data]) for b in part.cells],
+                 markers={name: [CellBlock(b.type, np.searchsorted(keep, b.data)) for b in blocks]
+                          for name, blocks in mesh.markers.items()},
+                 path=mesh.path, format=mesh.format, source=mesh.source, partial=True,
+                 global_ids=keep, n_global=mesh.n_points)
+    return local, replace(part, rows=rows)
 
 
 def rank_part(mesh: Mesh, comm) -> MeshPart:

@@ -12,7 +12,7 @@ from conftest import SAMPLES, shared_file
 from ffdcli.formats import read_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.parallel import share
-from ffdcli.partition import node_owners, part_of
+from ffdcli.partition import localize, node_owners, part_of
 from ffdcli.quality import check_quality, check_quality_part
 from ffdcli.testing.threadcomm import run_ranks
 from ffdcli.testing.wings import extruded_wing_mesh
@@ -145,6 +145,39 @@ def test_parts_cover_every_cell_once_and_hold_their_halo():
             if size == 4:       # a compact piece of space: far fewer cells than the whole, shuffled ids or not
                 assert len(around) < 0.45 * mesh.n_cells
         assert np.all(total == 1)
+
+
+@pytest.mark.parametrize("name", ["rect_wing_shuffled", "naca_quads_2d", "mixed_shuffled"])
+def test_a_local_mesh_holds_the_owned_nodes_their_halo_and_the_markers_and_nothing_else(name):
+    """:func:`localize`: the definition of one rank's local mesh that readers by parts reproduce."""
+    mesh = CASES[name]
+    marker_nodes = np.unique(np.concatenate([np.zeros(0, np.int64)] + [b.data.ravel() for bl in mesh.markers.values()
+                                                                       for b in bl]))
+    for size in (1, 3):
+        owner = node_owners(mesh.points, size)
+        seen = np.zeros(mesh.n_points, dtype=bool)
+        for r in range(size):
+            local, part = localize(mesh, owner, r)
+            whole_part = part_of(mesh, owner, r)
+            g = local.global_ids
+            assert local.is_local and local.partial and local.n_points_global == mesh.n_points
+            assert np.all(np.diff(g) > 0)
+            np.testing.assert_array_equal(local.points, mesh.points[g])
+            halo = np.unique(np.concatenate([b.data.ravel() for b in whole_part.cells]))
+            np.testing.assert_array_equal(g, np.union1d(np.union1d(whole_part.ids, marker_nodes),
+                                                        whole_part.ids[halo]))
+            for name_, blocks in mesh.markers.items():      # every marker, the same faces, local ids
+                for b, lb in zip(blocks, local.markers[name_], strict=True):
+                    np.testing.assert_array_equal(g[lb.data], b.data)
+            every = np.concatenate([b.data for b in mesh.cells]) if len({b.type for b in mesh.cells}) == 1 else None
+            for lb, pb, gid in zip(local.cells, whole_part.cells, whole_part.cell_ids, strict=True):
+                np.testing.assert_array_equal(g[lb.data], whole_part.ids[pb.data])
+                if every is not None:
+                    np.testing.assert_array_equal(g[lb.data], every[gid])
+            np.testing.assert_array_equal(part.take(local.points), whole_part.points)
+            np.testing.assert_array_equal(g[part.rows], part.ids)
+            seen[part.ids[part.owned]] = True
+        assert seen.all()
 
 
 # ---------------------------------------------------------------------------------------------- reading by parts
