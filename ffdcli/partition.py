@@ -1,9 +1,11 @@
 """One rank's share of a mesh: the nodes it owns (a compact piece of space), the cells around them and their halo.
 
-An MPI run (:mod:`ffdcli.parallel`) gives every node an owner rank (:func:`node_owners`): the
-nodes sorted along a Z-order (Morton) curve of their coordinates, cut into ``size`` runs of equal
-length, so that a rank owns a compact piece of space whatever the file's numbering (contiguous
-blocks of ids would give every rank cells all over a mesh numbered by a mesher's entities). What a
+An MPI run (:mod:`ffdcli.parallel`) gives every node an owner rank (:func:`block_owners`, and
+:func:`node_owners` for a whole mesh: the same rule): the nodes sorted along a Z-order (Morton)
+curve of their coordinates, cut into ``size`` runs of equal length, so that a rank owns a compact
+piece of space whatever the file's numbering (contiguous blocks of ids would give every rank cells
+all over a mesh numbered by a mesher's entities). The cuts are found from each rank's block of
+rows (a distributed selection), so no rank needs every node's coordinates to know its own nodes. What a
 rank needs of the volume mesh to judge its nodes and cells (the quality gate) is a :class:`MeshPart`:
 
 * the cells that touch an owned node, in global order within each cell block (so every edge of an
@@ -25,8 +27,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ffdcli.mesh import CELL_NODES, CellBlock, Mesh
-from ffdcli.parallel import share
-from ffdcli.warp_tree import morton_order  # the one Z-order curve (the warp orders its targets by it)
+from ffdcli.parallel import SerialComm, share
+from ffdcli.warp_tree import morton_codes  # the one Z-order curve (the warp orders its targets by it)
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,25 +85,98 @@ class MeshPart:
                    + sum(c.nbytes for c in self.cell_ids) + sum(c.nbytes for c in self.counted))
 
 
+#: Bits of the Morton code (63) and then of the global id that each round of the distributed
+#: selection of :func:`block_owners` decides: one histogram of 2^15 bins over all points, then
+#: 2^12 bins per cut over the points still in the running.
+FIRST_BITS, NEXT_BITS = 15, 12
+
+
 def node_owners(points: np.ndarray, size: int) -> np.ndarray:
-    """(N,) int32 owner rank of every node: the Morton order of ``points`` (in their bounding cube)
-    cut into ``size`` runs of equal length (:func:`ffdcli.parallel.share`). The same on every rank
-    (same points)."""
-    pts = np.asarray(points, dtype=np.float64)
-    n = len(pts)
-    owner = np.empty(n, dtype=np.int32)
-    if not n:
+    """(N,) int32 owner rank of every node of a whole mesh: :func:`block_owners` with every node in
+    one block (the same rule, so a mesh read whole and one read by parts have the same owners)."""
+    return block_owners(SerialComm(), points, 0, len(points), size)
+
+
+def block_owners(comm, points: np.ndarray, start: int, n: int, size: int | None = None) -> np.ndarray:
+    """(m,) int32 owner rank of the nodes ``start .. start + m - 1`` (``points`` (m, 3)) of a mesh of
+    ``n`` nodes whose rows are spread over the ranks of ``comm`` in blocks; a collective.
+
+    The rule: the nodes sorted along a Z-order (Morton) curve of the mesh's bounding cube
+    (:func:`ffdcli.warp_tree.morton_codes`; ties, the nodes of one code, by global id), cut into
+    ``size`` (default ``comm.size``) runs of equal length (:func:`ffdcli.parallel.share`): exactly
+    those of a sort of every node, but found without any rank holding every node. The cube is
+    all-gathered (two corners a rank); the ``size - 1`` cut keys are found by a distributed radix
+    selection (:data:`FIRST_BITS`, :data:`NEXT_BITS`): each round, the ranks' histograms of the next
+    bits of the nodes still in the running are summed (``allreduce_sum``, exact below 2^53 nodes),
+    which fixes those bits of every cut; at most 5 rounds of the code and 1-3 of the id (a cut
+    that no other node shares a code with is fixed by then too: the rounds run to the end anyway).
+    """
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    size = comm.size if size is None else int(size)
+    owner = np.zeros(len(pts), dtype=np.int32)
+    if size == 1 or n == 0:
         return owner
-    # the same scale on every axis: two corners of the bounding cube join the points (a thin mesh,
-    # one cell thick or a planar 2D mesh, is then cut across its plane, not through its thickness)
-    lo = pts.min(axis=0)
-    cube = np.vstack([pts, lo, lo + np.ptp(pts, axis=0).max()])
-    order = morton_order(cube)
-    order = order[order < n]
-    for r in range(size):
-        lo, hi = share(n, r, size)
-        owner[order[lo:hi]] = r
+    # the same scale on every axis: a thin mesh (one cell thick, a planar 2D mesh) is cut across its
+    # plane, not through its thickness
+    box = [b for b in comm.allgather((pts.min(axis=0), pts.max(axis=0)) if len(pts) else None) if b is not None]
+    lo = np.min([b[0] for b in box], axis=0)
+    ext = max(float(np.max(np.max([b[1] for b in box], axis=0) - lo)), 1e-300)
+    code = morton_codes(pts, lo, ext)
+    gid = np.arange(start, start + len(pts), dtype=np.uint64)
+    cut_code, cut_gid = _select(comm, code, gid, n, size)
+    # owner = how many cut keys (code, id) are <= the node's: the cuts of smaller codes, then ties
+    low = np.searchsorted(cut_code, code, side="left")
+    high = np.searchsorted(cut_code, code, side="right")
+    owner[:] = low
+    tie = np.flatnonzero(high > low)
+    for j in range(int((high - low).max(initial=0))):       # at most size - 1 cuts share one code
+        at = low[tie] + j
+        inside = at < high[tie]
+        owner[tie] += inside & (cut_gid[np.minimum(at, len(cut_gid) - 1)] <= gid[tie])
     return owner
+
+
+def _select(comm, code: np.ndarray, gid: np.ndarray, n: int, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """The keys (code, global id) of the nodes at sorted positions ``share(n, r, size)[0]``,
+    r = 1 .. size - 1 (nondecreasing), by rounds of summed histograms (see :func:`block_owners`)."""
+    targets = np.array([share(n, r, size)[0] for r in range(1, size)], dtype=np.int64)
+    digits = ([(0, s, b) for s, b in _digits(63, FIRST_BITS)]
+              + [(1, s, b) for s, b in _digits(max(1, (n - 1).bit_length()), NEXT_BITS)])
+    keys = (code, gid)
+    prefix = np.zeros((len(targets), 2), dtype=np.uint64)
+    below = np.zeros(len(targets), dtype=np.int64)      # nodes of a smaller key than the cut's prefix
+    groups = [np.arange(len(code))]                      # per distinct prefix: the local nodes in the running
+    member = np.zeros(len(targets), dtype=np.int64)      # each cut's group
+    for word, shift, bits in digits:
+        nb = 1 << bits
+        digit = [((keys[word][c] >> np.uint64(shift)) & np.uint64(nb - 1)).astype(np.int64) for c in groups]
+        hist = np.zeros((len(groups), nb))
+        for g, d in enumerate(digit):
+            hist[g] = np.bincount(d, minlength=nb)
+        cum = np.cumsum(comm.allreduce_sum(hist), axis=1).astype(np.int64)
+        chosen = np.empty(len(targets), dtype=np.int64)
+        for t in range(len(targets)):                    # a loop over the cuts (ranks), not nodes
+            row = cum[member[t]]
+            d = int(np.searchsorted(row, targets[t] - below[t], side="right"))
+            below[t] += row[d - 1] if d else 0
+            prefix[t, word] |= np.uint64(d) << np.uint64(shift)
+            chosen[t] = d
+        pairs, member = np.unique(np.stack([member, chosen], axis=1), axis=0, return_inverse=True)
+        member = member.ravel()
+        groups = [groups[g][digit[g] == d] for g, d in pairs.tolist()]
+    return prefix[:, 0], prefix[:, 1]
+
+
+def _digits(bits: int, width: int) -> list[tuple[int, int]]:
+    """(shift, width) of the digits of a ``bits``-bit key, most significant first (the first
+    ``width`` wide, the others :data:`NEXT_BITS`)."""
+    out, top = [], bits
+    while top > 0:
+        w = min(width, top)
+        out.append((top - w, w))
+        top -= w
+        width = NEXT_BITS
+    return out
 
 
 def touching(data: np.ndarray, owner: np.ndarray, rank: int) -> np.ndarray:

@@ -25,16 +25,24 @@ LEAF_SIZE = 16
 
 
 def morton_order(pos: np.ndarray) -> np.ndarray:
-    """Permutation sorting points along a Z-order curve (21 bits per axis)."""
+    """Permutation sorting points along a Z-order curve (21 bits per axis) of their bounding box."""
     if len(pos) == 0:
         return np.zeros(0, dtype=np.int64)
     lo = pos.min(axis=0)
     ext = np.maximum(pos.max(axis=0) - lo, 1e-300)
+    return np.argsort(morton_codes(pos, lo, ext), kind="stable")
+
+
+def morton_codes(pos: np.ndarray, lo: np.ndarray, ext) -> np.ndarray:
+    """(n,) uint64 Z-order codes of ``pos`` (n, 3) in the box ``lo + [0, ext]`` (``lo`` (3,), ``ext``
+    (3,) or a number, > 0): 21 bits per axis, x in the lowest bit. Points of the box only (a point
+    below ``lo`` has no code); a code depends on the point and the box alone, so ranks holding
+    different points of one box compute the codes a single process would."""
     q = np.minimum(((pos - lo) / ext * (2 ** 21 - 1)).astype(np.uint64), 2 ** 21 - 1)
     code = np.zeros(len(pos), dtype=np.uint64)
     for k in range(3):
         code |= _spread_bits(q[:, k]) << np.uint64(k)
-    return np.argsort(code, kind="stable")
+    return code
 
 
 def _spread_bits(v: np.ndarray) -> np.ndarray:

@@ -147,6 +147,47 @@ def test_parts_cover_every_cell_once_and_hold_their_halo():
         assert np.all(total == 1)
 
 
+def _sorted_owners(points, size):
+    """The owner rule by a sort of every node (the reference): Morton codes in the bounding cube,
+    ties by id, cut into equal runs."""
+    from ffdcli.warp_tree import morton_codes
+
+    lo = points.min(axis=0)
+    order = np.argsort(morton_codes(points, lo, max(float(np.ptp(points, axis=0).max()), 1e-300)), kind="stable")
+    owner = np.empty(len(points), dtype=np.int32)
+    for r in range(size):
+        a, b = share(len(points), r, size)
+        owner[order[a:b]] = r
+    return owner
+
+
+@pytest.mark.parametrize("kind", ["uniform", "repeated", "planar", "clustered", "rect_wing"])
+def test_owners_of_blocks_on_ranks_are_those_of_a_sort_of_every_node(kind):
+    """:func:`block_owners` (each rank: its block of rows, no rank holding every node) gives the owners
+    of a sort of every node, equal runs included, for any split of the rows; :func:`node_owners` is the
+    same rule on one rank. Repeated points (one code, many ids), a boundary layer 1e-9 thin inside a
+    large box (most nodes in one bin of the first rounds) and fewer nodes than ranks."""
+    from ffdcli.partition import block_owners
+
+    rng = np.random.default_rng(11)
+    pts = {"uniform": rng.random((3000, 3)),
+           "repeated": np.repeat(rng.random((40, 3)), 25, axis=0)[rng.permutation(1000)],
+           "planar": np.column_stack([rng.random((2000, 2)), np.zeros(2000)]),
+           "clustered": np.vstack([1e-9 * rng.random((1500, 3)), 100 * rng.random((500, 3))]),
+           "rect_wing": CASES["rect_wing_shuffled"].points}[kind]
+    for n in (len(pts), 3):
+        p = pts[:n]
+        for size in (1, 2, 3, 5, 8):
+            want = _sorted_owners(p, size)
+            np.testing.assert_array_equal(node_owners(p, size), want)
+            assert np.bincount(want, minlength=size).tolist() == [b - a for a, b in (share(n, r, size)
+                                                                                     for r in range(size))]
+            cut = np.concatenate([[0], np.sort(rng.integers(0, n + 1, size - 1)), [n]])     # uneven, some empty
+            got = run_ranks(size, lambda c, p=p, cut=cut: block_owners(c, p[cut[c.rank]:cut[c.rank + 1]],
+                                                                       cut[c.rank], len(p)))
+            np.testing.assert_array_equal(np.concatenate(got), want)
+
+
 @pytest.mark.parametrize("name", ["rect_wing_shuffled", "naca_quads_2d", "mixed_shuffled"])
 def test_a_local_mesh_holds_the_owned_nodes_their_halo_and_the_markers_and_nothing_else(name):
     """:func:`localize`: the definition of one rank's local mesh that readers by parts reproduce."""
