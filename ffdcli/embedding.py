@@ -27,7 +27,8 @@ basis values of each point: the tensor-product form of the sparse basis matrix `
 control points) with ``X = B @ P``; :meth:`Embedding.from_params` computes it in one compiled pass.
 :meth:`Embedding.displace` (``B @ dP``) and :meth:`Embedding.rmatvec` (``B.T @ g``) are parallel
 compiled loops over that form (about a third of the bytes of the CSR matrix), on control points
-padded to 4-wide rows;
+padded to 4-wide rows (``B.T @ g`` adds into them with explicit vector fused multiply-adds,
+:mod:`ffdcli.simd`);
 :meth:`Embedding.basis_matrix` builds the explicit CSR matrix. The ``*_reference`` functions are
 NumPy versions the tests compare the kernels with.
 """
@@ -46,6 +47,7 @@ from ffdcli.errors import InputError
 from ffdcli.lattice import Lattice, derivatives, eval_point_nb, evaluate, kernel_args
 from ffdcli.progress import chunks, no_progress
 from ffdcli.settings import MAX_DEGREE
+from ffdcli.simd import axpy4, axpy8
 from ffdcli.spline import basis, basis_row_nb, find_span_nb
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
@@ -235,10 +237,10 @@ class Embedding:
         if g.ndim != 2 or g.shape[0] != self.n_points or not 1 <= g.shape[1] <= 3:
             raise ValueError(f"g must have shape ({self.n_points}, gdim), got {g.shape}")
         nchunk = max(1, min(self.n_points, 4 * numba.get_num_threads()))
-        acc = np.zeros((nchunk, self.n_ctrl, 4))
+        acc = np.zeros((nchunk, 4 * self.n_ctrl))
         if self.n_points:
-            _rmatvec_nb(*self._kernel_axes(), g, self.inside, acc)
-        return np.ascontiguousarray(acc.sum(axis=0)[:, : g.shape[1]])
+            _rmatvec(self._kernel_axes(), g, self.inside, acc)
+        return np.ascontiguousarray(acc.sum(axis=0).reshape(self.n_ctrl, 4)[:, : g.shape[1]])
 
     def basis_matrix(self) -> sparse.csr_matrix:
         """The sparse basis ``B`` (N x n_ctrl, CSR) with zero rows for outside points.
@@ -424,13 +426,19 @@ def _basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, 
                     k += 1
 
 
-@njit(cache=True, parallel=True, fastmath={"contract"})
+# B.T @ g scatters each point's products into the rows of its (p+1)(q+1)(r+1) control points. The
+# accumulator is flat, 4 doubles per control point (x, y, z, 0), and every update is one explicit
+# vector fused multiply-add (ffdcli.simd: numba does not vectorise straight-line code): 4-wide per
+# control point in the general kernel, 8-wide over the two control points of a linear third axis in
+# the default box's kernel. Each lane is fma(w, g, acc), correctly rounded once.
+@njit(cache=True, parallel=True)
 def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
     """``acc[chunk] += B[chunk rows].T @ g`` per chunk of points (one accumulator per chunk: no two
-    threads add into one array); ``acc`` (nchunk, n_ctrl, 4), zero on entry, the 4th column stays 0.
+    threads add into one array); ``acc`` (nchunk, n_ctrl * 4), zero on entry, every 4th entry stays
+    0. Any basis widths, 2D (``has_w`` False) or 3D; rows of outside points are skipped.
 
-    A point's g is read once into scalars (not re-read after every store into ``acc``, which the
-    compiler must assume could alias it) and each update is one 4-wide read-modify-write."""
+    Per control point the update is ``fma(V0[a] V1[b] V2[c], g, acc)``: the same value, bit for bit,
+    as the scalar ``acc[k, q] += w * g[q]`` with contraction."""
     npts = f0.shape[0]
     gdim = g.shape[1]
     nchunk = acc.shape[0]
@@ -457,10 +465,58 @@ def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
                     base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
                     for c in range(c1):
                         w = wab * V2[i, c] if has_w else wab
-                        out[base + c, 0] += w * g0
-                        out[base + c, 1] += w * g1
-                        out[base + c, 2] += w * g2
-                        out[base + c, 3] += w * 0.0
+                        axpy4(out, 4 * (base + c), w, g0, g1, g2, 0.0)
+
+
+@njit(cache=True, parallel=True)
+def _rmatvec_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
+    """:func:`_rmatvec_nb` for the default box (cubic, cubic, linear: widths 4, 4, 2; 3D only) with
+    the widths known when compiling: the two control points ``c = 0, 1`` of a column are adjacent
+    (C order), so each of the 16 ``(a, b)`` columns is one 8-wide update
+    ``acc[4 base : 4 base + 8] += V0[a] V1[b] * (V2[0] g, 0, V2[1] g, 0)``. The products are grouped
+    as ``(V0 V1) (V2 g)`` instead of ``((V0 V1) V2) g``: results differ from the general kernel's by
+    ulps."""
+    npts = f0.shape[0]
+    gdim = g.shape[1]
+    nchunk = acc.shape[0]
+    for ch in prange(nchunk):
+        lo = ch * npts // nchunk
+        hi = (ch + 1) * npts // nchunk
+        out = acc[ch]
+        for i in range(lo, hi):
+            if not inside[i]:
+                continue
+            g0 = g[i, 0]
+            g1 = g[i, 1] if gdim > 1 else 0.0
+            g2 = g[i, 2] if gdim > 2 else 0.0
+            v0 = V2[i, 0]
+            v1 = V2[i, 1]
+            t0, t1, t2 = v0 * g0, v0 * g1, v0 * g2
+            s0, s1, s2 = v1 * g0, v1 * g1, v1 * g2
+            i0 = f0[i]
+            i1 = f1[i]
+            i2 = f2[i]
+            for a in range(4):
+                wa = V0[i, a]
+                for b in range(4):
+                    base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
+                    axpy8(out, 4 * base, wa * V1[i, b], t0, t1, t2, 0.0, s0, s1, s2, 0.0)
+
+
+def _rmatvec(axes, g, inside, acc):
+    """``B.T @ g`` into ``acc`` by the kernel that fits the basis widths (``axes`` from
+    ``Embedding._kernel_axes``)."""
+    f0, V0, f1, V1, f2, V2, has_w = axes[:7]
+    if has_w and V0.shape[1] == 4 and V1.shape[1] == 4 and V2.shape[1] == 2:
+        _rmatvec_442_nb(*axes, g, inside, acc)
+    else:
+        _rmatvec_nb(*axes, g, inside, acc)
+
+
+def rmatvec_reference(emb: Embedding, g) -> np.ndarray:
+    """NumPy/SciPy reference of :meth:`Embedding.rmatvec`: ``B.T @ g`` with ``B`` from
+    :func:`basis_matrix_reference` (outside rows empty). Returns (n_ctrl, gdim)."""
+    return np.asarray(basis_matrix_reference(emb).T @ np.asarray(g, dtype=np.float64))
 
 
 def basis_matrix_reference(emb: Embedding) -> sparse.csr_matrix:

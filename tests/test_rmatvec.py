@@ -1,0 +1,168 @@
+"""B.T @ g (Embedding.rmatvec) by the vectorised kernels against the NumPy/SciPy reference, and the
+vector fused multiply-adds (ffdcli.simd) they are built on."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import pytest
+from lattice_cases import curved_patch, wing_lattice
+from numba import njit
+from numba.core.errors import TypingError
+
+from ffdcli.derivatives import lattice_jacobian, vjp
+from ffdcli.embedding import (
+    Embedding,
+    _rmatvec_442_nb,
+    _rmatvec_nb,
+    basis_matrix_reference,
+    rmatvec_reference,
+)
+from ffdcli.simd import axpy4, axpy8
+
+CASES = {
+    "3d-442": lambda: wing_lattice((8, 6, 2), (3, 3, 1)),          # the default box: the 8-wide kernel
+    "3d-cubic-16x12x4": lambda: wing_lattice((16, 12, 4), 3),
+    "3d-mixed-6x5x3": lambda: wing_lattice((6, 5, 3), (2, 1, 2)),
+    "3d-linear-w-not-contiguous": lambda: wing_lattice((8, 6, 4), (3, 3, 1)),
+    "2d-gdim2": lambda: curved_patch((6, 5), (3, 2), gdim=2),
+    "2d-gdim3": lambda: curved_patch((7, 4), (2, 3), gdim=3),
+}
+
+
+def _embedding(lat, n, seed, outside=()):
+    """An Embedding of n random parameters (faces included) without the Newton solve."""
+    rng = np.random.default_rng(seed)
+    u = rng.uniform(0.0, 1.0, (n, lat.pdim))
+    u[: n // 8, 0] = rng.choice([0.0, 1.0], n // 8)
+    u[n // 8: n // 4, -1] = rng.choice([0.0, 1.0], n // 8)
+    inside = np.ones(n, dtype=bool)
+    inside[list(outside)] = False
+    return Embedding.from_params(lat, u, inside, np.where(inside, 0.0, 1.0))
+
+
+def _bound(emb, g):
+    """Per entry: sum of |B_ik g_i| over the points, the scale of the rounding errors of B.T @ g."""
+    return np.asarray(abs(basis_matrix_reference(emb)).T @ np.abs(g))
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+@pytest.mark.parametrize("gdim", [1, 2, 3])
+def test_rmatvec_matches_the_reference(case, gdim):
+    lat = CASES[case]()
+    emb = _embedding(lat, 5000, seed=gdim)
+    g = np.random.default_rng(11).normal(size=(emb.n_points, gdim))
+    got, ref = emb.rmatvec(g), rmatvec_reference(emb, g)
+    assert got.shape == (lat.n_ctrl, gdim) and got.flags.c_contiguous
+    # same products, summed in another order (per chunk, then over the chunks): ~1e-16 of the sum
+    # of |terms|; 1e-13 leaves room for any order, a wrong product or index is O(1) off
+    assert np.all(np.abs(got - ref) <= 1e-13 * _bound(emb, g))
+
+
+def test_the_442_kernel_is_the_general_one_to_rounding():
+    """The default box's 8-wide kernel and the general 4-wide one give the same sums to ulps (their
+    products are grouped differently), for every thread split."""
+    lat = wing_lattice((8, 6, 2), (3, 3, 1))
+    emb = _embedding(lat, 20_000, seed=3, outside=[0, 17, 19_999])
+    g = np.random.default_rng(4).normal(size=(emb.n_points, 3))
+    axes = emb._kernel_axes()
+    for nchunk in (1, 3, 8, 4 * numba.get_num_threads()):
+        special = np.zeros((nchunk, 4 * lat.n_ctrl))
+        general = np.zeros((nchunk, 4 * lat.n_ctrl))
+        _rmatvec_442_nb(*axes, g, emb.inside, special)
+        _rmatvec_nb(*axes, g, emb.inside, general)
+        assert not special[:, 3::4].any() and not general[:, 3::4].any()   # the padding lane stays 0
+        s, r = special.sum(axis=0).reshape(-1, 4)[:, :3], general.sum(axis=0).reshape(-1, 4)[:, :3]
+        assert np.all(np.abs(s - r) <= 1e-14 * _bound(emb, g))
+    # rmatvec is this kernel with 4 chunks per thread, summed over the chunks in order
+    np.testing.assert_array_equal(emb.rmatvec(g), s)
+
+
+@pytest.mark.parametrize("case", ["3d-442", "3d-cubic-16x12x4", "2d-gdim2"])
+def test_outside_rows_do_not_contribute(case):
+    """Rows of outside points are skipped, not multiplied by zero: not even a NaN or inf of g there
+    reaches the control points."""
+    lat = CASES[case]()
+    out = [0, 1, 2, 500, 1999]
+    emb = _embedding(lat, 2000, seed=5, outside=out)
+    g = np.random.default_rng(6).normal(size=(emb.n_points, lat.gdim))
+    ref = rmatvec_reference(emb, g)
+    g[out] = [np.nan] + [np.inf] * (lat.gdim - 1)
+    got = emb.rmatvec(g)
+    assert np.all(np.isfinite(got))
+    assert np.all(np.abs(got - ref) <= 1e-13 * _bound(emb, np.nan_to_num(g, nan=0.0, posinf=0.0)))
+    # every point outside: exact zeros
+    none = Embedding.from_params(lat, emb.params, np.zeros(emb.n_points, dtype=bool), emb.residual)
+    assert not none.rmatvec(g).any()
+
+
+@pytest.mark.parametrize("case", ["3d-442", "2d-gdim3"])
+def test_empty_embedding(case):
+    lat = CASES[case]()
+    emb = Embedding.from_params(lat, np.zeros((0, lat.pdim)), np.zeros(0, dtype=bool), np.zeros(0))
+    for gdim in (1, 3):
+        got = emb.rmatvec(np.zeros((0, gdim)))
+        assert got.shape == (lat.n_ctrl, gdim) and not got.any()
+
+
+def test_vjp_through_the_kernel_is_the_reference():
+    """vjp(embedding, g, D) = (B.T g).reshape(-1) @ D of the reference B, for the default box."""
+    from benchmarks.bench_derivatives import design_changes
+    from ffdcli.changes import LatticeFrame
+
+    lat = wing_lattice((8, 6, 2), (3, 3, 1))
+    emb = _embedding(lat, 3000, seed=9, outside=[10])
+    frame = LatticeFrame.from_lattice(lat.shape, (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), (0.0, 1.0, 0.0))
+    D = lattice_jacobian(lat.control_points, frame, design_changes(6, 8, 2))
+    g = np.random.default_rng(10).normal(size=(emb.n_points, 3))
+    ref = rmatvec_reference(emb, g).reshape(-1) @ D
+    got = vjp(emb, g, D)
+    scale = _bound(emb, g).reshape(-1) @ np.abs(D)
+    assert np.all(np.abs(got - ref) <= 1e-13 * scale)
+
+
+# ---------------------------------------------------------------------------------------------- simd
+
+@njit(cache=False)
+def _call4(out, k, w, x):
+    axpy4(out, k, w, x[0], x[1], x[2], x[3])
+
+
+@njit(cache=False)
+def _call8(out, k, w, x):
+    axpy8(out, k, w, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7])
+
+
+@pytest.mark.parametrize("width, call", [(4, _call4), (8, _call8)])
+def test_axpy_updates_its_lanes_only(width, call):
+    rng = np.random.default_rng(1)
+    out = rng.normal(size=20)
+    x = rng.normal(size=width)
+    before = out.copy()
+    call(out, 5, 0.75, x)
+    np.testing.assert_allclose(out[5:5 + width], before[5:5 + width] + 0.75 * x, rtol=1e-15, atol=1e-15)
+    np.testing.assert_array_equal(np.delete(out, np.arange(5, 5 + width)),
+                                  np.delete(before, np.arange(5, 5 + width)))
+
+
+@pytest.mark.parametrize("width, call", [(4, _call4), (8, _call8)])
+def test_axpy_rounds_once(width, call):
+    """fma(w, x, a) with w = x = 1 + 2^-30 and a = -(1 + 2^-29): the exact result 2^-60 survives a
+    single rounding; a multiply then an add would round w x to 1 + 2^-29 and give 0."""
+    e = 2.0 ** -30
+    out = np.full(width, -(1.0 + 2 * e))
+    call(out, 0, 1.0 + e, np.full(width, 1.0 + e))
+    np.testing.assert_array_equal(out, np.full(width, 2.0 ** -60))
+
+
+def test_axpy_refuses_what_it_cannot_address():
+    @njit(cache=False)
+    def two_d(out):
+        axpy4(out, 0, 1.0, 1.0, 2.0, 3.0, 4.0)
+
+    with pytest.raises(TypingError):
+        two_d(np.zeros((2, 4)))
+    with pytest.raises(TypingError):
+        two_d(np.zeros(8, dtype=np.float32))
+    with pytest.raises(TypingError):
+        two_d(np.zeros(16)[::2])
