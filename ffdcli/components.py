@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ffdcli.distributed import global_ids
 from ffdcli.errors import InputError
 
 AXIS_NAMES = "xyz"
@@ -325,8 +326,9 @@ def check_shared_nodes(components: list[Component], *, path=None) -> None:
             ca, cb = components[a], components[b]
             both = np.intersect1d(ca.prep.surface.ids, cb.prep.surface.ids, assume_unique=True)
             if len(both):
+                node = int(global_ids(ca.prep.mesh, both[:1])[0])
                 raise InputError(f"components {ca.name!r} and {cb.name!r} share {len(both)} surface nodes "
-                                 f"(e.g. node {int(both[0])}); components must be separate markers that do "
+                                 f"(e.g. node {node}); components must be separate markers that do "
                                  "not touch", path=path)
 
 
@@ -347,8 +349,9 @@ def check_overlap(components: list[Component], *, path=None) -> None:
             emb = embed(ca.box.lattice(), ca.box.core_points(X[near]))
             if emb.inside.any():
                 k = int(np.flatnonzero(near)[np.flatnonzero(emb.inside)[0]])
+                node = int(global_ids(cb.prep.mesh, cb.prep.surface.ids[k:k + 1])[0])
                 raise InputError(f"the boxes of components {ca.name!r} and {cb.name!r} overlap: surface point "
-                                 f"{int(cb.prep.surface.ids[k])} of {cb.name!r} lies inside the lattice of "
+                                 f"{node} of {cb.name!r} lies inside the lattice of "
                                  f"{ca.name!r} (move them apart, or make {ca.name!r}'s box smaller with "
                                  "box.margin)", path=path)
 

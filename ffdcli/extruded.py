@@ -66,9 +66,12 @@ def one_cell_thick(mesh: Mesh, surface) -> Extrusion | None:
             on[ids] = True
             share[name] = ids
     rest = ~on_surface
-    if not rest.any():
+    # the non-surface nodes of the whole mesh (a local mesh, one MPI rank's, holds every marker node
+    # but only some of the others: the counts on markers are the whole mesh's, not the count of the rest)
+    n_rest = mesh.n_points_global - int(np.count_nonzero(on_surface))
+    if not n_rest:
         return None
-    fraction = float(on[rest].mean())
+    fraction = int(np.count_nonzero(on[rest])) / n_rest
     if fraction < ON_MARKERS:
         return None
     axis = int(np.argmin(np.ptp(mesh.points, axis=0)))
@@ -77,7 +80,7 @@ def one_cell_thick(mesh: Mesh, surface) -> Extrusion | None:
     big = max(counts.values())
     markers = tuple(n for n, k in counts.items() if k >= 0.5 * big)
     roles = marker_roles(mesh.points, mesh.markers, surface, 3).roles
-    fixed = tuple(n for n in markers if roles.get(n) == "fixed" and counts[n] >= 0.5 * rest.sum())
+    fixed = tuple(n for n in markers if roles.get(n) == "fixed" and counts[n] >= 0.5 * n_rest)
     sp = mesh.points[on_surface] if on_surface.any() else mesh.points
     ext = np.ptp(sp, axis=0)
     chord, thick = sorted((a for a in range(3) if a != axis), key=lambda a: -ext[a])

@@ -22,6 +22,8 @@ from ffdcli.box import Box, fit_box
 from ffdcli.box_import import import_box
 from ffdcli.changes import apply_changes
 from ffdcli.design import Design
+from ffdcli.distributed import diagonal as global_diagonal
+from ffdcli.distributed import gather_points, global_ids, local_rows, writable_mesh
 from ffdcli.embedding import Embedding
 from ffdcli.errors import InputError, QualityError
 from ffdcli.extruded import one_cell_thick
@@ -31,7 +33,7 @@ from ffdcli.lattice import derivatives
 from ffdcli.limits import check_box_memory, check_lattice_size
 from ffdcli.mesh import Mesh, check_markers
 from ffdcli.parallel import SerialComm
-from ffdcli.partition import rank_part
+from ffdcli.partition import localize, node_owners, rank_part
 from ffdcli.progress import no_progress
 from ffdcli.quality import QualityReport, check_quality, check_quality_part, part_reference, quality_reference
 from ffdcli.rotations import rotations_from_deformation_gradient, surface_frame_gradient
@@ -75,7 +77,7 @@ class PreparedBox:
         if out["outside"]:
             idx = np.flatnonzero(~inside)
             out["outside_worst"] = float(emb.residual[idx].max())
-            out["outside_ids"] = self.surface.ids[idx[:10]].tolist()
+            out["outside_ids"] = global_ids(self.mesh, self.surface.ids[idx[:10]]).tolist()
         return out
 
 
@@ -191,7 +193,8 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
             got = comm.root_then_bcast(cache_mod.load, path, key, settings)
             if got is not None:
                 box, ids, emb, header = got
-                if np.array_equal(ids, surf.ids) and cache_mod.embedding_matches(box, emb, surf.points):
+                if np.array_equal(ids, global_ids(mesh, surf.ids)) and cache_mod.embedding_matches(box, emb,
+                                                                                                surf.points):
                     return PreparedBox(mesh=mesh, surface=surf, box=box, embedding=emb,
                                        report=header.get("report", {}), cache=path, from_cache=True,
                                        seconds=time.perf_counter() - t0,
@@ -207,7 +210,7 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
     warnings = notes + list(report.get("warnings", []))
     if path is not None and use_cache and comm.is_root:
         try:
-            cache_mod.save(path, key, box, surf.ids, emb, report,
+            cache_mod.save(path, key, box, global_ids(mesh, surf.ids), emb, report,
                            meta={"mesh": str(mesh.path), "surface": names})
         except OSError as e:          # a read-only folder: work without a cache, say so
             warnings.append(f"could not write the cache {path}: {e.strerror or e}")
@@ -230,7 +233,10 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
     t0 = time.perf_counter()
     if settings is not None:         # an absurd lattice is refused before minutes of reading
         check_lattice_size(settings.points, path=None if isinstance(mesh, Mesh) else mesh)
-    if isinstance(mesh, Mesh):
+    if isinstance(mesh, Mesh) and mesh.is_local:     # each rank's own local mesh: nothing to share
+        got_mesh = mesh
+        mh = mesh_hash or comm.root_then_bcast(lambda: cache_mod.file_hash(mesh.path) if mesh.path else None)
+    elif isinstance(mesh, Mesh):
         got_mesh, mh = comm.root_then_bcast(read)
     else:                        # each rank reads its part (the box needs the surface only)
         got_mesh, _ = formats.read_part(mesh, comm, progress=progress or no_progress)
@@ -277,12 +283,48 @@ class DesignRun:
         mesh, comm = self.prep.mesh, self.comm
         if comm is None or comm.size == 1:
             return check_quality(mesh, points, points_before=mesh.points, reference=self.quality_reference(), **kw)
-        part, ref = self._quality_part or (rank_part(mesh, comm), None)
+        part = self.quality_part()
+        ref = self._quality_part[1]
         if ref is None:
             ref = part_reference(part, comm)
             self._quality_part = (part, ref)
         return check_quality_part(part, comm, part.take(points), part.points, reference=ref, **kw)
 
+    def quality_part(self):
+        """This rank's :class:`~ffdcli.partition.MeshPart` (the gate's share; under MPI only)."""
+        if self._quality_part is None:
+            if self.local:
+                raise RuntimeError("a run on a local mesh needs its MeshPart (load_run(..., local=True) keeps it)")
+            self._quality_part = (rank_part(self.prep.mesh, self.comm), None)
+        return self._quality_part[0]
+
+    @property
+    def local(self) -> bool:
+        """True when the run's mesh is this MPI rank's local mesh (:func:`ffdcli.partition.localize`):
+        its points are the rank's rows, and what the serial run takes from every node is reduced."""
+        return self.prep.mesh.is_local
+
+    def mesh_diagonal(self, points: np.ndarray | None = None) -> float | None:
+        """Of a local mesh, the bounding-box diagonal of every node at ``points`` (the local rows;
+        default the input's), a collective equal to the serial figure; else None (whoever needs it
+        takes it from the points, which are every node)."""
+        if not self.local:
+            return None
+        return global_diagonal(self.prep.mesh.points if points is None else points, self.comm)
+
+    def warp_volume(self, model: WarpModel, disp: np.ndarray, rot: np.ndarray | None, progress=None) -> np.ndarray:
+        """:func:`ffdcli.warp.warp` of the run's mesh (a collective under MPI). A local mesh: each
+        rank warps every one of its rows (owned and halo: each node's value depends on the surface
+        only, so it is the serial one bit for bit), no communication but the error agreement. A mesh
+        with every node on every rank: each rank its block, the blocks gathered."""
+        if self.local:
+            return self.comm.run(warp, model, disp, rot, progress=progress)
+        return warp(model, disp, rot, progress=progress, comm=self.comm)
+
+    def all_finite(self, points: np.ndarray) -> bool:
+        """Whether every coordinate of the mesh at ``points`` is finite (the same answer on every rank)."""
+        ok = bool(np.all(np.isfinite(points)))
+        return all(self.comm.allgather(ok)) if self.local else ok
     @property
     def prep(self) -> PreparedBox:
         """The first component's prepared box (its ``mesh`` is the run's mesh)."""
@@ -336,7 +378,8 @@ class DesignRun:
 
             settings = self.warp_settings
             names = [n for c in self.components for n in c.prep.surface.names]
-            model, _ = prepare_mesh_warp(self.prep.mesh, names, settings, progress=progress)
+            model, _ = prepare_mesh_warp(self.prep.mesh, names, settings, progress=progress,
+                                         size=self.mesh_diagonal())
             if not np.array_equal(model.surface_ids, self.surface_ids):
                 raise RuntimeError("the warp's surface nodes differ from the box's")
             self._warp = model
@@ -453,8 +496,8 @@ def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[n
     zone = DESIGN_ZONE * run.warp_model().chord
     tree = cKDTree(Xs)
 
-    def moved(node_ids: np.ndarray) -> np.ndarray:
-        X = mesh.points[node_ids]
+    def moved(node_ids: np.ndarray) -> np.ndarray:       # node ids: global (rows of a local mesh's ids)
+        X = mesh.points[local_rows(mesh, node_ids)]
         d, j = tree.query(X)
         out = X + b[j] + np.einsum("kij,kj->ki", F[j] - np.eye(3), X - Xs[j])
         out[d > zone] = np.nan
@@ -524,11 +567,15 @@ def full3(box: Box, Fc: np.ndarray) -> np.ndarray:
 
 
 def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = False,
-             progress=None, comm=None) -> DesignRun:
+             progress=None, comm=None, local: bool = False) -> DesignRun:
     """Prepare the box of every component of a loaded design (cached) and build its changes.
 
     ``comm`` (:mod:`ffdcli.parallel`) is kept by the run: :func:`deform` shares the volume among
-    the ranks; rank 0 reads the mesh and broadcasts it."""
+    the ranks. Each rank reads its part of the mesh (:func:`ffdcli.formats.read_part`). With
+    ``local`` (``ffd deform``), the run's mesh is the rank's local mesh
+    (:func:`ffdcli.partition.localize`: its nodes, their halo and every marker node), so no rank
+    keeps every node; without it (the derivatives through the whole volume, the API), every rank
+    keeps every node's coordinates."""
     from ffdcli import components as comp_mod
     from ffdcli.cache import file_hash
     from ffdcli.design import changes_from_spec
@@ -546,6 +593,16 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     part = None
     if comm is not None and comm.size > 1:       # each rank reads its part (where the format allows it)
         mesh, part = formats.read_part(design.mesh, comm, progress=progress)
+        if local and not mesh.is_local:          # a reader that gave every node: keep this rank's rows
+            mesh, rows = localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
+            # the reader's part has the global cell indices and count (a partial mesh's own cells are
+            # only some): only the rows of its nodes in the local mesh are new
+            if not np.array_equal(rows.ids, part.ids):
+                raise RuntimeError("the local mesh's part differs from the reader's")
+            part = replace(part, rows=rows.rows)
+        elif not local and mesh.is_local:        # every node wanted: rank 0 reads it all, broadcasts it
+            mesh = comm.root_then_bcast(read_mesh, design.mesh, progress=progress)
+            part = rank_part(mesh, comm)
         mesh_hash = comm.root_then_bcast(lambda: file_hash(mesh.path) if mesh.path is not None else None)
     else:
         mesh, mesh_hash = (comm or SerialComm()).root_then_bcast(read)
@@ -593,7 +650,7 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
 class Deformation:
     """The result of one design: new coordinates of every mesh node, and what was checked."""
 
-    points: np.ndarray           # (N, 3) all mesh nodes
+    points: np.ndarray           # (N, 3) all mesh nodes; a run on an MPI rank's local mesh: its rows (n, 3)
     lattice: object              # (n, m, l, 3) deformed control points; several components: a list
     surface_displacement: np.ndarray   # (S, 3)
     volume_method: str
@@ -654,13 +711,13 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
 
         model = run.warp_model(progress)
         rot = run.surface_frames(P1)
-        points += warp(model, disp, rot, progress=progress, comm=run.comm)   # MPI: each rank its block
+        points += run.warp_volume(model, disp, rot, progress)   # MPI: each rank its rows or its block
     else:
         points[ids] += disp
     # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
     points[ids] = mesh.points[ids] + disp
     t["volume"] = time.perf_counter() - t1
-    if not np.all(np.isfinite(points)):
+    if not run.all_finite(points):
         raise QualityError("the deformed mesh has non-finite coordinates; are the design values far too "
                            "large? nothing was written", path=run.design.path)
     quality = None
@@ -680,7 +737,7 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         best = (_badness(quality), points, quality, None)
         for what, settings, steps in attempts(run.warp_model(progress).settings):
             pts = incremental_warp(run, P1, settings, steps, progress=progress)
-            if not np.all(np.isfinite(pts)):
+            if not run.all_finite(pts):
                 tried.append({"attempt": what, "failed": None, "ok": False})
                 continue
             q = run.check_quality(pts, **kw)
@@ -704,16 +761,21 @@ def _badness(q: QualityReport) -> tuple[int, int]:
 # The writers are called through their modules (formats.write_mesh, ...), not bound names: a test or
 # a caller that replaces a writer (a full disk, an I/O error) replaces it here too.
 def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes: dict | None = None,
-                   target=None) -> dict:
+                   target=None, points: np.ndarray | None = None) -> dict:
     """{output kind: writer(tmp_path)} for the outputs of one design (see :mod:`ffdcli.outputs`).
 
     ``notes`` (a dict) receives what a writer reports: ``"su2_ffd"``, what was done to SU2's own FFD
-    section of an SU2 mesh, when it has one. ``target``: an airfoil (K, 2) drawn on the picture."""
+    section of an SU2 mesh, when it has one. ``target``: an airfoil (K, 2) drawn on the picture.
+    ``points``: of a run on a local mesh, every node's (N, 3) (:func:`ffdcli.distributed.gather_points`,
+    on the writing rank), which the mesh is written with; the other outputs need the surface only."""
 
     notes = {} if notes is None else notes
 
     def mesh(tmp):
-        got = formats.write_mesh(run.prep.mesh, tmp, result.points, progress=progress) or {}
+        if run.local and points is None:
+            raise RuntimeError("a run on a local mesh writes the mesh of every node: pass points=")
+        got = formats.write_mesh(writable_mesh(run.prep.mesh, tmp), tmp, result.points if points is None else points,
+                                 progress=progress) or {}
         if "su2_ffd" in got:         # SU2's own FFD section, brought up to date (or dropped): say so
             notes["su2_ffd"] = got["su2_ffd"]
 
@@ -724,8 +786,9 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
         return lambda tmp: lattice_vtk.write_lattice_vtk(tmp, P, original=comp.P0)
 
     def surface_file(tmp):           # SU2's DV_KIND= SURFACE_FILE: the surface for SU2's own volume motion
-        ids = run.surface_ids
-        su2_surface.write_surface_file(tmp, ids, result.points[ids], space_dim(run.prep.mesh))
+        ids = run.surface_ids        # the file names GLOBAL node ids (the rows of a local mesh are not)
+        su2_surface.write_surface_file(tmp, global_ids(run.prep.mesh, ids), result.points[ids],
+                                       space_dim(run.prep.mesh))
 
     def plot(tmp):
         from ffdcli.plot import plot_design
@@ -750,20 +813,43 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
 
 
 def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattice_path=None,
-                  surface_file=None, plot: bool = False, plan=None, progress=None, extra_writers=None) -> dict:
+                  surface_file=None, plot: bool = False, plan=None, progress=None, extra_writers=None,
+                  comm=None) -> dict:
     """Write the outputs of one design together (:meth:`ffdcli.outputs.OutputPlan.write`): the
     deformed mesh, the lattice VTK, with ``surface_file`` SU2's surface-positions file of the deformed
     surface nodes and with ``plot`` the picture. ``plan``: the plan made before the work (else one is
     made here from ``mesh_path`` (``-o``), ``lattice_path``, ``surface_file``, ``plot``).
     ``extra_writers``: writers of more planned kinds. Returns {kind: path}, plus ``"su2_ffd"``: what
-    was done to SU2's own FFD section of an SU2 mesh, when it has one."""
+    was done to SU2's own FFD section of an SU2 mesh, when it has one.
+
+    ``comm`` (:mod:`ffdcli.parallel`, a collective): rank 0 writes every output once, the outcome
+    (or its error) agreed on and broadcast. A run on local meshes first gathers every node's
+    coordinates on rank 0 (:func:`ffdcli.distributed.gather_points`: rank 0 then holds one (N, 3)
+    array, the other ranks their rows only)."""
+
+    if comm is not None and comm.size > 1:
+        kw = dict(mesh_path=mesh_path, lattice_path=lattice_path, surface_file=surface_file, plot=plot, plan=plan,
+                  progress=progress, extra_writers=extra_writers)
+        whole = None
+        if run.local and (plan is None or "mesh" in plan):
+            part = run.quality_part()
+            whole = comm.run(gather_points, part, result.points, run.prep.mesh.n_points_global, comm)
+        return comm.root_then_bcast(_write_outputs, run, result, points=whole, **kw)
+    return _write_outputs(run, result, mesh_path=mesh_path, lattice_path=lattice_path, surface_file=surface_file,
+                          plot=plot, plan=plan, progress=progress, extra_writers=extra_writers)
+
+
+def _write_outputs(run, result, *, mesh_path, lattice_path, surface_file, plot, plan, progress, extra_writers,
+                   points=None) -> dict:
+    """:func:`write_outputs` on the writing rank (``points``: every node's, of a run on local meshes)."""
     from ffdcli.outputs import plan_deform
 
     if plan is None:
         plan = plan_deform(run.design, mesh=mesh_path, lattice=lattice_path, plot=plot,
                            extra=[("surface_file", surface_file, False, "--surface-file")])
     notes: dict = {}
-    writers = {k: w for k, w in deform_writers(run, result, progress=progress, notes=notes).items() if k in plan}
+    writers = {k: w for k, w in deform_writers(run, result, progress=progress, notes=notes, points=points).items()
+               if k in plan}
     writers.update(extra_writers or {})
     written = plan.write(writers)
     written.update(notes)

@@ -61,12 +61,12 @@ def attempts(settings: WarpSettings) -> list[tuple[str, WarpSettings, int]]:
 
 def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *, progress=None
                      ) -> np.ndarray:
-    """(N, 3) mesh points after warping the volume through ``steps`` intermediate surfaces.
+    """(N, 3) mesh points (a local mesh: its rows) after warping the volume through ``steps`` intermediate surfaces.
 
     Step k moves the lattice to ``P0 + k/steps (P1 - P0)``; the warp of each step is prepared on
     the points of the step before. Surface nodes end exactly at ``X0 + B (P1 - P0)``.
     """
-    from ffdcli.warp import prepare_mesh_warp, warp
+    from ffdcli.warp import prepare_mesh_warp
 
     progress = progress or no_progress
     mesh = run.prep.mesh
@@ -81,8 +81,9 @@ def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *,
         bk = run.surface_displacement(Pk)
         Rk = run.surface_frames(Pk, settings.carry)
         dR = Rk if R_prev is None else Rk @ np.linalg.inv(R_prev)
-        model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress)
-        pts = pts + warp(model, bk - b_prev, dR, progress=progress, comm=getattr(run, "comm", None))
+        model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress,
+                                     size=run.mesh_diagonal(pts))
+        pts = pts + run.warp_volume(model, bk - b_prev, dR, progress)
         pts[sid] = mesh.points[sid] + bk
         b_prev, R_prev = bk, Rk
     return pts

@@ -280,16 +280,17 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
                      center, radius, narea)
 
 
-def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None
-                      ) -> tuple[WarpModel, MarkerRoles]:
+def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None,
+                      size: float | None = None) -> tuple[WarpModel, MarkerRoles]:
     """:func:`marker_roles` then :func:`prepare_warp` for an :class:`ffdcli.mesh.Mesh`.
 
     ``surface`` is the marker name or names of the deforming surface. The warp's surface nodes
     (``model.surface_ids``) are the sorted unique nodes of those markers: :func:`warp` takes their
-    displacement in that order.
+    displacement in that order. ``size``: the bounding-box diagonal of the whole mesh when ``mesh``
+    is one MPI rank's local mesh (:func:`ffdcli.distributed.diagonal`); default that of its points.
     """
     settings = settings or WarpSettings()
-    roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path)
+    roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path, size=size)
     model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
                          faces=roles.faces, progress=progress)
     return model, roles

@@ -67,7 +67,7 @@ class MarkerRoles:
 
 
 def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surface, dim: int = 3,
-                 settings: WarpSettings | None = None, *, path=None) -> MarkerRoles:
+                 settings: WarpSettings | None = None, *, path=None, size: float | None = None) -> MarkerRoles:
     """Decide which markers are fixed and which slide, by the rules of the module docstring.
 
     Parameters
@@ -82,6 +82,10 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
         2 for an airfoil mesh (planes become lines of the mesh plane), 3 otherwise.
     settings
         ``fixed``/``sliding`` name markers whose role the user chose.
+    size
+        The mesh's size scale (the planes' tolerance is relative to it): the diagonal of the
+        bounding box of ``points`` by default; given when ``points`` are some nodes of a larger
+        mesh (an MPI rank's local mesh: the whole mesh's diagonal, reduced over the ranks).
     """
     settings = settings or WarpSettings()
     pts = np.asarray(points, dtype=np.float64)
@@ -102,7 +106,7 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
 
     surface_ids = (np.unique(np.concatenate([ids_of(n) for n in surface])) if surface
                    else np.zeros(0, dtype=np.int64))
-    size = diagonal(pts)
+    size = diagonal(pts) if size is None else float(size)
     mesh_normal = _plane_normal(pts) if dim == 2 else None
     roles: dict[str, str] = {n: "surface" for n in surface}
     planes: dict[str, tuple[np.ndarray, np.ndarray]] = {}

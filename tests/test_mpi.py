@@ -407,3 +407,19 @@ def test_mpiexec_deform_of_a_cgns_mesh_read_by_parts_equals_serial(tmp_path):
     sm, pm = read_mesh(tmp_path / "s.cgns"), read_mesh(tmp_path / "p.cgns")
     np.testing.assert_array_equal(sm.points, pm.points)
     assert sm.n_cells == pm.n_cells and list(sm.markers) == list(pm.markers)
+
+
+@needs_mpi
+def test_mpiexec_check_shares_the_cells_and_prints_the_serial_report(tmp_path):
+    """``ffd check`` under 2 ranks: each judges its part of the mesh read by parts; the report (and a
+    refusal's exit status and report) is the serial one, printed once."""
+    for args in ([], ["--threshold", "0.2", "--worst", "3"]):
+        ser = run_ffd("check", SAMPLES / "rect_wing.su2", "--json", *args, cwd=tmp_path)
+        par = mpi_ffd(2, "check", SAMPLES / "rect_wing.su2", "--json", *args, cwd=tmp_path)
+        assert ser.returncode == par.returncode == (3 if args else 0), par.stderr
+        lines = [ln for ln in par.stdout.splitlines() if ln.strip()]
+        assert len(lines) == 1, par.stdout
+        a, b = json.loads(ser.stdout), json.loads(lines[0])
+        for d in (a, b, a.get("report", {}), b.get("report", {})):
+            d.pop("seconds", None)
+        assert a == b

@@ -65,7 +65,9 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     from ffdcli.quality import enforce
 
     comm = console.comm
-    run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress, comm=comm)
+    # MPI: each rank keeps its local mesh (its nodes, their halo, every marker node), never every node
+    run = load_run(design, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress, comm=comm,
+                   local=True)
     for comp in run.components:
         who = f"{comp.name}: " if comp.name else ""
         for w in comp.prep.warnings:
@@ -85,8 +87,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         from ffdcli.api import constraints_report
 
         constraints = constraints_report(run)
-    # every output once, together: rank 0 of an MPI run
-    written = comm.root_then_bcast(write_outputs, run, result, plan=plan, progress=console.progress)
+    # every output once, together: rank 0 of an MPI run (every node's coordinates gathered there)
+    written = write_outputs(run, result, plan=plan, progress=console.progress, comm=comm)
     su2_ffd = written.pop("su2_ffd", None)
     if su2_ffd is not None and su2_ffd.get("outside"):
         console.warn(f"{su2_ffd['outside']} surface nodes are now outside the mesh's own SU2 FFD box(es): "

@@ -1,0 +1,153 @@
+"""``ffd deform`` on each MPI rank's local mesh (issue 17: no rank holds every node): 3 ranks as threads
+(:mod:`ffdcli.testing.threadcomm`) against the serial run, bit for bit.
+
+Each rank's mesh is its local mesh (:func:`ffdcli.partition.localize`: owned nodes, halo, every marker
+node); every row it computes (owned and halo) equals the serial run's row of that node, the gate's
+report and the recovery attempts are the serial ones, and the files rank 0 writes from the gathered
+rows are the serial files byte for byte.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import yaml
+from conftest import SAMPLES
+
+from ffdcli import formats
+from ffdcli.design import load_design
+from ffdcli.distributed import diagonal, extent, gather_points
+from ffdcli.formats.su2_surface import read_surface_file
+from ffdcli.mesh import diagonal as serial_diagonal
+from ffdcli.partition import localize, node_owners
+from ffdcli.pipeline import deform, load_run, write_outputs
+from ffdcli.testing.threadcomm import run_ranks
+from ffdcli.testing.wings import extruded_wing_mesh
+
+RANKS = 3
+
+
+@pytest.fixture(scope="module")
+def wing_file(tmp_path_factory):
+    """A generated hexahedral wing mesh (1440 nodes) as an SU2 file."""
+    mesh = extruded_wing_mesh(n_around=33, n_radial=9, n_span=5)
+    path = tmp_path_factory.mktemp("wing") / "wing.su2"
+    formats.write_mesh(mesh, path, mesh.points)
+    return path
+
+
+def _design(tmp_path, data: dict, name: str = "d.yaml"):
+    p = tmp_path / name
+    p.write_text(yaml.safe_dump(data))
+    return p
+
+
+def _serial_and_ranks(design, tmp_path, outputs: dict, *, cache_dir=None):
+    """(serial run, its result, its written files) and, per rank, (global ids, points, report, recovery,
+    from_cache, written) of the same design on local meshes."""
+    serial_dir, mpi_dir = tmp_path / "serial", tmp_path / "mpi"
+    serial_dir.mkdir()
+    mpi_dir.mkdir()
+    kw = {"use_cache": cache_dir is not None, "cache_dir": cache_dir}
+    run = load_run(load_design(design), **kw)
+    res = deform(run)
+    written = write_outputs(run, res, **{k: serial_dir / v for k, v in outputs.items()})
+
+    def one(comm):
+        r = load_run(load_design(design), comm=comm, local=True, **kw)
+        x = deform(r)
+        w = write_outputs(r, x, comm=comm, **{k: mpi_dir / v for k, v in outputs.items()})
+        q = None if x.quality is None else x.quality.to_dict()
+        return r.prep.mesh.global_ids, x.points, q, x.recovery, x.recovered_with, r.prep.from_cache, w
+
+    return (run, res, written), run_ranks(RANKS, one)
+
+
+def _same_files(serial_written: dict, mpi_written: dict):
+    for kind, path in serial_written.items():
+        if kind == "su2_ffd":
+            continue
+        for a, b in zip(np.atleast_1d(path), np.atleast_1d(mpi_written[kind]), strict=True):
+            assert open(a, "rb").read() == open(b, "rb").read(), kind
+
+
+def test_extent_and_diagonal_of_the_ranks_rows_are_the_whole_meshs(wing_file):
+    mesh = formats.read_mesh(wing_file)
+    owner = node_owners(mesh.points, RANKS)
+
+    def one(comm):
+        local, _ = localize(mesh, owner, comm.rank)
+        return extent(local.points, comm), diagonal(local.points, comm), diagonal(np.zeros((0, 3)), comm)
+
+    for (lo, hi), d, empty in run_ranks(RANKS, one):
+        np.testing.assert_array_equal(lo, mesh.points.min(axis=0))
+        np.testing.assert_array_equal(hi, mesh.points.max(axis=0))
+        assert d == serial_diagonal(mesh.points) and empty == 0.0
+
+
+@pytest.mark.parametrize("chunk", [1, 97, 1 << 20])
+def test_gather_points_puts_every_owned_row_in_place_on_rank_0(wing_file, chunk):
+    mesh = formats.read_mesh(wing_file)
+    owner = node_owners(mesh.points, RANKS)
+    X = mesh.points * 2.0 + 1.0
+
+    def one(comm):
+        local, part = localize(mesh, owner, comm.rank)
+        return gather_points(part, X[local.global_ids], mesh.n_points, comm, chunk=chunk)
+
+    got = run_ranks(RANKS, one)
+    np.testing.assert_array_equal(got[0], X)
+    assert all(g is None for g in got[1:])
+
+
+def test_a_design_that_needs_recovery_gives_the_serial_rows_report_and_files(wing_file, tmp_path):
+    """Dihedral 40 with IDWarp's short reach fails the gate: every recovery attempt runs (longer
+    reach, rotation, increments: the warp rebuilt on each step's local rows), each rank's rows
+    are the serial ones, the report and attempts too, and the files are the serial ones."""
+    design = _design(tmp_path, {"mesh": str(wing_file), "surface": "wing", "box": {"points": [4, 4, 2]},
+                                "changes": [{"dihedral": 40}], "volume": {"alpha": 0.25}})
+    outputs = {"mesh_path": "out.su2", "lattice_path": "out_lattice.vtk", "surface_file": "surface.dat"}
+    (run, res, written), ranks = _serial_and_ranks(design, tmp_path, outputs)
+    assert len(res.recovery) == 5 and any("increments" in a["attempt"] for a in res.recovery)
+    seen = np.zeros(run.prep.mesh.n_points, dtype=int)
+    for g, pts, q, recovery, used, _, w in ranks:
+        assert len(g) < run.prep.mesh.n_points          # a local mesh: not every node
+        np.testing.assert_array_equal(pts, res.points[g])
+        assert q == res.quality.to_dict()
+        assert recovery == res.recovery and used == res.recovered_with
+        seen[g] += 1
+        assert w == ranks[0][6]             # what was written, agreed on every rank
+    assert seen.min() >= 1
+    assert sorted(ranks[0][6]) == sorted(written) == ["lattice", "mesh", "surface_file"]
+    _same_files(written, ranks[0][6])
+    ids, _ = read_surface_file(tmp_path / "mpi" / "surface.dat", 3)
+    np.testing.assert_array_equal(ids, run.surface_ids)       # global node ids
+
+
+def test_another_output_format_is_written_from_every_cell(wing_file, tmp_path):
+    """A local mesh written as VTU (not the input's format): rank 0 reads the whole file again."""
+    design = _design(tmp_path, {"mesh": str(wing_file), "surface": "wing", "box": {"points": [4, 4, 2]},
+                                "changes": [{"twist": {"tip": 5}}]})
+    (run, res, written), ranks = _serial_and_ranks(design, tmp_path, {"mesh_path": "out.vtu",
+                                                                      "lattice_path": "out_lattice.vtk"})
+    back = formats.read_mesh(ranks[0][6]["mesh"])
+    assert back.n_cells == run.prep.mesh.n_cells
+    np.testing.assert_array_equal(back.points, res.points)
+    assert open(written["mesh"], "rb").read() == open(ranks[0][6]["mesh"], "rb").read()
+
+
+def test_two_components_on_local_meshes_equal_the_serial_run(tmp_path):
+    """Wing, tail and fin (three boxes, one volume motion) on the ranks' local meshes, the boxes
+    read from the cache the serial run wrote (its surface ids are global on every rank)."""
+    design = _design(tmp_path, {"mesh": str(SAMPLES / "wing_tail_fin.su2"), "components": [
+        {"name": "wing", "surface": "wing", "box": {"points": [6, 8, 2]}, "changes": [{"twist": {"tip": -3}}]},
+        {"name": "htail", "surface": "htail", "box": {"points": [5, 4, 2]}, "changes": [{"dihedral": 5}]}]})
+    cache = tmp_path / "cache"
+    cache.mkdir()
+    (run, res, written), ranks = _serial_and_ranks(design, tmp_path, {"mesh_path": "out.su2"}, cache_dir=cache)
+    assert not run.single
+    for g, pts, q, recovery, _, from_cache, _ in ranks:
+        assert from_cache
+        np.testing.assert_array_equal(pts, res.points[g])
+        assert q == res.quality.to_dict() and recovery == res.recovery
+    assert open(written["mesh"], "rb").read() == open(ranks[0][6]["mesh"], "rb").read()
