@@ -1,6 +1,8 @@
 """Strong scaling over MPI ranks (issue 17): embedding 1M points, the 1M-node volume warp, reading a
 1M-node mesh by parts (SU2 and CGNS, against rank 0 reading and broadcasting it), the quality gate on
-the parts, and ``ffd deform`` of the 1M-node mesh end to end, at 1 and 2 ranks; peak memory per rank.
+the parts, and ``ffd deform`` of the 1M-node mesh end to end, at 1 and 2 ranks; peak memory per rank,
+and (case ``memory``) ``ffd deform``'s pipeline at 1, 2 and 4 ranks on local meshes and at 2 with every
+node on every rank: RSS and peak per phase, the arrays held by owner, the rows per rank.
 
 Each case runs as ``mpiexec -n R python -m benchmarks.bench_mpi --child CASE ...`` (the ``[mpi]``
 extra's ``mpiexec``; skipped without it). The ranks build the same inputs (same seeds), warm the
@@ -44,7 +46,9 @@ element rows, the cells sent to the ranks owning their nodes) against `bcast` (r
 whole mesh and broadcasts it, each rank then takes its part). Gate: the quality gate of a smoothly
 moved copy of that mesh (scaled Jacobian + node orthogonality, the input's reference included), each
 rank on its part. Deform: `ffd deform --force --json` of the SU2 mesh with its box cached: wall time
-of the whole command. The machine has 2 cores shared with other jobs: every figure is as loaded as
+of the whole command. Memory: load_run / deform / write_outputs of that design, once per row (1, 2, 4
+ranks x 1 thread on local meshes, 2 ranks with every node; 4 ranks oversubscribe the cores: memory,
+not time). The machine has 2 cores shared with other jobs: every figure is as loaded as
 the machine was (load average in the table).
 """
 
@@ -63,6 +67,11 @@ def _env(threads: int) -> dict:
 def _peak_mb() -> float:
     with open("/proc/self/status") as fh:
         return int(next(ln for ln in fh if ln.startswith("VmHWM:")).split()[1]) / 1024
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/status") as fh:
+        return int(next(ln for ln in fh if ln.startswith("VmRSS:")).split()[1]) / 1024
 
 
 def _timed(comm, fn, repeat=REPEAT) -> float:
@@ -145,6 +154,71 @@ def child_gate(comm, path: str) -> dict:
     return {"seconds": t, "failed": report.n_failed}
 
 
+def _held_bytes(obj, seen: set) -> int:
+    """Bytes of the NumPy arrays reachable from ``obj`` through dataclass fields, attributes, dicts,
+    lists and tuples (each buffer counted once over the calls sharing ``seen``)."""
+    import dataclasses
+
+    stack, total = [obj], 0
+    while stack:
+        o = stack.pop()
+        if isinstance(o, np.ndarray):
+            base = o
+            while isinstance(base.base, np.ndarray):
+                base = base.base
+            if id(base) not in seen:
+                seen.add(id(base))
+                total += base.nbytes
+            continue
+        if id(o) in seen or o is None or isinstance(o, (str, bytes, int, float, bool, Path, type)):
+            continue
+        seen.add(id(o))
+        if isinstance(o, dict):
+            stack.extend(o.values())
+        elif isinstance(o, (list, tuple)):
+            stack.extend(o)
+        elif dataclasses.is_dataclass(o):
+            stack.extend(getattr(o, f.name) for f in dataclasses.fields(o))
+        elif type(o).__module__.startswith("ffdcli") and hasattr(o, "__dict__"):
+            stack.extend(vars(o).values())
+    return total
+
+
+def _held_mb(run, result=None) -> dict:
+    """MB of the arrays a run holds, by what holds them (the rank's local mesh, the gate's part and
+    reference, the warp model, the boxes/embeddings/surfaces, the result)."""
+    seen: set = set()
+    groups = {"mesh": run.prep.mesh, "gate part": (run._quality_part, run._quality_ref), "warp": run._warp,
+              "boxes": [(c.prep.box, c.prep.embedding, c.prep.surface) for c in run.components], "result": result}
+    return {k: round(_held_bytes(v, seen) / 2**20, 1) for k, v in groups.items()}
+
+
+def child_memory(comm, design: str, mode: str) -> dict:
+    """``ffd deform``'s pipeline (load_run, deform, write_outputs) on local meshes (``mode`` local) or
+    with every node on every rank (``whole``, the path before issue 17's local meshes): the resident
+    and peak MB of every rank after each phase, and each rank's local rows."""
+    from ffdcli.design import load_design
+    from ffdcli.pipeline import deform, load_run, write_outputs
+
+    phases = {}
+
+    def mark(name):
+        phases[name] = comm.allgather((round(_rss_mb()), round(_peak_mb())))
+
+    t0 = time.perf_counter()
+    mark("start")
+    run = load_run(load_design(design), comm=comm, local=mode == "local")
+    mark("read")
+    held = {"read": comm.allgather(_held_mb(run))}
+    result = deform(run)
+    mark("deform")
+    held["deform"] = comm.allgather(_held_mb(run, result))
+    write_outputs(run, result, comm=comm)
+    mark("write")
+    return {"seconds": max(comm.allgather(time.perf_counter() - t0)), "phases": phases, "held_mb": held,
+            "local_rows": comm.allgather(run.prep.mesh.n_points), "nodes": run.prep.mesh.n_points_global}
+
+
 def _child(argv) -> int:
     from ffdcli.parallel import world
 
@@ -156,6 +230,8 @@ def _child(argv) -> int:
         out = child_warp(comm, int(args[0]), int(args[1]))
     elif case == "read":
         out = child_read(comm, args[0], args[1])
+    elif case == "memory":
+        out = child_memory(comm, args[0], args[1])
     else:
         out = child_gate(comm, args[0])
     peaks = comm.allgather(_peak_mb())
@@ -221,7 +297,24 @@ def _cases(folder: Path, quick: bool) -> list[tuple[str, int, list[str], Path | 
             ("read CGNS by parts", nodes, me + ["read", str(folder / "wing.cgns"), "parts"], None),
             ("read CGNS rank 0 + bcast", nodes, me + ["read", str(folder / "wing.cgns"), "bcast"], None),
             ("gate", nodes, me + ["gate", str(folder / "wing.su2")], None),
-            ("deform", nodes, ["-c", _FFD_PEAK, "deform", "design_idw.yaml", "--force", "--json"], folder)]
+            ("deform", nodes, ["-c", _FFD_PEAK, "deform", "design_idw.yaml", "--force", "--json"], folder),
+            ("memory", nodes, me + ["memory", str(folder / "design_idw.yaml")], None)]
+
+
+#: (ranks, mode) of the memory rows: every node on every rank (before the local meshes) and local meshes.
+MEMORY = ((1, "local"), (2, "whole"), (2, "local"), (4, "local"))
+
+
+def _memory_rows(n: int, argv: list[str]) -> list[dict]:
+    """One run of each of :data:`MEMORY` (1 thread a rank; 4 ranks oversubscribe 2 cores: memory only)."""
+    rows = []
+    for ranks, mode in MEMORY:
+        _, js, _ = _launch(ranks, 1, argv + [mode])
+        rows.append({"case": "memory", "N": n, "ranks": ranks, "threads": 1, "mode": mode,
+                     "seconds": js["seconds"], "peak_mb_max": js["peak_mb_max"], "peak_mb": js["peak_mb"],
+                     "phases": js["phases"], "held_mb": js["held_mb"], "local_rows": js["local_rows"],
+                     "load": round(os.getloadavg()[0], 1)})
+    return rows
 
 
 def run(quick: bool = False, only: list[str] | None = None) -> list[dict]:
@@ -232,6 +325,9 @@ def run(quick: bool = False, only: list[str] | None = None) -> list[dict]:
     with tempfile.TemporaryDirectory() as tmp:
         cases = [c for c in _cases(Path(tmp), quick) if not only or c[0].split()[0] in only]
         for case, n, argv, cwd in cases:
+            if case == "memory":
+                rows += _memory_rows(n, argv)
+                continue
             runs: dict[tuple, list] = {}
             for _ in range(ROUNDS):
                 for cfg in SCALING:                      # 1 and 2 ranks alternately: the same load
@@ -261,6 +357,19 @@ def summary(rows: list[dict]) -> list[dict]:
                         "measured": f"{r['load_start']} at the start, {r['load_end']} at the end",
                         "target": "", "pyGeo reference": ""})
             continue
+        if r["case"] == "memory":
+            ph = r["phases"]
+            rss = ", ".join(f"{k} {max(v[0] for v in ph[k])}/{max(v[1] for v in ph[k])}" for k in ph)
+            per_rank = "/".join(f"{p:.0f}" for p in r["peak_mb"])
+            held = r["held_mb"]["deform"]
+            arrays = ", ".join(f"{k} {max(h[k] for h in held):.0f}" for k in held[0])
+            out.append({"case": f"memory, ffd deform {r['N'] / 1e6:g}M, {r['ranks']} rank(s), {r['mode']} mesh",
+                        "measured": f"peak {r['peak_mb_max']:.0f} MB/rank (per rank {per_rank}); "
+                                    f"after each phase, max over ranks, RSS/peak MB: {rss}; arrays held after "
+                                    f"the deform, MB (max over ranks): {arrays}; rows per rank "
+                                    f"{'/'.join(map(str, r['local_rows']))} ({r['seconds']:.3g} s, load {r['load']})",
+                        "target": "shrinks with the rank count", "pyGeo reference": ""})
+            continue
         one = by.get((r["case"], 1, 1))
         eff = ""
         met = None
@@ -285,7 +394,7 @@ def _main(argv=None) -> int:
     ap = argparse.ArgumentParser(description="MPI strong scaling (issue 17)")
     ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", action="append", help="case names to run (embed, warp, read, gate, deform)")
+    ap.add_argument("--only", action="append", help="case names to run (embed, warp, read, gate, deform, memory)")
     args = ap.parse_args(argv)
     if args.child:
         return _child(args.child)
