@@ -236,11 +236,12 @@ class Embedding:
         g = np.ascontiguousarray(g, dtype=np.float64)
         if g.ndim != 2 or g.shape[0] != self.n_points or not 1 <= g.shape[1] <= 3:
             raise ValueError(f"g must have shape ({self.n_points}, gdim), got {g.shape}")
-        nchunk = max(1, min(self.n_points, 4 * numba.get_num_threads()))
-        acc = np.zeros((nchunk, 4 * self.n_ctrl))
-        if self.n_points:
-            _rmatvec(self._kernel_axes(), g, self.inside, acc)
-        return np.ascontiguousarray(acc.sum(axis=0).reshape(self.n_ctrl, 4)[:, : g.shape[1]])
+        if not self.n_points:
+            return np.zeros((self.n_ctrl, g.shape[1]))
+        nchunk = min(self.n_points, 4 * numba.get_num_threads())
+        out = np.empty((self.n_ctrl, g.shape[1]))
+        _rmatvec(self._kernel_axes(), g, self.inside, np.zeros((nchunk, 4 * self.n_ctrl)), out)
+        return out
 
     def basis_matrix(self) -> sparse.csr_matrix:
         """The sparse basis ``B`` (N x n_ctrl, CSR) with zero rows for outside points.
@@ -432,10 +433,11 @@ def _basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, 
 # control point in the general kernel, 8-wide over the two control points of a linear third axis in
 # the default box's kernel. Each lane is fma(w, g, acc), correctly rounded once.
 @njit(cache=True, parallel=True)
-def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
-    """``acc[chunk] += B[chunk rows].T @ g`` per chunk of points (one accumulator per chunk: no two
-    threads add into one array); ``acc`` (nchunk, n_ctrl * 4), zero on entry, every 4th entry stays
-    0. Any basis widths, 2D (``has_w`` False) or 3D; rows of outside points are skipped.
+def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc, out):
+    """``out = B.T @ g``, (n_ctrl, gdim): ``acc[chunk] += B[chunk rows].T @ g`` per chunk of points
+    (one accumulator per chunk: no two threads add into one array), then the chunks summed in order
+    (:func:`_sum_chunks`); ``acc`` (nchunk, n_ctrl * 4), zero on entry, every 4th entry stays 0.
+    Any basis widths, 2D (``has_w`` False) or 3D; rows of outside points are skipped.
 
     Per control point the update is ``fma(V0[a] V1[b] V2[c], g, acc)``: the same value, bit for bit,
     as the scalar ``acc[k, q] += w * g[q]`` with contraction."""
@@ -448,7 +450,7 @@ def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
     for ch in prange(nchunk):
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        out = acc[ch]
+        part = acc[ch]
         for i in range(lo, hi):
             if not inside[i]:
                 continue
@@ -465,11 +467,12 @@ def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
                     base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
                     for c in range(c1):
                         w = wab * V2[i, c] if has_w else wab
-                        axpy4(out, 4 * (base + c), w, g0, g1, g2, 0.0)
+                        axpy4(part, 4 * (base + c), w, g0, g1, g2, 0.0)
+    _sum_chunks(acc, out)
 
 
 @njit(cache=True, parallel=True)
-def _rmatvec_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
+def _rmatvec_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc, out):
     """:func:`_rmatvec_nb` for the default box (cubic, cubic, linear: widths 4, 4, 2; 3D only) with
     the widths known when compiling: the two control points ``c = 0, 1`` of a column are adjacent
     (C order), so each of the 16 ``(a, b)`` columns is one 8-wide update
@@ -482,7 +485,7 @@ def _rmatvec_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
     for ch in prange(nchunk):
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        out = acc[ch]
+        part = acc[ch]
         for i in range(lo, hi):
             if not inside[i]:
                 continue
@@ -500,17 +503,30 @@ def _rmatvec_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc):
                 wa = V0[i, a]
                 for b in range(4):
                     base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-                    axpy8(out, 4 * base, wa * V1[i, b], t0, t1, t2, 0.0, s0, s1, s2, 0.0)
+                    axpy8(part, 4 * base, wa * V1[i, b], t0, t1, t2, 0.0, s0, s1, s2, 0.0)
+    _sum_chunks(acc, out)
 
 
-def _rmatvec(axes, g, inside, acc):
-    """``B.T @ g`` into ``acc`` by the kernel that fits the basis widths (``axes`` from
-    ``Embedding._kernel_axes``)."""
+@njit(cache=True, nogil=True, inline="always")
+def _sum_chunks(acc, out):
+    """``out[k, d] = acc[0, 4k + d] + acc[1, 4k + d] + ...`` in chunk order (serial: a few hundred
+    sums per chunk; what ``acc.sum(axis=0)`` gives, without its temporaries)."""
+    for k in range(out.shape[0]):
+        for d in range(out.shape[1]):
+            s = acc[0, 4 * k + d]
+            for ch in range(1, acc.shape[0]):
+                s += acc[ch, 4 * k + d]
+            out[k, d] = s
+
+
+def _rmatvec(axes, g, inside, acc, out):
+    """``out = B.T @ g`` (through the chunk accumulators ``acc``) by the kernel that fits the basis
+    widths (``axes`` from ``Embedding._kernel_axes``)."""
     f0, V0, f1, V1, f2, V2, has_w = axes[:7]
     if has_w and V0.shape[1] == 4 and V1.shape[1] == 4 and V2.shape[1] == 2:
-        _rmatvec_442_nb(*axes, g, inside, acc)
+        _rmatvec_442_nb(*axes, g, inside, acc, out)
     else:
-        _rmatvec_nb(*axes, g, inside, acc)
+        _rmatvec_nb(*axes, g, inside, acc, out)
 
 
 def rmatvec_reference(emb: Embedding, g) -> np.ndarray:

@@ -96,4 +96,6 @@ class PointSet:
         g = np.asarray(g, dtype=float)
         if g.shape != (self.n_points, 3):
             raise InputError(f"point set {self.name!r}: g must have shape ({self.n_points}, 3), got {g.shape}")
-        return np.asarray(self.basis.T @ g).reshape(-1) @ D
+        # B.T @ g by the embedding's compiled kernel (a few times SciPy's CSR product; same sums to
+        # rounding): ``basis`` is the embedding's basis matrix, outside rows zero, which rmatvec skips
+        return self.embedding.rmatvec(g).reshape(-1) @ D

@@ -18,6 +18,7 @@ from ffdcli.embedding import (
     basis_matrix_reference,
     rmatvec_reference,
 )
+from ffdcli.pointset import PointSet
 from ffdcli.simd import axpy4, axpy8
 
 CASES = {
@@ -35,7 +36,7 @@ def _embedding(lat, n, seed, outside=()):
     rng = np.random.default_rng(seed)
     u = rng.uniform(0.0, 1.0, (n, lat.pdim))
     u[: n // 8, 0] = rng.choice([0.0, 1.0], n // 8)
-    u[n // 8: n // 4, -1] = rng.choice([0.0, 1.0], n // 8)
+    u[n // 8: n // 4, -1] = rng.choice([0.0, 1.0], n // 4 - n // 8)
     inside = np.ones(n, dtype=bool)
     inside[list(outside)] = False
     return Embedding.from_params(lat, u, inside, np.where(inside, 0.0, 1.0))
@@ -69,10 +70,13 @@ def test_the_442_kernel_is_the_general_one_to_rounding():
     for nchunk in (1, 3, 8, 4 * numba.get_num_threads()):
         special = np.zeros((nchunk, 4 * lat.n_ctrl))
         general = np.zeros((nchunk, 4 * lat.n_ctrl))
-        _rmatvec_442_nb(*axes, g, emb.inside, special)
-        _rmatvec_nb(*axes, g, emb.inside, general)
+        s, r = np.empty((lat.n_ctrl, 3)), np.empty((lat.n_ctrl, 3))
+        _rmatvec_442_nb(*axes, g, emb.inside, special, s)
+        _rmatvec_nb(*axes, g, emb.inside, general, r)
         assert not special[:, 3::4].any() and not general[:, 3::4].any()   # the padding lane stays 0
-        s, r = special.sum(axis=0).reshape(-1, 4)[:, :3], general.sum(axis=0).reshape(-1, 4)[:, :3]
+        # the result is the chunks' sum in chunk order
+        np.testing.assert_array_equal(s, special.sum(axis=0).reshape(-1, 4)[:, :3])
+        np.testing.assert_array_equal(r, general.sum(axis=0).reshape(-1, 4)[:, :3])
         assert np.all(np.abs(s - r) <= 1e-14 * _bound(emb, g))
     # rmatvec is this kernel with 4 chunks per thread, summed over the chunks in order
     np.testing.assert_array_equal(emb.rmatvec(g), s)
@@ -119,6 +123,17 @@ def test_vjp_through_the_kernel_is_the_reference():
     got = vjp(emb, g, D)
     scale = _bound(emb, g).reshape(-1) @ np.abs(D)
     assert np.all(np.abs(got - ref) <= 1e-13 * scale)
+
+
+def test_point_set_vjp_is_its_basis_transpose():
+    """PointSet.vjp goes through the embedding's kernel: the same as its CSR basis' transpose."""
+    lat = wing_lattice((8, 6, 2), (3, 3, 1))
+    emb = _embedding(lat, 500, seed=12, outside=[3, 4])
+    ps = PointSet(name="p", points0=np.zeros((500, 3)), embedding=emb, basis=emb.basis_matrix())
+    D = np.random.default_rng(13).normal(size=(3 * lat.n_ctrl, 7))
+    g = np.random.default_rng(14).normal(size=(500, 3))
+    ref = np.asarray(ps.basis.T @ g).reshape(-1) @ D
+    np.testing.assert_allclose(ps.vjp(D, g), ref, rtol=0, atol=1e-13 * (_bound(emb, g).reshape(-1) @ np.abs(D)).max())
 
 
 # ---------------------------------------------------------------------------------------------- simd
