@@ -14,12 +14,13 @@ from ffdcli.derivatives import lattice_jacobian, vjp
 from ffdcli.embedding import (
     Embedding,
     _rmatvec_442_nb,
+    _rmatvec_442c_nb,
     _rmatvec_nb,
     basis_matrix_reference,
     rmatvec_reference,
 )
 from ffdcli.pointset import PointSet
-from ffdcli.simd import axpy4, axpy8
+from ffdcli.simd import axpy4, axpy8, axpy8x3
 
 CASES = {
     "3d-442": lambda: wing_lattice((8, 6, 2), (3, 3, 1)),          # the default box: the 8-wide kernel
@@ -60,26 +61,29 @@ def test_rmatvec_matches_the_reference(case, gdim):
     assert np.all(np.abs(got - ref) <= 1e-13 * _bound(emb, g))
 
 
-def test_the_442_kernel_is_the_general_one_to_rounding():
-    """The default box's 8-wide kernel and the general 4-wide one give the same sums to ulps (their
-    products are grouped differently), for every thread split."""
-    lat = wing_lattice((8, 6, 2), (3, 3, 1))
+@pytest.mark.parametrize("shape", [(8, 6, 2), (8, 6, 4)])
+def test_the_442_kernels_are_the_general_one_to_rounding(shape):
+    """The cubic-cubic-linear kernels (8-wide; 24-wide when the third axis has 2 control points) and
+    the general 4-wide one give the same sums to ulps (their products are grouped differently), for
+    any split into chunks; the result is the chunks' sum in chunk order."""
+    lat = wing_lattice(shape, (3, 3, 1))
     emb = _embedding(lat, 20_000, seed=3, outside=[0, 17, 19_999])
     g = np.random.default_rng(4).normal(size=(emb.n_points, 3))
     axes = emb._kernel_axes()
+    kernels = [(_rmatvec_nb, 4), (_rmatvec_442_nb, 4)] + ([(_rmatvec_442c_nb, 3)] if shape[2] == 2 else [])
     for nchunk in (1, 3, 8, 4 * numba.get_num_threads()):
-        special = np.zeros((nchunk, 4 * lat.n_ctrl))
-        general = np.zeros((nchunk, 4 * lat.n_ctrl))
-        s, r = np.empty((lat.n_ctrl, 3)), np.empty((lat.n_ctrl, 3))
-        _rmatvec_442_nb(*axes, g, emb.inside, special, s)
-        _rmatvec_nb(*axes, g, emb.inside, general, r)
-        assert not special[:, 3::4].any() and not general[:, 3::4].any()   # the padding lane stays 0
-        # the result is the chunks' sum in chunk order
-        np.testing.assert_array_equal(s, special.sum(axis=0).reshape(-1, 4)[:, :3])
-        np.testing.assert_array_equal(r, general.sum(axis=0).reshape(-1, 4)[:, :3])
-        assert np.all(np.abs(s - r) <= 1e-14 * _bound(emb, g))
-    # rmatvec is this kernel with 4 chunks per thread, summed over the chunks in order
-    np.testing.assert_array_equal(emb.rmatvec(g), s)
+        results = []
+        for kernel, stride in kernels:
+            acc, out = np.zeros((nchunk, stride * lat.n_ctrl)), np.empty((lat.n_ctrl, 3))
+            kernel(*axes, g, emb.inside, acc, out)
+            if stride == 4:
+                assert not acc[:, 3::4].any()                      # the padding lane stays 0
+            np.testing.assert_array_equal(out, acc.sum(axis=0).reshape(-1, stride)[:, :3])
+            results.append(out)
+        for r in results[1:]:
+            assert np.all(np.abs(r - results[0]) <= 1e-14 * _bound(emb, g))
+    # rmatvec: the last (fastest fitting) kernel with 4 chunks per thread
+    np.testing.assert_array_equal(emb.rmatvec(g), results[-1])
 
 
 @pytest.mark.parametrize("case", ["3d-442", "3d-cubic-16x12x4", "2d-gdim2"])
@@ -168,6 +172,26 @@ def test_axpy_rounds_once(width, call):
     out = np.full(width, -(1.0 + 2 * e))
     call(out, 0, 1.0 + e, np.full(width, 1.0 + e))
     np.testing.assert_array_equal(out, np.full(width, 2.0 ** -60))
+
+
+@njit(cache=False)
+def _call8x3(out, k, w, u, g):
+    axpy8x3(out, k, w, u[0], u[1], u[2], u[3], u[4], u[5], u[6], u[7], g[0], g[1], g[2])
+
+
+def test_axpy8x3_adds_the_scaled_outer_product():
+    rng = np.random.default_rng(2)
+    out, u, g = rng.normal(size=30), rng.normal(size=8), rng.normal(size=3)
+    before = out.copy()
+    _call8x3(out, 3, -1.5, u, g)
+    np.testing.assert_allclose(out[3:27], before[3:27] - 1.5 * np.outer(u, g).ravel(), rtol=1e-15, atol=1e-15)
+    np.testing.assert_array_equal(out[:3], before[:3])
+    np.testing.assert_array_equal(out[27:], before[27:])
+    # u g rounded, then one fused multiply-add: w = 1 + 2^-30 times (1 + 2^-30) * 1, plus -(1 + 2^-29)
+    e = 2.0 ** -30
+    out = np.full(24, -(1.0 + 2 * e))
+    _call8x3(out, 0, 1.0 + e, np.full(8, 1.0 + e), np.ones(3))
+    np.testing.assert_array_equal(out, np.full(24, 2.0 ** -60))
 
 
 def test_axpy_refuses_what_it_cannot_address():
