@@ -259,14 +259,25 @@ def rank_part(mesh: Mesh, comm) -> MeshPart:
     return part_of(mesh, node_owners(mesh.points, comm.size), comm.rank)
 
 
-def redistribute(comm, owner: np.ndarray, types, blocks, cell_ids) -> tuple[list, list]:
+def redistribute(comm, owners, types, blocks, cell_ids) -> tuple[list, list]:
     """Cells read in any split sent to every rank that owns one of their nodes (an all-to-all).
 
     ``blocks``/``cell_ids``: per cell type, the (k, nodes) global node ids and (k,) global indices
-    of the cells this rank read. Returns, per type, the cells touching this rank's nodes, sorted by
-    global index."""
-    outgoing = [[(b[m], c[m]) for b, c in zip(blocks, cell_ids, strict=True) for m in [touching(b, owner, r)]]
-                for r in range(comm.size)]
+    of the cells this rank read; ``owners``: per type, the (k, nodes) owner rank of each of their
+    nodes. Returns, per type, the cells touching this rank's nodes, sorted by global index."""
+    outgoing = [[] for _ in range(comm.size)]
+    for b, c, ow in zip(blocks, cell_ids, owners, strict=True):
+        k, m = b.shape[0], b.shape[1] if b.ndim == 2 else 0
+        srt = np.sort(ow.reshape(k, m), axis=1)
+        first = np.ones(srt.shape, dtype=bool)          # each (cell, rank) pair once
+        first[:, 1:] = srt[:, 1:] != srt[:, :-1]
+        cell = np.repeat(np.arange(k), m)[first.ravel()]
+        dest = srt.ravel()[first.ravel()]
+        order = np.argsort(dest, kind="stable")        # by rank, cells in read order within one
+        cuts = np.searchsorted(dest[order], np.arange(comm.size + 1))
+        for r in range(comm.size):
+            sel = cell[order[cuts[r]:cuts[r + 1]]]
+            outgoing[r].append((b[sel], c[sel]))
     incoming = comm.alltoall(outgoing)
     out_blocks, out_ids = [], []
     for k, t in enumerate(types):
@@ -277,3 +288,86 @@ def redistribute(comm, owner: np.ndarray, types, blocks, cell_ids) -> tuple[list
         out_blocks.append(data[order].reshape(len(ids), CELL_NODES[t]))
         out_ids.append(ids[order])
     return out_blocks, out_ids
+
+
+def _ask(comm, bounds: np.ndarray, ids: np.ndarray, answer) -> list:
+    """Every rank asks the holders of the blocks of rows (``bounds`` (size + 1,): rank r holds global
+    rows ``bounds[r] .. bounds[r + 1] - 1``) about sorted unique global ``ids`` (two all-to-alls):
+    ``answer(rows)`` on the holder, with ``rows`` its local row indices, gives an array of one row per
+    id. Returns the answers in the order of ``ids``, one array per rank concatenated by the caller."""
+    holder = np.searchsorted(bounds, ids, side="right") - 1
+    cuts = np.searchsorted(holder, np.arange(comm.size + 1))     # ids sorted: holders nondecreasing
+    asked = comm.alltoall([ids[cuts[r]:cuts[r + 1]] for r in range(comm.size)])
+    return comm.alltoall([answer(a - bounds[comm.rank]) for a in asked])
+
+
+def local_mesh_of_blocks(comm, block: np.ndarray, n: int, dim: int, types, blocks, cell_ids, n_cells: int,
+                         markers: dict) -> tuple[Mesh, MeshPart]:
+    """One rank's local mesh (:func:`localize`, without ``path``, ``format``, ``source``) and its part
+    from blocks of rows read by each rank; a collective. No rank holds every node.
+
+    Parameters
+    ----------
+    block
+        (m, 3) this rank's contiguous block of the ``n`` nodes' coordinates (the blocks in rank order
+        are the rows in order; any lengths, some empty).
+    types, blocks, cell_ids
+        The mesh's non-empty cell types in its order (the same on every rank); per type, the (k, nodes)
+        cells this rank read (global node ids, any split of the cells) and their (k,) global indices.
+    n_cells
+        The mesh's cell count.
+    markers
+        Every marker, global node ids (the same on every rank).
+
+    Each node goes to its owner (:func:`block_owners`; one all-to-all of ids and coordinates); the
+    owners of the nodes of the cells read are asked of the blocks' holders, the cells sent to the
+    owners of their nodes (:func:`redistribute`), and the coordinates of the halo and marker nodes
+    asked of the holders (all-to-alls of ids, then of rows). Equal to :func:`localize` of the whole
+    mesh with :func:`node_owners`, field by field.
+    """
+    block = np.ascontiguousarray(block, dtype=np.float64).reshape(-1, 3)
+    counts = np.array(comm.allgather(len(block)), dtype=np.int64)
+    bounds = np.concatenate([[0], np.cumsum(counts)])
+    if int(bounds[-1]) != n:
+        raise ValueError(f"the ranks' blocks hold {int(bounds[-1])} rows, the mesh has {n} nodes")
+    start, rank = int(bounds[comm.rank]), comm.rank
+    own = block_owners(comm, block, start, n)
+    gid = np.arange(start, start + len(block), dtype=np.int64)
+    by = np.argsort(own, kind="stable")
+    cut = np.searchsorted(own[by], np.arange(comm.size + 1))
+    got = comm.alltoall([(gid[by[cut[r]:cut[r + 1]]], block[by[cut[r]:cut[r + 1]]]) for r in range(comm.size)])
+    mine = np.concatenate([g[0] for g in got])           # sorted: the holders' blocks in rank order
+    mine_pts = np.concatenate([g[1] for g in got]).reshape(-1, 3)
+    # the owners of the nodes of the cells read, from the holders of their rows
+    empty = np.zeros(0, np.int64)
+    blocks = [np.asarray(b, dtype=np.int64) for b in blocks]
+    need = np.unique(np.concatenate([b.ravel() for b in blocks] + [empty]))
+    need_owner = np.concatenate([np.zeros(0, np.int32)] + _ask(comm, bounds, need, lambda rows: own[rows]))
+    owners = [need_owner[np.searchsorted(need, b)] for b in blocks]
+    blocks, cell_ids = redistribute(comm, owners, types, blocks, cell_ids)
+    # the part: owned nodes and their halo; the local mesh: the part's nodes and every marker node
+    ids = np.union1d(mine, np.unique(np.concatenate([b.ravel() for b in blocks] + [empty])))
+    marker = [b.data.ravel() for bl in markers.values() for b in bl]
+    keep = np.union1d(ids, np.concatenate(marker + [empty])).astype(np.int64)
+    at = np.searchsorted(mine, keep)
+    is_mine = (at < len(mine)) & (mine[np.minimum(at, max(len(mine) - 1, 0))] == keep) if len(mine) else \
+        np.zeros(len(keep), dtype=bool)
+    points = np.empty((len(keep), 3))
+    points[is_mine] = mine_pts[at[is_mine]]
+    others = keep[~is_mine]
+    asked = _ask(comm, bounds, others, lambda rows: block[rows])
+    points[~is_mine] = np.concatenate([np.zeros((0, 3))] + asked).reshape(-1, 3)
+    rows = np.searchsorted(keep, ids)
+    owned = is_mine[rows]
+    counted = tuple(is_mine[np.searchsorted(keep, b[:, 0])] if len(b) else np.zeros(0, dtype=bool) for b in blocks)
+    part = MeshPart(int(n), int(n_cells), int(rank), ids, points[rows], owned, int(dim), tuple(types),
+                    tuple(CellBlock(t, np.searchsorted(ids, b).reshape(len(b), -1))
+                          for t, b in zip(types, blocks, strict=True)),
+                    tuple(np.asarray(c, dtype=np.int64) for c in cell_ids), counted, rows)
+    local = Mesh(points=points, dim=int(dim),
+                 cells=[CellBlock(t, np.searchsorted(keep, b).reshape(len(b), -1))
+                        for t, b in zip(types, blocks, strict=True)],
+                 markers={name: [CellBlock(b.type, np.searchsorted(keep, b.data)) for b in bl]
+                          for name, bl in markers.items()},
+                 partial=True, global_ids=keep, n_global=int(n))
+    return local, part

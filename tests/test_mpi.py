@@ -423,3 +423,39 @@ def test_mpiexec_check_shares_the_cells_and_prints_the_serial_report(tmp_path):
         for d in (a, b, a.get("report", {}), b.get("report", {})):
             d.pop("seconds", None)
         assert a == b
+
+
+@needs_mpi
+def test_mpiexec_read_by_parts_gives_each_rank_the_local_mesh_of_the_whole_read(tmp_path):
+    """Over real MPI (mpi4py's all-to-alls and reductions): SU2 (small chunks: many per rank) and
+    CGNS/HDF5 (hyperslabs of points and cells) read by parts equal :func:`ffdcli.partition.localize`
+    of the serial read on each of 2 ranks, and no rank holds every node."""
+    from ffdcli.formats import read_mesh, write_mesh
+
+    write_mesh(read_mesh(SAMPLES / "rect_wing.su2"), tmp_path / "wing.cgns")
+    proc = mpi_script(2, f"""
+        import numpy as np
+        from ffdcli.formats import read_mesh, read_part, su2
+        from ffdcli.parallel import MPIComm
+        from ffdcli.partition import localize, node_owners
+        c = MPIComm()
+        su2.CHUNK_BYTES = 1 << 15
+        for path in ({str(SAMPLES / 'rect_wing.su2')!r}, {str(tmp_path / 'wing.cgns')!r}):
+            whole = read_mesh(path)
+            mesh, part = read_part(path, c)
+            want, want_part = localize(whole, node_owners(whole.points, 2), c.rank)
+            assert mesh.is_local and len(mesh.global_ids) < whole.n_points
+            for f in ("global_ids", "points"):
+                assert np.array_equal(getattr(mesh, f), getattr(want, f)), f
+            for x, y in zip(mesh.cells, want.cells, strict=True):
+                assert x.type == y.type and np.array_equal(x.data, y.data)
+            for k, v in want.markers.items():
+                assert all(np.array_equal(x.data, y.data) for x, y in zip(mesh.markers[k], v, strict=True))
+            for f in ("ids", "points", "owned", "rows"):
+                assert np.array_equal(getattr(part, f), getattr(want_part, f)), f
+            for f in ("cell_ids", "counted"):
+                assert all(np.array_equal(x, y) for x, y in zip(getattr(part, f), getattr(want_part, f), strict=True))
+            print(f"rank {{c.rank}} {{path[-4:]}} {{len(mesh.global_ids)}} of {{whole.n_points}}")
+    """, tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.count(" of ") == 4, proc.stdout

@@ -56,13 +56,15 @@ READ_BY_PARTS = ("su2", "cgns")
 def read_part(path: str | Path, comm, *, progress=None):
     """One MPI rank's read of a mesh: ``(mesh, part)``, a collective (``comm``: :mod:`ffdcli.parallel`).
 
-    ``mesh`` has every point and marker (the surface and the volume nodes every rank warps) and,
-    ``partial``, only the cells around the rank's nodes; ``part`` is the rank's
-    :class:`~ffdcli.partition.MeshPart` (the quality gate's share). SU2 files are read by parts
-    (each rank parses its share of the element rows: :func:`ffdcli.formats.su2.read_part`); other
-    formats are read by rank 0 and broadcast, each rank then taking its part. Errors are agreed on.
+    ``mesh`` is the rank's local mesh (:func:`ffdcli.partition.localize`: the nodes it owns, their
+    halo and every marker node, rows sorted by global id, ``global_ids``, local ids in cells and
+    markers), ``part`` the rank's :class:`~ffdcli.partition.MeshPart` (the quality gate's share,
+    ``rows`` in the local mesh). SU2 and CGNS/HDF5 files are read by parts, no rank holding every
+    node (:func:`ffdcli.formats.su2.read_part`, :func:`ffdcli.formats.cgns.read_part`); other
+    formats are read by rank 0 and broadcast (every rank then holds the whole mesh until it is
+    localized). Errors are agreed on.
     """
-    from ffdcli.partition import rank_part
+    from ffdcli.partition import localize, node_owners
 
     p = Path(path)
     fmt = comm.run(format_of, p)
@@ -71,21 +73,39 @@ def read_part(path: str | Path, comm, *, progress=None):
         mesh, part = _module(fmt).read_part(p, comm, progress=progress)
         comm.run(check_finite_points, mesh)
         return mesh, part
-    mesh = comm.root_then_bcast(read_mesh, p, progress=progress)
-    return mesh, rank_part(mesh, comm)
+    mesh = comm.root_then_bcast(read_mesh, p, progress=progress)      # transiently whole on every rank
+    return localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
 
 
 def check_finite_points(mesh: Mesh) -> None:
-    """InputError naming the file and the first node (0-based, as in the file) with a NaN or infinite
-    coordinate; every reader's mesh passes here (SU2's reader also names the line)."""
+    """InputError naming the file and the first node (0-based, as in the file; a local mesh's global
+    id) with a NaN or infinite coordinate; every reader's mesh passes here (SU2's reader also names
+    the line)."""
     pts = mesh.points
     finite = np.isfinite(pts).all(axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
-        node = int(bad[0])
-        raise InputError(f"node {node} has a NaN or infinite coordinate ({', '.join(map(repr, pts[node].tolist()))})"
-                         f"{f' and {len(bad) - 1} more nodes' if len(bad) > 1 else ''}; a mesh needs finite "
-                         "coordinates", path=mesh.path)
+        node = int(bad[0] if mesh.global_ids is None else mesh.global_ids[bad[0]])
+        raise InputError(_non_finite(node, pts[bad[0]].tolist(), len(bad) - 1), path=mesh.path)
+
+
+def check_finite_rows(comm, points: np.ndarray, first: int, path) -> None:
+    """:func:`check_finite_points` of a mesh whose rows are read in blocks, a collective: ``points``
+    this rank's rows ``first ..``; every rank raises the error of the whole mesh (agreed on)."""
+    bad = np.flatnonzero(~np.isfinite(points).all(axis=1))
+    said = [x for x in comm.allgather((first + int(bad[0]), points[bad[0]].tolist(), len(bad)) if len(bad) else None)
+            if x is not None]
+
+    def check():
+        if said:
+            raise InputError(_non_finite(said[0][0], said[0][1], sum(x[2] for x in said) - 1), path=path)
+
+    comm.run(check)
+
+
+def _non_finite(node: int, xyz: list, more: int) -> str:
+    return (f"node {node} has a NaN or infinite coordinate ({', '.join(map(repr, xyz))})"
+            f"{f' and {more} more nodes' if more else ''}; a mesh needs finite coordinates")
 
 
 def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *,

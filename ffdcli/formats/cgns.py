@@ -623,8 +623,30 @@ def _structured_bc(bc, zone: CgnsZone, file: Path, handed: int = 0) -> list[Cell
                      path=file, key=bc.name)
 
 
+def _zone_size(base, zn, file: Path) -> tuple[int, int, bool, tuple[int, ...], int]:
+    """(cell dimension, physical dimension, structured, vertex shape, point count) of a zone."""
+    bdata = np.asarray(_data(base)).ravel() if _data(base) is not None else np.array([3, 3])
+    cell_dim, phys_dim = int(bdata[0]), int(bdata[-1])
+    ztype = _child_text(zn, "ZoneType_t") or "Unstructured"
+    zsize = _data(zn)
+    if zsize is None:
+        raise InputError("zone without its size data", path=file, key=zn.name)
+    zsize = np.asarray(zsize, dtype=np.int64)
+    structured = ztype.lower() == "structured"
+    if structured:
+        vshape = tuple(int(v) for v in zsize.reshape(3, -1)[0]) if zsize.size % 3 == 0 \
+            else tuple(int(v) for v in zsize.ravel()[: cell_dim])
+        n_points = int(np.prod(vshape))
+    else:
+        n_points = int(zsize.ravel()[0])
+        vshape = (n_points,)
+    return cell_dim, phys_dim, structured, vshape, n_points
+
+
 def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, file: Path, offset: int,
-                      structured: bool) -> tuple[np.ndarray, CgnsZone]:
+                      structured: bool, span: tuple[int, int] | None = None) -> tuple[np.ndarray, CgnsZone]:
+    """The zone's (n_points, 3) coordinates, or only rows ``span = (a, b)`` of an unstructured zone
+    (a hyperslab of each coordinate array), and its :class:`CgnsZone`."""
     grids = _children(zone_node, "GridCoordinates_t")
     if not grids:
         raise InputError("zone has no GridCoordinates_t node (no point coordinates)", path=file,
@@ -642,9 +664,10 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
         have = ", ".join(arrays) or "none"
         raise InputError(f"missing {', '.join(missing)} (Cartesian coordinates expected; the grid has: "
                          f"{have})", path=file, key=grid.name)
-    pts = np.zeros((n_points, 3))
+    a, b = (0, n_points) if span is None else span
+    pts = np.zeros((b - a, 3))
     paths = []
-    for a, name in enumerate(names):
+    for axis, name in enumerate(names):
         if name not in arrays or " data" not in arrays[name]:
             continue
         ds = arrays[name][" data"]
@@ -655,7 +678,11 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
             # HDF5 holds the Fortran-ordered CGNS array with its dimensions reversed: (nk, nj, ni)
             raise InputError(f"{name} has shape {tuple(ds.shape)[::-1]}, the zone has "
                              f"{tuple(vertex_shape)} vertices", path=file, key=f"{arrays[name].name}/ data")
-        pts[:, a] = np.asarray(ds[()], dtype=np.float64).ravel()
+        if span is None:
+            pts[:, axis] = np.asarray(ds[()], dtype=np.float64).ravel()
+        elif b > a:                 # a hyperslab: this rank's rows only
+            pts[:, axis] = np.asarray(ds[a:b] if ds.ndim == 1 else ds[()], dtype=np.float64).ravel()[
+                slice(None) if ds.ndim == 1 else slice(a, b)]
         paths.append(f"{arrays[name].name}/ data")   # ds.name would be the path inside a linked file
     zone = CgnsZone(zone_node.name, tuple(paths), offset, n_points, structured,
                     tuple(int(s) for s in vertex_shape))
@@ -664,8 +691,10 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
 
 def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) -> Mesh:
     """The mesh of the file. ``share`` (``share(n) -> (a, b)``, one MPI rank's): the interior cells
-    are read as rows ``[a, b)`` of each section / zone (hyperslabs of ``ElementConnectivity``), and
-    ``mesh.cells`` is then a list of :class:`_Rows` (see :func:`read_part`)."""
+    are read as rows ``[a, b)`` of each section / zone (hyperslabs of ``ElementConnectivity``),
+    ``mesh.cells`` is then a list of :class:`_Rows`, and the result is ``(mesh, rows)``: ``rows`` the
+    rank's block ``(a, b)`` of the points when ``mesh.points`` holds only those (unstructured volume
+    zones only), else None (every point; see :func:`read_part`)."""
     bases = _children(h5, "CGNSBase_t")
     if not bases:
         raise InputError("no CGNSBase_t node: not a CGNS file", path=file, key="/")
@@ -682,27 +711,20 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
     offset = 0
     dim = 0
     bar = progress("reading CGNS zones", len(zones_nodes)) if progress else None
-    for base, zn in zones_nodes:
-        bdata = np.asarray(_data(base)).ravel() if _data(base) is not None else np.array([3, 3])
-        cell_dim, phys_dim = int(bdata[0]), int(bdata[-1])
+    sizes = [_zone_size(base, zn, file) for base, zn in zones_nodes]
+    if share is not None and all(not z[2] and z[0] >= z[1] for z in sizes):
+        # unstructured volume zones only: this rank reads its block of the points (hyperslabs of
+        # the coordinate arrays); structured zones (their orientation) and surfaces need them all
+        point_rows = share(sum(z[4] for z in sizes))
+    else:
+        point_rows = None
+    for (base, zn), (cell_dim, phys_dim, structured, vshape, n_points) in zip(zones_nodes, sizes, strict=True):
         dim = max(dim, cell_dim)
-        ztype = _child_text(zn, "ZoneType_t") or "Unstructured"
-        zsize = _data(zn)
-        if zsize is None:
-            raise InputError("zone without its size data", path=file, key=zn.name)
-        zsize = np.asarray(zsize, dtype=np.int64)
-        structured = ztype.lower() == "structured"
-        if structured:
-            vshape = tuple(int(v) for v in zsize.reshape(3, -1)[0]) if zsize.size % 3 == 0 \
-                else tuple(int(v) for v in zsize.ravel()[: cell_dim])
-            n_points = int(np.prod(vshape))
-        else:
-            n_points = int(zsize.ravel()[0])
-            vshape = (n_points,)
         _check_no_links(zn, file)
         for grid in _children(zn, "GridCoordinates_t"):
             _check_no_links(grid, file)
-        pts, zone = _read_coordinates(zn, n_points, vshape, phys_dim, file, offset, structured)
+        span = None if point_rows is None else tuple(min(max(e - offset, 0), n_points) for e in point_rows)
+        pts, zone = _read_coordinates(zn, n_points, vshape, phys_dim, file, offset, structured, span)
         zone_blocks: list[CellBlock] = []
         if structured:
             blk = _structured_cells(vshape, offset)
@@ -775,8 +797,9 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
                    else [r for t in _TYPE_ORDER for r in cells.get(t, [])])
     source = CgnsSource(container, zones, {k: _merge(v) for k, v in ms.by_bc.items()}, ms.bc_family,
                         skipped)
-    return Mesh(points=np.vstack(points), dim=dim, cells=cell_blocks, markers=markers, path=file,
+    mesh = Mesh(points=np.vstack(points), dim=dim, cells=cell_blocks, markers=markers, path=file,
                 format="cgns", source=source)
+    return mesh if share is None else (mesh, point_rows)
 
 
 @dataclass
@@ -822,22 +845,27 @@ def _interior_rows(sec, offset: int, n_points: int, cell_dim: int, file: Path, s
 
 
 def read_part(path: str | Path, comm, progress=None):
-    """One MPI rank's read of a CGNS/HDF5 mesh: ``(mesh, part)``, a collective.
+    """One MPI rank's read of a CGNS/HDF5 mesh: ``(mesh, part)``, its local mesh and part; a collective.
 
-    Every rank reads the coordinates and the boundary (markers); of the volume cells only its
-    share of the rows of each section, as hyperslabs of ``ElementConnectivity`` (MIXED sections and
-    structured zones are read or built whole and cut the same way); the cells are then sent to the
-    ranks owning their nodes (:func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s
-    mesh with ``partial`` set and ``cells`` the rank's (global ids); ``part`` equals
-    :func:`ffdcli.partition.part_of` of the whole mesh. An ADF file is read by rank 0 and broadcast.
-    A surface mesh (cells of a lower dimension than the space) is read whole by every rank.
+    Every rank reads the boundary (markers, whole) and of the volume cells only its share of the
+    rows of each section, as hyperslabs of ``ElementConnectivity`` (MIXED sections and structured
+    zones are read or built whole and cut the same way). When every zone is an unstructured volume
+    zone, each rank also reads only its block of the points (hyperslabs of ``CoordinateX/Y/Z``);
+    structured zones (whose cells are oriented by a vote over all of them) and surface meshes are
+    read with every point by every rank, transiently. Then
+    (:func:`ffdcli.partition.local_mesh_of_blocks`) each node goes to its owner, the cells to the
+    owners of their nodes, and the halo and marker nodes' coordinates are asked of the ranks that
+    read them. ``mesh`` is the rank's local mesh (:func:`ffdcli.partition.localize` of :func:`read`'s
+    mesh), ``part`` its :class:`~ffdcli.partition.MeshPart`; ``mesh.source`` (zones, paths: small) on
+    every rank. An ADF file is read by rank 0, broadcast and localized.
     """
-    from ffdcli.partition import assemble_part, node_owners, rank_part, redistribute
+    from ffdcli.formats import check_finite_rows
+    from ffdcli.partition import local_mesh_of_blocks, localize, node_owners
 
     p = Path(path)
     if comm.run(container_of, p) == "adf":
         mesh = comm.root_then_bcast(read, p, progress)
-        return mesh, rank_part(mesh, comm)
+        return localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
 
     def parse():
         try:
@@ -846,11 +874,15 @@ def read_part(path: str | Path, comm, progress=None):
             raise InputError(f"cannot open as CGNS/HDF5: {exc}", path=p) from None
         with h5:
             try:
-                return _read_tree(h5, p, "hdf5", progress, share=comm.share)
+                mesh, got = _read_tree(h5, p, "hdf5", progress, share=comm.share)
             except (KeyError, OSError, ValueError, TypeError, IndexError) as exc:
                 raise InputError(f"corrupt or unsupported CGNS file: {exc}", path=p) from None
+        n = sum(z.n_points for z in mesh.source.zones)
+        a, b = comm.share(n) if got is None else got
+        return mesh, np.ascontiguousarray(mesh.points if got is not None else mesh.points[a:b]), a, n
 
-    mesh = comm.run(parse)
+    mesh, block, a, n = comm.run(parse)
+    check_finite_rows(comm, block, a, p)         # before the owners (Morton codes of finite points)
     rows = mesh.cells
     types, blocks, ids, start = [], [], [], 0
     for t in _TYPE_ORDER:                   # the serial blocks: one per type, sections in file order
@@ -865,13 +897,9 @@ def read_part(path: str | Path, comm, progress=None):
         blocks.append(np.vstack([r.data for r in mine]))
         ids.append(np.concatenate(parts))
         start = base
-    owner = node_owners(mesh.points, comm.size)
-    blocks, ids = redistribute(comm, owner, types, blocks, ids)
-    part = assemble_part(mesh.n_points, start, owner, comm.rank, mesh.dim, types, blocks, ids,
-                         lambda i: mesh.points[i])
-    mesh.cells = [CellBlock(t, b) for t, b in zip(types, blocks, strict=True)]
-    mesh.partial = True
-    return mesh, part
+    local, part = local_mesh_of_blocks(comm, block, n, mesh.dim, types, blocks, ids, start, mesh.markers)
+    local.path, local.format, local.source = mesh.path, mesh.format, mesh.source
+    return local, part
 
 
 def _merge(blocks: list[CellBlock]) -> list[CellBlock]:

@@ -136,20 +136,20 @@ def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
 
 
 def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
-    """One MPI rank's read of an SU2 mesh: ``(mesh, part)``, a collective.
+    """One MPI rank's read of an SU2 mesh: ``(mesh, part)``, its local mesh and part; a collective.
 
     Every rank parses its share of the point block and of the element block: the chunks of whole
     lines (:data:`CHUNK_BYTES`) whose first row falls in its share of the NPOIN / NELEM rows, the
-    others only counted. The coordinates are then gathered on every rank (every node's are needed
-    everywhere: the warp's targets, the surface), the markers are parsed by every rank, and the
-    cells are sent to the ranks owning their nodes (:func:`ffdcli.partition.node_owners`,
-    :func:`ffdcli.partition.redistribute`). ``mesh`` is :func:`read`'s mesh with ``partial`` set,
-    ``cells`` the rank's (global ids), and ``source`` (the point block's layout, for the writer) on
-    rank 0 only; ``part`` its :class:`~ffdcli.partition.MeshPart`, equal to
-    :func:`ffdcli.partition.part_of` of the whole mesh. Errors (a bad line in one rank's share)
-    are agreed on: every rank raises the lowest failing rank's.
+    others only counted; every rank parses the markers. Then (:func:`ffdcli.partition.local_mesh_of_blocks`)
+    each node goes to its owner, the cells to the owners of their nodes, and the coordinates of
+    the halo and of the marker nodes are asked of the ranks that parsed them: no rank holds every
+    node. ``mesh`` is the rank's local mesh (:func:`ffdcli.partition.localize` of :func:`read`'s
+    mesh: ``global_ids``, local ids, ``partial``), ``part`` its :class:`~ffdcli.partition.MeshPart`.
+    Rank 0, the writer, also keeps ``source`` (the point block's layout and the coordinates as read,
+    48 bytes a node of a 3D mesh, rank 0 only); it is ``None`` on the others. Errors (a bad line in
+    one rank's share) are agreed on: every rank raises the lowest failing rank's.
     """
-    from ffdcli.partition import assemble_part, node_owners, redistribute
+    from ffdcli.partition import local_mesh_of_blocks
 
     path = Path(path)
     progress = progress or no_progress
@@ -174,17 +174,21 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
         return parser, st
 
     parser, st = comm.run(parse)
-    # every rank gets every point (in file order: the ranks' chunks are consecutive); rank 0, the
-    # writer, also the point block's layout
-    points = comm.allgather_rows(np.ascontiguousarray(parser.points))
+    # rank 0, the writer, gets the point block's layout and the coordinates as read (the ranks'
+    # chunks are consecutive: gathered in rank order they are the file's rows)
+    mine = np.ascontiguousarray(parser.points)
     rs, cs, ce = (comm.gather_rows(np.ascontiguousarray(a)) for a in parser.layout[:3])
-    empty = np.zeros(0, dtype=np.int64)
-    parser.layout = ((np.append(rs, parser.points_end).astype(np.int64), cs, ce, parser.layout[3]) if comm.is_root
-                     else (empty, empty, empty, parser.layout[3]))
-    parser.points = points
-    mesh = parser.mesh(st)
-    local = {b.type: b.data for b in mesh.cells}
-    every = comm.allgather([(b.type, len(b)) for b in mesh.cells])
+    as_read = comm.gather_rows(mine)
+    source = None
+    if comm.is_root:
+        source = Su2Source(ndim=parser.ndim, row_start=np.append(rs, parser.points_end).astype(np.int64),
+                           coord_start=cs, coord_end=ce, points=as_read, separator=parser.layout[3],
+                           size=st.st_size, mtime_ns=st.st_mtime_ns)
+    block = np.zeros((len(mine), 3))
+    block[:, :parser.ndim] = mine
+    del mine, as_read
+    local = {b.type: b.data for b in parser.cells}
+    every = comm.allgather([(b.type, len(b)) for b in parser.cells])
     order: list[str] = []
     for lst in every:
         order += [t for t, _ in lst if t not in order]
@@ -195,14 +199,9 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
         blocks.append(data)
         ids.append(start + sum(counts[:comm.rank]) + np.arange(len(data), dtype=np.int64))
         start += sum(counts)
-    owner = node_owners(mesh.points, comm.size)
-    blocks, ids = redistribute(comm, owner, order, blocks, ids)
-    part = assemble_part(mesh.n_points, start, owner, comm.rank, mesh.dim, order, blocks, ids,
-                         lambda i: mesh.points[i])
-    mesh.cells = [CellBlock(t, b) for t, b in zip(order, blocks, strict=True)]
-    mesh.partial = True
-    if not comm.is_root:         # the point block's layout is the writer's (rank 0): 48 bytes a node less
-        mesh.source = None
+    mesh, part = local_mesh_of_blocks(comm, block, int(parser.npoin), parser.ndim, order, blocks, ids, start,
+                                      parser.markers)
+    mesh.path, mesh.format, mesh.source = path, "su2", source
     return mesh, part
 
 
