@@ -41,9 +41,12 @@ a warm-up; efficiency = min t(1x1) / (2 min t(2x1)); target >= 80 %. Embed: 1M r
 8x6x2 wing lattice of bench_core (each rank inverts its half; gather included). Warp: bench_warp's
 synthetic mesh, 1M volume / 50k surface nodes (each rank warps its half of the volume nodes; gather
 included; the replicated tree build is reported apart). Read: bench_pipeline's 1,003,520-node hex wing
-mesh as SU2 and as CGNS/HDF5, `read_part` (each rank: every point and marker, its share of the
-element rows, the cells sent to the ranks owning their nodes) against `bcast` (rank 0 reads the
-whole mesh and broadcasts it, each rank then takes its part). Gate: the quality gate of a smoothly
+mesh as SU2 and as CGNS/HDF5, `read_part` (each rank parses its block of the point rows and of the
+element rows; nodes sent to their owners, cells to their nodes' owners, halo and marker coordinates
+fetched: the rank's local mesh) against `bcast` (rank 0 reads the whole mesh and broadcasts it, each
+rank then localizes it: the route of VTK and ADF CGNS); also once at 4 ranks (oversubscribed: for the
+memory per rank, its time means nothing). "held" = the local mesh's and part's arrays, max over ranks.
+Gate: the quality gate of a smoothly
 moved copy of that mesh (scaled Jacobian + node orthogonality, the input's reference included), each
 rank on its part. Deform: `ffd deform --force --json` of the SU2 mesh with its box cached: wall time
 of the whole command. Memory: load_run / deform / write_outputs of that design, once per row (1, 2, 4
@@ -51,6 +54,10 @@ ranks x 1 thread on local meshes, 2 ranks with every node; 4 ranks oversubscribe
 not time). The machine has 2 cores shared with other jobs: every figure is as loaded as
 the machine was (load average in the table).
 """
+
+
+#: What a child reports that the table keeps.
+KEPT = ("prepare_s", "part_cells", "cells", "held_mb", "local_nodes", "nodes")
 
 
 def _mpiexec() -> str | None:
@@ -121,27 +128,32 @@ def child_warp(comm, n_volume: int, n_surface: int) -> dict:
 
 def child_read(comm, path: str, mode: str) -> dict:
     from ffdcli.formats import read_mesh, read_part
-    from ffdcli.partition import rank_part
+    from ffdcli.partition import localize, node_owners
 
     def once():
-        if mode == "bcast":
+        if mode == "bcast":          # the route of the formats read whole (VTK, ADF CGNS)
             mesh = comm.root_then_bcast(read_mesh, path)
-            return rank_part(mesh, comm)
-        return read_part(path, comm)[1]
+            return localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
+        return read_part(path, comm)
 
-    part = once()
-    t = _timed(comm, once, repeat=2)
+    mesh, part = once()
+    del mesh, part
+    t = _timed(comm, lambda: once(), repeat=2)
+    mesh, part = once()
     cells = comm.allgather(sum(len(b) for b in part.cells))
+    held = mesh.points.nbytes + mesh.global_ids.nbytes + sum(b.data.nbytes for b in mesh.cells) + \
+        sum(b.data.nbytes for bl in mesh.markers.values() for b in bl) + part.nbytes()
     return {"seconds": t, "part_cells": cells, "cells": part.n_cells,
-            "part_mb": max(comm.allgather(part.nbytes() / 2**20))}
+            "local_nodes": comm.allgather(len(mesh.global_ids)), "nodes": mesh.n_global,
+            "held_mb": max(comm.allgather(held / 2**20))}
 
 
 def child_gate(comm, path: str) -> dict:
     from ffdcli.formats import read_part
     from ffdcli.quality import check_quality, check_quality_part
 
-    mesh, part = read_part(path, comm)
-    size = np.ptp(mesh.points, axis=0).max()
+    mesh, part = read_part(path, comm)          # the rank's local mesh (every marker node: the far field)
+    size = comm.allreduce_max(float(np.ptp(mesh.points, axis=0).max()))
     after = mesh.points + 1e-3 * size * np.sin(mesh.points[:, ::-1] / size * 3)
     if comm.size == 1:         # the serial gate (the part is the whole mesh)
         def once():
@@ -333,13 +345,15 @@ def run(quick: bool = False, only: list[str] | None = None) -> list[dict]:
                 for cfg in SCALING:                      # 1 and 2 ranks alternately: the same load
                     runs.setdefault(cfg, []).append(_launch(*cfg, argv, cwd=cwd))
             runs[(1, 2)] = [_launch(1, 2, argv, cwd=cwd)]
+            if case.startswith("read"):                  # memory per rank: the split (4 ranks oversubscribe)
+                runs[(4, 1)] = [_launch(4, 1, argv, cwd=cwd)]
             for (ranks, threads), got in runs.items():
                 secs = [js.get("seconds", wall) if case != "deform" else wall for wall, js, _ in got]
                 js = got[-1][1]
                 rows.append({"case": case, "N": n, "ranks": ranks, "threads": threads, "seconds": min(secs),
                              "seconds_max": max(secs), "runs": len(secs),
                              "peak_mb_max": max(g[1].get("peak_mb_max") or g[1].get("peak_mb") or 0 for g in got),
-                             **{k: v for k, v in js.items() if k in ("prepare_s", "part_cells", "cells", "part_mb")},
+                             **{k: v for k, v in js.items() if k in KEPT},
                              "load": round(os.getloadavg()[0], 1)})
     rows.append({"case": "machine load", "load_start": round(load0, 1), "load_end": round(os.getloadavg()[0], 1)})
     return rows
@@ -383,6 +397,9 @@ def summary(rows: list[dict]) -> list[dict]:
         halo = ""
         if r.get("part_cells") and r["ranks"] > 1:
             halo = f", cells per rank {'/'.join(str(c) for c in r['part_cells'])} of {r['cells']}"
+        if r.get("local_nodes"):
+            halo += (f", nodes per rank {'/'.join(str(c) for c in r['local_nodes'])} of {r['nodes']}, "
+                     f"{r['held_mb']:.0f} MB held")
         out.append({"case": f"{r['case']} {n}, {r['ranks']} rank(s) x {r['threads']} thread(s)",
                     "measured": f"{r['seconds']:.3g}{spread} s{eff}{peak}{halo} (load {r['load']})",
                     "target": ">= 80 % efficiency at 2 ranks" if r["ranks"] == 2 and met is not None else "",

@@ -267,26 +267,39 @@ def redistribute(comm, owners, types, blocks, cell_ids) -> tuple[list, list]:
     nodes. Returns, per type, the cells touching this rank's nodes, sorted by global index."""
     outgoing = [[] for _ in range(comm.size)]
     for b, c, ow in zip(blocks, cell_ids, owners, strict=True):
-        k, m = b.shape[0], b.shape[1] if b.ndim == 2 else 0
-        srt = np.sort(ow.reshape(k, m), axis=1)
-        first = np.ones(srt.shape, dtype=bool)          # each (cell, rank) pair once
-        first[:, 1:] = srt[:, 1:] != srt[:, :-1]
-        cell = np.repeat(np.arange(k), m)[first.ravel()]
-        dest = srt.ravel()[first.ravel()]
-        order = np.argsort(dest, kind="stable")        # by rank, cells in read order within one
+        k = len(b)
+        ow = ow.reshape(k, b.shape[1])
+        lo, hi = ow.min(axis=1, initial=comm.size), ow.max(axis=1, initial=-1)
+        cell, dest = np.flatnonzero(lo == hi), lo[lo == hi]       # most cells: one owner
+        shared = np.flatnonzero(lo != hi)                         # the others: each (cell, rank) pair once
+        if len(shared):
+            srt = np.sort(ow[shared], axis=1)
+            first = np.ones(srt.shape, dtype=bool)
+            first[:, 1:] = srt[:, 1:] != srt[:, :-1]
+            cell = np.concatenate([cell, np.repeat(shared, srt.shape[1])[first.ravel()]])
+            dest = np.concatenate([dest, srt.ravel()[first.ravel()]])
+        order = np.lexsort((cell, dest))                          # by rank, cells in read order within one
         cuts = np.searchsorted(dest[order], np.arange(comm.size + 1))
         for r in range(comm.size):
             sel = cell[order[cuts[r]:cuts[r + 1]]]
             outgoing[r].append((b[sel], c[sel]))
+        del ow, lo, hi, cell, dest, order
+    own, outgoing[comm.rank] = outgoing[comm.rank], None      # this rank's own cells are not sent
     incoming = comm.alltoall(outgoing)
+    incoming[comm.rank] = own
+    del outgoing, own
     out_blocks, out_ids = [], []
     for k, t in enumerate(types):
         got = [msg[k] for msg in incoming]
         data = np.concatenate([g[0] for g in got]) if got else np.zeros((0, CELL_NODES[t]), np.int64)
         ids = np.concatenate([g[1] for g in got]) if got else np.zeros(0, np.int64)
-        order = np.argsort(ids, kind="stable")
-        out_blocks.append(data[order].reshape(len(ids), CELL_NODES[t]))
-        out_ids.append(ids[order])
+        for msg in incoming:
+            msg[k] = None
+        if np.any(np.diff(ids) < 0):        # read in rows of ranks in rank order: usually sorted already
+            order = np.argsort(ids, kind="stable")
+            data, ids = data[order], ids[order]
+        out_blocks.append(data.reshape(len(ids), CELL_NODES[t]))
+        out_ids.append(ids)
     return out_blocks, out_ids
 
 
@@ -314,6 +327,8 @@ def local_mesh_of_blocks(comm, block: np.ndarray, n: int, dim: int, types, block
     types, blocks, cell_ids
         The mesh's non-empty cell types in its order (the same on every rank); per type, the (k, nodes)
         cells this rank read (global node ids, any split of the cells) and their (k,) global indices.
+        ``blocks`` (a list) is emptied once the cells are sent: drop other references to its arrays
+        and they are freed then, before the local mesh is built (the peak memory of a read).
     n_cells
         The mesh's cell count.
     markers
@@ -340,11 +355,15 @@ def local_mesh_of_blocks(comm, block: np.ndarray, n: int, dim: int, types, block
     mine_pts = np.concatenate([g[1] for g in got]).reshape(-1, 3)
     # the owners of the nodes of the cells read, from the holders of their rows
     empty = np.zeros(0, np.int64)
-    blocks = [np.asarray(b, dtype=np.int64) for b in blocks]
+    blocks[:] = [np.asarray(b, dtype=np.int64) for b in blocks]
     need = np.unique(np.concatenate([b.ravel() for b in blocks] + [empty]))
     need_owner = np.concatenate([np.zeros(0, np.int32)] + _ask(comm, bounds, need, lambda rows: own[rows]))
     owners = [need_owner[np.searchsorted(need, b)] for b in blocks]
-    blocks, cell_ids = redistribute(comm, owners, types, blocks, cell_ids)
+    del need, need_owner
+    read = blocks
+    blocks, cell_ids = redistribute(comm, owners, types, read, cell_ids)
+    del owners
+    read.clear()                 # the cells as read (the caller's list): sent, no longer needed
     # the part: owned nodes and their halo; the local mesh: the part's nodes and every marker node
     ids = np.union1d(mine, np.unique(np.concatenate([b.ravel() for b in blocks] + [empty])))
     marker = [b.data.ravel() for bl in markers.values() for b in bl]
@@ -358,15 +377,16 @@ def local_mesh_of_blocks(comm, block: np.ndarray, n: int, dim: int, types, block
     asked = _ask(comm, bounds, others, lambda rows: block[rows])
     points[~is_mine] = np.concatenate([np.zeros((0, 3))] + asked).reshape(-1, 3)
     rows = np.searchsorted(keep, ids)
-    owned = is_mine[rows]
-    counted = tuple(is_mine[np.searchsorted(keep, b[:, 0])] if len(b) else np.zeros(0, dtype=bool) for b in blocks)
-    part = MeshPart(int(n), int(n_cells), int(rank), ids, points[rows], owned, int(dim), tuple(types),
-                    tuple(CellBlock(t, np.searchsorted(ids, b).reshape(len(b), -1))
-                          for t, b in zip(types, blocks, strict=True)),
-                    tuple(np.asarray(c, dtype=np.int64) for c in cell_ids), counted, rows)
-    local = Mesh(points=points, dim=int(dim),
-                 cells=[CellBlock(t, np.searchsorted(keep, b).reshape(len(b), -1))
-                        for t, b in zip(types, blocks, strict=True)],
+    part_cells, cells, counted = [], [], []
+    for k, t in enumerate(types):            # the global-id cells replaced one by one by local ones
+        b = blocks[k]
+        part_cells.append(CellBlock(t, np.searchsorted(ids, b).reshape(len(b), -1)))
+        cells.append(CellBlock(t, rows[part_cells[-1].data]))
+        counted.append(is_mine[np.searchsorted(keep, b[:, 0])] if len(b) else np.zeros(0, dtype=bool))
+        blocks[k] = b = None
+    part = MeshPart(int(n), int(n_cells), int(rank), ids, points[rows], is_mine[rows], int(dim), tuple(types),
+                    tuple(part_cells), tuple(np.asarray(c, dtype=np.int64) for c in cell_ids), tuple(counted), rows)
+    local = Mesh(points=points, dim=int(dim), cells=cells,
                  markers={name: [CellBlock(b.type, np.searchsorted(keep, b.data)) for b in bl]
                           for name, bl in markers.items()},
                  partial=True, global_ids=keep, n_global=int(n))

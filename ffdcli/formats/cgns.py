@@ -897,6 +897,8 @@ def read_part(path: str | Path, comm, progress=None):
         blocks.append(np.vstack([r.data for r in mine]))
         ids.append(np.concatenate(parts))
         start = base
+    mesh.cells = []
+    del rows, mine                   # the rows as read (local_mesh_of_blocks empties blocks once sent)
     local, part = local_mesh_of_blocks(comm, block, n, mesh.dim, types, blocks, ids, start, mesh.markers)
     local.path, local.format, local.source = mesh.path, mesh.format, mesh.source
     return local, part

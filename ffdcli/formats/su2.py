@@ -186,7 +186,8 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
                            size=st.st_size, mtime_ns=st.st_mtime_ns)
     block = np.zeros((len(mine), 3))
     block[:, :parser.ndim] = mine
-    del mine, as_read
+    del mine, as_read, rs, cs, ce
+    parser.points = parser.layout = None
     local = {b.type: b.data for b in parser.cells}
     every = comm.allgather([(b.type, len(b)) for b in parser.cells])
     order: list[str] = []
@@ -199,6 +200,8 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
         blocks.append(data)
         ids.append(start + sum(counts[:comm.rank]) + np.arange(len(data), dtype=np.int64))
         start += sum(counts)
+    parser.cells = []
+    del local, data                  # the cells as read: freed once sent (local_mesh_of_blocks empties blocks)
     mesh, part = local_mesh_of_blocks(comm, block, int(parser.npoin), parser.ndim, order, blocks, ids, start,
                                       parser.markers)
     mesh.path, mesh.format, mesh.source = path, "su2", source
