@@ -377,6 +377,34 @@ def test_cgns_read_by_parts_names_a_bad_node_in_one_ranks_block_on_every_rank(tm
     assert len(said) == 3 and {s[1] for s in said} == {str(serial.value)}, said
 
 
+def test_a_format_read_whole_is_broadcast_and_localized(tmp_path):
+    """VTK (no reader by parts): :func:`ffdcli.formats.read_part` reads on rank 0, broadcasts and gives
+    each rank the same local mesh as the readers by parts."""
+    from ffdcli.formats import read_part, write_mesh
+
+    path = tmp_path / "wing.vtu"
+    write_mesh(CASES["mixed_hex_wedge"], path)
+    whole = read_mesh(path)
+    owner = node_owners(whole.points, 3)
+    for r, (mesh, part) in enumerate(run_ranks(3, lambda c: read_part(path, c))):
+        _same_local(mesh, part, whole, owner, r)
+
+
+def test_an_adf_cgns_file_is_read_by_rank_0_and_localized(tmp_path, monkeypatch):
+    """The ADF branch of :func:`ffdcli.formats.cgns.read_part` (h5py cannot slice ADF): rank 0 reads,
+    broadcasts, each rank localizes (an HDF5 file standing in for the converted ADF one)."""
+    from ffdcli.formats import cgns, write_mesh
+
+    path = tmp_path / "wing.cgns"
+    write_mesh(CASES["rect_wing_tets"], path)
+    whole = cgns.read(path)
+    monkeypatch.setattr(cgns, "container_of", lambda p: "adf")
+    monkeypatch.setattr(cgns, "read", lambda p, progress=None: cgns._read_file(p, p, "hdf5", progress))
+    owner = node_owners(whole.points, 2)
+    for r, (mesh, part) in enumerate(run_ranks(2, lambda c: cgns.read_part(path, c))):
+        _same_local(mesh, part, whole, owner, r)
+
+
 def test_su2_read_by_parts_with_a_rank_that_gets_no_chunk():
     """Default chunks: the small sample's blocks are one chunk each, so rank 1 parses no row."""
     from ffdcli.formats import su2
