@@ -312,10 +312,17 @@ class DesignRun:
             return None
         return global_diagonal(self.prep.mesh.points if points is None else points, self.comm)
 
+    def warp_targets(self) -> np.ndarray | None:
+        """The rows the volume warp moves: of a local mesh, its part's (owned nodes and halo: what the
+        gate and the writer read; the other ranks' marker nodes stay where they were); else None
+        (every node)."""
+        return self.quality_part().rows if self.local else None
+
     def warp_volume(self, model: WarpModel, disp: np.ndarray, rot: np.ndarray | None, progress=None) -> np.ndarray:
         """:func:`ffdcli.warp.warp` of the run's mesh (a collective under MPI). A local mesh: each
-        rank warps every one of its rows (owned and halo: each node's value depends on the surface
-        only, so it is the serial one bit for bit), no communication but the error agreement. A mesh
+        rank warps the rows of its part (owned and halo, :meth:`warp_targets`: each node's value
+        depends on the surface only, so it is the serial one bit for bit), no communication but the
+        error agreement. A mesh
         with every node on every rank: each rank its block, the blocks gathered."""
         if self.local:
             return self.comm.run(warp, model, disp, rot, progress=progress)
@@ -379,7 +386,7 @@ class DesignRun:
             settings = self.warp_settings
             names = [n for c in self.components for n in c.prep.surface.names]
             model, _ = prepare_mesh_warp(self.prep.mesh, names, settings, progress=progress,
-                                         size=self.mesh_diagonal())
+                                         size=self.mesh_diagonal(), targets=self.warp_targets())
             if not np.array_equal(model.surface_ids, self.surface_ids):
                 raise RuntimeError("the warp's surface nodes differ from the box's")
             self._warp = model
@@ -650,7 +657,8 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
 class Deformation:
     """The result of one design: new coordinates of every mesh node, and what was checked."""
 
-    points: np.ndarray           # (N, 3) all mesh nodes; a run on an MPI rank's local mesh: its rows (n, 3)
+    points: np.ndarray           # (N, 3) all mesh nodes; a run on an MPI rank's local mesh: its rows (n, 3), of
+    #                              which the part's (owned, halo) and the surface's are moved (DesignRun.warp_targets)
     lattice: object              # (n, m, l, 3) deformed control points; several components: a list
     surface_displacement: np.ndarray   # (S, 3)
     volume_method: str

@@ -82,7 +82,7 @@ def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *,
         Rk = run.surface_frames(Pk, settings.carry)
         dR = Rk if R_prev is None else Rk @ np.linalg.inv(R_prev)
         model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress,
-                                     size=run.mesh_diagonal(pts))
+                                     size=run.mesh_diagonal(pts), targets=run.warp_targets())
         pts = pts + run.warp_volume(model, bk - b_prev, dR, progress)
         pts[sid] = mesh.points[sid] + bk
         b_prev, R_prev = bk, Rk

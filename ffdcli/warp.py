@@ -173,7 +173,7 @@ class WarpModel:
 
 def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
                  settings: WarpSettings | None = None, *, areas: np.ndarray | None = None,
-                 faces: list[CellBlock] | None = None, progress=None) -> WarpModel:
+                 faces: list[CellBlock] | None = None, progress=None, targets=None) -> WarpModel:
     """Precompute the sources, their area weights, L and the tree, from the undeformed mesh.
 
     Parameters
@@ -194,6 +194,11 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
         Area weight per mesh node, (N,); or the boundary faces of the surface and fixed markers
         (lines in 2D) to compute them with :func:`vertex_areas`. A source of zero area (a node on
         no face) gets the median area of the sources.
+    targets
+        Node ids whose displacement is wanted (one MPI rank's part of its local mesh, owned nodes
+        and halo); the other nodes that are neither surface nor fixed are then not warped (zero
+        displacement, as fixed nodes, but no source). Default: every node. Each warped node's value
+        is the same either way (it depends on the sources only).
     """
     settings = settings or WarpSettings()
     progress = progress or no_progress
@@ -207,6 +212,10 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     is_target = np.ones(n, dtype=bool)
     is_target[surface_ids] = False
     is_target[fixed_ids] = False
+    if targets is not None:
+        wanted = np.zeros(n, dtype=bool)
+        wanted[np.asarray(targets, dtype=np.int64)] = True
+        is_target &= wanted
     target_ids = np.flatnonzero(is_target)
 
     lo, hi = ((pts[surface_ids].min(axis=0), pts[surface_ids].max(axis=0)) if surface_ids.size
@@ -281,18 +290,19 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
 
 
 def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None,
-                      size: float | None = None) -> tuple[WarpModel, MarkerRoles]:
+                      size: float | None = None, targets=None) -> tuple[WarpModel, MarkerRoles]:
     """:func:`marker_roles` then :func:`prepare_warp` for an :class:`ffdcli.mesh.Mesh`.
 
     ``surface`` is the marker name or names of the deforming surface. The warp's surface nodes
     (``model.surface_ids``) are the sorted unique nodes of those markers: :func:`warp` takes their
     displacement in that order. ``size``: the bounding-box diagonal of the whole mesh when ``mesh``
     is one MPI rank's local mesh (:func:`ffdcli.distributed.diagonal`); default that of its points.
+    ``targets``: as in :func:`prepare_warp`.
     """
     settings = settings or WarpSettings()
     roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path, size=size)
     model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
-                         faces=roles.faces, progress=progress)
+                         faces=roles.faces, progress=progress, targets=targets)
     return model, roles
 
 

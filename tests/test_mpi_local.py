@@ -2,9 +2,10 @@
 (:mod:`ffdcli.testing.threadcomm`) against the serial run, bit for bit.
 
 Each rank's mesh is its local mesh (:func:`ffdcli.partition.localize`: owned nodes, halo, every marker
-node); every row it computes (owned and halo) equals the serial run's row of that node, the gate's
-report and the recovery attempts are the serial ones, and the files rank 0 writes from the gathered
-rows are the serial files byte for byte.
+node); every row it moves (its part's, owned and halo, and the surface's) equals the serial run's row
+of that node, the other ranks' marker nodes stay where they were, the gate's report and the
+recovery attempts are the serial ones, and the files rank 0 writes from the gathered rows are the
+serial files byte for byte.
 """
 
 from __future__ import annotations
@@ -43,8 +44,8 @@ def _design(tmp_path, data: dict, name: str = "d.yaml"):
 
 
 def _serial_and_ranks(design, tmp_path, outputs: dict, *, cache_dir=None):
-    """(serial run, its result, its written files) and, per rank, (global ids, points, report, recovery,
-    from_cache, written) of the same design on local meshes."""
+    """(serial run, its result, its written files) and, per rank, (local mesh, rows moved, points,
+    report, recovery, recovered_with, from_cache, written) of the same design on local meshes."""
     serial_dir, mpi_dir = tmp_path / "serial", tmp_path / "mpi"
     serial_dir.mkdir()
     mpi_dir.mkdir()
@@ -58,7 +59,8 @@ def _serial_and_ranks(design, tmp_path, outputs: dict, *, cache_dir=None):
         x = deform(r)
         w = write_outputs(r, x, comm=comm, **{k: mpi_dir / v for k, v in outputs.items()})
         q = None if x.quality is None else x.quality.to_dict()
-        return r.prep.mesh.global_ids, x.points, q, x.recovery, x.recovered_with, r.prep.from_cache, w
+        moved = np.union1d(r.warp_targets(), r.surface_ids)        # the part's rows and the surface
+        return r.prep.mesh, moved, x.points, q, x.recovery, x.recovered_with, r.prep.from_cache, w
 
     return (run, res, written), run_ranks(RANKS, one)
 
@@ -110,16 +112,22 @@ def test_a_design_that_needs_recovery_gives_the_serial_rows_report_and_files(win
     (run, res, written), ranks = _serial_and_ranks(design, tmp_path, outputs)
     assert len(res.recovery) == 5 and any("increments" in a["attempt"] for a in res.recovery)
     seen = np.zeros(run.prep.mesh.n_points, dtype=int)
-    for g, pts, q, recovery, used, _, w in ranks:
+    for local, moved, pts, q, recovery, used, _, w in ranks:
+        g = local.global_ids
         assert len(g) < run.prep.mesh.n_points          # a local mesh: not every node
-        np.testing.assert_array_equal(pts, res.points[g])
+        # the part's rows and the surface: the serial rows bit for bit; the other ranks' marker nodes
+        # (not this rank's to warp) where they were
+        np.testing.assert_array_equal(pts[moved], res.points[g[moved]])
+        rest = np.setdiff1d(np.arange(len(g)), moved)
+        assert len(rest)
+        np.testing.assert_array_equal(pts[rest], local.points[rest])
         assert q == res.quality.to_dict()
         assert recovery == res.recovery and used == res.recovered_with
-        seen[g] += 1
-        assert w == ranks[0][6]             # what was written, agreed on every rank
+        seen[g[moved]] += 1
+        assert w == ranks[0][7]             # what was written, agreed on every rank
     assert seen.min() >= 1
-    assert sorted(ranks[0][6]) == sorted(written) == ["lattice", "mesh", "surface_file"]
-    _same_files(written, ranks[0][6])
+    assert sorted(ranks[0][7]) == sorted(written) == ["lattice", "mesh", "surface_file"]
+    _same_files(written, ranks[0][7])
     ids, _ = read_surface_file(tmp_path / "mpi" / "surface.dat", 3)
     np.testing.assert_array_equal(ids, run.surface_ids)       # global node ids
 
@@ -130,10 +138,10 @@ def test_another_output_format_is_written_from_every_cell(wing_file, tmp_path):
                                 "changes": [{"twist": {"tip": 5}}]})
     (run, res, written), ranks = _serial_and_ranks(design, tmp_path, {"mesh_path": "out.vtu",
                                                                       "lattice_path": "out_lattice.vtk"})
-    back = formats.read_mesh(ranks[0][6]["mesh"])
+    back = formats.read_mesh(ranks[0][7]["mesh"])
     assert back.n_cells == run.prep.mesh.n_cells
     np.testing.assert_array_equal(back.points, res.points)
-    assert open(written["mesh"], "rb").read() == open(ranks[0][6]["mesh"], "rb").read()
+    assert open(written["mesh"], "rb").read() == open(ranks[0][7]["mesh"], "rb").read()
 
 
 def test_two_components_on_local_meshes_equal_the_serial_run(tmp_path):
@@ -146,8 +154,8 @@ def test_two_components_on_local_meshes_equal_the_serial_run(tmp_path):
     cache.mkdir()
     (run, res, written), ranks = _serial_and_ranks(design, tmp_path, {"mesh_path": "out.su2"}, cache_dir=cache)
     assert not run.single
-    for g, pts, q, recovery, _, from_cache, _ in ranks:
+    for local, moved, pts, q, recovery, _, from_cache, _ in ranks:
         assert from_cache
-        np.testing.assert_array_equal(pts, res.points[g])
+        np.testing.assert_array_equal(pts[moved], res.points[local.global_ids[moved]])
         assert q == res.quality.to_dict() and recovery == res.recovery
-    assert open(written["mesh"], "rb").read() == open(ranks[0][6]["mesh"], "rb").read()
+    assert open(written["mesh"], "rb").read() == open(ranks[0][7]["mesh"], "rb").read()
