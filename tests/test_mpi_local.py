@@ -159,3 +159,18 @@ def test_two_components_on_local_meshes_equal_the_serial_run(tmp_path):
         np.testing.assert_array_equal(pts[moved], res.points[local.global_ids[moved]])
         assert q == res.quality.to_dict() and recovery == res.recovery
     assert open(written["mesh"], "rb").read() == open(ranks[0][7]["mesh"], "rb").read()
+
+
+def test_the_constraints_of_ffd_deform_on_local_meshes_are_the_serial_ones(tmp_path):
+    """``ffd deform --json`` reports the design's constraints (surface and lattice only): the same
+    table from every rank's local mesh."""
+    from ffdcli.api import constraints_report
+
+    design = _design(tmp_path, {"mesh": str(SAMPLES / "rect_wing.su2"), "surface": "wing",
+                                "box": {"points": [6, 8, 2], "sections": "xy"}, "changes": [{"twist": {"tip": 3}}],
+                                "constraints": [{"volume": {"lower": 1.0}},
+                                                {"thickness": {"chord": [0.3, 0.6], "span": [0.2, 0.8]}}]})
+    serial = constraints_report(load_run(load_design(design), use_cache=False))
+    got = run_ranks(RANKS, lambda comm: constraints_report(load_run(load_design(design), use_cache=False, comm=comm,
+                                                                    local=True)))
+    assert len(serial) > 2 and all(g == serial for g in got)
