@@ -15,7 +15,9 @@ once: the same value, bit for bit, as the scalar statement ``out[k + j] += w * x
 no bounds check (as in numba's own indexing without ``boundscheck``): the caller guarantees
 ``0 <= k`` and ``k + W <= out.size``.
 
-They can only be called from compiled (``@njit``) code.
+They can only be called from compiled (``@njit``) code. numba's on-disk cache of a caller is keyed
+on the caller's source file only: after a change of the code generation here, touch the callers
+(``ffdcli/embedding.py``) or remove their ``__pycache__`` entries.
 """
 
 from __future__ import annotations
