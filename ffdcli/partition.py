@@ -235,8 +235,9 @@ def localize(mesh: Mesh, owner: np.ndarray, rank: int) -> tuple[Mesh, MeshPart]:
     boundaries that every rank's warp and box need). Rows are sorted by global id (so every sum and
     tie-break over them runs in the order of the whole mesh); ``global_ids`` maps rows to global
     ids, ``cells`` (those touching the owned nodes, global order) and ``markers`` use local ids.
-    ``mesh`` may be whole or a partial mesh with global ids whose cells include those around the
-    rank's nodes. The part's ``rows`` are its nodes' rows of the local mesh.
+    ``mesh`` must have every node and every cell (the part's ``cell_ids`` are indices into its
+    cells: of a partial mesh they would be that mesh's own, not the file's). The part's ``rows``
+    are its nodes' rows of the local mesh.
 
     This is the definition every reader by parts must reproduce (``read_part`` of a format gives
     the same local mesh without any rank holding every node).
