@@ -30,9 +30,23 @@ from numba.extending import intrinsic
 _I32 = ir.IntType(32)
 
 
+def _fma_store(context, builder, signature, out, k_value, w_value, x, width: int) -> None:
+    """Emit ``out[k:k+width] = fma(broadcast(w), x, out[k:k+width])``: one vector load, one
+    ``llvm.fma.v{width}f64``, one vector store (the common tail of every intrinsic here)."""
+    vec = ir.VectorType(ir.DoubleType(), width)
+    w = builder.insert_element(ir.Constant(vec, ir.Undefined), w_value, ir.Constant(_I32, 0))
+    w = builder.shuffle_vector(w, ir.Constant(vec, ir.Undefined),
+                               ir.Constant(ir.VectorType(_I32, width), [0] * width))
+    k = context.cast(builder, k_value, signature.args[1], types.intp)
+    ptr = builder.bitcast(builder.gep(out.data, [k]), vec.as_pointer())
+    acc = builder.load(ptr, align=8)
+    fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [vec, vec, vec]),
+                                         f"llvm.fma.v{width}f64")
+    builder.store(builder.call(fma, [w, x, acc]), ptr, align=8)
+
+
 def _fma_codegen(width: int):
     vec = ir.VectorType(ir.DoubleType(), width)
-    fma_type = ir.FunctionType(vec, [vec, vec, vec])
 
     def codegen(context, builder, signature, args):
         out_value, k_value, w_value = args[:3]
@@ -40,14 +54,7 @@ def _fma_codegen(width: int):
         x = ir.Constant(vec, ir.Undefined)
         for j, value in enumerate(args[3:]):
             x = builder.insert_element(x, value, ir.Constant(_I32, j))
-        w = builder.insert_element(ir.Constant(vec, ir.Undefined), w_value, ir.Constant(_I32, 0))
-        w = builder.shuffle_vector(w, ir.Constant(vec, ir.Undefined),
-                                   ir.Constant(ir.VectorType(_I32, width), [0] * width))
-        k = context.cast(builder, k_value, signature.args[1], types.intp)
-        ptr = builder.bitcast(builder.gep(out.data, [k]), vec.as_pointer())
-        acc = builder.load(ptr, align=8)
-        fma = cgutils.get_or_insert_function(builder.module, fma_type, f"llvm.fma.v{width}f64")
-        builder.store(builder.call(fma, [w, x, acc]), ptr, align=8)
+        _fma_store(context, builder, signature, out, k_value, w_value, x, width)
         return context.get_dummy_value()
 
     return codegen
@@ -131,7 +138,6 @@ def axpy8x3(typingctx, out, k, w, u0, u1, u2, u3, u4, u5, u6, u7, g0, g1, g2):
 def _outer_codegen(nu: int, ng: int):
     width = nu * ng
     vec = ir.VectorType(ir.DoubleType(), width)
-    fma_type = ir.FunctionType(vec, [vec, vec, vec])
 
     def codegen(context, builder, signature, args):
         out_value, k_value, w_value = args[:3]
@@ -141,14 +147,7 @@ def _outer_codegen(nu: int, ng: int):
             u = builder.insert_element(u, args[3 + j // ng], ir.Constant(_I32, j))
             g = builder.insert_element(g, args[3 + nu + j % ng], ir.Constant(_I32, j))
         x = builder.fmul(u, g)
-        w = builder.insert_element(ir.Constant(vec, ir.Undefined), w_value, ir.Constant(_I32, 0))
-        w = builder.shuffle_vector(w, ir.Constant(vec, ir.Undefined),
-                                   ir.Constant(ir.VectorType(_I32, width), [0] * width))
-        k = context.cast(builder, k_value, signature.args[1], types.intp)
-        ptr = builder.bitcast(builder.gep(out.data, [k]), vec.as_pointer())
-        acc = builder.load(ptr, align=8)
-        fma = cgutils.get_or_insert_function(builder.module, fma_type, f"llvm.fma.v{width}f64")
-        builder.store(builder.call(fma, [w, x, acc]), ptr, align=8)
+        _fma_store(context, builder, signature, out, k_value, w_value, x, width)
         return context.get_dummy_value()
 
     return codegen
