@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.idsets import unique_ids
 from ffdcli.settings import SECTION_CHOICES
 
 AXIS_NAMES = ("x", "y", "z")
@@ -96,7 +97,7 @@ def free_edge_nodes(faces, n_points: int) -> np.ndarray:
     e = np.sort(np.concatenate(edges), axis=1)
     key, count = np.unique(e[:, 0] * np.int64(n_points) + e[:, 1], return_counts=True)
     free = key[count == 1]
-    return np.unique(np.concatenate([free // n_points, free % n_points]))
+    return unique_ids(free // n_points, free % n_points)
 
 
 def root_plane(points: np.ndarray, faces, thickness: int) -> tuple[int, str] | None:

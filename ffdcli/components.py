@@ -36,6 +36,7 @@ import numpy as np
 
 from ffdcli.distributed import global_ids
 from ffdcli.errors import InputError
+from ffdcli.idsets import unique_ids
 
 AXIS_NAMES = "xyz"
 
@@ -201,7 +202,7 @@ def marker_ids(mesh, name: str) -> np.ndarray:
     blocks = mesh.markers[name]
     if not blocks:
         return np.zeros(0, dtype=np.int64)
-    return np.unique(np.concatenate([b.data.ravel() for b in blocks]))
+    return unique_ids(*[b.data for b in blocks])
 
 
 def _flat_normal_to(mesh, name: str, axis: int, size: float) -> bool:
@@ -368,7 +369,7 @@ class Layout:
 
 def layout(components: list[Component]) -> Layout:
     ids = np.concatenate([c.prep.surface.ids for c in components])
-    union = np.unique(ids)
+    union = unique_ids(ids)
     rows = tuple(np.searchsorted(union, c.prep.surface.ids) for c in components)
     ctrl = np.cumsum([0] + [int(np.prod(c.P0.shape[:3])) for c in components])
     nv = np.cumsum([0] + [sum(ch.size for ch in c.changes) for c in components])

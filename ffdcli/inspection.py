@@ -16,6 +16,7 @@ from ffdcli.axes import Axes, detect_axes
 from ffdcli.errors import InputError
 from ffdcli.extruded import one_cell_thick
 from ffdcli.formats import read_mesh
+from ffdcli.idsets import unique_ids
 from ffdcli.mesh import Mesh
 from ffdcli.pipeline import is_surface_mesh, space_dim
 from ffdcli.surface import default_surface, extract_surface
@@ -131,7 +132,7 @@ def inspect_mesh(mesh: Mesh | str | Path, surfaces=(), progress=None) -> MeshInf
     for name, blocks in mesh.markers.items():
         ids = [b.data.ravel() for b in blocks]
         markers[name] = MarkerInfo(elements=sum(len(b) for b in blocks),
-                                   points=len(np.unique(np.concatenate(ids))) if ids else 0,
+                                   points=len(unique_ids(*ids)) if ids else 0,
                                    types={b.type: len(b) for b in blocks})
     bounds = (mesh.points.min(axis=0), mesh.points.max(axis=0)) if mesh.n_points else None
 

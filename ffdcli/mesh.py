@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.idsets import unique_ids
 
 #: Cell types use meshio's names. Nodes per cell and topological dimension of each type.
 CELL_NODES = {"vertex": 1, "line": 2, "triangle": 3, "quad": 4, "tetra": 4, "pyramid": 5,
@@ -117,7 +118,7 @@ class Mesh:
             ids.extend(b.data.ravel() for b in self.markers[name])
         if not ids:
             return np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate(ids))
+        return unique_ids(*ids)
 
     def marker_faces(self, names: str | list[str] | tuple[str, ...]) -> list[CellBlock]:
         """The boundary cell blocks of one or more markers (vertex blocks left out)."""

@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ffdcli.idsets import union_ids, unique_ids
 from ffdcli.mesh import CELL_NODES, CellBlock, Mesh
 from ffdcli.parallel import SerialComm, share
 from ffdcli.warp_tree import morton_codes  # the one Z-order curve (the warp orders its targets by it)
@@ -204,7 +205,7 @@ def assemble_part(n_points: int, n_cells: int, owner: np.ndarray, rank: int, dim
     """
     blocks = [np.asarray(b, dtype=np.int64) for b in blocks]
     mine = np.flatnonzero(owner == rank)
-    ids = np.union1d(mine, np.unique(np.concatenate([b.ravel() for b in blocks])) if blocks
+    ids = union_ids(mine, unique_ids(*[b.ravel() for b in blocks]) if blocks
                      else np.zeros(0, np.int64))
     cells = tuple(CellBlock(t, np.searchsorted(ids, b).reshape(len(b), -1)) for t, b in zip(types, blocks, strict=True))
     counted = tuple(owner[b[:, 0]] == rank if len(b) else np.zeros(0, dtype=bool) for b in blocks)
@@ -244,7 +245,7 @@ def localize(mesh: Mesh, owner: np.ndarray, rank: int) -> tuple[Mesh, MeshPart]:
     """
     part = part_of(mesh, owner, rank)
     marker = [b.data.ravel() for blocks in mesh.markers.values() for b in blocks]
-    keep = np.union1d(part.ids, np.concatenate(marker) if marker else np.zeros(0, np.int64)).astype(np.int64)
+    keep = unique_ids(part.ids, *marker).astype(np.int64)
     rows = np.searchsorted(keep, part.ids)
     local = Mesh(points=mesh.points[keep], dim=mesh.dim,
                  cells=[CellBlock(b.type, rows[b.data]) for b in part.cells],
@@ -357,7 +358,7 @@ def local_mesh_of_blocks(comm, block: np.ndarray, n: int, dim: int, types, block
     # the owners of the nodes of the cells read, from the holders of their rows
     empty = np.zeros(0, np.int64)
     blocks[:] = [np.asarray(b, dtype=np.int64) for b in blocks]
-    need = np.unique(np.concatenate([b.ravel() for b in blocks] + [empty]))
+    need = unique_ids(*blocks, empty)
     need_owner = np.concatenate([np.zeros(0, np.int32)] + _ask(comm, bounds, need, lambda rows: own[rows]))
     owners = [need_owner[np.searchsorted(need, b)] for b in blocks]
     del need, need_owner
@@ -366,9 +367,9 @@ def local_mesh_of_blocks(comm, block: np.ndarray, n: int, dim: int, types, block
     del owners
     read.clear()                 # the cells as read (the caller's list): sent, no longer needed
     # the part: owned nodes and their halo; the local mesh: the part's nodes and every marker node
-    ids = np.union1d(mine, np.unique(np.concatenate([b.ravel() for b in blocks] + [empty])))
+    ids = unique_ids(mine, *blocks, empty)
     marker = [b.data.ravel() for bl in markers.values() for b in bl]
-    keep = np.union1d(ids, np.concatenate(marker + [empty])).astype(np.int64)
+    keep = unique_ids(ids, *marker, empty).astype(np.int64)
     at = np.searchsorted(mine, keep)
     is_mine = (at < len(mine)) & (mine[np.minimum(at, max(len(mine) - 1, 0))] == keep) if len(mine) else \
         np.zeros(len(keep), dtype=bool)

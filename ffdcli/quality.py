@@ -75,6 +75,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit, prange
 
+from ffdcli.idsets import unique_ids
 from ffdcli.mesh import CellBlock, Mesh
 
 #: Default threshold of the scaled Jacobian below which a cell that got worse fails the gate.
@@ -951,7 +952,7 @@ def shaped_by_design(after, cells, index, q, design_map, orientation) -> np.ndar
     starts = np.cumsum([0] + [len(b) for b in cells])
     blk = np.searchsorted(starts, index, side="right") - 1
     per_block = [cells[k].data[index[blk == k] - starts[k]] for k in range(len(cells))]
-    nodes = np.unique(np.concatenate([d.ravel() for d in per_block]))
+    nodes = unique_ids(*per_block)
     moved = np.asarray(design_map(nodes), dtype=np.float64)
     good = np.isfinite(moved).all(axis=1)
     pts = np.array(after, dtype=np.float64)
@@ -975,7 +976,7 @@ def nodes_shaped_by_design(after, cells, dim, orientation, topology, fail, o, de
     near = np.zeros(len(after), dtype=bool)
     near[cand] = True
     around = [b.data[near[b.data].any(axis=1)] for b in cells]
-    nodes = np.unique(np.concatenate([d.ravel() for d in around]))
+    nodes = unique_ids(*around)
     moved = np.asarray(design_map(nodes), dtype=np.float64)
     good = np.isfinite(moved).all(axis=1)
     pts = np.array(after, dtype=np.float64)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.axes import Axes
+from ffdcli.idsets import unique_ids
 from ffdcli.mesh import diagonal
 
 #: Where the first cut inboard of a degenerate tip cut is searched, as fractions of the span.
@@ -85,7 +86,7 @@ def surface_edges(faces, *, unique: bool = True) -> np.ndarray:
         return e
     e = np.sort(e, axis=1)
     n = int(e.max()) + 1
-    key = np.unique(e[:, 0] * n + e[:, 1])          # 1D unique: far faster than unique(axis=0)
+    key = unique_ids(e[:, 0] * n + e[:, 1])          # 1D unique: far faster than unique(axis=0)
     return np.stack([key // n, key % n], axis=1)
 
 

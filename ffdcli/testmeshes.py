@@ -33,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ffdcli.idsets import unique_ids
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.testing.wings import Planform, crm_planform
 
@@ -262,7 +263,7 @@ def _gmsh_tets(case: WingCase):
     finally:
         gmsh.finalize()
 
-    used = np.unique(tets_tags)
+    used = unique_ids(tets_tags)
     lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
     lookup[used] = np.arange(len(used))
     pos = np.full(len(lookup), -1, dtype=np.int64)
@@ -275,7 +276,7 @@ def _gmsh_tets(case: WingCase):
     if any(np.any(t < 0) for t in markers.values()):
         raise RuntimeError(f"{case.name}: a marker references a node no tetrahedron uses")
     # exact root plane for the symmetry nodes (gmsh returns them to rounding)
-    sym = np.unique(markers["symmetry"])
+    sym = unique_ids(markers["symmetry"])
     points[sym, case.planform.axes[2]] = case.planform.root_offset[case.planform.axes[2]]
     return points, tets, _orient_out_of_fluid(points, tets, markers)
 
@@ -323,12 +324,12 @@ def add_prism_layers(points: np.ndarray, tets: np.ndarray, markers: dict[str, np
     Returns the Mesh (tetra + wedge blocks; symmetry gets triangle + quad blocks).
     """
     wing = markers["wing"]
-    wall = np.unique(wing)
+    wall = unique_ids(wing)
     n0 = len(points)
     p = points[wing]
     fn = -np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])           # into the fluid, |.| = 2 area
     on_sym = np.zeros(n0, dtype=bool)
-    on_sym[np.unique(markers["symmetry"])] = True
+    on_sym[unique_ids(markers["symmetry"])] = True
     vn = _wall_normals(n0, wing, fn / np.linalg.norm(fn, axis=1)[:, None], on_sym, span_axis)
     # local limit: 0.3 of the shortest tetrahedron edge at each wall node
     shortest = np.full(n0, np.inf)
@@ -360,13 +361,13 @@ def add_prism_layers(points: np.ndarray, tets: np.ndarray, markers: dict[str, np
         for k in range(layers):
             pts[ids[k, wall[sym_wall]], span_axis] = root
         bad_nodes = [c[_quality(pts, c, t) <= 0].ravel() for c, t in ((tets, "tetra"), (wedges, "wedge"))]
-        bad = np.unique(np.concatenate(bad_nodes))
+        bad = unique_ids(*bad_nodes)
         bad = bad[bad < n0]
         bad = bad[pos[bad] >= 0]
         if len(bad) == 0 and all(len(b) == 0 for b in bad_nodes):
             break
         if len(bad) == 0:        # a bad cell without a wall node of its own: shrink its wedges' walls
-            wn = np.unique(np.concatenate(bad_nodes))
+            wn = unique_ids(*bad_nodes)
             bad = wall[np.isin(ids[:, wall], wn).any(axis=0)]
         scale[pos[bad]] *= 0.5
     # symmetry quads: wing-triangle edges with both nodes in the plane

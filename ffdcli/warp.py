@@ -79,6 +79,7 @@ import numba
 import numpy as np
 from numba import njit, prange
 
+from ffdcli.idsets import setdiff_ids, unique_ids
 from ffdcli.mesh import CellBlock, diagonal
 from ffdcli.progress import chunks, no_progress
 from ffdcli.rotations import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
@@ -204,8 +205,8 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     progress = progress or no_progress
     pts = np.asarray(points, dtype=np.float64)
     n = len(pts)
-    surface_ids = np.unique(np.asarray(surface_ids, dtype=np.int64))
-    fixed_ids = np.setdiff1d(np.asarray(fixed_ids, dtype=np.int64), surface_ids)
+    surface_ids = unique_ids(np.asarray(surface_ids, dtype=np.int64))
+    fixed_ids = setdiff_ids(np.asarray(fixed_ids, dtype=np.int64), surface_ids)
     for name, ids in (("surface", surface_ids), ("fixed", fixed_ids)):
         if ids.size and (ids[0] < 0 or ids[-1] >= n):
             raise ValueError(f"{name} node ids out of range 0..{n - 1}")

@@ -29,6 +29,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.idsets import union_ids, unique_ids
 from ffdcli.mesh import CellBlock, check_markers, diagonal
 from ffdcli.settings import WarpSettings
 
@@ -102,9 +103,9 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
         blocks = markers[name]
         if not blocks:
             return np.zeros(0, dtype=np.int64)
-        return np.unique(np.concatenate([b.data.ravel() for b in blocks]))
+        return unique_ids(*[b.data for b in blocks])
 
-    surface_ids = (np.unique(np.concatenate([ids_of(n) for n in surface])) if surface
+    surface_ids = (unique_ids(*[ids_of(n) for n in surface]) if surface
                    else np.zeros(0, dtype=np.int64))
     size = diagonal(pts) if size is None else float(size)
     mesh_normal = _plane_normal(pts) if dim == 2 else None
@@ -129,9 +130,9 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
         if roles[name] == "sliding":
             planes[name] = plane
     fixed = [ids_of(n) for n, r in roles.items() if r == "fixed"]
-    fixed_ids = np.unique(np.concatenate(fixed)) if fixed else np.zeros(0, dtype=np.int64)
+    fixed_ids = unique_ids(*fixed) if fixed else np.zeros(0, dtype=np.int64)
     fixed_ids = np.setdiff1d(fixed_ids, surface_ids, assume_unique=True)
-    taken = np.union1d(surface_ids, fixed_ids)
+    taken = union_ids(surface_ids, fixed_ids)
     sliding = []
     for name, (normal, point) in planes.items():
         ids = np.setdiff1d(ids_of(name), taken, assume_unique=True)

@@ -61,6 +61,7 @@ import numpy as np
 
 from ffdcli.atomic import atomic_path
 from ffdcli.errors import InputError
+from ffdcli.idsets import unique_ids
 from ffdcli.mesh import CELL_DIM, CELL_NODES, CellBlock, Mesh
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -555,7 +556,7 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
     if len(pts) and (pts.min() < 1 or pts.max() > zone.n_points):
         raise InputError(f"boundary condition refers to points outside 1..{zone.n_points} of its zone",
                          path=file, key=bc.name)
-    gids = np.unique(pts - 1 + zone.offset)
+    gids = unique_ids(pts - 1 + zone.offset)
     # faces of the boundary sections whose nodes all belong to the BC's points
     inside = np.zeros(zone.n_points, dtype=bool)
     inside[gids - zone.offset] = True
@@ -573,7 +574,7 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
         if whole and any(CELL_DIM[t] < cell_dim for t in s.blocks):
             hit.add(si)
     if faces:
-        covered = np.unique(np.concatenate([np.vstack(v).ravel() for v in faces.values()]))
+        covered = unique_ids(*[np.vstack(v) for v in faces.values()])
         if len(covered) == len(gids):
             used |= hit
             return [CellBlock(t, np.vstack(faces[t])) for t in _TYPE_ORDER if t in faces]
@@ -1097,7 +1098,7 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
                 bcs.append((mname, "FaceCenter" if cell_dim == 3 else "EdgeCenter",
                             np.arange(start, end + 1)))
             elif verts:
-                ids = np.unique(np.concatenate([b.data.ravel() for b in verts])) + 1
+                ids = unique_ids(*[b.data for b in verts]) + 1
                 bcs.append((mname, "Vertex", ids))
         if bcs:
             zbc = _node(zone, "ZoneBC", "ZoneBC_t")

@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.idsets import setdiff_ids
 from ffdcli.inputs import check_input_file, existing_kind
 from ffdcli.mesh import diagonal
 
@@ -46,7 +47,7 @@ class Sensitivity:
     def check_covers(self, ids: np.ndarray, path=None, what: str = "surface") -> None:
         """The rule of a gradient: dJ/dX is given at every node of ``ids`` (the surface marker's
         nodes); raises :class:`InputError` naming the file, how many rows are missing and the first ids."""
-        missing = np.setdiff1d(ids, self.ids)
+        missing = setdiff_ids(ids, self.ids)
         if len(missing):
             raise InputError(f"has no row for {len(missing)} of the {len(ids)} {what} nodes (first mesh node "
                              f"ids: {', '.join(map(str, missing[:5].tolist()))}); dJ/dX is needed at every "
