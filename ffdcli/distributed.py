@@ -12,6 +12,9 @@ files, the mesh written) is put back in global terms:
 * :func:`gather_points`: the owned rows of every rank, in global order, on rank 0 (the writer),
   sent in chunks of global ids, so rank 0 holds the (N, 3) result and one chunk, not every rank's
   rows at once;
+* :func:`rows_of_block`: the coordinates of a block of global ids (the point rows a rank read)
+  from their owners, so that each rank prints the text of its own rows of an SU2 file
+  (:func:`ffdcli.formats.su2.render_rows`) and rank 0 only copies it into the output;
 * :func:`writable_mesh`: what rank 0 hands to :func:`ffdcli.formats.write_mesh` for those points.
 
 Every function takes the communicator explicitly; with a mesh that has every node (``global_ids``
@@ -29,6 +32,8 @@ from ffdcli.mesh import Mesh
 PATCHED = ("su2", "cgns")
 #: Global ids per message of :func:`gather_points` (24 MB of coordinates at most per chunk).
 GATHER_ROWS = 1 << 20
+#: Bytes of printed SU2 rows a rank sends rank 0 per round of :func:`rendered_mesh`.
+RENDER_PIECE = 1 << 26
 
 
 def extent(points: np.ndarray, comm=None) -> tuple[np.ndarray, np.ndarray]:
@@ -89,6 +94,78 @@ def gather_points(part, points: np.ndarray, n_points: int, comm, *, chunk: int =
         if comm.is_root:
             out[ids] = xyz
     return out
+
+
+def rows_of_block(part, points: np.ndarray, first: int, count: int, comm) -> np.ndarray:
+    """(count, 3) the coordinates of global nodes ``first .. first + count - 1`` on this rank, from the
+    ranks that own them (one all-to-all), a collective; each rank asks for its own block of ids (the
+    blocks of any ranks, e.g. the point rows each rank read; every id asked by some rank is owned by
+    exactly one).
+
+    ``part``, ``points``: as :func:`gather_points` (this rank's part of its local mesh and the local
+    mesh's rows)."""
+    owned_ids = part.ids[part.owned]
+    rows = owned_ids if part.rows is None else part.rows[part.owned]
+    pts = np.asarray(points, dtype=np.float64)
+    spans = np.array(comm.allgather((int(first), int(count))), dtype=np.int64).reshape(-1, 2)
+    lo = np.searchsorted(owned_ids, spans[:, 0])
+    hi = np.searchsorted(owned_ids, spans[:, 0] + spans[:, 1])
+    got = comm.alltoall([(owned_ids[a:b] - int(f), np.ascontiguousarray(pts[rows[a:b]]))
+                         for a, b, f in zip(lo, hi, spans[:, 0], strict=True)])
+    out = np.full((int(count), 3), np.nan)
+    seen = np.zeros(int(count), dtype=bool)
+    for at, xyz in got:
+        out[at] = xyz
+        seen[at] = True
+    if not seen.all():
+        raise RuntimeError(f"rows_of_block: {int((~seen).sum())} of the ids asked are owned by no rank")
+    return out
+
+
+def rendered_mesh(mesh: Mesh, part, points: np.ndarray, path, comm, *, piece: int = RENDER_PIECE
+                  ) -> tuple[bool, Mesh | None]:
+    """The SU2 file of a local mesh printed by parts, a collective: ``(True, mesh)`` where ``mesh`` (rank
+    0; None on the others) is what rank 0 hands to :func:`ffdcli.formats.write_mesh` for ``path``, or
+    ``(False, None)`` on every rank when the write cannot be done by parts (then
+    :func:`gather_points` and :func:`writable_mesh`).
+
+    By parts when the mesh was read by parts from an SU2 file (every rank holds the layout of the
+    point rows it parsed, :func:`ffdcli.formats.su2.read_part`), the output is SU2, and the file has
+    no SU2 FFD section (whose refresh needs every node). Each rank gets the new coordinates of its
+    rows from their owners (:func:`rows_of_block`) and prints them
+    (:func:`ffdcli.formats.su2.render_rows`): the ``%.17g`` printing, the serial writer's largest
+    cost, is split between the ranks. Rank 0 receives the texts in rounds of at most ``piece`` bytes
+    a rank (MPI counts stay below 2**31) and keeps them in file order: about the bytes of the point
+    block (~60 bytes a moved row), where the gather held 24 bytes a node plus the 48 bytes a node of
+    the whole block's layout.
+    """
+    from ffdcli.formats import su2
+
+    src = mesh.source
+    ok = (mesh.global_ids is not None and mesh.format == "su2" and isinstance(src, su2.Su2Source)
+          and src.block is not None and formats.format_of(path) == "su2")
+    if not all(comm.allgather(ok)) or comm.root_then_bcast(su2.has_ffd_section, mesh.path, src):
+        return False, None
+    block = comm.run(rows_of_block, part, points, src.first_row, len(src.points), comm)
+    text = comm.run(su2.render_rows, mesh.path, src, block)
+    del block
+    rounds = max(comm.allgather(-(-len(text) // piece)))
+    pieces: list[list[np.ndarray]] = [[] for _ in range(comm.size)]
+    for k in range(rounds):
+        chunk = text[k * piece:(k + 1) * piece]
+        lengths = comm.allgather(len(chunk))
+        got = comm.gather_rows(chunk)
+        if comm.is_root:
+            for r, (a, b) in enumerate(zip(np.cumsum([0] + lengths[:-1]), np.cumsum(lengths), strict=True)):
+                if b > a:
+                    pieces[r].append(got[a:b])
+    if not comm.is_root:
+        return True, None
+    rendered = su2.Su2Rendered(ndim=src.ndim, text=tuple(p for per in pieces for p in per),
+                               block_start=src.block_start, block_end=src.block_end, size=src.size,
+                               mtime_ns=src.mtime_ns)
+    shape_only = np.broadcast_to(np.zeros(3), (int(mesh.n_global), 3))
+    return True, Mesh(points=shape_only, dim=mesh.dim, path=mesh.path, format="su2", source=rendered, partial=True)
 
 
 def writable_mesh(mesh: Mesh, path) -> Mesh:

@@ -23,7 +23,7 @@ from ffdcli.box_import import import_box
 from ffdcli.changes import apply_changes
 from ffdcli.design import Design
 from ffdcli.distributed import diagonal as global_diagonal
-from ffdcli.distributed import gather_points, global_ids, local_rows, writable_mesh
+from ffdcli.distributed import gather_points, global_ids, local_rows, rendered_mesh, writable_mesh
 from ffdcli.embedding import Embedding
 from ffdcli.errors import InputError, QualityError
 from ffdcli.extruded import one_cell_thick
@@ -769,17 +769,21 @@ def _badness(q: QualityReport) -> tuple[int, int]:
 # The writers are called through their modules (formats.write_mesh, ...), not bound names: a test or
 # a caller that replaces a writer (a full disk, an I/O error) replaces it here too.
 def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes: dict | None = None,
-                   target=None, points: np.ndarray | None = None) -> dict:
+                   target=None, points: np.ndarray | None = None, mesh_out: Mesh | None = None) -> dict:
     """{output kind: writer(tmp_path)} for the outputs of one design (see :mod:`ffdcli.outputs`).
 
     ``notes`` (a dict) receives what a writer reports: ``"su2_ffd"``, what was done to SU2's own FFD
     section of an SU2 mesh, when it has one. ``target``: an airfoil (K, 2) drawn on the picture.
     ``points``: of a run on a local mesh, every node's (N, 3) (:func:`ffdcli.distributed.gather_points`,
-    on the writing rank), which the mesh is written with; the other outputs need the surface only."""
+    on the writing rank), which the mesh is written with; the other outputs need the surface only.
+    ``mesh_out``: the mesh to write as it is, with its own points (:func:`ffdcli.distributed.rendered_mesh`)."""
 
     notes = {} if notes is None else notes
 
     def mesh(tmp):
+        if mesh_out is not None:
+            formats.write_mesh(mesh_out, tmp, mesh_out.points, progress=progress)
+            return
         if run.local and points is None:
             raise RuntimeError("a run on a local mesh writes the mesh of every node: pass points=")
         got = formats.write_mesh(writable_mesh(run.prep.mesh, tmp), tmp, result.points if points is None else points,
@@ -831,33 +835,45 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     was done to SU2's own FFD section of an SU2 mesh, when it has one.
 
     ``comm`` (:mod:`ffdcli.parallel`, a collective): rank 0 writes every output once, the outcome
-    (or its error) agreed on and broadcast. A run on local meshes first gathers every node's
-    coordinates on rank 0 (:func:`ffdcli.distributed.gather_points`: rank 0 then holds one (N, 3)
-    array, the other ranks their rows only)."""
+    (or its error) agreed on and broadcast. A run on local meshes writing an SU2 mesh read by parts
+    has each rank print its own point rows and rank 0 copy the texts into the file
+    (:func:`ffdcli.distributed.rendered_mesh`); any other first gathers every node's coordinates on
+    rank 0 (:func:`ffdcli.distributed.gather_points`: rank 0 then holds one (N, 3) array, the other
+    ranks their rows only)."""
 
     if comm is not None and comm.size > 1:
+        if plan is None:
+            plan = comm.run(_plan, run, mesh_path, lattice_path, surface_file, plot)
         kw = dict(mesh_path=mesh_path, lattice_path=lattice_path, surface_file=surface_file, plot=plot, plan=plan,
                   progress=progress, extra_writers=extra_writers)
-        whole = None
-        if run.local and (plan is None or "mesh" in plan):
-            part = run.quality_part()
-            whole = comm.run(gather_points, part, result.points, run.prep.mesh.n_points_global, comm)
-        return comm.root_then_bcast(_write_outputs, run, result, points=whole, **kw)
+        whole = printed = None
+        if run.local and "mesh" in plan:
+            part = run.quality_part()        # an SU2 output: each rank prints its own rows
+            by_parts, printed = rendered_mesh(run.prep.mesh, part, result.points, plan.path("mesh"), comm)
+            if not by_parts:
+                whole = comm.run(gather_points, part, result.points, run.prep.mesh.n_points_global, comm)
+        return comm.root_then_bcast(_write_outputs, run, result, points=whole, mesh_out=printed, **kw)
     return _write_outputs(run, result, mesh_path=mesh_path, lattice_path=lattice_path, surface_file=surface_file,
                           plot=plot, plan=plan, progress=progress, extra_writers=extra_writers)
 
 
-def _write_outputs(run, result, *, mesh_path, lattice_path, surface_file, plot, plan, progress, extra_writers,
-                   points=None) -> dict:
-    """:func:`write_outputs` on the writing rank (``points``: every node's, of a run on local meshes)."""
+def _plan(run, mesh_path, lattice_path, surface_file, plot):
+    """The output plan of :func:`write_outputs` made from its arguments."""
     from ffdcli.outputs import plan_deform
 
+    return plan_deform(run.design, mesh=mesh_path, lattice=lattice_path, plot=plot,
+                       extra=[("surface_file", surface_file, False, "--surface-file")])
+
+
+def _write_outputs(run, result, *, mesh_path, lattice_path, surface_file, plot, plan, progress, extra_writers,
+                   points=None, mesh_out=None) -> dict:
+    """:func:`write_outputs` on the writing rank (``points``: every node's, of a run on local meshes;
+    ``mesh_out``: instead, the mesh to write as it is, e.g. printed by parts)."""
     if plan is None:
-        plan = plan_deform(run.design, mesh=mesh_path, lattice=lattice_path, plot=plot,
-                           extra=[("surface_file", surface_file, False, "--surface-file")])
+        plan = _plan(run, mesh_path, lattice_path, surface_file, plot)
     notes: dict = {}
-    writers = {k: w for k, w in deform_writers(run, result, progress=progress, notes=notes, points=points).items()
-               if k in plan}
+    writers = {k: w for k, w in deform_writers(run, result, progress=progress, notes=notes, points=points,
+                                               mesh_out=mesh_out).items() if k in plan}
     writers.update(extra_writers or {})
     written = plan.write(writers)
     written.update(notes)

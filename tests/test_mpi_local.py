@@ -174,3 +174,78 @@ def test_the_constraints_of_ffd_deform_on_local_meshes_are_the_serial_ones(tmp_p
     got = run_ranks(RANKS, lambda comm: constraints_report(load_run(load_design(design), use_cache=False, comm=comm,
                                                                     local=True)))
     assert len(serial) > 2 and all(g == serial for g in got)
+
+
+def _printed_by_parts(path, X, monkeypatch, piece):
+    """(rank 0's written bytes, the serial writer's bytes, by_parts flags) of ``X`` (every node's new
+    coordinates) written as SU2 by 3 thread ranks that read ``path`` by parts."""
+    from ffdcli import distributed
+    from ffdcli.formats import su2
+    from ffdcli.partition import node_owners
+
+    monkeypatch.setattr(su2, "CHUNK_BYTES", 1 << 12)      # many parse chunks: every rank holds rows
+    whole = formats.read_mesh(path)
+    out = path.parent / f"{path.stem}_serial_out.su2"
+    formats.write_mesh(whole, out, X)
+
+    def one(comm):
+        local, part = su2.read_part(path, comm)
+        assert np.array_equal(local.global_ids[part.rows], part.ids)
+        used, mesh = distributed.rendered_mesh(local, part, X[local.global_ids], out.with_name("p.su2"), comm,
+                                               piece=piece)
+        if used and comm.is_root:
+            target = path.parent / f"{path.stem}_parts_out.su2"
+            formats.write_mesh(mesh, target, mesh.points)
+            return used, target.read_bytes()
+        return used, None
+
+    got = run_ranks(RANKS, one)
+    owner = node_owners(whole.points, RANKS)
+    assert len(set(owner.tolist())) == RANKS
+    return got, out.read_bytes()
+
+
+@pytest.mark.parametrize("piece", [4099, 1 << 26])
+def test_the_ranks_print_their_own_rows_and_rank_0_writes_the_serial_file(wing_file, tmp_path, monkeypatch,
+                                                                            piece):
+    """Each rank prints the SU2 point rows it read (the moved ones; the others keep their text) and
+    rank 0 copies the texts, received in rounds of ``piece`` bytes: the serial writer's file byte
+    for byte, also when only some rows move and for a 2D mesh with CRLF line ends."""
+    mesh = formats.read_mesh(wing_file)
+    rng = np.random.default_rng(3)
+    some = mesh.points.copy()
+    some[rng.random(len(some)) < 0.3] += 1e-3 * np.pi
+    cases = [(wing_file, mesh.points * 1.1 + 1 / 3), (wing_file, some)]
+    text = (SAMPLES / "naca0012_2d.su2").read_bytes().replace(b"\n", b"\r\n")
+    crlf = tmp_path / "crlf_2d.su2"
+    crlf.write_bytes(text)
+    m2 = formats.read_mesh(crlf)
+    moved2 = m2.points.copy()
+    moved2[:, :2] *= 1.0 + 1e-7
+    cases.append((crlf, moved2))
+    for path, X in cases:
+        got, serial = _printed_by_parts(path, X, monkeypatch, piece)
+        assert all(used for used, _ in got)
+        assert got[0][1] == serial
+        assert all(b is None for _, b in got[1:])
+
+
+def test_a_file_with_su2s_ffd_section_is_gathered_and_its_section_refreshed(tmp_path, monkeypatch):
+    """SU2's FFD section needs every surface node: no printing by parts (the gather, then the
+    serial writer, which refreshes the section)."""
+    from conftest import shared_file
+
+    from ffdcli import distributed
+    from ffdcli.formats import su2
+
+    src = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
+    path = tmp_path / "ffd.su2"
+    path.write_bytes(src.read_bytes())
+    X = formats.read_mesh(path).points.copy()
+    X[:, 1] *= 1.01
+
+    def one(comm):
+        local, part = su2.read_part(path, comm)
+        return distributed.rendered_mesh(local, part, X[local.global_ids], tmp_path / "o.su2", comm)
+
+    assert run_ranks(RANKS, one) == [(False, None)] * RANKS

@@ -263,22 +263,27 @@ def _same_local(mesh, part, whole, owner, rank):
 def test_su2_read_by_parts_is_the_local_mesh_of_the_whole_read(sample, monkeypatch):
     """Each rank parses only its chunks of the point and element rows (small chunks here: many per
     rank); its mesh and part are :func:`localize` of the serial read (owners: :func:`node_owners`),
-    and rank 0 alone has the point block's layout of the whole file."""
+    and each rank holds the point block's layout of the rows it parsed: in rank order, the whole
+    file's (the rows each rank prints when the mesh is written)."""
     from ffdcli.formats import su2
 
     monkeypatch.setattr(su2, "CHUNK_BYTES", 1 << 14)
     whole = su2.read(SAMPLES / sample)
     for size in (2, 3, 5):
         owner = node_owners(whole.points, size)
-        for r, (mesh, part) in enumerate(run_ranks(size, lambda c: su2.read_part(SAMPLES / sample, c))):
+        got = run_ranks(size, lambda c: su2.read_part(SAMPLES / sample, c))
+        srcs = [mesh.source for mesh, _ in got]
+        assert [s.first_row for s in srcs] == list(np.cumsum([0] + [len(s.points) for s in srcs[:-1]]))
+        assert sum(len(s.points) > 0 for s in srcs) >= 2          # the rows are split
+        for f in ("coord_start", "coord_end", "points"):
+            np.testing.assert_array_equal(np.concatenate([getattr(s, f) for s in srcs]), getattr(whole.source, f))
+        for s in srcs:          # each rank's rows end where the next rank's begin
+            rows = slice(s.first_row, s.first_row + len(s.points) + 1)
+            np.testing.assert_array_equal(s.row_start, whole.source.row_start[rows])
+            for f in ("separator", "ndim", "size", "mtime_ns", "block_start", "block_end"):
+                assert getattr(s, f) == getattr(whole.source, f)
+        for r, (mesh, part) in enumerate(got):
             _same_local(mesh, part, whole, owner, r)
-            if r == 0:          # the writer: the point block's layout of the whole file
-                for f in ("row_start", "coord_start", "coord_end", "points"):
-                    np.testing.assert_array_equal(getattr(mesh.source, f), getattr(whole.source, f))
-                for f in ("separator", "ndim", "size", "mtime_ns"):
-                    assert getattr(mesh.source, f) == getattr(whole.source, f)
-            else:
-                assert mesh.source is None
             # the nodes off the markers (every rank has the markers' nodes) are split between the ranks
             off = np.setdiff1d(np.arange(whole.n_points), whole.marker_point_ids(list(whole.markers)))
             held = np.setdiff1d(mesh.global_ids, whole.marker_point_ids(list(whole.markers)))

@@ -77,6 +77,11 @@ class Su2Source:
     one is the end of the point block); ``coord_start[i]``/``coord_end[i]`` delimit the coordinate
     text of row ``i`` (first to last of its ``ndim`` numbers). ``points`` are the coordinates as
     read, (N, ndim), used to tell which rows moved. ``size``/``mtime_ns`` identify the file version.
+
+    An MPI rank's read (:func:`read_part`) holds the rows it parsed only: rows ``first_row`` to
+    ``first_row + len(points) - 1`` of the file (``row_start`` then ends where the next row starts),
+    and ``block`` is the byte range of the whole point block (None: this source's rows are the
+    whole block). :func:`render_rows` prints the new text of those rows on the rank that holds them.
     """
 
     ndim: int
@@ -87,14 +92,30 @@ class Su2Source:
     separator: bytes
     size: int
     mtime_ns: int
+    first_row: int = 0
+    block: tuple[int, int] | None = None
 
     @property
     def block_start(self) -> int:
-        return int(self.row_start[0])
+        return int(self.row_start[0]) if self.block is None else int(self.block[0])
 
     @property
     def block_end(self) -> int:
-        return int(self.row_start[-1])
+        return int(self.row_start[-1]) if self.block is None else int(self.block[1])
+
+
+@dataclass(frozen=True)
+class Su2Rendered:
+    """The point block of a file as rendered by the MPI ranks (:func:`render_rows`), for :func:`write`:
+    ``text`` is the new point block, pieces in file order; everything outside
+    ``block_start:block_end`` of the file ``size``/``mtime_ns`` is copied unchanged."""
+
+    ndim: int
+    text: tuple[np.ndarray, ...]
+    block_start: int
+    block_end: int
+    size: int
+    mtime_ns: int
 
 
 # ----------------------------------------------------------------------------------------------
@@ -145,9 +166,10 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
     the halo and of the marker nodes are asked of the ranks that parsed them: no rank holds every
     node. ``mesh`` is the rank's local mesh (:func:`ffdcli.partition.localize` of :func:`read`'s
     mesh: ``global_ids``, local ids, ``partial``), ``part`` its :class:`~ffdcli.partition.MeshPart`.
-    Rank 0, the writer, also keeps ``source`` (the point block's layout and the coordinates as read,
-    48 bytes a node of a 3D mesh, rank 0 only); it is ``None`` on the others. Errors (a bad line in
-    one rank's share) are agreed on: every rank raises the lowest failing rank's.
+    Every rank keeps ``source``, the layout of the point rows it parsed and their coordinates as read
+    (:class:`Su2Source` with ``first_row`` and ``block``; 48 bytes a row of a 3D mesh), so that each
+    rank prints the new text of its own rows (:func:`render_rows`). Errors (a bad line in one rank's
+    share) are agreed on: every rank raises the lowest failing rank's.
     """
     from ffdcli.partition import local_mesh_of_blocks
 
@@ -174,19 +196,22 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
         return parser, st
 
     parser, st = comm.run(parse)
-    # rank 0, the writer, gets the point block's layout and the coordinates as read (the ranks'
-    # chunks are consecutive: gathered in rank order they are the file's rows)
+    # each rank keeps the layout of the rows it parsed (the ranks' chunks are consecutive, in rank
+    # order): its rows end where the next rank's first row starts, the last ones at the block's end
     mine = np.ascontiguousarray(parser.points)
-    rs, cs, ce = (comm.gather_rows(np.ascontiguousarray(a)) for a in parser.layout[:3])
-    as_read = comm.gather_rows(mine)
-    source = None
-    if comm.is_root:
-        source = Su2Source(ndim=parser.ndim, row_start=np.append(rs, parser.points_end).astype(np.int64),
-                           coord_start=cs, coord_end=ce, points=as_read, separator=parser.layout[3],
-                           size=st.st_size, mtime_ns=st.st_mtime_ns)
+    rs, cs, ce, sep = parser.layout
+    starts = comm.allgather((len(mine), int(rs[0]) if len(rs) else -1, sep))
+    first_row = sum(n for n, _, _ in starts[:comm.rank])
+    after = [a for n, a, _ in starts[comm.rank + 1:] if n]
+    end = after[0] if after else int(parser.points_end)
+    block_start = next((a for n, a, _ in starts if n), int(parser.points_end))
+    source = Su2Source(ndim=parser.ndim, row_start=np.append(rs, end).astype(np.int64), coord_start=cs,
+                       coord_end=ce, points=mine, separator=next((x for n, _, x in starts if n), sep),
+                       size=st.st_size, mtime_ns=st.st_mtime_ns, first_row=first_row,
+                       block=(block_start, int(parser.points_end)))
     block = np.zeros((len(mine), 3))
     block[:, :parser.ndim] = mine
-    del mine, as_read, rs, cs, ce
+    del rs, cs, ce
     parser.points = parser.layout = None
     local = {b.type: b.data for b in parser.cells}
     every = comm.allgather([(b.type, len(b)) for b in parser.cells])
@@ -681,6 +706,9 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> di
         raise ValueError(f"points {points.shape} do not match the mesh {mesh.points.shape}")
     if not np.isfinite(points).all():
         raise ValueError("cannot write non-finite point coordinates (NaN or inf)")
+    if mesh.format == "su2" and isinstance(mesh.source, Su2Rendered):
+        _write_rendered(mesh.path, mesh.source, path, progress)
+        return {}
     src = mesh.source if mesh.format == "su2" and isinstance(mesh.source, Su2Source) else None
     ndim = src.ndim if src is not None else mesh.dim
     if ndim == 2 and len(points) and np.ptp(points[:, 2]) != 0:
@@ -690,6 +718,69 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> di
         return _write_patched(mesh, src, path, points, progress)
     _write_new(mesh, path, points, progress)
     return {}
+
+
+def _open_source(original: Path, size: int, mtime_ns: int) -> mmap.mmap:
+    """The input file mapped for reading, refused when it is not the version that was read."""
+    try:
+        fh = open(original, "rb")
+    except OSError as e:
+        raise InputError(f"cannot reopen the input mesh to copy it: {e.strerror or e}",
+                         path=original) from None
+    with fh:
+        st = os.fstat(fh.fileno())
+        if st.st_size != size or st.st_mtime_ns != mtime_ns:
+            raise InputError("the input mesh changed on disk since it was read; read it again",
+                             path=original)
+        return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+
+
+def render_rows(original: str | Path, src: Su2Source, points: np.ndarray) -> np.ndarray:
+    """The new text (uint8) of the point rows that ``src`` holds (an MPI rank's, :func:`read_part`).
+
+    ``points`` (n, 3) are the new coordinates of those rows, in their order. Rows that did not move
+    keep their text; moved rows are printed as :func:`write` prints them, so the ranks' texts in
+    rank order are the point block :func:`write` writes for every node (:class:`Su2Rendered`).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    if points.shape != (len(src.points), 3):
+        raise ValueError(f"points {points.shape} do not match the {len(src.points)} rows of this source")
+    if not np.isfinite(points).all():
+        raise ValueError("cannot write non-finite point coordinates (NaN or inf)")
+    mm = _open_source(Path(original), src.size, src.mtime_ns)
+    try:
+        pieces = [np.frombuffer(_patch_rows(mm, src, points[:, :src.ndim], a, min(len(points), a + WRITE_ROWS)),
+                                dtype=np.uint8) for a in range(0, len(points), WRITE_ROWS)]
+    finally:
+        mm.close()
+    return np.concatenate(pieces) if pieces else np.zeros(0, dtype=np.uint8)
+
+
+def has_ffd_section(original: str | Path, src: Su2Source) -> bool:
+    """Whether the file has SU2's own FFD section after its markers (the writer then needs every
+    node's coordinates to bring it up to date: no :class:`Su2Rendered` write)."""
+    from ffdcli.formats import su2_ffd
+
+    mm = _open_source(Path(original), src.size, src.mtime_ns)
+    try:
+        return su2_ffd.find_section(mm[src.block_end:]) is not None
+    finally:
+        mm.close()
+
+
+def _write_rendered(original: Path, rendered: Su2Rendered, path: Path, progress) -> None:
+    """A copy of the file with its point block replaced by the ranks' rendered text."""
+    mm = _open_source(Path(original), rendered.size, rendered.mtime_ns)
+    try:
+        total = sum(len(t) for t in rendered.text)
+        with atomic_write(path) as out, progress(f"writing {path.name}", total) as bar:
+            _copy(mm, 0, rendered.block_start, out)
+            for piece in rendered.text:
+                out.write(piece)
+                bar.update(len(piece))
+            _copy(mm, rendered.block_end, len(mm), out)
+    finally:
+        mm.close()
 
 
 def _ffd_section(mm: mmap.mmap, src: Su2Source, original: Path, points: np.ndarray):
@@ -720,17 +811,7 @@ def _ffd_section(mm: mmap.mmap, src: Su2Source, original: Path, points: np.ndarr
 def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points3: np.ndarray, progress) -> dict:
     points = points3[:, :src.ndim]
     original = mesh.path
-    try:
-        fh = open(original, "rb")
-    except OSError as e:
-        raise InputError(f"cannot reopen the input mesh to copy it: {e.strerror or e}",
-                         path=original) from None
-    with fh:
-        st = os.fstat(fh.fileno())
-        if st.st_size != src.size or st.st_mtime_ns != src.mtime_ns:
-            raise InputError("the input mesh changed on disk since it was read; read it again",
-                             path=original)
-        mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    mm = _open_source(original, src.size, src.mtime_ns)
     try:
         n = len(points)
         ffd = _ffd_section(mm, src, original, points3)
