@@ -8,10 +8,11 @@ def run() -> None:
     ends like one during the work: one line, status 130, no traceback."""
     try:
         from ffdcli.cli import main  # noqa: PLC0415  (imported here: an interrupt during the import is caught)
+
+        main()                       # its first imports (the commands, numpy) are before its own handling
     except KeyboardInterrupt:
         sys.stderr.write("ffd: error: interrupted; nothing was written\n")
         sys.exit(130)
-    main()
 
 
 if __name__ == "__main__":

@@ -18,7 +18,7 @@ import traceback
 import click
 
 from ffdcli import __version__
-from ffdcli.atomic import Terminated
+from ffdcli.atomic import Terminated, interrupts_outside_compilers
 from ffdcli.cli.console import Console, StdoutError, jsonable
 from ffdcli.errors import FfdError
 
@@ -93,7 +93,8 @@ def main(argv=None):
         _fail(str(e), e.exit_code, as_json)
     try:
         try:
-            cli.main(args=argv, prog_name="ffd", standalone_mode=False, obj={"comm": comm})
+            with interrupts_outside_compilers():       # Ctrl-C inside numba's kernel loading crashes
+                cli.main(args=argv, prog_name="ffd", standalone_mode=False, obj={"comm": comm})
             error = None
         except BaseException as e:   # noqa: BLE001 - agreed on below, then reported as before
             error = e
