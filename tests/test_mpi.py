@@ -161,11 +161,11 @@ def test_mpi_comm_collectives_and_error_agreement(tmp_path):
         try:
             c.run(fail_on_1)
         except RankError as e:
-            print(f"rank {c.rank}: RankError {e.exit_code} {e.rank} {e}")
+            print(f"rank {c.rank}: RankError {e.exit_code} {e.rank} {e}\\n", end="", flush=True)
         except InputError as e:
-            print(f"rank {c.rank}: own {e.exit_code} {e}")
+            print(f"rank {c.rank}: own {e.exit_code} {e}\\n", end="", flush=True)
         else:
-            print(f"rank {c.rank}: no error")
+            print(f"rank {c.rank}: no error\\n", end="", flush=True)
     """, tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "rank 0: RankError 2 1 x.su2: bad thing on rank 1" in proc.stdout
@@ -192,7 +192,7 @@ def test_mpi_embedding_equals_serial_bit_for_bit(tmp_path):
         assert np.array_equal(a.inside, b.inside) and (~a.inside).any()
         for f, g in zip(a.values, b.values):
             assert np.array_equal(f, g)
-        print("same", c.rank)
+        print(f"same {{c.rank}}\\n", end="", flush=True)   # one write: ranks never interleave
     """, tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert "same 0" in proc.stdout and "same 1" in proc.stdout
@@ -455,7 +455,8 @@ def test_mpiexec_read_by_parts_gives_each_rank_the_local_mesh_of_the_whole_read(
                 assert np.array_equal(getattr(part, f), getattr(want_part, f)), f
             for f in ("cell_ids", "counted"):
                 assert all(np.array_equal(x, y) for x, y in zip(getattr(part, f), getattr(want_part, f), strict=True))
-            print(f"rank {{c.rank}} {{path[-4:]}} {{len(mesh.global_ids)}} of {{whole.n_points}}")
+            print(f"rank {{c.rank}} {{path[-4:]}} {{len(mesh.global_ids)}} of {{whole.n_points}}\\n", end="",
+                  flush=True)
     """, tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.count(" of ") == 4, proc.stdout
