@@ -151,6 +151,7 @@ def rendered_mesh(mesh: Mesh, part, points: np.ndarray, path, comm, *, piece: in
     del block
     rounds = max(comm.allgather(-(-len(text) // piece)))
     pieces: list[list[np.ndarray]] = [[] for _ in range(comm.size)]
+    chunk = got = None
     for k in range(rounds):
         chunk = text[k * piece:(k + 1) * piece]
         lengths = comm.allgather(len(chunk))
@@ -159,6 +160,7 @@ def rendered_mesh(mesh: Mesh, part, points: np.ndarray, path, comm, *, piece: in
             for r, (a, b) in enumerate(zip(np.cumsum([0] + lengths[:-1]), np.cumsum(lengths), strict=True)):
                 if b > a:
                     pieces[r].append(got[a:b])
+    del text, chunk, got             # rank 0 keeps the received copies only
     if not comm.is_root:
         return True, None
     rendered = su2.Su2Rendered(ndim=src.ndim, text=tuple(p for per in pieces for p in per),
