@@ -9,7 +9,9 @@ parallelepiped (it follows a swept, tapered, twisted wing), so the map is invert
    kernel's own pass); the table is made once per call from a grid of samples (a few per knot span
    and direction) in a k-d tree, with about one cell per sample whatever the number of points;
 2. a projected Gauss-Newton iteration with backtracking line search runs per point inside a
-   parallel compiled loop (numba ``prange``; no Python loop over points). Parameters are clipped
+   parallel compiled loop (numba ``prange``; no Python loop over points), compiled per lattice
+   degrees (:func:`ffdcli.lattice.eval_point_fixed_nb`: the lattice map unrolled, in vector
+   operations, equal bit for bit to the generic evaluation). Parameters are clipped
    to [0, 1] at every step and the variables held at a bound by the gradient are frozen, so the
    iteration converges to the nearest point of the lattice also for points outside it (which stop
    once their residual is normal to the lattice, :data:`STATIONARY`);
@@ -44,7 +46,15 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
-from ffdcli.lattice import Lattice, derivatives, eval_point_nb, evaluate, kernel_args
+from ffdcli.lattice import (
+    Lattice,
+    derivatives,
+    eval_point_fixed_nb,
+    evaluate,
+    fixed_widths,
+    kernel_args,
+    padded_rows,
+)
 from ffdcli.progress import chunks, no_progress
 from ffdcli.settings import MAX_DEGREE
 from ffdcli.simd import axpy4, axpy8, axpy8x3
@@ -613,9 +623,10 @@ def dense_basis_reference(lattice: Lattice, params) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------
 
 @njit(cache=True, nogil=True, inline="always")
-def _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, out, W):
-    """|V(u) - X[i]|^2; ``out`` (12,) receives V and its derivatives (see ``eval_point_nb``)."""
-    res = eval_point_nb(P, k0, k1, k2, p0, p1, p2, u[0], u[1], u[2], W)
+def _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, out, w0, w1, w2):
+    """|V(u) - X[i]|^2; ``out`` (12,) receives V and its derivatives (see
+    :func:`ffdcli.lattice.eval_point_fixed_nb`; ``w0, w1, w2``: the basis widths)."""
+    res = eval_point_fixed_nb(R, n1, n2, k0, k1, k2, u[0], u[1], u[2], w0, w1, w2)
     for k in range(12):
         out[k] = res[k]
     s = 0.0
@@ -665,13 +676,13 @@ def _solve_small(H, rhs, n, x):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
-                  cur, trial, ut, step, grad, H, rhs, fixed, scratch):
+def _newton_point(R, n1, n2, k0, k1, k2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
+                  cur, trial, ut, step, grad, H, rhs, fixed, w0, w1, w2):
     """Projected Gauss-Newton for point ``X[i]``; ``u`` (3,) is the start and receives the result.
 
     Returns the squared residual at the result.
     """
-    f = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, cur, scratch)
+    f = _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, cur, w0, w1, w2)
     for _ in range(max_iter):
         if f <= stop2:
             break
@@ -728,7 +739,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, s
             for e in range(pdim):
                 v = u[e] + alpha * step[e]
                 ut[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-            ft = _sqdist(P, k0, k1, k2, p0, p1, p2, ut, X, i, gdim, trial, scratch)
+            ft = _sqdist(R, n1, n2, k0, k1, k2, ut, X, i, gdim, trial, w0, w1, w2)
             if ft < f:
                 accepted = True
                 break
@@ -755,7 +766,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, s
             if target >= 0.0:
                 keep = u[e]
                 u[e] = target
-                fs = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, trial, scratch)
+                fs = _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, trial, w0, w1, w2)
                 if fs <= tol2:
                     f = fs
                 else:
@@ -763,42 +774,65 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, s
     return f
 
 
-@njit(cache=True, parallel=True)
-def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, residual, nchunk,
-               use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv):
-    """Newton for every point of ``X``, from ``params`` or (``use_table``) from the start table
-    ``t_*`` (:class:`StartTable`'s arrays), read in the same pass; writes ``params`` and ``residual``.
-    ``nchunk`` chunks of points share the threads, each with its work arrays."""
-    npts = X.shape[0]
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_iter, residual, lo, hi,
+                     use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2, work, fixed):
+    """Newton for the points ``lo:hi`` of ``X`` (see :func:`_newton_nb`); ``work`` (48,) and ``fixed``
+    (3,) are the chunk's work arrays.
+
+    A function of its own, called once per chunk from the parallel loop, not inlined into it: numba
+    compiles it with the widths ``w0, w1, w2`` (tuples, :func:`ffdcli.lattice.fixed_widths`) as
+    constants, and the parallel loop's array analysis never sees the per-point tuples. Compiled
+    without numba's reference counting (``_nrt=False``: it allocates nothing): the arrays handed to
+    the inlined per-point functions would otherwise be counted in and out at every point (about 30
+    calls per point, atomic operations on counters shared by the threads). NumPy's error model: no
+    zero-division checks (and their exception paths) around the basis recurrence's divisions (never
+    by zero: a knot span's denominators are sums of non-empty knot intervals; the Gauss elimination
+    checks its pivots first)."""
     gdim = X.shape[1]
     pdim = params.shape[1]
+    cur = work[0:12]
+    trial = work[12:24]
+    u = work[24:27]
+    ut = work[27:30]
+    step = work[30:33]
+    grad = work[33:36]
+    rhs = work[36:39]
+    H = work[39:48].reshape((3, 3))
+    for i in range(lo, hi):
+        if use_table:
+            _start_point(X, i, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, u)
+        else:
+            for e in range(pdim):
+                u[e] = params[i, e]
+        f = _newton_point(R, n1, n2, k0, k1, k2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
+                          cur, trial, ut, step, grad, H, rhs, fixed, w0, w1, w2)
+        for e in range(pdim):
+            params[i, e] = u[e]
+        residual[i] = np.sqrt(f)
+
+
+@njit(cache=True, parallel=True)
+def _newton_nb(R, n1, n2, k0, k1, k2, X, params, tol, stop, snap, max_iter, residual, nchunk,
+               use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2):
+    """Newton for every point of ``X``, from ``params`` or (``use_table``) from the start table
+    ``t_*`` (:class:`StartTable`'s arrays), read in the same pass; writes ``params`` and ``residual``.
+    ``nchunk`` chunks of points share the threads (:func:`_newton_chunk_nb`). ``w0, w1, w2``: the
+    basis widths (:func:`ffdcli.lattice.fixed_widths`): a compiled version per lattice degrees,
+    with the lattice evaluation unrolled (the results of the generic ``eval_point_nb``, bit for
+    bit, in a third of the time)."""
+    npts = X.shape[0]
     tol2 = tol * tol
     stop2 = stop * stop
     nchunk = min(npts, nchunk)
     for ch in prange(nchunk):
-        scratch = np.zeros((8, MAX_DEGREE + 1))
-        cur = np.zeros(12)
-        trial = np.zeros(12)
-        u = np.zeros(3)
-        ut = np.zeros(3)
-        step = np.zeros(3)
-        grad = np.zeros(3)
-        H = np.zeros((3, 3))
-        rhs = np.zeros(3)
-        fixed = np.zeros(3, dtype=np.bool_)
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        for i in range(lo, hi):
-            if use_table:
-                _start_point(X, i, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, u)
-            else:
-                for e in range(pdim):
-                    u[e] = params[i, e]
-            f = _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
-                              cur, trial, ut, step, grad, H, rhs, fixed, scratch)
-            for e in range(pdim):
-                params[i, e] = u[e]
-            residual[i] = np.sqrt(f)
+        work = np.zeros(48)
+        fixed = np.zeros(3, dtype=np.bool_)
+        _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_iter, residual, lo, hi,
+                         use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2, work,
+                         fixed)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -972,8 +1006,10 @@ def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_ite
     # enough chunks per thread to balance the slower points outside the lattice; work arrays are
     # allocated per chunk, not per point
     nchunk = 16 * numba.get_num_threads()
-    _newton_nb(*args, points, params, float(tol_abs), float(stop_abs), float(snap), int(max_iter), residual,
-               nchunk, table is not None, *t)
+    P, k0, k1, k2, p0, p1, p2 = args
+    n1, n2 = np.int64(P.shape[1]), np.int64(P.shape[2])
+    _newton_nb(padded_rows(P), n1, n2, k0, k1, k2, points, params, float(tol_abs), float(stop_abs), float(snap),
+               int(max_iter), residual, nchunk, table is not None, *t, *fixed_widths((p0, p1, p2)))
 
 
 def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, samples_per_span: int = 4,

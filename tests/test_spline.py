@@ -18,10 +18,12 @@ from ffdcli.spline import (
     basis,
     basis_compiled,
     basis_d1_row_nb,
+    basis_d1_tuple,
     basis_derivs,
     basis_row_nb,
     check_knots,
     clamped_knots,
+    degree_proto,
     find_span,
     find_span_nb,
 )
@@ -172,6 +174,10 @@ def test_compiled_kernels_match_numpy(degree, extra, seed):
         basis_row_nb(knots, degree, span, t[i], W, 4, 2, 3)
         np.testing.assert_array_equal(W[4], W[0])
         np.testing.assert_array_equal(W[0], cvalues[i])
+        # the unrolled fixed-degree kernel of the Newton embedding: the same operations, bit for bit
+        N, D = basis_d1_tuple(knots, span, t[i], degree_proto(degree))
+        np.testing.assert_array_equal(np.array(N), W[0])
+        np.testing.assert_array_equal(np.array(D), W[1])
 
 
 def test_degree_zero_compiled_basis_is_constant():
@@ -179,6 +185,7 @@ def test_degree_zero_compiled_basis_is_constant():
     W = np.empty((4, 1))
     basis_d1_row_nb(np.array([0.0, 1.0]), 0, 0, 0.3, W, 0, 1, 2, 3)
     assert W[0, 0] == 1.0 and W[1, 0] == 0.0
+    assert basis_d1_tuple(np.array([0.0, 1.0]), 0, 0.3, degree_proto(0)) == ((1.0,), (0.0,))
 
 
 def test_basis_rejects_parameters_outside_range():
