@@ -56,9 +56,8 @@ from ffdcli.lattice import (
     padded_rows,
 )
 from ffdcli.progress import chunks, no_progress
-from ffdcli.settings import MAX_DEGREE
 from ffdcli.simd import axpy4, axpy8, axpy8x3
-from ffdcli.spline import basis, basis_row_nb, find_span_nb
+from ffdcli.spline import basis, basis_d1_tuple, find_span_nb
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
 DEFAULT_TOL = 1e-10
@@ -129,12 +128,13 @@ class Embedding:
         values = tuple(np.empty((npts, p + 1)) for p in lattice.degree)
         k, deg = lattice.knots, lattice.degree
         if lattice.pdim == 3:
-            args = (k[0], deg[0], k[1], deg[1], k[2], deg[2], params, first[0], values[0], first[1],
-                    values[1], first[2], values[2])
+            args = (k[0], k[1], k[2], params, first[0], values[0], first[1], values[1], first[2], values[2])
         else:
-            args = (k[0], deg[0], k[1], deg[1], _DUMMY_KNOTS, 0, params, first[0], values[0], first[1],
-                    values[1], _DUMMY_FIRST, _DUMMY_VALUES)
-        if npts and not _basis_axes_nb(*args):
+            args = (k[0], k[1], _DUMMY_KNOTS, params, first[0], values[0], first[1], values[1], _DUMMY_FIRST,
+                    _DUMMY_VALUES)
+        widths = fixed_widths((*deg, 0) if lattice.pdim == 2 else deg)
+        nchunk = min(npts, 16 * numba.get_num_threads())
+        if npts and not _basis_axes_nb(*args, nchunk, *widths):
             raise ValueError("params must lie in [0, 1]")
         if tolerance is None:
             tolerance = DEFAULT_TOL * lattice.size
@@ -292,44 +292,63 @@ _DUMMY_VALUES = np.ones((1, 1))
 _DUMMY_KNOTS = np.array([0.0, 1.0])
 
 
-@njit(cache=True, parallel=True)
-def _basis_axes_nb(k0, p0, k1, p1, k2, p2, params, f0, V0, f1, V1, f2, V2):
-    """Per-axis first index and basis values of every point, in one pass over ``params`` (N, pdim);
-    the third axis is skipped when ``params`` has two columns. The values are
-    :func:`ffdcli.spline.basis_compiled`'s, bit for bit. Returns False if a parameter is not in
-    [0, 1] (NaN included)."""
-    npts = params.shape[0]
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _basis_axes_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, w0, w1, w2):
+    """:func:`_basis_axes_nb` for the points ``lo:hi``; returns the number of parameters not in [0, 1].
+
+    Compiled per basis widths (``w0, w1, w2``: :func:`ffdcli.lattice.fixed_widths`) with the basis
+    of :func:`ffdcli.spline.basis_d1_tuple` in registers; without reference counting and zero-division
+    checks per point, as :func:`_newton_chunk_nb`."""
     pdim = params.shape[1]
-    nchunk = min(npts, 256)
+    p0 = len(w0) - 1
+    p1 = len(w1) - 1
+    p2 = len(w2) - 1
+    bad = 0
+    for i in range(lo, hi):
+        t = params[i, 0]
+        if not (0.0 <= t <= 1.0):
+            bad += 1
+            t = 0.0
+        span = find_span_nb(k0, p0, t)
+        N, _ = basis_d1_tuple(k0, span, t, w0)
+        f0[i] = span - p0
+        for a in range(p0 + 1):
+            V0[i, a] = N[a]
+        t = params[i, 1]
+        if not (0.0 <= t <= 1.0):
+            bad += 1
+            t = 0.0
+        span = find_span_nb(k1, p1, t)
+        N, _ = basis_d1_tuple(k1, span, t, w1)
+        f1[i] = span - p1
+        for a in range(p1 + 1):
+            V1[i, a] = N[a]
+        if pdim == 3:
+            t = params[i, 2]
+            if not (0.0 <= t <= 1.0):
+                bad += 1
+                t = 0.0
+            span = find_span_nb(k2, p2, t)
+            N, _ = basis_d1_tuple(k2, span, t, w2)
+            f2[i] = span - p2
+            for a in range(p2 + 1):
+                V2[i, a] = N[a]
+    return bad
+
+
+@njit(cache=True, parallel=True)
+def _basis_axes_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, nchunk, w0, w1, w2):
+    """Per-axis first index and basis values of every point, in one pass over ``params`` (N, pdim)
+    in ``nchunk`` chunks (:func:`_basis_axes_chunk_nb`); the third axis is skipped when ``params``
+    has two columns. The values are :func:`ffdcli.spline.basis_compiled`'s, bit for bit (the
+    operations of :func:`ffdcli.spline.basis_row_nb`, unrolled for the widths ``w0, w1, w2``).
+    Returns False if a parameter is not in [0, 1] (NaN included)."""
+    npts = params.shape[0]
     bad = 0
     for ch in prange(nchunk):
-        W = np.empty((3, MAX_DEGREE + 1))
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        for i in range(lo, hi):
-            for e in range(pdim):
-                t = params[i, e]
-                if not (0.0 <= t <= 1.0):
-                    bad += 1
-                    t = 0.0
-                if e == 0:
-                    span = find_span_nb(k0, p0, t)
-                    basis_row_nb(k0, p0, span, t, W, 0, 1, 2)
-                    f0[i] = span - p0
-                    for a in range(p0 + 1):
-                        V0[i, a] = W[0, a]
-                elif e == 1:
-                    span = find_span_nb(k1, p1, t)
-                    basis_row_nb(k1, p1, span, t, W, 0, 1, 2)
-                    f1[i] = span - p1
-                    for a in range(p1 + 1):
-                        V1[i, a] = W[0, a]
-                else:
-                    span = find_span_nb(k2, p2, t)
-                    basis_row_nb(k2, p2, span, t, W, 0, 1, 2)
-                    f2[i] = span - p2
-                    for a in range(p2 + 1):
-                        V2[i, a] = W[0, a]
+        bad += _basis_axes_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, w0, w1, w2)
     return bad == 0
 
 
