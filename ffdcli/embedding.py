@@ -29,8 +29,9 @@ basis values of each point: the tensor-product form of the sparse basis matrix `
 control points) with ``X = B @ P``; :meth:`Embedding.from_params` computes it in one compiled pass.
 :meth:`Embedding.displace` (``B @ dP``) and :meth:`Embedding.rmatvec` (``B.T @ g``) are parallel
 compiled loops over that form (about a third of the bytes of the CSR matrix), on control points
-padded to 4-wide rows (``B.T @ g`` adds into them with explicit vector fused multiply-adds,
-:mod:`ffdcli.simd`);
+padded to 4-wide rows, with explicit vector fused multiply-adds (:mod:`ffdcli.simd`: ``B @ P``
+contracts each point's support by :func:`ffdcli.simd.tensor_v`, unrolled for the lattice's
+degrees; ``B.T @ g`` adds into the rows);
 :meth:`Embedding.basis_matrix` builds the explicit CSR matrix. The ``*_reference`` functions are
 NumPy versions the tests compare the kernels with.
 """
@@ -42,6 +43,7 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 from numba import njit, prange
+from numba.cpython.unsafe.tuple import tuple_setitem
 from scipy import sparse
 from scipy.spatial import cKDTree
 
@@ -56,7 +58,7 @@ from ffdcli.lattice import (
     padded_rows,
 )
 from ffdcli.progress import chunks, no_progress
-from ffdcli.simd import axpy4, axpy8, axpy8x3
+from ffdcli.simd import axpy4, axpy8, axpy8x3, tensor_v
 from ffdcli.spline import basis, basis_d1_tuple, find_span_nb
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
@@ -356,81 +358,58 @@ def _basis_axes_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, nchunk, w0, w1, w
 # B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
 # ----------------------------------------------------------------------------------------------
 
-# Control points as 4-wide rows (x, y, z, 0): each multiply-add of the tensor product is one vector
-# operation over the coordinates. "contract" (fused multiply-add) and "reassoc" (reordered sums)
-# make the loop faster; results move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"),
-# and a zero dP still gives 0.
+# Control points as 4-wide rows (x, y, z, 0): each multiply-add of the tensor product is one explicit
+# vector fused multiply-add over the coordinates (ffdcli.simd.tensor_v; numba does not vectorise
+# straight-line code), unrolled for the basis widths (tuples of the lattice's p + 1 per axis, so one
+# compiled version per lattice degrees). Results move by ulps from a sum of separate products; a
+# zero dP still gives 0.
 @njit(cache=True, nogil=True, inline="always")
-def _apply_point(i, f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, a1, b1, c1):
-    """Row ``i`` of ``B @ P``; ``a1, b1, c1`` are the basis widths (p + 1) per axis: constants in
-    :func:`_apply_442_nb`, so that its loops are unrolled."""
-    i0 = f0[i]
-    i1 = f1[i]
-    i2 = f2[i] if has_w else 0
-    x0 = x1 = x2 = x3 = 0.0
-    for a in range(a1):
-        r0 = r1 = r2 = r3 = 0.0
-        for b in range(b1):
-            base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-            q0 = q1 = q2 = q3 = 0.0
-            for c in range(c1):
-                w = V2[i, c] if has_w else 1.0
-                q0 += w * P[base + c, 0]
-                q1 += w * P[base + c, 1]
-                q2 += w * P[base + c, 2]
-                q3 += w * P[base + c, 3]
-            w = V1[i, b]
-            r0 += w * q0
-            r1 += w * q1
-            r2 += w * q2
-            r3 += w * q3
-        w = V0[i, a]
-        x0 += w * r0
-        x1 += w * r1
-        x2 += w * r2
-        x3 += w * r3
-    return x0, x1, x2
+def _row_tuple(V, i, proto):
+    """``V[i, :len(proto)]`` as a tuple (of the length of ``proto``, known when compiling)."""
+    out = proto
+    for a in range(len(proto)):
+        out = tuple_setitem(out, a, V[i, a])
+    return out
 
 
-@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
-def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
-    """``out = B @ P`` over the tensor-product form; ``P`` (n_ctrl, 4), ``out`` (N, gdim)."""
+@njit(cache=True, nogil=True, _nrt=False)
+def _apply_chunk_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, lo, hi, w0, w1, w2):
+    """Rows ``lo:hi`` of :func:`_apply_nb`; compiled without reference counting (no per-point
+    reference-count updates of the arrays handed to the inlined functions)."""
     gdim = out.shape[1]
-    a1 = V0.shape[1]
-    b1 = V1.shape[1]
-    c1 = V2.shape[1] if has_w else 1
-    for i in prange(f0.shape[0]):
+    for i in range(lo, hi):
         if use_mask and not inside[i]:
             for d in range(gdim):
                 out[i, d] = 0.0
             continue
-        x = _apply_point(i, f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, a1, b1, c1)
+        i2 = i if has_w else 0                       # 2D: the dummy axis, one value 1 at index 0
+        N0 = _row_tuple(V0, i, w0)
+        N1 = _row_tuple(V1, i, w1)
+        N2 = _row_tuple(V2, i2, w2)
+        k = (f0[i] * n1 + f1[i]) * n2 + f2[i2]
+        x = tensor_v(R, k, n1 * n2, n2, N0, N1, N2)
         for d in range(gdim):
             out[i, d] = x[d]
 
 
-@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
-def _apply_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
-    """:func:`_apply_nb` for the default box (cubic, cubic, linear: widths 4, 4, 2) with the widths
-    known when compiling (unrolled loops: ~20 % faster); 3D only."""
-    gdim = out.shape[1]
-    for i in prange(f0.shape[0]):
-        if use_mask and not inside[i]:
-            for d in range(gdim):
-                out[i, d] = 0.0
-            continue
-        x = _apply_point(i, f0, V0, f1, V1, f2, V2, True, n1, n2, P, 4, 4, 2)
-        for d in range(gdim):
-            out[i, d] = x[d]
+@njit(cache=True, parallel=True)
+def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, nchunk, w0, w1, w2):
+    """``out = B @ P`` over the tensor-product form; ``R`` the control points as flat 4-wide rows
+    (4 n_ctrl,), ``out`` (N, gdim); ``w0, w1, w2`` the basis widths
+    (:func:`ffdcli.lattice.fixed_widths`, a third of width 1 in 2D); ``nchunk`` chunks of points."""
+    npts = f0.shape[0]
+    for ch in prange(nchunk):
+        lo = ch * npts // nchunk
+        hi = (ch + 1) * npts // nchunk
+        _apply_chunk_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, lo, hi, w0, w1, w2)
 
 
 def _apply(axes, P, inside, use_mask, out):
-    """``B @ P`` by the kernel that fits the basis widths (``axes`` from ``Embedding._kernel_axes``)."""
+    """``B @ P`` (``axes`` from ``Embedding._kernel_axes``, ``P`` (n_ctrl, 4))."""
     f0, V0, f1, V1, f2, V2, has_w = axes[:7]
-    if has_w and V0.shape[1] == 4 and V1.shape[1] == 4 and V2.shape[1] == 2:
-        _apply_442_nb(*axes, P, inside, use_mask, out)
-    else:
-        _apply_nb(*axes, P, inside, use_mask, out)
+    widths = tuple((0.0,) * V.shape[1] for V in (V0, V1, V2))
+    nchunk = min(f0.shape[0], 4 * numba.get_num_threads())
+    _apply_nb(*axes, P.reshape(-1), inside, use_mask, out, nchunk, *widths)
 
 
 @njit(cache=True, parallel=True)

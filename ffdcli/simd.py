@@ -247,3 +247,57 @@ def tensor_d1(typingctx, P, k, s0, s1, N0, D0, N1, D1, N2, D2):
         return context.make_tuple(builder, signature.return_type, out)
 
     return sig, codegen
+
+
+@intrinsic
+def tensor_v(typingctx, P, k, s0, s1, N0, N1, N2):
+    """``V = sum_abc N0[a] N1[b] N2[c] P[k + a s0 + b s1 + c]`` on 4-wide rows, by fused multiply-adds.
+
+    The value part of :func:`tensor_d1` (same arguments, without the derivatives) for ``B @ P``:
+    each update is one ``llvm.fma.v4f64`` over the coordinates ``(x, y, z, 0)`` of a row of ``P``
+    (axis 2, then 1, then 0, each sum from zero), unrolled for the tuple lengths. Rounded once per
+    multiply-add, so it differs from a scalar sum of separate products by ulps.
+
+    Returns
+    -------
+    tuple of 3 floats
+        ``V``'s first three lanes.
+    """
+    if not (isinstance(P, types.Array) and P.ndim == 1 and P.layout == "C" and P.dtype == types.float64):
+        return None
+    if not all(isinstance(t, types.Integer) for t in (k, s0, s1)):
+        return None
+    tups = (N0, N1, N2)
+    if not all(isinstance(t, types.UniTuple) and t.dtype == types.float64 for t in tups):
+        return None
+    sig = types.UniTuple(types.float64, 3)(P, k, s0, s1, *tups)
+    widths = (N0.count, N1.count, N2.count)
+    vec = ir.VectorType(ir.DoubleType(), 4)
+
+    def codegen(context, builder, signature, args):
+        arr = context.make_array(signature.args[0])(context, builder, args[0])
+        k_, s0_, s1_ = (context.cast(builder, v, t, types.intp)
+                        for v, t in zip(args[1:4], signature.args[1:4], strict=True))
+        n0, n1, n2 = ([builder.extract_value(t, j) for j in range(w)]
+                      for t, w in zip(args[4:], widths, strict=True))
+        fma = cgutils.get_or_insert_function(builder.module, ir.FunctionType(vec, [vec, vec, vec]),
+                                             "llvm.fma.v4f64")
+        zero = ir.Constant(vec, [0.0] * 4)
+        four = ir.Constant(k_.type, 4)
+        x = zero
+        for a in range(widths[0]):
+            r = zero
+            ka = builder.add(k_, builder.mul(s0_, ir.Constant(k_.type, a)))
+            for b in range(widths[1]):
+                q = zero
+                kb = builder.add(ka, builder.mul(s1_, ir.Constant(k_.type, b)))
+                for c in range(widths[2]):
+                    ptr = builder.gep(arr.data, [builder.mul(builder.add(kb, ir.Constant(k_.type, c)), four)])
+                    C = builder.load(builder.bitcast(ptr, vec.as_pointer()), align=8)
+                    q = builder.call(fma, [_splat(builder, n2[c], vec), C, q])
+                r = builder.call(fma, [_splat(builder, n1[b], vec), q, r])
+            x = builder.call(fma, [_splat(builder, n0[a], vec), r, x])
+        out = [builder.extract_element(x, ir.Constant(_I32, d)) for d in range(3)]
+        return context.make_tuple(builder, signature.return_type, out)
+
+    return sig, codegen
