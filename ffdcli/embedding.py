@@ -788,7 +788,7 @@ def _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_it
     by zero: a knot span's denominators are sums of non-empty knot intervals; the Gauss elimination
     checks its pivots first)."""
     gdim = X.shape[1]
-    pdim = params.shape[1]
+    pdim = 3 if len(w2) > 1 else 2          # a constant: a 2D lattice has the third axis of degree 0
     cur = work[0:12]
     trial = work[12:24]
     u = work[24:27]

@@ -37,6 +37,7 @@ from ffdcli.spline import (
     check_knots,
     clamped_knots,
     degree_proto,
+    find_span_count_nb,
     find_span_nb,
 )
 
@@ -254,9 +255,9 @@ def eval_point_fixed_nb(R, n1, n2, k0, k1, k2, u0, u1, u2, w0, w1, w2):
     p0 = len(w0) - 1
     p1 = len(w1) - 1
     p2 = len(w2) - 1
-    s0 = find_span_nb(k0, p0, u0)
-    s1 = find_span_nb(k1, p1, u1)
-    s2 = find_span_nb(k2, p2, u2)
+    s0 = find_span_count_nb(k0, p0, u0)
+    s1 = find_span_count_nb(k1, p1, u1)
+    s2 = find_span_count_nb(k2, p2, u2)
     N0, D0 = basis_d1_tuple(k0, s0, u0, w0)
     N1, D1 = basis_d1_tuple(k1, s1, u1, w1)
     N2, D2 = basis_d1_tuple(k2, s2, u2, w2)

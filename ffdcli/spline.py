@@ -246,6 +246,25 @@ def find_span_nb(knots, p, t):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def find_span_count_nb(knots, p, t):
+    """:func:`find_span_nb` without its unpredictable branches, for the per-point kernels.
+
+    The span is ``p`` plus the number of interior knots ``knots[p + 1 : n]`` at or below ``t``
+    (knots are sorted): a branch-free count while there are at most 16 of them (a lattice axis of
+    up to ``p + 17`` control points), the binary search of :func:`find_span_nb` beyond. The same
+    span for every ``t`` in [0, 1] (and beyond: ``t >= 1`` gives ``n - 1``, ``t < 0`` gives ``p``);
+    a NaN gives ``p``.
+    """
+    n = knots.shape[0] - p - 1
+    if n - p - 1 > 16:
+        return find_span_nb(knots, p, t)
+    s = p
+    for j in range(p + 1, n):
+        s += knots[j] <= t
+    return s
+
+
+@njit(cache=True, nogil=True, inline="always")
 def basis_row_nb(knots, p, span, t, W, rv, rl, rr):
     """Scalar Cox–de Boor (A2.2) into rows of a work array: fills ``W[rv, :p + 1]``.
 

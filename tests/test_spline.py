@@ -25,6 +25,7 @@ from ffdcli.spline import (
     clamped_knots,
     degree_proto,
     find_span,
+    find_span_count_nb,
     find_span_nb,
 )
 
@@ -103,6 +104,24 @@ def test_find_span_contract_and_compiled_agree():
         assert np.all(k[s[inner]] <= t[inner]) and np.all(t[inner] < k[s[inner] + 1])
         assert np.all(s[t == 1.0] == n - 1)
         np.testing.assert_array_equal([find_span_nb(k, p, x) for x in t], s)
+
+
+@pytest.mark.parametrize("n_ctrl", [2, 4, 8, 20, 21, 40])
+def test_branch_free_span_is_the_binary_search(n_ctrl):
+    # the count of interior knots at or below t (up to 16 of them), the binary search beyond:
+    # the same span everywhere, at repeated knots, at and beyond the ends
+    rng = np.random.default_rng(n_ctrl)
+    for p in range(0, 6):
+        if n_ctrl <= p:
+            continue
+        k = clamped_knots(n_ctrl, p)                  # uniform interior knots, then moved a little
+        k[p + 1: n_ctrl] += rng.uniform(-0.2, 0.2, n_ctrl - p - 1) / (n_ctrl - p)
+        if n_ctrl - p - 1 >= 3:                       # a knot repeated p times
+            k[p + 2: p + 2 + p] = k[p + 2]
+            k = np.ascontiguousarray(np.sort(k))
+        t = np.concatenate([params_with_knots(rng, k), [-0.5, 1.5]])
+        np.testing.assert_array_equal([find_span_count_nb(k, p, x) for x in t],
+                                      [find_span_nb(k, p, x) for x in t])
 
 
 # ---------------------------------------------------------------------------------------------- values
