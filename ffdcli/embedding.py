@@ -9,7 +9,9 @@ parallelepiped (it follows a swept, tapered, twisted wing), so the map is invert
    kernel's own pass); the table is made once per call from a grid of samples (a few per knot span
    and direction) in a k-d tree, with about one cell per sample whatever the number of points;
 2. a projected Gauss-Newton iteration with backtracking line search runs per point inside a
-   parallel compiled loop (numba ``prange``; no Python loop over points). Parameters are clipped
+   parallel compiled loop (numba ``prange``; no Python loop over points), compiled per lattice
+   degrees (:func:`ffdcli.lattice.eval_point_fixed_nb`: the lattice map unrolled, in vector
+   operations, equal bit for bit to the generic evaluation). Parameters are clipped
    to [0, 1] at every step and the variables held at a bound by the gradient are frozen, so the
    iteration converges to the nearest point of the lattice also for points outside it (which stop
    once their residual is normal to the lattice, :data:`STATIONARY`);
@@ -27,8 +29,9 @@ basis values of each point: the tensor-product form of the sparse basis matrix `
 control points) with ``X = B @ P``; :meth:`Embedding.from_params` computes it in one compiled pass.
 :meth:`Embedding.displace` (``B @ dP``) and :meth:`Embedding.rmatvec` (``B.T @ g``) are parallel
 compiled loops over that form (about a third of the bytes of the CSR matrix), on control points
-padded to 4-wide rows (``B.T @ g`` adds into them with explicit vector fused multiply-adds,
-:mod:`ffdcli.simd`);
+padded to 4-wide rows, with explicit vector fused multiply-adds (:mod:`ffdcli.simd`: ``B @ P``
+contracts each point's support by :func:`ffdcli.simd.tensor_v`, unrolled for the lattice's
+degrees; ``B.T @ g`` adds into the rows);
 :meth:`Embedding.basis_matrix` builds the explicit CSR matrix. The ``*_reference`` functions are
 NumPy versions the tests compare the kernels with.
 """
@@ -40,15 +43,23 @@ from dataclasses import dataclass, replace
 import numba
 import numpy as np
 from numba import njit, prange
+from numba.cpython.unsafe.tuple import tuple_setitem
 from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
-from ffdcli.lattice import Lattice, derivatives, eval_point_nb, evaluate, kernel_args
+from ffdcli.lattice import (
+    Lattice,
+    derivatives,
+    eval_point_fixed_nb,
+    evaluate,
+    fixed_widths,
+    kernel_args,
+    padded_rows,
+)
 from ffdcli.progress import chunks, no_progress
-from ffdcli.settings import MAX_DEGREE
-from ffdcli.simd import axpy4, axpy8, axpy8x3
-from ffdcli.spline import basis, basis_row_nb, find_span_nb
+from ffdcli.simd import axpy4, axpy8, axpy8x3, tensor_v
+from ffdcli.spline import basis, basis_d1_tuple, find_span_nb
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
 DEFAULT_TOL = 1e-10
@@ -119,12 +130,13 @@ class Embedding:
         values = tuple(np.empty((npts, p + 1)) for p in lattice.degree)
         k, deg = lattice.knots, lattice.degree
         if lattice.pdim == 3:
-            args = (k[0], deg[0], k[1], deg[1], k[2], deg[2], params, first[0], values[0], first[1],
-                    values[1], first[2], values[2])
+            args = (k[0], k[1], k[2], params, first[0], values[0], first[1], values[1], first[2], values[2])
         else:
-            args = (k[0], deg[0], k[1], deg[1], _DUMMY_KNOTS, 0, params, first[0], values[0], first[1],
-                    values[1], _DUMMY_FIRST, _DUMMY_VALUES)
-        if npts and not _basis_axes_nb(*args):
+            args = (k[0], k[1], _DUMMY_KNOTS, params, first[0], values[0], first[1], values[1], _DUMMY_FIRST,
+                    _DUMMY_VALUES)
+        widths = fixed_widths((*deg, 0) if lattice.pdim == 2 else deg)
+        nchunk = min(npts, 16 * numba.get_num_threads())
+        if npts and not _basis_axes_nb(*args, nchunk, *widths):
             raise ValueError("params must lie in [0, 1]")
         if tolerance is None:
             tolerance = DEFAULT_TOL * lattice.size
@@ -282,44 +294,63 @@ _DUMMY_VALUES = np.ones((1, 1))
 _DUMMY_KNOTS = np.array([0.0, 1.0])
 
 
-@njit(cache=True, parallel=True)
-def _basis_axes_nb(k0, p0, k1, p1, k2, p2, params, f0, V0, f1, V1, f2, V2):
-    """Per-axis first index and basis values of every point, in one pass over ``params`` (N, pdim);
-    the third axis is skipped when ``params`` has two columns. The values are
-    :func:`ffdcli.spline.basis_compiled`'s, bit for bit. Returns False if a parameter is not in
-    [0, 1] (NaN included)."""
-    npts = params.shape[0]
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _basis_axes_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, w0, w1, w2):
+    """:func:`_basis_axes_nb` for the points ``lo:hi``; returns the number of parameters not in [0, 1].
+
+    Compiled per basis widths (``w0, w1, w2``: :func:`ffdcli.lattice.fixed_widths`) with the basis
+    of :func:`ffdcli.spline.basis_d1_tuple` in registers; without reference counting and zero-division
+    checks per point, as :func:`_newton_chunk_nb`."""
     pdim = params.shape[1]
-    nchunk = min(npts, 256)
+    p0 = len(w0) - 1
+    p1 = len(w1) - 1
+    p2 = len(w2) - 1
+    bad = 0
+    for i in range(lo, hi):
+        t = params[i, 0]
+        if not (0.0 <= t <= 1.0):
+            bad += 1
+            t = 0.0
+        span = find_span_nb(k0, p0, t)
+        N, _ = basis_d1_tuple(k0, span, t, w0)
+        f0[i] = span - p0
+        for a in range(p0 + 1):
+            V0[i, a] = N[a]
+        t = params[i, 1]
+        if not (0.0 <= t <= 1.0):
+            bad += 1
+            t = 0.0
+        span = find_span_nb(k1, p1, t)
+        N, _ = basis_d1_tuple(k1, span, t, w1)
+        f1[i] = span - p1
+        for a in range(p1 + 1):
+            V1[i, a] = N[a]
+        if pdim == 3:
+            t = params[i, 2]
+            if not (0.0 <= t <= 1.0):
+                bad += 1
+                t = 0.0
+            span = find_span_nb(k2, p2, t)
+            N, _ = basis_d1_tuple(k2, span, t, w2)
+            f2[i] = span - p2
+            for a in range(p2 + 1):
+                V2[i, a] = N[a]
+    return bad
+
+
+@njit(cache=True, parallel=True)
+def _basis_axes_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, nchunk, w0, w1, w2):
+    """Per-axis first index and basis values of every point, in one pass over ``params`` (N, pdim)
+    in ``nchunk`` chunks (:func:`_basis_axes_chunk_nb`); the third axis is skipped when ``params``
+    has two columns. The values are :func:`ffdcli.spline.basis_compiled`'s, bit for bit (the
+    operations of :func:`ffdcli.spline.basis_row_nb`, unrolled for the widths ``w0, w1, w2``).
+    Returns False if a parameter is not in [0, 1] (NaN included)."""
+    npts = params.shape[0]
     bad = 0
     for ch in prange(nchunk):
-        W = np.empty((3, MAX_DEGREE + 1))
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        for i in range(lo, hi):
-            for e in range(pdim):
-                t = params[i, e]
-                if not (0.0 <= t <= 1.0):
-                    bad += 1
-                    t = 0.0
-                if e == 0:
-                    span = find_span_nb(k0, p0, t)
-                    basis_row_nb(k0, p0, span, t, W, 0, 1, 2)
-                    f0[i] = span - p0
-                    for a in range(p0 + 1):
-                        V0[i, a] = W[0, a]
-                elif e == 1:
-                    span = find_span_nb(k1, p1, t)
-                    basis_row_nb(k1, p1, span, t, W, 0, 1, 2)
-                    f1[i] = span - p1
-                    for a in range(p1 + 1):
-                        V1[i, a] = W[0, a]
-                else:
-                    span = find_span_nb(k2, p2, t)
-                    basis_row_nb(k2, p2, span, t, W, 0, 1, 2)
-                    f2[i] = span - p2
-                    for a in range(p2 + 1):
-                        V2[i, a] = W[0, a]
+        bad += _basis_axes_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, w0, w1, w2)
     return bad == 0
 
 
@@ -327,81 +358,58 @@ def _basis_axes_nb(k0, p0, k1, p1, k2, p2, params, f0, V0, f1, V1, f2, V2):
 # B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
 # ----------------------------------------------------------------------------------------------
 
-# Control points as 4-wide rows (x, y, z, 0): each multiply-add of the tensor product is one vector
-# operation over the coordinates. "contract" (fused multiply-add) and "reassoc" (reordered sums)
-# make the loop faster; results move by ulps only, NaN/inf keep IEEE semantics (no "nnan"/"ninf"),
-# and a zero dP still gives 0.
+# Control points as 4-wide rows (x, y, z, 0): each multiply-add of the tensor product is one explicit
+# vector fused multiply-add over the coordinates (ffdcli.simd.tensor_v; numba does not vectorise
+# straight-line code), unrolled for the basis widths (tuples of the lattice's p + 1 per axis, so one
+# compiled version per lattice degrees). Results move by ulps from a sum of separate products; a
+# zero dP still gives 0.
 @njit(cache=True, nogil=True, inline="always")
-def _apply_point(i, f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, a1, b1, c1):
-    """Row ``i`` of ``B @ P``; ``a1, b1, c1`` are the basis widths (p + 1) per axis: constants in
-    :func:`_apply_442_nb`, so that its loops are unrolled."""
-    i0 = f0[i]
-    i1 = f1[i]
-    i2 = f2[i] if has_w else 0
-    x0 = x1 = x2 = x3 = 0.0
-    for a in range(a1):
-        r0 = r1 = r2 = r3 = 0.0
-        for b in range(b1):
-            base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-            q0 = q1 = q2 = q3 = 0.0
-            for c in range(c1):
-                w = V2[i, c] if has_w else 1.0
-                q0 += w * P[base + c, 0]
-                q1 += w * P[base + c, 1]
-                q2 += w * P[base + c, 2]
-                q3 += w * P[base + c, 3]
-            w = V1[i, b]
-            r0 += w * q0
-            r1 += w * q1
-            r2 += w * q2
-            r3 += w * q3
-        w = V0[i, a]
-        x0 += w * r0
-        x1 += w * r1
-        x2 += w * r2
-        x3 += w * r3
-    return x0, x1, x2
+def _row_tuple(V, i, proto):
+    """``V[i, :len(proto)]`` as a tuple (of the length of ``proto``, known when compiling)."""
+    out = proto
+    for a in range(len(proto)):
+        out = tuple_setitem(out, a, V[i, a])
+    return out
 
 
-@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
-def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
-    """``out = B @ P`` over the tensor-product form; ``P`` (n_ctrl, 4), ``out`` (N, gdim)."""
+@njit(cache=True, nogil=True, _nrt=False)
+def _apply_chunk_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, lo, hi, w0, w1, w2):
+    """Rows ``lo:hi`` of :func:`_apply_nb`; compiled without reference counting (no per-point
+    reference-count updates of the arrays handed to the inlined functions)."""
     gdim = out.shape[1]
-    a1 = V0.shape[1]
-    b1 = V1.shape[1]
-    c1 = V2.shape[1] if has_w else 1
-    for i in prange(f0.shape[0]):
+    for i in range(lo, hi):
         if use_mask and not inside[i]:
             for d in range(gdim):
                 out[i, d] = 0.0
             continue
-        x = _apply_point(i, f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, a1, b1, c1)
+        i2 = i if has_w else 0                       # 2D: the dummy axis, one value 1 at index 0
+        N0 = _row_tuple(V0, i, w0)
+        N1 = _row_tuple(V1, i, w1)
+        N2 = _row_tuple(V2, i2, w2)
+        k = (f0[i] * n1 + f1[i]) * n2 + f2[i2]
+        x = tensor_v(R, k, n1 * n2, n2, N0, N1, N2)
         for d in range(gdim):
             out[i, d] = x[d]
 
 
-@njit(cache=True, parallel=True, fastmath={"contract", "reassoc"})
-def _apply_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, P, inside, use_mask, out):
-    """:func:`_apply_nb` for the default box (cubic, cubic, linear: widths 4, 4, 2) with the widths
-    known when compiling (unrolled loops: ~20 % faster); 3D only."""
-    gdim = out.shape[1]
-    for i in prange(f0.shape[0]):
-        if use_mask and not inside[i]:
-            for d in range(gdim):
-                out[i, d] = 0.0
-            continue
-        x = _apply_point(i, f0, V0, f1, V1, f2, V2, True, n1, n2, P, 4, 4, 2)
-        for d in range(gdim):
-            out[i, d] = x[d]
+@njit(cache=True, parallel=True)
+def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, nchunk, w0, w1, w2):
+    """``out = B @ P`` over the tensor-product form; ``R`` the control points as flat 4-wide rows
+    (4 n_ctrl,), ``out`` (N, gdim); ``w0, w1, w2`` the basis widths
+    (:func:`ffdcli.lattice.fixed_widths`, a third of width 1 in 2D); ``nchunk`` chunks of points."""
+    npts = f0.shape[0]
+    for ch in prange(nchunk):
+        lo = ch * npts // nchunk
+        hi = (ch + 1) * npts // nchunk
+        _apply_chunk_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, lo, hi, w0, w1, w2)
 
 
 def _apply(axes, P, inside, use_mask, out):
-    """``B @ P`` by the kernel that fits the basis widths (``axes`` from ``Embedding._kernel_axes``)."""
+    """``B @ P`` (``axes`` from ``Embedding._kernel_axes``, ``P`` (n_ctrl, 4))."""
     f0, V0, f1, V1, f2, V2, has_w = axes[:7]
-    if has_w and V0.shape[1] == 4 and V1.shape[1] == 4 and V2.shape[1] == 2:
-        _apply_442_nb(*axes, P, inside, use_mask, out)
-    else:
-        _apply_nb(*axes, P, inside, use_mask, out)
+    widths = tuple((0.0,) * V.shape[1] for V in (V0, V1, V2))
+    nchunk = min(f0.shape[0], 4 * numba.get_num_threads())
+    _apply_nb(*axes, P.reshape(-1), inside, use_mask, out, nchunk, *widths)
 
 
 @njit(cache=True, parallel=True)
@@ -613,9 +621,10 @@ def dense_basis_reference(lattice: Lattice, params) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------
 
 @njit(cache=True, nogil=True, inline="always")
-def _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, out, W):
-    """|V(u) - X[i]|^2; ``out`` (12,) receives V and its derivatives (see ``eval_point_nb``)."""
-    res = eval_point_nb(P, k0, k1, k2, p0, p1, p2, u[0], u[1], u[2], W)
+def _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, out, w0, w1, w2):
+    """|V(u) - X[i]|^2; ``out`` (12,) receives V and its derivatives (see
+    :func:`ffdcli.lattice.eval_point_fixed_nb`; ``w0, w1, w2``: the basis widths)."""
+    res = eval_point_fixed_nb(R, n1, n2, k0, k1, k2, u[0], u[1], u[2], w0, w1, w2)
     for k in range(12):
         out[k] = res[k]
     s = 0.0
@@ -665,13 +674,13 @@ def _solve_small(H, rhs, n, x):
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
-                  cur, trial, ut, step, grad, H, rhs, fixed, scratch):
+def _newton_point(R, n1, n2, k0, k1, k2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
+                  cur, trial, ut, step, grad, H, rhs, fixed, w0, w1, w2):
     """Projected Gauss-Newton for point ``X[i]``; ``u`` (3,) is the start and receives the result.
 
     Returns the squared residual at the result.
     """
-    f = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, cur, scratch)
+    f = _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, cur, w0, w1, w2)
     for _ in range(max_iter):
         if f <= stop2:
             break
@@ -728,7 +737,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, s
             for e in range(pdim):
                 v = u[e] + alpha * step[e]
                 ut[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-            ft = _sqdist(P, k0, k1, k2, p0, p1, p2, ut, X, i, gdim, trial, scratch)
+            ft = _sqdist(R, n1, n2, k0, k1, k2, ut, X, i, gdim, trial, w0, w1, w2)
             if ft < f:
                 accepted = True
                 break
@@ -755,7 +764,7 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, s
             if target >= 0.0:
                 keep = u[e]
                 u[e] = target
-                fs = _sqdist(P, k0, k1, k2, p0, p1, p2, u, X, i, gdim, trial, scratch)
+                fs = _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, trial, w0, w1, w2)
                 if fs <= tol2:
                     f = fs
                 else:
@@ -763,42 +772,65 @@ def _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, s
     return f
 
 
+@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
+def _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_iter, residual, lo, hi,
+                     use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2, work, fixed):
+    """Newton for the points ``lo:hi`` of ``X`` (see :func:`_newton_nb`); ``work`` (48,) and ``fixed``
+    (3,) are the chunk's work arrays.
+
+    A function of its own, called once per chunk from the parallel loop, not inlined into it: numba
+    compiles it with the widths ``w0, w1, w2`` (tuples, :func:`ffdcli.lattice.fixed_widths`) as
+    constants, and the parallel loop's array analysis never sees the per-point tuples. Compiled
+    without numba's reference counting (``_nrt=False``: it allocates nothing): the arrays handed to
+    the inlined per-point functions would otherwise be counted in and out at every point (about 30
+    calls per point, atomic operations on counters shared by the threads). NumPy's error model: no
+    zero-division checks (and their exception paths) around the basis recurrence's divisions (never
+    by zero: a knot span's denominators are sums of non-empty knot intervals; the Gauss elimination
+    checks its pivots first)."""
+    gdim = X.shape[1]
+    pdim = 3 if len(w2) > 1 else 2          # a constant: a 2D lattice has the third axis of degree 0
+    cur = work[0:12]
+    trial = work[12:24]
+    u = work[24:27]
+    ut = work[27:30]
+    step = work[30:33]
+    grad = work[33:36]
+    rhs = work[36:39]
+    H = work[39:48].reshape((3, 3))
+    for i in range(lo, hi):
+        if use_table:
+            _start_point(X, i, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, u)
+        else:
+            for e in range(pdim):
+                u[e] = params[i, e]
+        f = _newton_point(R, n1, n2, k0, k1, k2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
+                          cur, trial, ut, step, grad, H, rhs, fixed, w0, w1, w2)
+        for e in range(pdim):
+            params[i, e] = u[e]
+        residual[i] = np.sqrt(f)
+
+
 @njit(cache=True, parallel=True)
-def _newton_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, max_iter, residual, nchunk,
-               use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv):
+def _newton_nb(R, n1, n2, k0, k1, k2, X, params, tol, stop, snap, max_iter, residual, nchunk,
+               use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2):
     """Newton for every point of ``X``, from ``params`` or (``use_table``) from the start table
     ``t_*`` (:class:`StartTable`'s arrays), read in the same pass; writes ``params`` and ``residual``.
-    ``nchunk`` chunks of points share the threads, each with its work arrays."""
+    ``nchunk`` chunks of points share the threads (:func:`_newton_chunk_nb`). ``w0, w1, w2``: the
+    basis widths (:func:`ffdcli.lattice.fixed_widths`): a compiled version per lattice degrees,
+    with the lattice evaluation unrolled (the results of the generic ``eval_point_nb``, bit for
+    bit, in a third of the time)."""
     npts = X.shape[0]
-    gdim = X.shape[1]
-    pdim = params.shape[1]
     tol2 = tol * tol
     stop2 = stop * stop
     nchunk = min(npts, nchunk)
     for ch in prange(nchunk):
-        scratch = np.zeros((8, MAX_DEGREE + 1))
-        cur = np.zeros(12)
-        trial = np.zeros(12)
-        u = np.zeros(3)
-        ut = np.zeros(3)
-        step = np.zeros(3)
-        grad = np.zeros(3)
-        H = np.zeros((3, 3))
-        rhs = np.zeros(3)
-        fixed = np.zeros(3, dtype=np.bool_)
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        for i in range(lo, hi):
-            if use_table:
-                _start_point(X, i, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, u)
-            else:
-                for e in range(pdim):
-                    u[e] = params[i, e]
-            f = _newton_point(P, k0, k1, k2, p0, p1, p2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
-                              cur, trial, ut, step, grad, H, rhs, fixed, scratch)
-            for e in range(pdim):
-                params[i, e] = u[e]
-            residual[i] = np.sqrt(f)
+        work = np.zeros(48)
+        fixed = np.zeros(3, dtype=np.bool_)
+        _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_iter, residual, lo, hi,
+                         use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2, work,
+                         fixed)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -972,8 +1004,10 @@ def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_ite
     # enough chunks per thread to balance the slower points outside the lattice; work arrays are
     # allocated per chunk, not per point
     nchunk = 16 * numba.get_num_threads()
-    _newton_nb(*args, points, params, float(tol_abs), float(stop_abs), float(snap), int(max_iter), residual,
-               nchunk, table is not None, *t)
+    P, k0, k1, k2, p0, p1, p2 = args
+    n1, n2 = np.int64(P.shape[1]), np.int64(P.shape[2])
+    _newton_nb(padded_rows(P), n1, n2, k0, k1, k2, points, params, float(tol_abs), float(stop_abs), float(snap),
+               int(max_iter), residual, nchunk, table is not None, *t, *fixed_widths((p0, p1, p2)))
 
 
 def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, samples_per_span: int = 4,

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
+from numba.cpython.unsafe.tuple import tuple_setitem
 
 
 def clamped_knots(n_ctrl: int, degree: int) -> np.ndarray:
@@ -245,6 +246,25 @@ def find_span_nb(knots, p, t):
 
 
 @njit(cache=True, nogil=True, inline="always")
+def find_span_count_nb(knots, p, t):
+    """:func:`find_span_nb` without its unpredictable branches, for the per-point kernels.
+
+    The span is ``p`` plus the number of interior knots ``knots[p + 1 : n]`` at or below ``t``
+    (knots are sorted): a branch-free count while there are at most 16 of them (a lattice axis of
+    up to ``p + 17`` control points), the binary search of :func:`find_span_nb` beyond. The same
+    span for every ``t`` in [0, 1] (and beyond: ``t >= 1`` gives ``n - 1``, ``t < 0`` gives ``p``);
+    a NaN gives ``p``.
+    """
+    n = knots.shape[0] - p - 1
+    if n - p - 1 > 16:
+        return find_span_nb(knots, p, t)
+    s = p
+    for j in range(p + 1, n):
+        s += knots[j] <= t
+    return s
+
+
+@njit(cache=True, nogil=True, inline="always")
 def basis_row_nb(knots, p, span, t, W, rv, rl, rr):
     """Scalar Cox–de Boor (A2.2) into rows of a work array: fills ``W[rv, :p + 1]``.
 
@@ -292,6 +312,44 @@ def basis_d1_row_nb(knots, p, span, t, W, rv, rd, rl, rr):
         W[rv, j] = saved
         if j == p:
             W[rd, p] = dsaved
+
+
+def degree_proto(p: int) -> tuple[float, ...]:
+    """The ``proto`` argument of :func:`basis_d1_tuple` for degree ``p``: a tuple of ``p + 1`` zeros."""
+    return (0.0,) * (int(p) + 1)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def basis_d1_tuple(knots, span, t, proto):
+    """Scalar basis values and first derivatives as tuples, for a degree known when compiling.
+
+    ``proto`` is a tuple of ``p + 1`` zeros (:func:`degree_proto`): its length is the degree, a
+    constant of the compiled code (numba compiles a version per tuple length), so the loops unroll
+    and the values stay in registers instead of a work array. Returns ``(values, derivatives)``,
+    two tuples of ``p + 1`` floats: the operations of :func:`basis_d1_row_nb` in the same order, so
+    the values are those of :func:`basis_row_nb` bit for bit. Degree 0 gives ``((1.0,), (0.0,))``.
+    """
+    p = len(proto) - 1
+    N = tuple_setitem(proto, 0, 1.0)
+    D = tuple_setitem(proto, 0, 0.0)
+    L = proto
+    R = proto
+    for j in range(1, p + 1):
+        L = tuple_setitem(L, j, t - knots[span + 1 - j])
+        R = tuple_setitem(R, j, knots[span + j] - t)
+        saved = 0.0
+        dsaved = 0.0
+        for r in range(j):
+            temp = N[r] / (R[r + 1] + L[j - r])
+            N = tuple_setitem(N, r, saved + R[r + 1] * temp)
+            saved = L[j - r] * temp
+            if j == p:
+                D = tuple_setitem(D, r, dsaved - p * temp)
+                dsaved = p * temp
+        N = tuple_setitem(N, j, saved)
+        if j == p:
+            D = tuple_setitem(D, p, dsaved)
+    return N, D
 
 
 @njit(cache=True, parallel=True)

@@ -8,9 +8,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from lattice_cases import curved_patch, wing_grid, wing_lattice
+from numba import njit
 
 from ffdcli.errors import InputError
-from ffdcli.lattice import Lattice, derivatives, derivatives_reference, evaluate, evaluate_reference
+from ffdcli.lattice import (
+    Lattice,
+    derivatives,
+    derivatives_reference,
+    eval_point_fixed_nb,
+    eval_point_nb,
+    evaluate,
+    evaluate_reference,
+    fixed_widths,
+    kernel_args,
+    padded_rows,
+)
+from ffdcli.settings import MAX_DEGREE
 from ffdcli.spline import clamped_knots
 
 # Compiled vs NumPy reference: same sums in a different order on coordinates of order 1-5 (mesh
@@ -169,3 +182,53 @@ def test_evaluate_rejects_bad_params():
         with pytest.raises(ValueError, match="must lie in"):
             derivatives(lat, bad)
     assert evaluate(lat, np.zeros((0, 3))).shape == (0, 3)
+
+
+@njit
+def _both_kernels(P, k0, k1, k2, p0, p1, p2, R, n1, n2, w0, w1, w2, U, gen, fix):
+    W = np.zeros((8, MAX_DEGREE + 1))
+    for i in range(U.shape[0]):
+        u2 = U[i, 2] if U.shape[1] == 3 else 0.0
+        a = eval_point_nb(P, k0, k1, k2, p0, p1, p2, U[i, 0], U[i, 1], u2, W)
+        b = eval_point_fixed_nb(R, n1, n2, k0, k1, k2, U[i, 0], U[i, 1], u2, w0, w1, w2)
+        for j in range(12):
+            gen[i, j] = a[j]
+            fix[i, j] = b[j]
+
+
+FIXED_CASES = dict(CASES, **{
+    "3d-linear": lambda: wing_lattice((3, 2, 2), 1),
+    "3d-quadratic-cubic-linear": lambda: wing_lattice((5, 7, 3), (2, 3, 1)),
+    "3d-deg4-knots": lambda: Lattice(wing_grid((7, 5, 3)), (4, 2, 2), knots=(
+        np.array([0, 0, 0, 0, 0, 0.4, 0.4, 1, 1, 1, 1, 1.0]), np.array([0, 0, 0, 0.25, 0.5, 1, 1, 1.0]),
+        clamped_knots(3, 2))),
+    "2d-linear-gdim2": lambda: curved_patch((4, 3), (1, 1), gdim=2),
+})
+
+
+@pytest.mark.parametrize("case", sorted(FIXED_CASES))
+def test_fixed_degree_kernel_is_the_generic_one_bit_for_bit(case):
+    # the Newton embedding's kernel (unrolled for the lattice's degrees, 4-wide vector tensor product)
+    # against the generic one: the same 12 floats, bit for bit, inside, on faces and corners and at
+    # repeated knots
+    lat = FIXED_CASES[case]()
+    rng = np.random.default_rng(3)
+    U = random_params(rng, lat.pdim, 400)
+    breaks = np.unique(np.concatenate(lat.knots))
+    U[-len(breaks):, -1] = breaks                      # parameters exactly at (repeated) knots
+    P, k0, k1, k2, p0, p1, p2 = kernel_args(lat)
+    gen = np.empty((len(U), 12))
+    fix = np.empty((len(U), 12))
+    _both_kernels(P, k0, k1, k2, p0, p1, p2, padded_rows(P), np.int64(P.shape[1]), np.int64(P.shape[2]),
+                  *fixed_widths((p0, p1, p2)), np.ascontiguousarray(U), gen, fix)
+    np.testing.assert_array_equal(fix, gen)
+    np.testing.assert_allclose(fix[:, :lat.gdim], evaluate_reference(lat, U), rtol=0, atol=KERNEL_TOL * lat.size)
+
+
+def test_padded_rows_and_fixed_widths():
+    lat = wing_lattice((4, 3, 2), (3, 2, 1))
+    P, *_, p0, p1, p2 = kernel_args(lat)
+    R = padded_rows(P).reshape(-1, 4)
+    np.testing.assert_array_equal(R[:, :3], lat.control_points.reshape(-1, 3))
+    assert not R[:, 3].any()
+    assert fixed_widths((p0, p1, p2)) == ((0.0,) * 4, (0.0,) * 3, (0.0,) * 2)

@@ -18,11 +18,14 @@ from ffdcli.spline import (
     basis,
     basis_compiled,
     basis_d1_row_nb,
+    basis_d1_tuple,
     basis_derivs,
     basis_row_nb,
     check_knots,
     clamped_knots,
+    degree_proto,
     find_span,
+    find_span_count_nb,
     find_span_nb,
 )
 
@@ -103,6 +106,24 @@ def test_find_span_contract_and_compiled_agree():
         np.testing.assert_array_equal([find_span_nb(k, p, x) for x in t], s)
 
 
+@pytest.mark.parametrize("n_ctrl", [2, 4, 8, 20, 21, 40])
+def test_branch_free_span_is_the_binary_search(n_ctrl):
+    # the count of interior knots at or below t (up to 16 of them), the binary search beyond:
+    # the same span everywhere, at repeated knots, at and beyond the ends
+    rng = np.random.default_rng(n_ctrl)
+    for p in range(0, 6):
+        if n_ctrl <= p:
+            continue
+        k = clamped_knots(n_ctrl, p)                  # uniform interior knots, then moved a little
+        k[p + 1: n_ctrl] += rng.uniform(-0.2, 0.2, n_ctrl - p - 1) / (n_ctrl - p)
+        if n_ctrl - p - 1 >= 3:                       # a knot repeated p times
+            k[p + 2: p + 2 + p] = k[p + 2]
+            k = np.ascontiguousarray(np.sort(k))
+        t = np.concatenate([params_with_knots(rng, k), [-0.5, 1.5]])
+        np.testing.assert_array_equal([find_span_count_nb(k, p, x) for x in t],
+                                      [find_span_nb(k, p, x) for x in t])
+
+
 # ---------------------------------------------------------------------------------------------- values
 
 @pytest.mark.parametrize("degree", [1, 2, 3, 4, 5])
@@ -172,6 +193,10 @@ def test_compiled_kernels_match_numpy(degree, extra, seed):
         basis_row_nb(knots, degree, span, t[i], W, 4, 2, 3)
         np.testing.assert_array_equal(W[4], W[0])
         np.testing.assert_array_equal(W[0], cvalues[i])
+        # the unrolled fixed-degree kernel of the Newton embedding: the same operations, bit for bit
+        N, D = basis_d1_tuple(knots, span, t[i], degree_proto(degree))
+        np.testing.assert_array_equal(np.array(N), W[0])
+        np.testing.assert_array_equal(np.array(D), W[1])
 
 
 def test_degree_zero_compiled_basis_is_constant():
@@ -179,6 +204,7 @@ def test_degree_zero_compiled_basis_is_constant():
     W = np.empty((4, 1))
     basis_d1_row_nb(np.array([0.0, 1.0]), 0, 0, 0.3, W, 0, 1, 2, 3)
     assert W[0, 0] == 1.0 and W[1, 0] == 0.0
+    assert basis_d1_tuple(np.array([0.0, 1.0]), 0, 0.3, degree_proto(0)) == ((1.0,), (0.0,))
 
 
 def test_basis_rejects_parameters_outside_range():
