@@ -38,7 +38,9 @@ NOTES = """
 Runs: `mpiexec -n R` with NUMBA_NUM_THREADS=T per rank; 1x1 and 2x1 alternate ROUNDS times (min and
 max given), 1x2 (the serial run with both cores) once. Time = slowest rank, best of its repeats, after
 a warm-up; efficiency = min t(1x1) / (2 min t(2x1)); target >= 80 %. Embed: 1M random points of the
-8x6x2 wing lattice of bench_core (each rank inverts its half; gather included). Warp: bench_warp's
+8x6x2 wing lattice of bench_core (each rank inverts its half; the all-gather that gives every rank the
+whole embedding included); embed own share: each rank embeds its half and keeps it (pyGeo's model of
+point sets per partition, ffd's `DesignModel(comm=)` point sets). Warp: bench_warp's
 synthetic mesh, 1M volume / 50k surface nodes (each rank warps its half of the volume nodes; gather
 included; the replicated tree build is reported apart). Read: bench_pipeline's 1,003,520-node hex wing
 mesh as SU2 and as CGNS/HDF5, `read_part` (each rank parses its block of the point rows and of the
@@ -92,7 +94,7 @@ def _timed(comm, fn, repeat=REPEAT) -> float:
     return best
 
 
-def child_embed(comm, npts: int) -> dict:
+def child_embed(comm, npts: int, own: bool = False) -> dict:
     from benchmarks.bench_core import wing_control_points
     from ffdcli.embedding import embed
     from ffdcli.lattice import Lattice, evaluate
@@ -100,6 +102,9 @@ def child_embed(comm, npts: int) -> dict:
     lat = Lattice(wing_control_points((8, 6, 2)), (3, 3, 1))
     X = evaluate(lat, np.random.default_rng(0).uniform(0.0, 1.0, (npts, 3)))
     embed(lat, X[:1000], comm=comm)
+    if own:             # pyGeo's model: each rank embeds the points of its partition and keeps them
+        lo, hi = comm.share(npts)
+        return {"seconds": _timed(comm, lambda: embed(lat, X[lo:hi]))}
     t = _timed(comm, lambda: embed(lat, X, comm=comm))
     return {"seconds": t}
 
@@ -237,7 +242,7 @@ def _child(argv) -> int:
     comm = world()
     case, *args = argv
     if case == "embed":
-        out = child_embed(comm, int(args[0]))
+        out = child_embed(comm, int(args[0]), own=args[1:] == ["own"])
     elif case == "warp":
         out = child_warp(comm, int(args[0]), int(args[1]))
     elif case == "read":
@@ -303,6 +308,7 @@ def _cases(folder: Path, quick: bool) -> list[tuple[str, int, list[str], Path | 
     me = ["-m", "benchmarks.bench_mpi", "--child"]
     nodes = facts["nodes"]
     return [("embed", n_embed, me + ["embed", str(n_embed)], None),
+            ("embed own share", n_embed, me + ["embed", str(n_embed), "own"], None),
             ("warp", n_vol, me + ["warp", str(n_vol), str(n_surf)], None),
             ("read SU2 by parts", nodes, me + ["read", str(folder / "wing.su2"), "parts"], None),
             ("read SU2 rank 0 + bcast", nodes, me + ["read", str(folder / "wing.su2"), "bcast"], None),

@@ -38,7 +38,7 @@ NumPy versions the tests compare the kernels with.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -1049,11 +1049,10 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
         pts = np.asarray(points, dtype=np.float64)
         lo, hi = comm.share(pts.shape[0] if pts.ndim == 2 else 0)
         part = comm.run(embed, lattice, pts[lo:hi] if pts.ndim == 2 else pts, **kw)
-        # the blocks' basis values are gathered too (not recomputed for every point on every rank)
-        return replace(part, params=comm.allgather_rows(part.params), inside=comm.allgather_rows(part.inside),
-                       residual=comm.allgather_rows(part.residual),
-                       first=tuple(comm.allgather_rows(f) for f in part.first),
-                       values=tuple(comm.allgather_rows(v) for v in part.values))
+        # the parameters are gathered and every rank computes the basis values (bit for bit the
+        # block's: the same compiled pass per point): a fourth of the bytes, faster than gathering them
+        return Embedding.from_params(lattice, comm.allgather_rows(part.params), comm.allgather_rows(part.inside),
+                                     comm.allgather_rows(part.residual), tolerance=part.tolerance)
     pts = np.asarray(points, dtype=np.float64)
     if pts.ndim != 2 or pts.shape[1] != lattice.gdim:
         raise ValueError(f"points must have shape (N, {lattice.gdim}), got {pts.shape}")
