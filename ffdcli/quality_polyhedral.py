@@ -1,0 +1,149 @@
+"""The quality of polyhedral cells (OpenFOAM, CGNS NGON_n/NFACE_n) as checkMesh measures it.
+
+On the geometry of :mod:`ffdcli.polyhedra` (OpenFOAM's face centres and areas, cell centres and
+volumes), per face and per cell, with OpenFOAM's definitions (``polyMeshCheck.C``,
+``primitiveMeshTools.C``):
+
+- **volume** of each cell (the tetrahedra about its face centres and estimated centre); checkMesh's
+  "negative volume" cells have a volume below VSMALL (1e-300).
+- **face pyramids**: the pyramid of each face with apex at the owner's (and the neighbour's) centre
+  must have a positive volume (checkMesh's "face pyramids" error counts the faces whose pyramid is
+  below -SMALL, 1e-15).
+- **non-orthogonality** of an internal face: the angle between the line joining its two cell
+  centres and its area vector, ``acos(d . S / (|d| |S|))`` in degrees. checkMesh reports the maximum
+  over internal faces, the average (of the cosines, over internal faces: ESI v1912), the
+  faces above 70 degrees (severe) and those at 90 or more (errors).
+- **skewness** of a face: the distance from the face centre to where the line between the cell
+  centres crosses the face's plane, divided by the larger of 0.2 x the cell-centre distance and the
+  extent of the face in that direction; a boundary face mirrors its owner (0.4 x, the distance to
+  the face's plane). checkMesh flags faces above 4.
+
+The per-cell value the gate's rules use (``q``, as the scaled Jacobian for the other cells): the
+cell's smallest face pyramid times its number of faces, divided by its volume, clipped to [-1, 1].
+It is 1 for a cube or a regular tetrahedron, 5/6 for a regular prism, falls as a cell is sheared and
+is <= 0 exactly when a face pyramid is empty or inverted (checkMesh's face-pyramid error, which also
+catches every negative volume).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ffdcli.polyhedra import (
+    ROOTVSMALL,
+    VSMALL,
+    Polyhedra,
+    cell_centres_volumes,
+    face_centres_areas,
+    next_in_face,
+    pyramid_volumes,
+)
+
+#: checkMesh's thresholds: severe non-orthogonality (degrees), skewness, face pyramids (SMALL).
+NON_ORTH_SEVERE = 70.0
+SKEW_MAX = 4.0
+SMALL = 1.0e-15
+
+
+@dataclass(frozen=True, eq=False)
+class PolyFigures:
+    """The figures of a polyhedral mesh at one geometry (arrays of length C cells or F faces).
+
+    volumes (C,), centres (C, 3), q (C,) the gate's per-cell value (module docstring),
+    non_orth (F,) degrees (0 on boundary faces), skew (F,), pyramid_errors (F,) bool."""
+
+    volumes: np.ndarray
+    centres: np.ndarray
+    q: np.ndarray
+    non_orth: np.ndarray
+    skew: np.ndarray
+    pyramid_errors: np.ndarray
+    internal: np.ndarray
+
+    def summary(self) -> dict:
+        """checkMesh's figures: cells, negative volumes, face-pyramid errors, maximum and average
+        non-orthogonality, severely non-orthogonal faces, maximum skewness, skewed faces."""
+        inner = self.internal
+        cos = np.cos(np.radians(self.non_orth[inner]))
+        n_inner = int(inner.sum())
+        return {
+            "cells": len(self.volumes),
+            "negative_volumes": int(np.count_nonzero(self.volumes < VSMALL)),
+            "min_volume": float(self.volumes.min()) if len(self.volumes) else None,
+            "face_pyramid_errors": int(np.count_nonzero(self.pyramid_errors)),
+            "max_non_orthogonality": float(self.non_orth[inner].max()) if n_inner else 0.0,
+            "average_non_orthogonality": float(np.degrees(np.arccos(np.clip(cos.mean(), -1, 1))))
+            if n_inner else 0.0,
+            "severely_non_orthogonal": int(np.count_nonzero(inner & (self.non_orth > NON_ORTH_SEVERE))),
+            "max_skewness": float(self.skew.max()) if len(self.skew) else 0.0,
+            "skewed_faces": int(np.count_nonzero(self.skew > SKEW_MAX)),
+        }
+
+
+def poly_figures(points: np.ndarray, poly: Polyhedra) -> PolyFigures:
+    """The :class:`PolyFigures` of ``poly`` at ``points`` (N, 3)."""
+    fc, fa = face_centres_areas(points, poly)
+    cc, vol = cell_centres_volumes(poly, fc, fa)
+    own_pyr, nei_pyr = pyramid_volumes(poly, fc, fa, cc)
+    inner = poly.neighbour >= 0
+    errors = (own_pyr < -SMALL) | (inner & (nei_pyr < -SMALL))
+    return PolyFigures(volumes=vol, centres=cc, q=cell_q(poly, own_pyr, nei_pyr, vol),
+                       non_orth=non_orthogonality(poly, fa, cc), skew=skewness(points, poly, fc, fa, cc),
+                       pyramid_errors=errors, internal=inner)
+
+
+def cell_q(poly: Polyhedra, own_pyr: np.ndarray, nei_pyr: np.ndarray, vol: np.ndarray) -> np.ndarray:
+    """(C,) the gate's value: faces x smallest face pyramid / volume, clipped to [-1, 1] (<= 0: a
+    face pyramid is empty or inverted, or the volume is not positive)."""
+    nc = poly.n_cells
+    inner = poly.neighbour >= 0
+    smallest = np.full(nc, np.inf)
+    np.minimum.at(smallest, poly.owner, own_pyr)
+    np.minimum.at(smallest, poly.neighbour[inner], nei_pyr[inner])
+    nf = poly.faces_per_cell()
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        q = np.where(vol > VSMALL, nf * smallest / np.where(vol > VSMALL, vol, 1.0), -1.0)
+    q = np.where(np.isfinite(q), q, -1.0)
+    return np.clip(q, -1.0, 1.0)
+
+
+def non_orthogonality(poly: Polyhedra, fa: np.ndarray, cc: np.ndarray) -> np.ndarray:
+    """(F,) degrees: ``acos(d . S / (|d| |S| + ROOTVSMALL))`` on internal faces, 0 on boundary faces
+    (``polyMeshTools::faceOrthogonality``; coupled patches are treated as boundaries)."""
+    out = np.zeros(poly.n_faces)
+    inner = np.flatnonzero(poly.neighbour >= 0)
+    d = cc[poly.neighbour[inner]] - cc[poly.owner[inner]]
+    s = fa[inner]
+    cos = np.einsum("ij,ij->i", d, s) / (np.linalg.norm(d, axis=1) * np.linalg.norm(s, axis=1) + ROOTVSMALL)
+    out[inner] = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    return out
+
+
+def skewness(points: np.ndarray, poly: Polyhedra, fc: np.ndarray, fa: np.ndarray, cc: np.ndarray) -> np.ndarray:
+    """(F,) ``primitiveMeshTools::faceSkewness`` (internal) and ``boundaryFaceSkewness`` (boundary)."""
+    own = cc[poly.owner]
+    inner = poly.neighbour >= 0
+    cpf = fc - own
+    d = np.empty_like(cpf)
+    d[inner] = cc[poly.neighbour[inner]] - own[inner]
+    bnd = ~inner
+    if bnd.any():
+        mag = np.linalg.norm(fa[bnd], axis=1)
+        nrm = fa[bnd] / np.where(mag > 0, mag, 1.0)[:, None]     # OpenFOAM's normalised(): 0 for 0
+        d[bnd] = nrm * np.einsum("ij,ij->i", nrm, cpf[bnd])[:, None]
+    sv = cpf - (np.einsum("ij,ij->i", fa, cpf) / (np.einsum("ij,ij->i", fa, d) + ROOTVSMALL))[:, None] * d
+    sv_mag = np.linalg.norm(sv, axis=1)
+    sv_hat = sv / (sv_mag + ROOTVSMALL)[:, None]
+    fd = np.where(inner, 0.2, 0.4) * np.linalg.norm(d, axis=1) + ROOTVSMALL
+    # the face's extent along sv_hat: the largest |sv_hat . (p - fc)| over its nodes
+    size = poly.face_sizes
+    fid = np.repeat(np.arange(poly.n_faces), size)
+    along = np.abs(np.einsum("ij,ij->i", sv_hat[fid], points[poly.face_nodes] - fc[fid]))
+    extent = np.maximum.reduceat(along, poly.face_offsets[:-1]) if len(along) else np.zeros(0)
+    return sv_mag / np.maximum(fd, extent)
+
+
+__all__ = ["NON_ORTH_SEVERE", "SKEW_MAX", "PolyFigures", "cell_q", "next_in_face", "non_orthogonality",
+           "poly_figures", "skewness"]
