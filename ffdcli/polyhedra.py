@@ -307,3 +307,70 @@ def from_counted(tokens: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np
     keep = np.ones(len(tokens), dtype=bool)
     keep[starts[:-1]] = False
     return tokens[keep], offsets
+
+
+# ----------------------------------------------------------------------------------------------
+# From cell blocks (tetrahedra, pyramids, prisms, hexahedra in VTK order)
+# ----------------------------------------------------------------------------------------------
+
+#: The faces of each VTK cell type, node order giving the outward normal (right-hand rule).
+CELL_FACES = {
+    "tetra": ((0, 2, 1), (0, 1, 3), (1, 2, 3), (0, 3, 2)),
+    "pyramid": ((0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)),
+    "wedge": ((0, 2, 1), (3, 4, 5), (0, 1, 4, 3), (1, 2, 5, 4), (2, 0, 3, 5)),
+    "hexahedron": ((0, 3, 2, 1), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7)),
+}
+
+
+def face_keys(faces: np.ndarray) -> np.ndarray:
+    """(n, 4) a face's nodes sorted, padded with -1 (triangles): equal for the same face."""
+    keys = np.full((len(faces), 4), -1, dtype=np.int64)
+    keys[:, :faces.shape[1]] = np.sort(faces, axis=1)
+    return keys
+
+
+def polyhedra_from_cells(blocks) -> tuple[Polyhedra, np.ndarray]:
+    """The :class:`Polyhedra` of cell blocks (``.type``, ``.data`` in VTK order, volume types only),
+    in OpenFOAM's order: internal faces first, by owner then neighbour (owner < neighbour, the face
+    pointing out of the owner), then the boundary faces by owner. Returns it and the boundary faces'
+    keys (:func:`face_keys`, (B, 4)) to match them to markers. Cells are numbered block after block."""
+    tris, quads, cell0 = [], [], 0
+    for b in blocks:
+        data = np.asarray(b.data, dtype=np.int64)
+        ids = cell0 + np.arange(len(data), dtype=np.int64)
+        for f in CELL_FACES[b.type]:
+            (tris if len(f) == 3 else quads).append((data[:, f], ids))
+        cell0 += len(data)
+    faces = [np.vstack([f for f, _ in group]) if group else np.zeros((0, k), np.int64)
+             for group, k in ((tris, 3), (quads, 4))]
+    cells = [np.concatenate([c for _, c in group]) if group else np.zeros(0, np.int64) for group in (tris, quads)]
+    nodes4 = np.full((len(faces[0]) + len(faces[1]), 4), -1, dtype=np.int64)
+    nodes4[:len(faces[0]), :3] = faces[0]
+    nodes4[len(faces[0]):] = faces[1]
+    cell = np.concatenate(cells)
+    keys = np.vstack([face_keys(faces[0]), face_keys(faces[1])])
+    order = np.lexsort(keys.T[::-1])
+    keys, nodes4, cell = keys[order], nodes4[order], cell[order]
+    first = np.ones(len(keys), dtype=bool)
+    first[1:] = (keys[1:] != keys[:-1]).any(axis=1)
+    start = np.flatnonzero(first)
+    count = np.diff(np.append(start, len(keys)))
+    if (count > 2).any():
+        raise ValueError(f"a face is shared by {count.max()} cells")
+    pair = start[count == 2]
+    a, b = cell[pair], cell[pair + 1]
+    f_nodes = nodes4[pair].copy()
+    swap = a > b                                  # owner the lower cell; its face points out of it
+    f_nodes[swap] = nodes4[pair + 1][swap]
+    own, nei = np.minimum(a, b), np.maximum(a, b)
+    io = np.lexsort((nei, own))
+    single = start[count == 1]
+    bo = np.argsort(cell[single], kind="stable")
+    all_nodes = np.vstack([f_nodes[io], nodes4[single][bo]])
+    owner = np.concatenate([own[io], cell[single][bo]])
+    neighbour = np.concatenate([nei[io], np.full(len(single), -1, dtype=np.int64)])
+    size = np.where(all_nodes[:, 3] < 0, 3, 4)
+    offsets = np.zeros(len(size) + 1, dtype=np.int64)
+    np.cumsum(size, out=offsets[1:])
+    flat = all_nodes[all_nodes >= 0]
+    return Polyhedra(flat, offsets, owner, neighbour, cell0), keys[single][bo]

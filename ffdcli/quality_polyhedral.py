@@ -147,3 +147,87 @@ def skewness(points: np.ndarray, poly: Polyhedra, fc: np.ndarray, fa: np.ndarray
 
 __all__ = ["NON_ORTH_SEVERE", "SKEW_MAX", "PolyFigures", "cell_q", "next_in_face", "non_orthogonality",
            "poly_figures", "skewness"]
+
+
+# ----------------------------------------------------------------------------------------------
+# The gate on polyhedral cells
+# ----------------------------------------------------------------------------------------------
+
+def face_rule(fig: PolyFigures, ref: PolyFigures | None, ortho_min: float, ortho_loss: float,
+              relative: float) -> np.ndarray:
+    """(F,) faces the gate refuses (the one home of the rule on faces, relative to the baseline
+    ``ref``): an internal face whose non-orthogonality exceeds ``90 - ortho_min`` (70 degrees by
+    default, checkMesh's severe threshold) after growing by more than ``ortho_loss`` degrees, or a
+    face whose skewness exceeds checkMesh's 4 after growing to more than ``1 / relative`` (2) times
+    its value before. Without a baseline nothing is refused here."""
+    if ref is None:
+        return np.zeros(len(fig.non_orth), dtype=bool)
+    ortho = fig.internal & (fig.non_orth > 90.0 - ortho_min) & (fig.non_orth - ref.non_orth > ortho_loss)
+    skew = (fig.skew > SKEW_MAX) & (fig.skew * relative > ref.skew)
+    return ortho | skew
+
+
+def gate_counts(poly: Polyhedra, after: np.ndarray, fig: PolyFigures, ref: PolyFigures | None, cell_rule, floor,
+                *, threshold: float, relative: float, ortho_min: float, ortho_loss: float, n_worst: int) -> dict:
+    """The fields of a :class:`~ffdcli.quality.QualityReport` for polyhedral cells: the cell rules
+    (``cell_rule`` of the gate, with ``floor``) on the per-cell value ``q``, the face rule
+    (:func:`face_rule`), checkMesh's figures after and before under ``polyhedral``."""
+    q = fig.q
+    qb = None if ref is None else ref.q
+    inverted, below, bad_in, new_inv, worse, failed = cell_rule(q, qb, threshold, relative, floor)
+    faces_failed = face_rule(fig, ref, ortho_min, ortho_loss, relative)
+    out = {"n_inverted": int(inverted.sum()), "n_below": int(below.sum()),
+           "min_after": float(q.min()) if len(q) else None, "min_before": None}
+    shapes = _cell_shapes(poly)
+
+    def rows(index, values, coords, with_failed):
+        got = []
+        for c in index.tolist():
+            row = {"cell": int(c), "type": shapes[c], "quality": float(values[c])}
+            if with_failed is not None:
+                row["quality_before"] = None if qb is None else float(qb[c])
+            row["centroid"] = coords[c].tolist()
+            if with_failed is not None:
+                row["failed"] = bool(with_failed[c])
+            got.append(row)
+        return got
+
+    if ref is not None:
+        out.update(n_inverted_before=int(bad_in.sum()), n_below_before=int((~bad_in & (qb < threshold)).sum()),
+                   n_input_bad=int(bad_in.sum()), n_new_inverted=int(new_inv.sum()), n_worse=int(worse.sum()),
+                   min_before=float(qb.min()) if len(qb) else None)
+        if bad_in.any():
+            idx = np.flatnonzero(bad_in)
+            out["input_bad"] = rows(idx[np.argsort(qb[idx], kind="stable")][:n_worst], qb, ref.centres, None)
+    out["worst"] = rows(np.argsort(q, kind="stable")[:n_worst], q, fig.centres, failed)
+    worst_faces = np.flatnonzero(faces_failed)[:n_worst]
+    out["n_faces_failed"] = int(faces_failed.sum())
+    out["polyhedral"] = {
+        "after": fig.summary(), "before": None if ref is None else ref.summary(),
+        "faces_failed": int(faces_failed.sum()),
+        "worst_faces": [{"face": int(f), "non_orthogonality": float(fig.non_orth[f]),
+                         "non_orthogonality_before": float(ref.non_orth[f]), "skewness": float(fig.skew[f]),
+                         "skewness_before": float(ref.skew[f]), "owner": int(poly.owner[f])}
+                        for f in worst_faces.tolist()] if ref is not None else [],
+    }
+    return out
+
+
+def _cell_shapes(poly: Polyhedra) -> _Shapes:
+    return _Shapes(poly)
+
+
+class _Shapes:
+    """The shape name of a cell, computed when asked (only for the few cells a report lists)."""
+
+    def __init__(self, poly: Polyhedra):
+        self.poly = poly
+        self.offsets, self.faces = None, None
+
+    def __getitem__(self, c: int) -> str:
+        if self.offsets is None:
+            self.offsets, self.faces = self.poly.cell_faces()
+        faces = self.faces[self.offsets[c]:self.offsets[c + 1]]
+        size = np.sort(self.poly.face_sizes[faces]).tolist()
+        return {(4, 4, 4, 4, 4, 4): "hexahedron", (3, 3, 4, 4, 4): "prism", (3, 3, 3, 3, 4): "pyramid",
+                (3, 3, 3, 3): "tetrahedron"}.get(tuple(size), f"polyhedron ({len(size)} faces)")

@@ -29,7 +29,7 @@ def is_design_file(path: str) -> bool:
 
 
 @cli.command("box")
-@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.argument("mesh", type=click.Path())
 @click.option("--surface", "surfaces", multiple=True, metavar="NAME",
               help="Marker of the wing (repeat for several). Default: the only marker, or the one "
                    "named like wing/airfoil.")
@@ -98,7 +98,7 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
     settings = (settings or BoxSettings()).with_options(points=points, degree=degree, sections=sections,
                                                         root=root, margin=margin, file=from_file)
     from ffdcli.formats import format_of
-    from ffdcli.inputs import check_input_file
+    from ffdcli.inputs import check_mesh_path
     from ffdcli.outputs import plan_outputs
 
     if is_design_file(mesh) and getattr(design, "components", None):
@@ -108,7 +108,7 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
         return _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, console)
     mpath = Path(mesh_path)
     format_of(mpath)
-    check_input_file(mpath, "mesh file")
+    check_mesh_path(mpath)
     out = lattice_out if lattice_out is not None else mpath.with_name(mpath.stem + "_lattice.vtk")
     inputs = (mpath, mesh if is_design_file(mesh) else None, from_file, settings.file if settings else None)
     plan = plan_outputs([("lattice", out, False, "--lattice"), ("plot3d", export_plot3d, False, "--export-plot3d")],

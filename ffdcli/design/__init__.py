@@ -49,7 +49,7 @@ from ffdcli.design.yamlmap import (
     yaml_lines,
 )
 from ffdcli.errors import InputError
-from ffdcli.inputs import check_input_file, existing_kind
+from ffdcli.inputs import check_input_file, check_mesh_path, existing_kind
 from ffdcli.limits import check_lattice_size
 from ffdcli.settings import BoxSettings
 
@@ -123,7 +123,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
 
     mesh = resolve(data["mesh"])
     if check_files:
-        check_input_file(mesh, "mesh file", design=path, key="mesh", line=line_at(lines, ("mesh",)))
+        check_mesh_path(mesh, design=path, key="mesh", line=line_at(lines, ("mesh",)))
     surface = data.get("surface")
     if isinstance(surface, str):
         surface = [surface]

@@ -1,6 +1,7 @@
 """Mesh input and output: one reader/writer API, one module per format.
 
-``read_mesh(path)`` picks the reader from the extension; ``write_mesh(mesh, path, points)`` writes a
+``read_mesh(path)`` picks the reader from the extension (a folder, or a path without one, is an
+OpenFOAM case: :mod:`ffdcli.formats.openfoam`); ``write_mesh(mesh, path, points)`` writes a
 mesh with new point coordinates. When ``path`` has the format the mesh was read from, the writer
 patches a copy of the input file (only coordinates change, everything else byte for byte);
 otherwise it writes the mesh from scratch in the new format, markers included.
@@ -13,25 +14,33 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
-from ffdcli.inputs import check_input_file
+from ffdcli.inputs import check_mesh_path
 from ffdcli.mesh import Mesh
 
 #: extension -> format name
 FORMATS = {".su2": "su2", ".cgns": "cgns", ".vtu": "vtu", ".vtk": "vtk"}
+#: The format of a folder (an OpenFOAM case or its constant/polyMesh), and of a path without extension.
+FOLDER_FORMAT = "openfoam"
 
 
 def format_of(path: str | Path, *, key: str | None = None) -> str:
-    """The format name of a mesh path, from its extension; InputError if unsupported."""
-    ext = Path(path).suffix.lower()
-    if ext not in FORMATS:
-        raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
-                         f"{', '.join(FORMATS)}", path=path, key=key)
-    return FORMATS[ext]
+    """The format name of a mesh path: from its extension; ``openfoam`` for a folder or a path
+    without extension (an OpenFOAM case folder, or one to be written); InputError if unsupported."""
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext in FORMATS:
+        return FORMATS[ext]
+    if str(path) and (ext == "" or p.is_dir()):
+        return FOLDER_FORMAT
+    raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
+                     f"{', '.join(FORMATS)}, or an OpenFOAM case folder", path=path, key=key)
 
 
 def _module(fmt: str):
     if fmt == "su2":
         from ffdcli.formats import su2 as mod
+    elif fmt == FOLDER_FORMAT:
+        from ffdcli.formats import openfoam as mod
     elif fmt == "cgns":
         from ffdcli.formats import cgns as mod
     else:
@@ -40,10 +49,11 @@ def _module(fmt: str):
 
 
 def read_mesh(path: str | Path, *, progress=None) -> Mesh:
-    """Read a mesh (.su2, .cgns, .vtu, .vtk). Raises InputError naming the file on any problem."""
+    """Read a mesh (.su2, .cgns, .vtu, .vtk, an OpenFOAM case folder). Raises InputError naming the
+    file on any problem."""
     p = Path(path)
     fmt = format_of(p)
-    check_input_file(p, "mesh file")          # a FIFO or a device would block or never end in open()
+    check_mesh_path(p)                         # a FIFO or a device would block or never end in open()
     mesh = _module(fmt).read(p, progress=progress)
     check_finite_points(mesh)
     return mesh
@@ -68,13 +78,20 @@ def read_part(path: str | Path, comm, *, progress=None):
 
     p = Path(path)
     fmt = comm.run(format_of, p)
-    comm.run(check_input_file, p, "mesh file")
+    comm.run(check_mesh_path, p)
+    if fmt == FOLDER_FORMAT:
+        comm.run(_no_polyhedra_mpi, p)
     if fmt in READ_BY_PARTS:
         mesh, part = _module(fmt).read_part(p, comm, progress=progress)
         comm.run(check_finite_points, mesh)
         return mesh, part
     mesh = comm.root_then_bcast(read_mesh, p, progress=progress)      # transiently whole on every rank
     return localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
+
+
+def _no_polyhedra_mpi(path) -> None:
+    raise InputError("MPI runs on OpenFOAM cases (polyhedral cells) are not supported yet; run without "
+                     "mpiexec (a serial run reads a 1M-cell polyMesh in seconds)", path=path)
 
 
 def check_finite_points(mesh: Mesh) -> None:
@@ -117,11 +134,28 @@ def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *
     """
     from ffdcli.atomic import check_writable
 
-    p = check_writable(path, inputs=(mesh.path,) if mesh.path else ())
+    p = Path(path)
     fmt = format_of(p)
+    if (fmt == FOLDER_FORMAT) != (mesh.format == FOLDER_FORMAT) or (mesh.polyhedra is not None and fmt != mesh.format):
+        raise InputError(mismatch_message(mesh.format, fmt), path=p)
+    if fmt != FOLDER_FORMAT:
+        p = check_writable(p, inputs=(mesh.path,) if mesh.path else ())
     if mesh.partial and fmt != mesh.format:      # written from scratch: every cell, read again here
         mesh = read_mesh(mesh.path, progress=progress)
     pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
     if pts.shape != mesh.points.shape:
         raise ValueError(f"points {pts.shape} do not match the mesh {mesh.points.shape}")
     return _module(fmt).write(mesh, p, pts, progress=progress) or {}
+
+
+def mismatch_message(read: str, written: str) -> str:
+    """Why a mesh read in format ``read`` cannot be written as ``written`` (OpenFOAM cases are
+    written only as a copy of an OpenFOAM case with new points; polyhedral cells have no other
+    writer)."""
+    if read == FOLDER_FORMAT:
+        return ("the input is an OpenFOAM case: the deformed mesh is written as a copy of the case (an "
+                "output folder name without extension, e.g. out/wing_case)")
+    if written == FOLDER_FORMAT:
+        return (f"an output without extension is an OpenFOAM case folder, written only from an OpenFOAM input; "
+                f"the input is {read or 'not from a file'}: give the output an extension ({', '.join(FORMATS)})")
+    return f"a mesh of polyhedral cells read from {read} can only be written as {read}"

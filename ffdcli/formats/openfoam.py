@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.inputs import check_mesh_path, polymesh_folder_of
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.polyhedra import Polyhedra, counted_offsets, from_counted, problem
 
@@ -50,25 +51,13 @@ _ZONE = re.compile(rb"([^\s{}()]+)\s*\{", re.S)
 _COMMENT = re.compile(rb"//[^\n]*|/\*.*?\*/", re.S)
 
 
-def is_case(path: str | Path) -> bool:
-    """True when ``path`` is a folder holding an OpenFOAM mesh: a case (``constant/polyMesh``)
-    or a polyMesh folder itself (its ``faces``)."""
-    p = Path(path)
-    return p.is_dir() and (_find(p / "constant" / "polyMesh", "faces") is not None
-                           or _find(p, "faces") is not None)
-
-
 def poly_mesh_folder(path: str | Path) -> Path:
     """The polyMesh folder of a case folder or a polyMesh folder; InputError if neither."""
-    p = Path(path)
-    if not p.is_dir():
-        raise InputError("no such OpenFOAM case folder" if not p.exists() else
-                         "expected an OpenFOAM case folder (or its constant/polyMesh)", path=p)
-    for cand in (p / "constant" / "polyMesh", p):
-        if _find(cand, "faces") is not None or _find(cand, "points") is not None:
-            return cand
-    raise InputError("not an OpenFOAM case: no constant/polyMesh/faces (or faces.gz) in this folder",
-                     path=p, hint="give the case folder or its constant/polyMesh")
+    p = check_mesh_path(path)
+    folder = polymesh_folder_of(p)
+    if folder is None:                            # not a folder (check_mesh_path passed a file)
+        raise InputError("expected an OpenFOAM case folder (or its constant/polyMesh)", path=p)
+    return folder
 
 
 def _find(folder: Path, name: str) -> Path | None:
@@ -455,24 +444,31 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     if out.exists() and not out.is_dir():
         out.unlink()                              # the plan's empty temporary file: a folder goes there
     out.mkdir(exist_ok=True)
-    _copy_tree(src.root, out, top=True)
+    _copy_tree(src.root, out, top=True, skip=out.resolve().parent)
     target = out / src.poly_mesh / src.points_file.path.name
     target.write_bytes(points_bytes(src, pts))
 
 
-def _copy_tree(src: Path, dest: Path, top: bool = False) -> None:
+def _copy_tree(src: Path, dest: Path, top: bool = False, skip: Path | None = None) -> None:
+    """Copy the folder ``src`` into ``dest`` (symlinks as links), leaving out, at the top, processor
+    and non-zero time folders, and anywhere the folder ``skip`` (where the output is written, when
+    it is inside the case) and its ancestors' entries that hold it."""
     if not src.is_dir():
         raise InputError("the input case folder is gone; cannot copy it to write the output", path=src)
     for entry in sorted(os.scandir(src), key=lambda e: e.name):
         if top and entry.is_dir() and (entry.name.startswith("processor")
                                        or (_TIME.fullmatch(entry.name) and float(entry.name) != 0.0)):
             continue
+        if skip is not None and entry.is_dir(follow_symlinks=False):
+            here = Path(entry.path).resolve()
+            if here == skip or here in skip.parents:
+                continue                          # the output's folder (e.g. case/out): not copied into itself
         target = dest / entry.name
         if entry.is_symlink():
             os.symlink(os.readlink(entry.path), target)
         elif entry.is_dir():
             target.mkdir()
-            _copy_tree(Path(entry.path), target)
+            _copy_tree(Path(entry.path), target, skip=skip)
         else:
             shutil.copy2(entry.path, target)
 
@@ -495,3 +491,145 @@ def points_bytes(src: FoamSource, points: np.ndarray) -> bytes:
     if ff.compressed:
         return gzip.compress(body, compresslevel=6, mtime=0)
     return body
+
+
+# ----------------------------------------------------------------------------------------------
+# A new case from a mesh of cell blocks (tests, benchmarks, conversions)
+# ----------------------------------------------------------------------------------------------
+
+_BANNER = b"""/*--------------------------------*- C++ -*----------------------------------*\\
+  written by ffd
+\\*---------------------------------------------------------------------------*/
+"""
+
+
+def polymesh_of(mesh: Mesh, *, wall: tuple[str, ...] = ()) -> tuple[Polyhedra, tuple[Patch, ...]]:
+    """The polyMesh of a mesh of cell blocks: the faces in OpenFOAM's order (internal faces
+    upper-triangular, then one patch per marker in order, then ``defaultFaces`` for boundary faces
+    on no marker). Patches named in ``wall`` get type ``wall``, the others ``patch``."""
+    from ffdcli.polyhedra import face_keys, polyhedra_from_cells
+
+    poly, keys = polyhedra_from_cells([b for b in mesh.cells if b.type in ("tetra", "pyramid", "wedge",
+                                                                            "hexahedron")])
+    n_int = int(np.count_nonzero(poly.neighbour >= 0))
+    patch_of = np.full(len(keys), len(mesh.markers), dtype=np.int64)
+    for i, (name, blocks) in enumerate(mesh.markers.items()):
+        for b in blocks:
+            if b.type not in ("triangle", "quad"):
+                continue
+            k = face_keys(b.data)
+            pos = _find_rows(keys, k)
+            if (pos < 0).any():
+                raise InputError(f"marker {name!r} has faces that are not boundary faces of the cells")
+            patch_of[pos] = i
+    order = np.argsort(patch_of, kind="stable")
+    faces = n_int + order
+    size = np.diff(poly.face_offsets)
+    new_faces = np.concatenate([np.arange(n_int), faces])
+    offsets = np.zeros(poly.n_faces + 1, dtype=np.int64)
+    np.cumsum(size[new_faces], out=offsets[1:])
+    gather = np.repeat(poly.face_offsets[new_faces] - offsets[:-1], size[new_faces]) + np.arange(offsets[-1])
+    out = Polyhedra(poly.face_nodes[gather], offsets, poly.owner[new_faces], poly.neighbour[new_faces], poly.n_cells)
+    names = list(mesh.markers) + ["defaultFaces"]
+    counts = np.bincount(patch_of, minlength=len(names))
+    patches, start = [], n_int
+    for i, name in enumerate(names):
+        if counts[i] or i < len(mesh.markers):
+            kind = "wall" if name in wall else "patch"
+            patches.append(Patch(name, kind, int(counts[i]), start))
+        start += int(counts[i])
+    return out, tuple(patches)
+
+
+def _find_rows(table: np.ndarray, keys: np.ndarray) -> np.ndarray:
+    """Row of each of ``keys`` (n, 4) in ``table`` (m, 4), -1 when absent (rows compared whole)."""
+    void = np.dtype((np.void, 4 * 8))
+    a = np.ascontiguousarray(table, dtype=np.int64).view(void).ravel()
+    b = np.ascontiguousarray(keys, dtype=np.int64).view(void).ravel()
+    order = np.argsort(a, kind="stable")
+    if not len(a):
+        return np.full(len(b), -1, dtype=np.int64)
+    pos = np.minimum(np.searchsorted(a[order], b), len(a) - 1)
+    return np.where(a[order][pos] == b, order[pos], -1)
+
+
+def write_case(folder: str | Path, points: np.ndarray, poly: Polyhedra, patches, *, binary: bool = False,
+               compress: bool = False, label: int = 32, scalar: int = 64) -> Path:
+    """Write a polyMesh (``folder/constant/polyMesh``) and a minimal ``system/controlDict``: points,
+    faces (faceList in ASCII, faceCompactList in binary), owner, neighbour, boundary, in the given
+    format, compression and label/scalar sizes. Returns the case folder."""
+    case = Path(folder)
+    pm = case / "constant" / "polyMesh"
+    pm.mkdir(parents=True, exist_ok=True)
+    (case / "system").mkdir(exist_ok=True)
+    fmt = "binary" if binary else "ascii"
+    arch = f"LSB;label={label};scalar={scalar}"
+    n_int = int(np.count_nonzero(poly.neighbour >= 0))
+    note = f"nPoints:{len(points)} nCells:{poly.n_cells} nFaces:{poly.n_faces} nInternalFaces:{n_int}"
+    ldt, sdt = f"<i{label // 8}", f"<f{scalar // 8}"
+
+    def header(cls, obj, extra=""):
+        return _BANNER + (f"FoamFile\n{{\n    version     2.0;\n    format      {fmt};\n    arch        \"{arch}\";\n"
+                f"    class       {cls};\n    location    \"constant/polyMesh\";\n{extra}    object      {obj};\n}}\n"
+                "// * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * //\n\n").encode()
+
+    def labels(arr):
+        arr = np.asarray(arr, dtype=np.int64)
+        if binary:
+            return f"{len(arr)}\n(".encode() + arr.astype(ldt).tobytes() + b")\n"
+        return f"{len(arr)}\n(\n".encode() + ("%d\n" * len(arr) % tuple(arr.tolist())).encode() + b")\n"
+
+    def put(name, data):
+        p = pm / (name + (".gz" if compress else ""))
+        p.write_bytes(gzip.compress(data, mtime=0) if compress else data)
+
+    pts = np.asarray(points, dtype=np.float64)
+    if binary:
+        body = f"{len(pts)}\n(".encode() + pts.astype(sdt).tobytes() + b")\n"
+    else:
+        body = f"{len(pts)}\n(\n".encode() + ("(%.17g %.17g %.17g)\n" * len(pts) % tuple(pts.ravel().tolist())).encode() + b")\n"
+    put("points", header("vectorField", "points") + body)
+    if binary:
+        put("faces", header("faceCompactList", "faces") + labels(poly.face_offsets) + labels(poly.face_nodes))
+    else:
+        size = np.diff(poly.face_offsets)
+        fmt_of = {int(k): f"{k}(" + " ".join(["%d"] * int(k)) + ")\n" for k in np.unique(size)}
+        rows = "".join([fmt_of[k] for k in size.tolist()]) % tuple(poly.face_nodes.tolist())
+        put("faces", header("faceList", "faces") + f"{poly.n_faces}\n(\n".encode() + rows.encode() + b")\n")
+    note_line = f"    note        \"{note}\";\n"
+    put("owner", header("labelList", "owner", note_line) + labels(poly.owner))
+    put("neighbour", header("labelList", "neighbour", note_line) + labels(poly.neighbour[:n_int]))
+    text = f"{len(patches)}\n(\n"
+    for p in patches:
+        text += f"    {p.name}\n    {{\n        type            {p.type};\n"
+        if p.type == "wall":
+            text += "        inGroups        List<word> 1(wall);\n"
+        text += f"        nFaces          {p.n_faces};\n        startFace       {p.start};\n    }}\n"
+    text += ")\n"
+    (pm / "boundary").write_bytes(header("polyBoundaryMesh", "boundary") + text.encode())
+    (case / "system" / "controlDict").write_text(_CONTROL_DICT)
+    return case
+
+
+_CONTROL_DICT = """FoamFile
+{
+    version     2.0;
+    format      ascii;
+    class       dictionary;
+    object      controlDict;
+}
+application     potentialFoam;
+startFrom       startTime;
+startTime       0;
+stopAt          endTime;
+endTime         1;
+deltaT          1;
+writeControl    timeStep;
+writeInterval   1;
+writeFormat     ascii;
+writePrecision  17;
+writeCompression off;
+timeFormat      general;
+timePrecision   6;
+runTimeModifiable false;
+"""
