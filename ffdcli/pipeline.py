@@ -36,6 +36,7 @@ from ffdcli.parallel import SerialComm
 from ffdcli.partition import localize, node_owners, rank_part
 from ffdcli.progress import no_progress
 from ffdcli.quality import QualityReport, check_quality, check_quality_part, part_reference, quality_reference
+from ffdcli.quality_polyhedral import check_quality_poly, poly_reference
 from ffdcli.rotations import rotations_from_deformation_gradient, surface_frame_gradient
 from ffdcli.settings import BoxSettings
 from ffdcli.surface import Surface, default_surface, extract_surface
@@ -272,7 +273,8 @@ class DesignRun:
         """The quality gate's :class:`~ffdcli.quality.QualityReference` of the input mesh, computed
         once: every design of a loop is judged against it without recomputing the input's quality."""
         if self._quality_ref is None:
-            self._quality_ref = quality_reference(self.prep.mesh)
+            mesh = self.prep.mesh
+            self._quality_ref = poly_reference(mesh) if mesh.polyhedra is not None else quality_reference(mesh)
         return self._quality_ref
 
     def check_quality(self, points: np.ndarray, **kw) -> QualityReport:
@@ -282,7 +284,8 @@ class DesignRun:
         the serial one, on every rank)."""
         mesh, comm = self.prep.mesh, self.comm
         if comm is None or comm.size == 1:
-            return check_quality(mesh, points, points_before=mesh.points, reference=self.quality_reference(), **kw)
+            gate = check_quality_poly if mesh.polyhedra is not None else check_quality
+            return gate(mesh, points, points_before=mesh.points, reference=self.quality_reference(), **kw)
         part = self.quality_part()
         ref = self._quality_part[1]
         if ref is None:

@@ -675,6 +675,10 @@ class QualityReport:
     worst: list = field(default_factory=list)
     worst_nodes: list = field(default_factory=list)
     input_bad: list = field(default_factory=list)
+    #: Polyhedral cells (:mod:`ffdcli.quality.polyhedral`): faces refused by the face rule, and
+    #: checkMesh's figures after and before (``{"after", "before", "faces_failed", "worst_faces"}``).
+    n_faces_failed: int = 0
+    polyhedral: dict | None = None
 
     @property
     def relative_check(self) -> bool:
@@ -692,7 +696,7 @@ class QualityReport:
         orthogonality). Without a mesh before: the inverted or degenerate cells."""
         if not self.relative_check:
             return self.n_inverted
-        return self.n_new_inverted + self.n_worse + self.n_ortho_failed
+        return self.n_new_inverted + self.n_worse + self.n_ortho_failed + self.n_faces_failed
 
     @property
     def ok(self) -> bool:
@@ -706,7 +710,11 @@ class QualityReport:
                 f"a node fails when its orthogonality falls below "
                 f"{self.ortho_min:g} deg after losing more than {self.ortho_loss_max:g} deg; "
                 f"unless the design's own FFD map shapes the cell or node so (within {DESIGN_SLACK:g} x "
-                f"its quality, {DESIGN_SLACK_DEG:g} deg)")
+                f"its quality, {DESIGN_SLACK_DEG:g} deg)"
+                + ("" if self.polyhedral is None else
+                   f"; of polyhedral cells (quality: the smallest cosine between a face and its centre's line), a face fails when "
+                   f"its non-orthogonality exceeds {90 - self.ortho_min:g} deg after growing by more than "
+                   f"{self.ortho_loss_max:g} deg, or its skewness exceeds 4 and {1 / self.relative:g} x its value before"))
 
     def to_dict(self) -> dict:
         """The report for ``--json`` (the same keys for ``deform`` and ``check``)."""
@@ -723,14 +731,15 @@ class QualityReport:
                                   "failed": self.n_ortho_failed, "min": self.ortho_min,
                                   "loss": self.ortho_loss_max},
                 "failed": self.n_failed, "ok": self.ok, "worst": self.worst, "worst_nodes": self.worst_nodes,
-                "input_bad": self.input_bad}
+                "input_bad": self.input_bad, **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
 
     def summary(self) -> str:
         """One line for people: the same words for ``ffd deform`` and ``ffd check``."""
         rel = self.relative_check
         before = f"{_g(self.min_before)} before, " if rel else ""
         after = _g(self.min_after) + (" after" if rel else "")
-        text = (f"cell quality (scaled Jacobian): min {before}{after}; {self.count} cells: "
+        measure = "scaled Jacobian" if self.polyhedral is None else "face pyramids, cosine"
+        text = (f"cell quality ({measure}): min {before}{after}; {self.count} cells: "
                 f"{self.n_inverted} inverted or degenerate, {self.n_below} below {self.threshold:g}")
         if rel:
             text += f" ({self.n_below_before} before); {self.n_new_inverted} inverted by the design, " \
@@ -746,6 +755,8 @@ class QualityReport:
         if self.n_design_cells or self.n_design_nodes:
             text += (f"; shaped by the design's own map (accepted): {self.n_design_cells} cells, "
                      f"{self.n_design_nodes} nodes")
+        if self.polyhedral is not None:
+            text += _polyhedral_words(self.polyhedral)
         return text
 
     def describe_worst(self, n: int = 5) -> str:
@@ -769,9 +780,27 @@ class QualityReport:
             what.append(f"{self.n_worse} cells made worse")
         if self.n_ortho_failed:
             what.append(f"{self.n_ortho_failed} nodes lost orthogonality")
+        if self.n_faces_failed:
+            what.append(f"{self.n_faces_failed} faces made severely non-orthogonal or skewed")
         worst = self.describe_worst(1).strip().splitlines()
         where = f"; worst: {worst[0].strip()}" if worst else ""
         return f"{', '.join(what) or 'no failure'} of {self.count} cells ({self.rule()}){where}"
+
+
+def _polyhedral_words(p: dict) -> str:
+    """checkMesh's figures of a polyhedral mesh, after (and before), for the summary line."""
+    a, b = p["after"], p.get("before")
+
+    def pair(key, spec):
+        return format(a[key], spec) + (f" (before {format(b[key], spec)})" if b else "")
+
+    text = (f". checkMesh's figures: {a['negative_volumes']} negative volumes, {a['face_pyramid_errors']} face "
+            f"pyramid errors, max non-orthogonality {pair('max_non_orthogonality', '.4g')} deg, "
+            f"{a['severely_non_orthogonal']} faces above 70 deg, max skewness {pair('max_skewness', '.4g')}, "
+            f"{a['skewed_faces']} faces above 4")
+    if b:
+        text += f"; {p['faces_failed']} faces made severely non-orthogonal or skewed"
+    return text
 
 
 def _g(v, spec: str = ".3g") -> str:

@@ -18,11 +18,13 @@ volumes), per face and per cell, with OpenFOAM's definitions (``polyMeshCheck.C`
   extent of the face in that direction; a boundary face mirrors its owner (0.4 x, the distance to
   the face's plane). checkMesh flags faces above 4.
 
-The per-cell value the gate's rules use (``q``, as the scaled Jacobian for the other cells): the
-cell's smallest face pyramid times its number of faces, divided by its volume, clipped to [-1, 1].
-It is 1 for a cube or a regular tetrahedron, 5/6 for a regular prism, falls as a cell is sheared and
-is <= 0 exactly when a face pyramid is empty or inverted (checkMesh's face-pyramid error, which also
-catches every negative volume).
+The per-cell value the gate's rules use (``q``, in the place of the scaled Jacobian of the other
+cells): the smallest, over the cell's faces, of the cosine between the face's outward area vector
+and the line from the cell centre to the face centre. It is 1 for a box of any aspect ratio, a
+regular tetrahedron or a right prism (every face square to its centre's line), falls as the cell is
+sheared or a face tilts, and is <= 0 exactly when a face pyramid is empty or reversed (checkMesh's
+face-pyramid error, which a negative volume also is). Like the scaled Jacobian it measures angles,
+not aspect ratio.
 """
 
 from __future__ import annotations
@@ -31,6 +33,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ffdcli.quality import (
+    DEFAULT_COLLAPSE,
+    DEFAULT_ORTHO_LOSS,
+    DEFAULT_ORTHO_MIN,
+    DEFAULT_RELATIVE,
+    DEFAULT_THRESHOLD,
+    QualityReport,
+    cell_rule,
+    collapse_floor,
+)
 from ffdcli.polyhedra import (
     ROOTVSMALL,
     VSMALL,
@@ -45,6 +57,7 @@ from ffdcli.polyhedra import (
 NON_ORTH_SEVERE = 70.0
 SKEW_MAX = 4.0
 SMALL = 1.0e-15
+
 
 
 @dataclass(frozen=True, eq=False)
@@ -89,24 +102,27 @@ def poly_figures(points: np.ndarray, poly: Polyhedra) -> PolyFigures:
     own_pyr, nei_pyr = pyramid_volumes(poly, fc, fa, cc)
     inner = poly.neighbour >= 0
     errors = (own_pyr < -SMALL) | (inner & (nei_pyr < -SMALL))
-    return PolyFigures(volumes=vol, centres=cc, q=cell_q(poly, own_pyr, nei_pyr, vol),
+    return PolyFigures(volumes=vol, centres=cc, q=cell_q(poly, fc, fa, cc),
                        non_orth=non_orthogonality(poly, fa, cc), skew=skewness(points, poly, fc, fa, cc),
                        pyramid_errors=errors, internal=inner)
 
 
-def cell_q(poly: Polyhedra, own_pyr: np.ndarray, nei_pyr: np.ndarray, vol: np.ndarray) -> np.ndarray:
-    """(C,) the gate's value: faces x smallest face pyramid / volume, clipped to [-1, 1] (<= 0: a
-    face pyramid is empty or inverted, or the volume is not positive)."""
+def cell_q(poly: Polyhedra, fc: np.ndarray, fa: np.ndarray, cc: np.ndarray) -> np.ndarray:
+    """(C,) the gate's value of each cell (module docstring): the smallest over its faces of the
+    cosine between the face's outward area vector and the line from the cell centre to the face
+    centre (1 when every face is square to its centre's line; <= 0 exactly when a face pyramid is
+    empty or reversed)."""
     nc = poly.n_cells
-    inner = poly.neighbour >= 0
-    smallest = np.full(nc, np.inf)
-    np.minimum.at(smallest, poly.owner, own_pyr)
-    np.minimum.at(smallest, poly.neighbour[inner], nei_pyr[inner])
-    nf = poly.faces_per_cell()
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        q = np.where(vol > VSMALL, nf * smallest / np.where(vol > VSMALL, vol, 1.0), -1.0)
-    q = np.where(np.isfinite(q), q, -1.0)
-    return np.clip(q, -1.0, 1.0)
+    q = np.full(nc, np.inf)
+    inner = np.flatnonzero(poly.neighbour >= 0)
+    mag = np.linalg.norm(fa, axis=1)
+    for side, cells, faces in ((1.0, poly.owner, slice(None)), (-1.0, poly.neighbour[inner], inner)):
+        d = fc[faces] - cc[cells]
+        den = mag[faces] * np.linalg.norm(d, axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cos = np.where(den > 0, side * np.einsum("ij,ij->i", fa[faces], d) / np.where(den > 0, den, 1.0), 0.0)
+        np.minimum.at(q, cells, cos)
+    return np.clip(np.where(np.isfinite(q), q, 0.0), -1.0, 1.0)
 
 
 def non_orthogonality(poly: Polyhedra, fa: np.ndarray, cc: np.ndarray) -> np.ndarray:
@@ -145,8 +161,6 @@ def skewness(points: np.ndarray, poly: Polyhedra, fc: np.ndarray, fa: np.ndarray
     return sv_mag / np.maximum(fd, extent)
 
 
-__all__ = ["NON_ORTH_SEVERE", "SKEW_MAX", "PolyFigures", "cell_q", "next_in_face", "non_orthogonality",
-           "poly_figures", "skewness"]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -231,3 +245,43 @@ class _Shapes:
         size = np.sort(self.poly.face_sizes[faces]).tolist()
         return {(4, 4, 4, 4, 4, 4): "hexahedron", (3, 3, 4, 4, 4): "prism", (3, 3, 3, 3, 4): "pyramid",
                 (3, 3, 3, 3): "tetrahedron"}.get(tuple(size), f"polyhedron ({len(size)} faces)")
+
+
+def check_quality_poly(mesh, points_after: np.ndarray | None = None, threshold: float = DEFAULT_THRESHOLD,
+                       points_before: np.ndarray | None = None, *, relative: float = DEFAULT_RELATIVE,
+                       collapse: float = DEFAULT_COLLAPSE, ortho_min: float = DEFAULT_ORTHO_MIN,
+                       ortho_loss: float = DEFAULT_ORTHO_LOSS, orthogonality: bool = True, n_worst: int = 10,
+                       reference: PolyFigures | None = None, design_map=None) -> QualityReport:
+    """:func:`ffdcli.quality.check_quality` of a mesh of polyhedral cells (``mesh.polyhedra``): the
+    same arguments and report, the cells judged on ``q`` (module docstring) by the gate's cell rule,
+    the faces by :func:`face_rule`, checkMesh's figures in ``report.polyhedral``. ``reference``: the
+    :func:`poly_reference` of the geometry before. ``orthogonality`` and ``design_map`` are not used
+    (the faces' non-orthogonality is always computed; no cell is excused as shaped by the design)."""
+    poly = mesh.polyhedra
+    if points_after is None:
+        after, before = mesh.points, points_before
+    else:
+        after = np.asarray(points_after, dtype=np.float64)
+        before = mesh.points if points_before is None else np.asarray(points_before, dtype=np.float64)
+    if after.shape != mesh.points.shape:
+        raise ValueError(f"points {after.shape} do not match the mesh {mesh.points.shape}")
+    kw = {"threshold": float(threshold), "relative": float(relative), "ortho_min": float(ortho_min),
+          "ortho_loss_max": float(ortho_loss), "collapse": float(collapse)}
+    if poly.n_cells == 0:
+        return QualityReport(0, 0, 0, min_before=None, min_after=None, **kw)
+    ref = None
+    if before is not None:
+        ref = reference if reference is not None else poly_reference(mesh, before)
+    fig = ref if (ref is not None and after is before) else poly_figures(after, poly)
+    floor = None
+    if ref is not None:
+        valid = ref.q > 0
+        floor = collapse_floor(float(ref.q[valid].min()) if valid.any() else None, collapse)
+    out = gate_counts(poly, after, fig, ref, cell_rule, floor, threshold=threshold, relative=relative,
+                      ortho_min=ortho_min, ortho_loss=ortho_loss, n_worst=n_worst)
+    return QualityReport(poly.n_cells, **out, **kw)
+
+
+def poly_reference(mesh, points: np.ndarray | None = None) -> PolyFigures:
+    """The gate's reference of a polyhedral mesh at ``points`` (default its own): its figures."""
+    return poly_figures(mesh.points if points is None else np.asarray(points, dtype=np.float64), mesh.polyhedra)

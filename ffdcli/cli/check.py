@@ -36,6 +36,7 @@ def check_cmd(mesh, threshold, n_worst, console):
     from ffdcli.errors import InputError, QualityError
     from ffdcli.formats import read_mesh, read_part
     from ffdcli.quality import DEFAULT_THRESHOLD, check_quality, check_quality_part
+    from ffdcli.quality_polyhedral import check_quality_poly
 
     if threshold is not None and not (-1.0 <= threshold <= 1.0):
         raise InputError(f"expected a scaled Jacobian in [-1, 1], got {threshold}", key="--threshold")
@@ -45,7 +46,8 @@ def check_cmd(mesh, threshold, n_worst, console):
     if comm.size > 1:        # MPI: each rank judges its part (its cells and nodes), the counts reduced
         report = check_quality_part(read_part(mesh, comm, progress=console.progress)[1], comm, **kw)
     else:
-        report = check_quality(read_mesh(mesh, progress=console.progress), **kw)
+        got = read_mesh(mesh, progress=console.progress)
+        report = (check_quality_poly if got.polyhedra is not None else check_quality)(got, **kw)
     summary = {"mesh": str(mesh), **report.to_dict(), "seconds": time.perf_counter() - t0}
     summary["worst"] = summary["worst"][:n_worst]
     summary["worst_nodes"] = summary["worst_nodes"][:n_worst]

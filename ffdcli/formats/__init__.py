@@ -30,7 +30,7 @@ def format_of(path: str | Path, *, key: str | None = None) -> str:
     ext = p.suffix.lower()
     if ext in FORMATS:
         return FORMATS[ext]
-    if str(path) and (ext == "" or p.is_dir()):
+    if str(path) and (ext in ("", ".part") or p.is_dir()):     # .part: the output plan's temporary folder
         return FOLDER_FORMAT
     raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
                      f"{', '.join(FORMATS)}, or an OpenFOAM case folder", path=path, key=key)
