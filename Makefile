@@ -49,7 +49,7 @@ $(VENV)/.stamp-viz: $(VENV)/.stamp-core
 venv: $(VENV)/.stamp-test
 
 demo: $(VENV)/.stamp-viz
-	$(BIN)/python -m ffdcli.demo --out $(OUT)
+	$(BIN)/python -m ffdcli.app.demo --out $(OUT)
 
 test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz $(VENV)/.stamp-openfoam
 	$(BIN)/python -m pytest -q

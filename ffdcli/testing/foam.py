@@ -6,7 +6,7 @@
   :func:`have_openfoam` says whether it is installed);
 - :func:`check_mesh`: checkMesh's figures parsed from its output (cells, negative volumes, face
   pyramid errors, maximum non-orthogonality, maximum skewness, failed checks);
-- :func:`gmsh_case`: a generated gmsh wing (:mod:`ffdcli.testmeshes`) converted by gmshToFoam, the
+- :func:`gmsh_case`: a generated gmsh wing (:mod:`ffdcli.testing.gmsh_wings`) converted by gmshToFoam, the
   wing patch made a ``wall``;
 - :func:`potential_flow_files`: 0/, system/ of a potentialFoam run (free stream along the chord).
 """
@@ -124,8 +124,9 @@ def potential_flow_files(case: str | Path, patches: dict[str, str], velocity=(1.
     for name, table, cls, dims, init in (("U", u, "volVectorField", "[0 1 -1 0 0 0 0]", "(0 0 0)"),
                                          ("p", p, "volScalarField", "[0 2 -2 0 0 0 0]", "0")):
         body = "".join(f"    {k}\n    {{\n        {table[r]}\n    }}\n" for k, r in patches.items())
-        (case / "0" / name).write_text(head.format(cls=cls, obj=name) + f"dimensions {dims};\ninternalField uniform {init};\n"
-                                       f"boundaryField\n{{\n{body}}}\n")
+        text = (head.format(cls=cls, obj=name) + f"dimensions {dims};\ninternalField uniform {init};\n"
+                f"boundaryField\n{{\n{body}}}\n")
+        (case / "0" / name).write_text(text)
     (case / "system" / "controlDict").write_text(head.format(cls="dictionary", obj="controlDict") + """
 application potentialFoam; startFrom startTime; startTime 0; stopAt endTime; endTime 1; deltaT 1;
 writeControl timeStep; writeInterval 1; writeFormat ascii; writePrecision 12; writeCompression off;
@@ -140,6 +141,10 @@ interpolationSchemes { default linear; }
 snGradSchemes { default corrected; }
 """)
     (case / "system" / "fvSolution").write_text(head.format(cls="dictionary", obj="fvSolution") + """
-solvers { Phi { solver GAMG; smoother DIC; tolerance 1e-06; relTol 0.01; } p { solver GAMG; smoother DIC; tolerance 1e-06; relTol 0.01; } }
+solvers
+{
+    Phi { solver GAMG; smoother DIC; tolerance 1e-06; relTol 0.01; }
+    p { solver GAMG; smoother DIC; tolerance 1e-06; relTol 0.01; }
+}
 potentialFlow { nNonOrthogonalCorrectors 3; }
 """)
