@@ -374,3 +374,36 @@ def polyhedra_from_cells(blocks) -> tuple[Polyhedra, np.ndarray]:
     np.cumsum(size, out=offsets[1:])
     flat = all_nodes[all_nodes >= 0]
     return Polyhedra(flat, offsets, owner, neighbour, cell0), keys[single][bo]
+
+
+def concat_polyhedra(parts: list[Polyhedra]) -> Polyhedra:
+    """One :class:`Polyhedra` of several (their point ids already global), cells numbered part
+    after part."""
+    if len(parts) == 1:
+        return parts[0]
+    nodes, offsets, owner, nei, base_k, base_c = [], [np.zeros(1, dtype=np.int64)], [], [], 0, 0
+    for p in parts:
+        nodes.append(p.face_nodes)
+        offsets.append(p.face_offsets[1:] + base_k)
+        owner.append(p.owner + base_c)
+        nei.append(np.where(p.neighbour >= 0, p.neighbour + base_c, -1))
+        base_k += int(p.face_offsets[-1])
+        base_c += p.n_cells
+    return Polyhedra(np.concatenate(nodes), np.concatenate(offsets), np.concatenate(owner), np.concatenate(nei),
+                     base_c)
+
+
+def reverse_faces(nodes: np.ndarray, offsets: np.ndarray, flip: np.ndarray) -> np.ndarray:
+    """A copy of the flat face nodes with the faces of mask ``flip`` (F,) in reverse order (their
+    normals turned round)."""
+    out = nodes.copy()
+    size = np.diff(offsets)
+    faces = np.flatnonzero(flip)
+    if not len(faces):
+        return out
+    n = size[faces]
+    start = np.repeat(offsets[faces], n)
+    pos = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    end = np.repeat(offsets[faces] + n - 1, n)
+    out[start + pos] = nodes[end - pos]
+    return out

@@ -38,7 +38,8 @@ def mismatch_message(read: str, written: str) -> str:
     if written == FOLDER_FORMAT:
         return (f"an output without extension is an OpenFOAM case folder, written only from an OpenFOAM input; "
                 f"the input is {read or 'not from a file'}: give the output an extension ({', '.join(FORMATS)})")
-    return f"a mesh of polyhedral cells read from {read} can only be written as {read}"
+    return (f"a mesh of polyhedral cells (NGON_n/NFACE_n) read from {read} can only be written as {read} (a copy of "
+            f"the input with new coordinates): give the output the .{read} extension")
 
 
 
