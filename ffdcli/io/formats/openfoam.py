@@ -31,24 +31,32 @@ import gzip
 import os
 import re
 import shutil
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.io.formats.foamfile import (
+    COMMENT,
+    ENTRY,
+    NO_BRACKETS,
+    FoamFile,
+    ascii_end,
+    find,
+    list_head,
+    numbers,
+    read_foam_file,
+    read_list,
+    skip_blank,
+)
 from ffdcli.io.inputs import check_mesh_path, polymesh_folder_of
 from ffdcli.mesh import CellBlock, Mesh
-from ffdcli.mesh.polyhedra import Polyhedra, counted_offsets, face_keys, from_counted, polyhedra_from_cells, problem
+from ffdcli.mesh.polyhedra import Polyhedra, counted_offsets, from_counted, problem
 
 FILES = ("points", "faces", "owner", "neighbour", "boundary")
-_HEADER = re.compile(rb"FoamFile\s*\{(?P<body>[^}]*)\}", re.S)
-_ENTRY = re.compile(rb"(\w+)\s+(\"[^\"]*\"|[^;]*);")
-_COUNT = re.compile(rb"\s*(\d+)\s*([({])")
 _PATCH = re.compile(rb"([^\s{}()]+)\s*\{([^{}]*)\}", re.S)
 _ZONE = re.compile(rb"([^\s{}()]+)\s*\{", re.S)
-_COMMENT = re.compile(rb"//[^\n]*|/\*.*?\*/", re.S)
 
 
 def poly_mesh_folder(path: str | Path) -> Path:
@@ -58,189 +66,6 @@ def poly_mesh_folder(path: str | Path) -> Path:
     if folder is None:                            # not a folder (check_mesh_path passed a file)
         raise InputError("expected an OpenFOAM case folder (or its constant/polyMesh)", path=p)
     return folder
-
-
-def _find(folder: Path, name: str) -> Path | None:
-    for cand in (folder / name, folder / f"{name}.gz"):
-        if cand.is_file():
-            return cand
-    return None
-
-
-# ----------------------------------------------------------------------------------------------
-# One FoamFile: header and lists
-# ----------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class FoamHeader:
-    """What the ``FoamFile`` dictionary of a file says: ``format`` (ascii/binary), the label and
-    scalar sizes in bytes (from ``arch``), ``cls`` (class), ``note``, and where the data starts."""
-
-    format: str
-    label: int
-    scalar: int
-    cls: str
-    note: str
-    end: int
-
-
-@dataclass(frozen=True, eq=False)
-class FoamFile:
-    """One file of the polyMesh as read: its path, whether gzip-compressed, the (uncompressed)
-    bytes and the header."""
-
-    path: Path
-    compressed: bool
-    data: bytes
-    header: FoamHeader
-
-    def error(self, message: str, pos: int | None = None, hint: str | None = None) -> InputError:
-        """InputError naming this file and, for ASCII, the line of byte ``pos``."""
-        line = None
-        if pos is not None and self.header.format == "ascii":
-            line = self.data.count(b"\n", 0, pos) + 1
-        return InputError(message, path=self.path, line=line, hint=hint)
-
-
-def read_foam_file(folder: Path, name: str) -> FoamFile:
-    """Read ``folder/name`` (or ``name.gz``) and its header; InputError if missing or malformed."""
-    path = _find(folder, name)
-    if path is None:
-        raise InputError(f"missing polyMesh file {name!r} (nor {name}.gz)", path=folder / name,
-                         hint="an OpenFOAM polyMesh needs points, faces, owner, neighbour and boundary")
-    try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise InputError(f"cannot read the file: {e.strerror}", path=path) from None
-    compressed = raw[:2] == b"\x1f\x8b"
-    if compressed:
-        try:
-            raw = gzip.decompress(raw)
-        except (OSError, EOFError, gzip.BadGzipFile) as e:
-            raise InputError(f"the gzip-compressed file is damaged or truncated ({e})", path=path) from None
-    return FoamFile(path, compressed, raw, _header(raw, path))
-
-
-def _header(data: bytes, path: Path) -> FoamHeader:
-    m = _HEADER.search(data, 0, 1 << 16)
-    if m is None:
-        raise InputError("no FoamFile header: not an OpenFOAM file, or empty", path=path, line=1)
-    body = _COMMENT.sub(b"", m["body"])
-    entries = {k.decode(): v.strip().strip(b'"').decode("latin-1") for k, v in _ENTRY.findall(body)}
-    fmt = entries.get("format", "ascii")
-    if fmt not in ("ascii", "binary"):
-        raise InputError(f"format {fmt!r} in the header; expected ascii or binary", path=path,
-                         line=data.count(b"\n", 0, m.start()) + 1)
-    arch = entries.get("arch", "")
-    sizes = dict(re.findall(r"(label|scalar)=(\d+)", arch))
-    label, scalar = int(sizes.get("label", 32)), int(sizes.get("scalar", 64))
-    if label not in (32, 64) or scalar not in (32, 64):
-        raise InputError(f"arch {arch!r}: label and scalar sizes must be 32 or 64", path=path,
-                         line=data.count(b"\n", 0, m.start()) + 1)
-    if "MSB" in arch:
-        raise InputError("big-endian (MSB) binary files are not supported", path=path)
-    return FoamHeader(fmt, label // 8, scalar // 8, entries.get("class", ""), entries.get("note", ""), m.end())
-
-
-def _skip(data: bytes, pos: int) -> int:
-    """Position of the next byte that is neither blank nor in a comment."""
-    n = len(data)
-    while pos < n:
-        c = data[pos:pos + 2]
-        if data[pos] <= 32:
-            pos += 1
-        elif c == b"//":
-            end = data.find(b"\n", pos)
-            pos = n if end < 0 else end + 1
-        elif c == b"/*":
-            end = data.find(b"*/", pos + 2)
-            pos = n if end < 0 else end + 2
-        else:
-            break
-    return pos
-
-
-def _list_head(ff: FoamFile, pos: int, what: str) -> tuple[int, int, bytes]:
-    """``(count, position after the opening bracket, bracket)`` of the list at ``pos``."""
-    pos = _skip(ff.data, pos)
-    m = _COUNT.match(ff.data, pos)
-    if m is None:
-        snippet = ff.data[pos:pos + 30].decode("latin-1", "replace").split("\n")[0]
-        raise ff.error(f"expected the {what} list (a count, then '('), found {snippet!r}"
-                       if pos < len(ff.data) else f"the file ends before the {what} list (truncated?)", pos)
-    return int(m[1]), m.end(), m[2]
-
-
-def _ascii_end(ff: FoamFile, start: int, what: str) -> int:
-    """Position of the ``)`` closing the ASCII list whose ``(`` is at ``start - 1``."""
-    arr = np.frombuffer(ff.data, dtype=np.uint8, offset=start)
-    idx = np.flatnonzero((arr == 40) | (arr == 41))
-    depth = np.cumsum(np.where(arr[idx] == 40, 1, -1), dtype=np.int64)
-    close = np.flatnonzero(depth < 0)
-    if not len(close):
-        raise ff.error(f"the {what} list is not closed: the file is truncated", len(ff.data))
-    return start + int(idx[close[0]])
-
-
-def read_list(ff: FoamFile, pos: int, kind: str, what: str, width: int = 1) -> tuple[np.ndarray, int]:
-    """The list at ``pos``: ``kind`` "label" (int64 (n,)) or "scalar" (float64 (n, width), the
-    entries of a vector list), and the position after it. InputError naming the file, the line
-    (ASCII) or the entry (binary) when the list is malformed, truncated, or not of its header's size."""
-    n, start, bracket = _list_head(ff, pos, what)
-    h = ff.header
-    if bracket == b"{":                           # a uniform list: n{value}
-        end = ff.data.find(b"}", start)
-        if end < 0:
-            raise ff.error(f"the uniform {what} list is not closed", start)
-        value = np.fromstring(ff.data[start:end].translate(_NO_BRACKETS).decode("latin-1"), sep=" ")
-        arr = np.tile(value, (n, 1)) if width > 1 else np.full(n, value[0] if len(value) else 0)
-        return (arr.astype(np.int64) if kind == "label" else arr), end + 1
-    size = h.label if kind == "label" else h.scalar
-    if h.format == "binary":
-        nbytes = n * width * size
-        dtype = np.dtype(f"<{'i' if kind == 'label' else 'f'}{size}")
-        if start + nbytes > len(ff.data):
-            raise ff.error(f"{what}: the list declares {n} entries of {width * size} bytes ({h.label * 8}-bit "
-                           f"labels, {h.scalar * 8}-bit scalars by the header's arch), {nbytes} bytes, but the "
-                           f"file has {len(ff.data) - start} bytes after its '(': truncated, or the header's "
-                           "arch is wrong")
-        if ff.data[start + nbytes:start + nbytes + 1] != b")":
-            raise ff.error(f"{what}: the list of {n} entries does not end where the header's arch "
-                           f"(label={h.label * 8}, scalar={h.scalar * 8}) puts its end (entry {n}: no ')'); "
-                           "is the arch entry right?")
-        arr = np.frombuffer(ff.data, dtype=dtype, count=n * width, offset=start)
-        arr = arr.astype(np.int64 if kind == "label" else np.float64)
-        return (arr.reshape(n, width) if width > 1 else arr), start + nbytes + 1
-    end = _ascii_end(ff, start, what)
-    text = ff.data[start:end].translate(_NO_BRACKETS)
-    arr = _numbers(ff, text, start, np.int64 if kind == "label" else np.float64, what)
-    if len(arr) != n * width:
-        raise ff.error(f"{what}: the list declares {n} entries but holds {len(arr) / width:g}", start)
-    return (arr.reshape(n, width) if width > 1 else arr), end + 1
-
-
-_NO_BRACKETS = bytes.maketrans(b"()", b"  ")
-
-
-def _numbers(ff: FoamFile, text: bytes, start: int, dtype, what: str) -> np.ndarray:
-    """The numbers of ``text`` (one ``np.fromstring``); a token that is not one is named with its line."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("error", DeprecationWarning)
-        try:
-            arr = np.fromstring(text.decode("latin-1"), dtype=dtype, sep=" ")
-            ok = len(arr) == len(text.split())
-        except (ValueError, DeprecationWarning):
-            ok = False
-    if ok:
-        return arr
-    for m in re.finditer(rb"\S+", text):          # the error path only: find the bad token
-        tok = m.group().decode("latin-1")
-        try:
-            int(tok) if dtype == np.int64 else float(tok)
-        except ValueError:
-            raise ff.error(f"{what}: {tok!r} is not {'an integer' if dtype == np.int64 else 'a number'}",
-                           start + m.start()) from None
-    raise ff.error(f"{what}: a number could not be read", start)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -315,7 +140,7 @@ def read(path: str | Path, progress=None) -> Mesh:
 
 
 def _points(ff: FoamFile) -> tuple[np.ndarray, tuple[int, int]]:
-    n, start, _ = _list_head(ff, ff.header.end, "points")
+    n, start, _ = list_head(ff, ff.header.end, "points")
     pts, end = read_list(ff, ff.header.end, "scalar", "points", width=3)
     return pts, (start, end - 1)
 
@@ -333,11 +158,11 @@ def _faces(ff: FoamFile) -> tuple[np.ndarray, np.ndarray]:
             bad = int(np.flatnonzero(sizes < 0)[0]) if (sizes < 0).any() else len(sizes)
             raise ff.error(f"faces: the offsets do not match the {len(nodes)} point labels (entry {bad})")
         return nodes, offsets
-    n, start, bracket = _list_head(ff, ff.header.end, "faces")
+    n, start, bracket = list_head(ff, ff.header.end, "faces")
     if bracket != b"(":
         raise ff.error("faces: a uniform list cannot hold faces", start)
-    end = _ascii_end(ff, start, "faces")
-    tokens = _numbers(ff, ff.data[start:end].translate(_NO_BRACKETS), start, np.int64, "faces")
+    end = ascii_end(ff, start, "faces")
+    tokens = numbers(ff, ff.data[start:end].translate(NO_BRACKETS), start, np.int64, "faces")
     try:
         starts = counted_offsets(tokens, n)
     except ValueError as e:
@@ -356,11 +181,11 @@ def _check_note(ff: FoamFile, n_points: int, n_cells: int, n_faces: int, n_inter
 
 
 def _boundary(ff: FoamFile, n_faces: int, n_internal: int) -> tuple[Patch, ...]:
-    n, start, _ = _list_head(ff, ff.header.end, "boundary")
-    body = _COMMENT.sub(b"", ff.data[start:])
+    n, start, _ = list_head(ff, ff.header.end, "boundary")
+    body = COMMENT.sub(b"", ff.data[start:])
     patches, expect = [], n_internal
     for m in _PATCH.finditer(body):
-        entries = {k.decode(): v.strip().decode("latin-1") for k, v in _ENTRY.findall(m[2])}
+        entries = {k.decode(): v.strip().decode("latin-1") for k, v in ENTRY.findall(m[2])}
         name = m[1].decode("latin-1")
         try:
             nf, sf = int(entries["nFaces"]), int(entries["startFace"])
@@ -383,18 +208,18 @@ def _boundary(ff: FoamFile, n_faces: int, n_internal: int) -> tuple[Patch, ...]:
 
 def _zone_names(folder: Path, kind: str) -> list[str]:
     """The names of the zones in ``cellZones``/``faceZones``/``pointZones`` (kept as they are)."""
-    if _find(folder, kind) is None:
+    if find(folder, kind) is None:
         return []
     ff = read_foam_file(folder, kind)
     try:
-        _, start, _ = _list_head(ff, ff.header.end, kind)
+        _, start, _ = list_head(ff, ff.header.end, kind)
     except InputError:
         return []
     # zone dictionaries hold label lists (binary in binary files): names are the words before '{'
     # at depth 0 of the list; read them from the text between the zones only
     names, pos, data = [], start, ff.data
     while True:
-        pos = _skip(data, pos)
+        pos = skip_blank(data, pos)
         m = _ZONE.match(data, pos)
         if m is None:
             break
@@ -491,144 +316,3 @@ def points_bytes(src: FoamSource, points: np.ndarray) -> bytes:
     if ff.compressed:
         return gzip.compress(body, compresslevel=6, mtime=0)
     return body
-
-
-# ----------------------------------------------------------------------------------------------
-# A new case from a mesh of cell blocks (tests, benchmarks, conversions)
-# ----------------------------------------------------------------------------------------------
-
-_BANNER = b"""/*--------------------------------*- C++ -*----------------------------------*\\
-  written by ffd
-\\*---------------------------------------------------------------------------*/
-"""
-
-
-def polymesh_of(mesh: Mesh, *, wall: tuple[str, ...] = ()) -> tuple[Polyhedra, tuple[Patch, ...]]:
-    """The polyMesh of a mesh of cell blocks: the faces in OpenFOAM's order (internal faces
-    upper-triangular, then one patch per marker in order, then ``defaultFaces`` for boundary faces
-    on no marker). Patches named in ``wall`` get type ``wall``, the others ``patch``."""
-    poly, keys = polyhedra_from_cells([b for b in mesh.cells if b.type in ("tetra", "pyramid", "wedge",
-                                                                            "hexahedron")])
-    n_int = int(np.count_nonzero(poly.neighbour >= 0))
-    patch_of = np.full(len(keys), len(mesh.markers), dtype=np.int64)
-    for i, (name, blocks) in enumerate(mesh.markers.items()):
-        for b in blocks:
-            if b.type not in ("triangle", "quad"):
-                continue
-            k = face_keys(b.data)
-            pos = _find_rows(keys, k)
-            if (pos < 0).any():
-                raise InputError(f"marker {name!r} has faces that are not boundary faces of the cells")
-            patch_of[pos] = i
-    order = np.argsort(patch_of, kind="stable")
-    faces = n_int + order
-    size = np.diff(poly.face_offsets)
-    new_faces = np.concatenate([np.arange(n_int), faces])
-    offsets = np.zeros(poly.n_faces + 1, dtype=np.int64)
-    np.cumsum(size[new_faces], out=offsets[1:])
-    gather = np.repeat(poly.face_offsets[new_faces] - offsets[:-1], size[new_faces]) + np.arange(offsets[-1])
-    out = Polyhedra(poly.face_nodes[gather], offsets, poly.owner[new_faces], poly.neighbour[new_faces], poly.n_cells)
-    names = list(mesh.markers) + ["defaultFaces"]
-    counts = np.bincount(patch_of, minlength=len(names))
-    patches, start = [], n_int
-    for i, name in enumerate(names):
-        if counts[i] or i < len(mesh.markers):
-            kind = "wall" if name in wall else "patch"
-            patches.append(Patch(name, kind, int(counts[i]), start))
-        start += int(counts[i])
-    return out, tuple(patches)
-
-
-def _find_rows(table: np.ndarray, keys: np.ndarray) -> np.ndarray:
-    """Row of each of ``keys`` (n, 4) in ``table`` (m, 4), -1 when absent (rows compared whole)."""
-    void = np.dtype((np.void, 4 * 8))
-    a = np.ascontiguousarray(table, dtype=np.int64).view(void).ravel()
-    b = np.ascontiguousarray(keys, dtype=np.int64).view(void).ravel()
-    order = np.argsort(a, kind="stable")
-    if not len(a):
-        return np.full(len(b), -1, dtype=np.int64)
-    pos = np.minimum(np.searchsorted(a[order], b), len(a) - 1)
-    return np.where(a[order][pos] == b, order[pos], -1)
-
-
-def write_case(folder: str | Path, points: np.ndarray, poly: Polyhedra, patches, *, binary: bool = False,
-               compress: bool = False, label: int = 32, scalar: int = 64) -> Path:
-    """Write a polyMesh (``folder/constant/polyMesh``) and a minimal ``system/controlDict``: points,
-    faces (faceList in ASCII, faceCompactList in binary), owner, neighbour, boundary, in the given
-    format, compression and label/scalar sizes. Returns the case folder."""
-    case = Path(folder)
-    pm = case / "constant" / "polyMesh"
-    pm.mkdir(parents=True, exist_ok=True)
-    (case / "system").mkdir(exist_ok=True)
-    fmt = "binary" if binary else "ascii"
-    arch = f"LSB;label={label};scalar={scalar}"
-    n_int = int(np.count_nonzero(poly.neighbour >= 0))
-    note = f"nPoints:{len(points)} nCells:{poly.n_cells} nFaces:{poly.n_faces} nInternalFaces:{n_int}"
-    ldt, sdt = f"<i{label // 8}", f"<f{scalar // 8}"
-
-    def header(cls, obj, extra=""):
-        return _BANNER + (f"FoamFile\n{{\n    version     2.0;\n    format      {fmt};\n    arch        \"{arch}\";\n"
-                f"    class       {cls};\n    location    \"constant/polyMesh\";\n{extra}    object      {obj};\n}}\n"
-                "// * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * * //\n\n").encode()
-
-    def labels(arr):
-        arr = np.asarray(arr, dtype=np.int64)
-        if binary:
-            return f"{len(arr)}\n(".encode() + arr.astype(ldt).tobytes() + b")\n"
-        return f"{len(arr)}\n(\n".encode() + ("%d\n" * len(arr) % tuple(arr.tolist())).encode() + b")\n"
-
-    def put(name, data):
-        p = pm / (name + (".gz" if compress else ""))
-        p.write_bytes(gzip.compress(data, mtime=0) if compress else data)
-
-    pts = np.asarray(points, dtype=np.float64)
-    if binary:
-        body = f"{len(pts)}\n(".encode() + pts.astype(sdt).tobytes() + b")\n"
-    else:
-        rows = "(%.17g %.17g %.17g)\n" * len(pts) % tuple(pts.ravel().tolist())
-        body = f"{len(pts)}\n(\n".encode() + rows.encode() + b")\n"
-    put("points", header("vectorField", "points") + body)
-    if binary:
-        put("faces", header("faceCompactList", "faces") + labels(poly.face_offsets) + labels(poly.face_nodes))
-    else:
-        size = np.diff(poly.face_offsets)
-        fmt_of = {int(k): f"{k}(" + " ".join(["%d"] * int(k)) + ")\n" for k in np.unique(size)}
-        rows = "".join([fmt_of[k] for k in size.tolist()]) % tuple(poly.face_nodes.tolist())
-        put("faces", header("faceList", "faces") + f"{poly.n_faces}\n(\n".encode() + rows.encode() + b")\n")
-    note_line = f"    note        \"{note}\";\n"
-    put("owner", header("labelList", "owner", note_line) + labels(poly.owner))
-    put("neighbour", header("labelList", "neighbour", note_line) + labels(poly.neighbour[:n_int]))
-    text = f"{len(patches)}\n(\n"
-    for p in patches:
-        text += f"    {p.name}\n    {{\n        type            {p.type};\n"
-        if p.type == "wall":
-            text += "        inGroups        List<word> 1(wall);\n"
-        text += f"        nFaces          {p.n_faces};\n        startFace       {p.start};\n    }}\n"
-    text += ")\n"
-    (pm / "boundary").write_bytes(header("polyBoundaryMesh", "boundary") + text.encode())
-    (case / "system" / "controlDict").write_text(_CONTROL_DICT)
-    return case
-
-
-_CONTROL_DICT = """FoamFile
-{
-    version     2.0;
-    format      ascii;
-    class       dictionary;
-    object      controlDict;
-}
-application     potentialFoam;
-startFrom       startTime;
-startTime       0;
-stopAt          endTime;
-endTime         1;
-deltaT          1;
-writeControl    timeStep;
-writeInterval   1;
-writeFormat     ascii;
-writePrecision  17;
-writeCompression off;
-timeFormat      general;
-timePrecision   6;
-runTimeModifiable false;
-"""
