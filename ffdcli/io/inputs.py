@@ -73,12 +73,14 @@ def check_input_file(path: str | Path, what: str = "file", *, key: str | None = 
 
 
 def polymesh_folder_of(path: str | Path) -> Path | None:
-    """The polyMesh folder of an OpenFOAM case folder (``constant/polyMesh``) or of a polyMesh folder
-    itself (the one holding ``faces`` or ``faces.gz``); None when ``path`` is neither."""
+    """The polyMesh folder of an OpenFOAM case folder (its ``constant/polyMesh``) or of a polyMesh
+    folder itself (one holding ``points``, ``faces`` or ``owner``, plain or ``.gz``); None when
+    ``path`` is neither."""
     p = Path(path)
-    for folder in (p / "constant" / "polyMesh", p):
-        if (folder / "faces").is_file() or (folder / "faces.gz").is_file():
-            return folder
+    if (p / "constant" / "polyMesh").is_dir():
+        return p / "constant" / "polyMesh"
+    if any((p / f"{name}{gz}").is_file() for name in ("points", "faces", "owner") for gz in ("", ".gz")):
+        return p
     return None
 
 
@@ -94,7 +96,7 @@ def check_mesh_path(path: str | Path, *, key: str | None = None, design: str | P
             raise InputError(text, path=design if design is not None else p, key=key, line=line)
         return check_input_file(p, "mesh file", key=key, design=design, line=line)
     if polymesh_folder_of(p) is None:
-        text = "is a folder without an OpenFOAM mesh (no constant/polyMesh/faces, nor faces.gz)"
+        text = "is a folder without an OpenFOAM mesh (no constant/polyMesh, nor polyMesh files)"
         if design is not None:
             raise InputError(f"mesh {p} {text}", path=design, key=key, line=line,
                              hint="give a mesh file or an OpenFOAM case folder")

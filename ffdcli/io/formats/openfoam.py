@@ -270,8 +270,9 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
         out.unlink()                              # the plan's empty temporary file: a folder goes there
     out.mkdir(exist_ok=True)
     _copy_tree(src.root, out, top=True, skip=out.resolve().parent)
-    target = out / src.poly_mesh / src.points_file.path.name
-    target.write_bytes(points_bytes(src, pts))
+    if not np.array_equal(pts.view(np.int64), src.points.view(np.int64)):     # unchanged: the copy is the input
+        target = out / src.poly_mesh / src.points_file.path.name
+        target.write_bytes(points_bytes(src, pts))
 
 
 def _copy_tree(src: Path, dest: Path, top: bool = False, skip: Path | None = None) -> None:
@@ -300,19 +301,17 @@ def _copy_tree(src: Path, dest: Path, top: bool = False, skip: Path | None = Non
 
 def points_bytes(src: FoamSource, points: np.ndarray) -> bytes:
     """The bytes of the new points file: the input's header and framing, the new coordinates in its
-    format and scalar size, gzip-compressed when the input was."""
+    format and scalar size, gzip-compressed when the input was (a writer whose points did not move
+    keeps the input's file as it is)."""
     ff = src.points_file
     a, b = src.points_at
-    if points.shape == src.points.shape and np.array_equal(points.view(np.int64), src.points.view(np.int64)):
-        body = ff.data                            # unchanged: the input's bytes
+    if ff.header.format == "binary":
+        new = np.ascontiguousarray(points, dtype=f"<f{ff.header.scalar}").tobytes()
     else:
-        if ff.header.format == "binary":
-            new = points.astype(f"<f{ff.header.scalar}").tobytes()
-        else:
-            digits = 17 if ff.header.scalar == 8 else 9
-            fmt = f"(%.{digits}g %.{digits}g %.{digits}g)\n"
-            new = b"\n" + (fmt * len(points) % tuple(points.ravel().tolist())).encode("ascii")
-        body = ff.data[:a] + new + ff.data[b:]
+        digits = 17 if ff.header.scalar == 8 else 9
+        fmt = f"(%.{digits}g %.{digits}g %.{digits}g)\n"
+        new = b"\n" + (fmt * len(points) % tuple(points.ravel().tolist())).encode("ascii")
+    body = ff.data[:a] + new + ff.data[b:]
     if ff.compressed:
         return gzip.compress(body, compresslevel=6, mtime=0)
     return body
