@@ -148,3 +148,56 @@ solvers
 }
 potentialFlow { nNonOrthogonalCorrectors 3; }
 """)
+
+
+def wing_block_mesh(case: str | Path, *, span: float = 2.0, radius: float = 6.0, n_seg: int = 16,
+                    n_radial: int = 24, n_span: int = 8, grading: float = 40.0, code: str = "0012") -> Path:
+    """``system/blockMeshDict`` of a hexahedral O-grid around a NACA wing of unit chord along x,
+    thickness y, extruded along z from 0 (patch ``symmetry``) to ``span`` (``side``): four blocks from
+    the airfoil (trailing edge, upper surface at 30 % chord, leading edge, lower surface) to a circle
+    of ``radius`` (``farfield``), cells graded towards the wing (``wing``, a wall). Run blockMesh
+    on it (:func:`foam`)."""
+    from ffdcli.testing.wings import naca4_thickness
+
+    case = Path(case)
+    potential_flow_files(case, {})
+    xs = [1.0, 0.3, 0.0, 0.3]
+    ys = [0.0, float(naca4_thickness(code, np.array([0.3]))[0]), 0.0, -float(naca4_thickness(code, np.array([0.3]))[0])]
+    ang = [0.0, 0.5 * np.pi, np.pi, 1.5 * np.pi]
+    outer = [(0.5 + radius * np.cos(a), radius * np.sin(a)) for a in ang]
+    verts = [(x, y, z) for z in (0.0, span) for x, y in list(zip(xs, ys, strict=True)) + outer]
+
+    def v(ring: int, k: int, top: int) -> int:          # ring 0 airfoil, 1 circle
+        return top * 8 + ring * 4 + k % 4
+
+    def airfoil_between(k: int, z: float) -> str:
+        sign = 1.0 if k in (0, 1) else -1.0
+        a, b = xs[k], xs[(k + 1) % 4]
+        x = np.linspace(a, b, 40)[1:-1]
+        y = sign * naca4_thickness(code, x)
+        return " ".join(f"({xi:.12g} {yi:.12g} {z:.12g})" for xi, yi in zip(x, y, strict=True))
+
+    blocks, edges, faces = [], [], {"wing": [], "farfield": [], "symmetry": [], "side": []}
+    for k in range(4):
+        hexa = [v(0, k, 0), v(1, k, 0), v(1, k + 1, 0), v(0, k + 1, 0),
+                v(0, k, 1), v(1, k, 1), v(1, k + 1, 1), v(0, k + 1, 1)]
+        blocks.append(f"    hex ({' '.join(map(str, hexa))}) ({n_radial} {n_seg} {n_span}) "
+                      f"simpleGrading ({grading} 1 1)")
+        for top, z in ((0, 0.0), (1, span)):
+            edges.append(f"    polyLine {v(0, k, top)} {v(0, k + 1, top)} ({airfoil_between(k, z)})")
+            mid = 0.5 * (ang[k] + (ang[(k + 1) % 4] if k < 3 else 2 * np.pi))
+            edges.append(f"    arc {v(1, k, top)} {v(1, k + 1, top)} ({0.5 + radius * np.cos(mid):.12g} "
+                         f"{radius * np.sin(mid):.12g} {z:.12g})")
+        faces["wing"].append((v(0, k, 0), v(0, k + 1, 0), v(0, k + 1, 1), v(0, k, 1)))
+        faces["farfield"].append((v(1, k, 0), v(1, k, 1), v(1, k + 1, 1), v(1, k + 1, 0)))
+        faces["symmetry"].append(tuple(hexa[:4]))
+        faces["side"].append(tuple(hexa[4:]))
+    bnd = "".join(f"    {n}\n    {{\n        type {'wall' if n == 'wing' else 'patch'};\n        faces\n        (\n"
+                  + "".join(f"            ({' '.join(map(str, f))})\n" for f in fs) + "        );\n    }\n"
+                  for n, fs in faces.items())
+    text = ("FoamFile\n{\n    version 2.0;\n    format ascii;\n    class dictionary;\n    object blockMeshDict;\n}\n"
+            "scale 1;\nvertices\n(\n" + "".join(f"    ({x:.12g} {y:.12g} {z:.12g})\n" for x, y, z in verts)
+            + ");\nblocks\n(\n" + "\n".join(blocks) + "\n);\nedges\n(\n" + "\n".join(edges)
+            + "\n);\nboundary\n(\n" + bnd + ");\n")
+    (case / "system" / "blockMeshDict").write_text(text)
+    return case
