@@ -20,8 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ffdcli.testing.wings import naca4_thickness
+
 #: Debian's OpenFOAM (ESI v1912): the environment every utility needs.
 BASHRC = Path("/usr/share/openfoam/etc/bashrc")
+#: OpenFOAM's tutorial cases (Debian's ``openfoam-examples``).
+EXAMPLE_CASES = Path("/usr/share/doc/openfoam-examples/examples")
 GMSH_TYPE = {"triangle": 2, "quad": 3, "tetra": 4, "hexahedron": 5, "wedge": 6, "pyramid": 7}
 
 
@@ -157,8 +161,6 @@ def wing_block_mesh(case: str | Path, *, span: float = 2.0, radius: float = 6.0,
     the airfoil (trailing edge, upper surface at 30 % chord, leading edge, lower surface) to a circle
     of ``radius`` (``farfield``), cells graded towards the wing (``wing``, a wall). Run blockMesh
     on it (:func:`foam`)."""
-    from ffdcli.testing.wings import naca4_thickness
-
     case = Path(case)
     potential_flow_files(case, {})
     xs = [1.0, 0.3, 0.0, 0.3]
