@@ -270,3 +270,23 @@ def test_output_inside_the_case_is_not_copied_into_itself(tmp_path, wing):
     write_mesh(mesh, case / "out" / "copy2")
     assert not (case / "out" / "copy2" / "out").exists()
     assert openfoam.poly_mesh_folder(case / "out" / "copy2")
+
+
+def test_2d_case_with_one_empty_patch_deforms_in_plane(tmp_path):
+    """A one-cell-thick case whose front and back planes are one patch (OpenFOAM's ``empty``, as
+    airFoil2D's frontAndBack): each node slides in its own plane, so a twist of both sections works
+    and every node keeps its z."""
+    from ffdcli.testing.wings import Planform
+
+    m = extruded_wing_mesh(Planform(semi_span=0.1, root_chord=1.0, sections="xy"), n_around=33, n_radial=9,
+                           n_span=2)
+    m.markers["frontAndBack"] = m.markers.pop("symmetry") + m.markers.pop("side")
+    poly, patches = polymesh_of(m, wall=("wing",))
+    case = write_case(tmp_path / "af", m.points, poly, patches)
+    design = tmp_path / "d.yaml"
+    design.write_text("mesh: af\nbox: {points: [6, 2, 2], sections: xy}\nchanges:\n  - twist: [2, 2]\n")
+    r = run_ffd("deform", design, cwd=tmp_path)          # the surface: the only wall patch
+    assert r.returncode == 0, r.stderr
+    got, src = read_mesh(tmp_path / "out" / "d"), read_mesh(case)
+    assert np.array_equal(got.points[:, 2], src.points[:, 2])
+    assert np.abs(got.points - src.points).max() > 1e-3
