@@ -299,6 +299,38 @@ def _counted_kernel(tokens, n_records):  # pragma: no cover - compiled
     return starts, pos, -1
 
 
+def split_counted(tokens: np.ndarray, n_records: int) -> tuple[np.ndarray, np.ndarray]:
+    """The flat values and offsets (R + 1,) of ``n_records`` counted records ``[n, v1..vn, ...]``
+    in one compiled pass (:func:`counted_offsets` then :func:`from_counted` is its reference);
+    ValueError as :func:`counted_offsets`."""
+    tokens = np.ascontiguousarray(tokens, dtype=np.int64)
+    values, offsets, stop, bad = _split_kernel(tokens, n_records)
+    if bad >= 0:
+        raise ValueError(f"record {bad}: {'negative count' if stop >= 0 and bad < n_records else 'ends early'}")
+    if stop != len(tokens):
+        raise ValueError(f"{len(tokens) - stop} values after the last of {n_records} records")
+    return values, offsets
+
+
+@njit(cache=True, nogil=True)
+def _split_kernel(tokens, n_records):  # pragma: no cover - compiled
+    n = tokens.shape[0]
+    values = np.empty(max(n - n_records, 0), np.int64)
+    offsets = np.zeros(n_records + 1, np.int64)
+    pos = 0
+    k = 0
+    for r in range(n_records):
+        if pos >= n or tokens[pos] < 0 or pos + 1 + tokens[pos] > n:
+            return values[:0], offsets, pos, r
+        size = tokens[pos]
+        for j in range(size):
+            values[k + j] = tokens[pos + 1 + j]
+        k += size
+        offsets[r + 1] = k
+        pos += 1 + size
+    return values[:k], offsets, pos, -1
+
+
 def from_counted(tokens: np.ndarray, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The flat nodes and offsets (R + 1,) of counted records whose starts are ``starts``."""
     sizes = tokens[starts[:-1]]

@@ -13,6 +13,7 @@ from conftest import run_ffd
 
 from ffdcli.errors import InputError
 from ffdcli.io.formats import openfoam, read_mesh, write_mesh
+from ffdcli.io.formats.foamfile import parse_ints
 from ffdcli.io.formats.openfoam_case import polymesh_of, write_case
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.polyhedra import (
@@ -20,8 +21,10 @@ from ffdcli.mesh.polyhedra import (
     counted_offsets,
     counted_offsets_reference,
     face_centres_areas,
+    from_counted,
     polyhedra_from_cells,
     reverse_faces,
+    split_counted,
 )
 from ffdcli.quality.polyhedral import check_quality_poly, poly_figures
 from ffdcli.testing.wings import extruded_wing_mesh, hex_volumes
@@ -75,6 +78,20 @@ def test_counted_records_match_the_reference():
             counted_offsets(bad, len(sizes))
         with pytest.raises(ValueError):
             counted_offsets_reference(bad, len(sizes))
+
+
+def test_compiled_parsers_match_their_references():
+    rng = np.random.default_rng(5)
+    sizes = rng.integers(3, 8, 300)
+    faces = [rng.integers(0, 10**6, k) for k in sizes]
+    text = "".join(f"{len(f)}(" + " ".join(map(str, f)) + ")\n" for f in faces).encode()
+    got, ok = parse_ints(np.frombuffer(text, dtype=np.uint8))
+    ref = np.fromstring(text.translate(bytes.maketrans(b"()", b"  ")).decode(), dtype=np.int64, sep=" ")
+    assert ok and np.array_equal(got, ref)
+    nodes, offsets = split_counted(got, len(sizes))
+    n2, o2 = from_counted(got, counted_offsets_reference(got, len(sizes)))
+    assert np.array_equal(nodes, n2) and np.array_equal(offsets, o2)
+    assert not parse_ints(np.frombuffer(b"1 2 x 3", dtype=np.uint8))[1]
 
 
 def test_volumes_are_the_cells_volumes(wing):

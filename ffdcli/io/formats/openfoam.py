@@ -40,19 +40,18 @@ from ffdcli.errors import InputError
 from ffdcli.io.formats.foamfile import (
     COMMENT,
     ENTRY,
-    NO_BRACKETS,
     FoamFile,
     ascii_end,
     find,
+    labels,
     list_head,
-    numbers,
     read_foam_file,
     read_list,
     skip_blank,
 )
 from ffdcli.io.inputs import check_mesh_path, polymesh_folder_of
 from ffdcli.mesh import CellBlock, Mesh
-from ffdcli.mesh.polyhedra import Polyhedra, counted_offsets, from_counted, problem
+from ffdcli.mesh.polyhedra import Polyhedra, problem, split_counted
 
 FILES = ("points", "faces", "owner", "neighbour", "boundary")
 _PATCH = re.compile(rb"([^\s{}()]+)\s*\{([^{}]*)\}", re.S)
@@ -162,12 +161,11 @@ def _faces(ff: FoamFile) -> tuple[np.ndarray, np.ndarray]:
     if bracket != b"(":
         raise ff.error("faces: a uniform list cannot hold faces", start)
     end = ascii_end(ff, start, "faces")
-    tokens = numbers(ff, ff.data[start:end].translate(NO_BRACKETS), start, np.int64, "faces")
+    tokens = labels(ff, start, end, "faces")
     try:
-        starts = counted_offsets(tokens, n)
+        return split_counted(tokens, n)
     except ValueError as e:
         raise ff.error(f"faces: the list declares {n} faces of the form n(p1 .. pn), but {e}", start) from None
-    return from_counted(tokens, starts)
 
 
 def _check_note(ff: FoamFile, n_points: int, n_cells: int, n_faces: int, n_internal: int) -> None:
