@@ -714,9 +714,9 @@ class QualityReport:
                 f"its quality, {DESIGN_SLACK_DEG:g} deg)"
                 + ("" if self.polyhedral is None else
                    f"; of polyhedral cells (quality: the smallest cosine between a face and its centre's "
-                   f"line), a face fails when its non-orthogonality exceeds {90 - self.ortho_min:g} deg after "
-                   f"growing by more than {self.ortho_loss_max:g} deg, or its skewness exceeds 4 and "
-                   f"{1 / self.relative:g} x its value before"))
+                   f"line), a face fails when its non-orthogonality exceeds {90 - self.ortho_min:g} deg and the "
+                   f"input's worst after growing by more than {self.ortho_loss_max:g} deg, or its skewness "
+                   f"exceeds 4 and the input's worst and {1 / self.relative:g} x its value before"))
 
     def to_dict(self) -> dict:
         """The report for ``--json`` (the same keys for ``deform`` and ``check``)."""

@@ -170,13 +170,19 @@ def face_rule(fig: PolyFigures, ref: PolyFigures | None, ortho_min: float, ortho
               relative: float) -> np.ndarray:
     """(F,) faces the gate refuses (the one home of the rule on faces, relative to the baseline
     ``ref``): an internal face whose non-orthogonality exceeds ``90 - ortho_min`` (70 degrees by
-    default, checkMesh's severe threshold) after growing by more than ``ortho_loss`` degrees, or a
-    face whose skewness exceeds checkMesh's 4 after growing to more than ``1 / relative`` (2) times
-    its value before. Without a baseline nothing is refused here."""
+    default, checkMesh's severe threshold) and the input's worst after growing by more than
+    ``ortho_loss`` degrees, or a face whose skewness exceeds checkMesh's 4 and the input's worst
+    after growing to more than ``1 / relative`` (2) times its value before. So, as for cells, a mesh
+    whose worst face did not get worse is never refused on its faces (the solver already ran on a
+    face that bad). Without a baseline nothing is refused here."""
     if ref is None:
         return np.zeros(len(fig.non_orth), dtype=bool)
-    ortho = fig.internal & (fig.non_orth > 90.0 - ortho_min) & (fig.non_orth - ref.non_orth > ortho_loss)
-    skew = (fig.skew > SKEW_MAX) & (fig.skew * relative > ref.skew)
+    inner = ref.internal
+    worst_ortho = float(ref.non_orth[inner].max()) if inner.any() else 0.0
+    worst_skew = float(ref.skew.max()) if len(ref.skew) else 0.0
+    ortho = (fig.internal & (fig.non_orth > max(90.0 - ortho_min, worst_ortho))
+             & (fig.non_orth - ref.non_orth > ortho_loss))
+    skew = (fig.skew > max(SKEW_MAX, worst_skew)) & (fig.skew * relative > ref.skew)
     return ortho | skew
 
 
