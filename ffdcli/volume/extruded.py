@@ -40,7 +40,8 @@ class Extrusion:
         names = ", ".join(self.markers)
         text = (f"the mesh is one cell thick along {ax} (an extruded 2D airfoil?): "
                 f"{100 * self.fraction:.0f} % of its volume nodes lie on {names}; the span is then "
-                f"{ax}: set box.sections: {self.sections} (ffd box --sections {self.sections})")
+                f"{ax}: set box.sections: {self.sections} (ffd box --sections {self.sections}), and "
+                f"volume.tolerance: 0 so that both side planes move alike (the exact sums are symmetric)")
         if self.fixed:
             text += (f"; {', '.join(self.fixed)} holds both side planes, so the volume motion keeps "
                      "it fixed and every change inverts cells: give ffd the 2D mesh of the airfoil, "

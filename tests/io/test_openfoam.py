@@ -231,6 +231,25 @@ def test_gate_refuses_an_inverting_move(wing):
     assert rep.polyhedral["after"]["face_pyramid_errors"] > 0 and "face pyramid" in rep.summary()
 
 
+def test_face_rule_is_relative_to_the_baseline_and_its_worst():
+    from ffdcli.quality.polyhedral import PolyFigures, face_rule
+
+    def fig(non_orth, skew):
+        n = len(skew)
+        return PolyFigures(volumes=np.ones(1), centres=np.zeros((1, 3)), q=np.ones(1), non_orth=np.array(non_orth),
+                           skew=np.array(skew), pyramid_errors=np.zeros(n, bool), internal=np.ones(n, bool))
+
+    ref = fig([10.0, 60.0, 75.0], [1.0, 3.0, 9.0])
+    # skewness 3 -> 8: above 4 and doubled, but below the input's worst (9): accepted
+    assert not face_rule(fig([10.0, 60.0, 75.0], [1.0, 8.0, 9.0]), ref, 20.0, 10.0, 0.5).any()
+    # 3 -> 9.5: beyond the input's worst, tripled: refused
+    assert face_rule(fig([10.0, 60.0, 75.0], [1.0, 9.5, 9.0]), ref, 20.0, 10.0, 0.5).tolist() == [False, True, False]
+    # non-orthogonality 60 -> 76 (grew 16 deg, beyond 70 and the worst 75): refused; 60 -> 74: not
+    assert face_rule(fig([10.0, 76.0, 75.0], [1.0, 3.0, 9.0]), ref, 20.0, 10.0, 0.5)[1]
+    assert not face_rule(fig([10.0, 74.0, 75.0], [1.0, 3.0, 9.0]), ref, 20.0, 10.0, 0.5).any()
+    assert not face_rule(ref, None, 20.0, 10.0, 0.5).any()
+
+
 def test_cli_deform_check_inspect_on_a_case(tmp_path, wing):
     case = _case(tmp_path, wing, binary=True, compress=True)
     design = tmp_path / "twist.yaml"
