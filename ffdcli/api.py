@@ -40,7 +40,7 @@ from ffdcli.app.pipeline import (
     volume_method,
     write_outputs,
 )
-from ffdcli.constraints.geometric import (
+from ffdcli.constraints import (
     ConstraintInputs,
     build_constraints,
     constraint_bounds,
@@ -225,7 +225,7 @@ class DesignModel:
     # -- constraints ---------------------------------------------------------------------------
     @property
     def constraints(self) -> list:
-        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints.geometric`),
+        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints`),
         built once on the baseline surface and lattice; several components: every component's, in
         component order (see :attr:`constraint_groups`)."""
         return [c for _, group in self.constraint_groups for c in group]
