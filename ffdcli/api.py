@@ -59,7 +59,7 @@ from ffdcli.parallel.comm import SerialComm
 from ffdcli.parameterization.bounds import make_bounds
 from ffdcli.parameterization.changes import design_bounds, design_units
 from ffdcli.parameterization.derivatives import surface_jvp, vjp
-from ffdcli.quality.gate import enforce
+from ffdcli.quality.gate import Remedies, enforce
 from ffdcli.volume.frames import (  # noqa: F401  (re-exported: the API's names of PR 7)
     planar_rotation_derivative,
     polar_rotation_derivative,
@@ -68,6 +68,11 @@ from ffdcli.volume.frames import (  # noqa: F401  (re-exported: the API's names 
     surface_frame_gradient_jvp,
 )
 from ffdcli.volume.warp import warp, warp_vjp
+
+#: How the API's user overrides the quality gate (the gate states the rule; :meth:`DesignModel.write`
+#: names its argument).
+_REMEDIES = Remedies(deform_anyway=", or pass force=True to deform it anyway",
+                     write_anyway=" (force=True writes it anyway)", forced=" (force=True)")
 
 
 class DesignModel:
@@ -455,7 +460,7 @@ class DesignModel:
         design = self.run.design
         plan = plan_deform(design, mesh=mesh, lattice=lattice, plot=plot)
         result = deform(self.run, P=self.lattice(), progress=progress)
-        enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force)
+        enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force, remedies=_REMEDIES)
         return self.comm.root_then_bcast(write_outputs, self.run, result, plan=plan, progress=progress)
 
     def _frame_jacobian(self):

@@ -41,7 +41,8 @@ from ffdcli.parameterization import components as comp_mod
 from ffdcli.parameterization.changes import apply_changes
 from ffdcli.parameterization.components import design_variables, layout, set_design_variables
 from ffdcli.progress import no_progress
-from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part, part_reference, quality_reference
+from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
+from ffdcli.quality.reference import part_reference, quality_reference
 from ffdcli.settings import BoxSettings
 from ffdcli.viz.plot import plot_3d as render
 from ffdcli.viz.plot import plot_design
@@ -278,7 +279,7 @@ class DesignRun:
     _quality_part: object = field(default=None, repr=False)  # MPI: (this rank's MeshPart, its PartReference)
 
     def quality_reference(self):
-        """The quality gate's :class:`~ffdcli.quality.gate.QualityReference` of the input mesh, computed
+        """The quality gate's :class:`~ffdcli.quality.reference.QualityReference` of the input mesh, computed
         once: every design of a loop is judged against it without recomputing the input's quality."""
         if self._quality_ref is None:
             self._quality_ref = quality_reference(self.prep.mesh)

@@ -35,7 +35,8 @@ def check_cmd(mesh, threshold, n_worst, console):
     """
     from ffdcli.errors import InputError, QualityError
     from ffdcli.io.formats import read_mesh, read_part
-    from ffdcli.quality.gate import DEFAULT_THRESHOLD, check_quality, check_quality_part
+    from ffdcli.quality.gate import check_quality, check_quality_part
+    from ffdcli.quality.rules import DEFAULT_THRESHOLD
 
     if threshold is not None and not (-1.0 <= threshold <= 1.0):
         raise InputError(f"expected a scaled Jacobian in [-1, 1], got {threshold}", key="--threshold")

@@ -62,7 +62,12 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
                        extra=[("surface_file", surface_file, False, "--surface-file")])
     # the heavy part, once the input is checked
     from ffdcli.app.pipeline import deform, load_run, write_outputs
-    from ffdcli.quality.gate import enforce
+    from ffdcli.quality.gate import Remedies, enforce
+
+    # the gate states its rule; the command line says which flag overrides it
+    remedies = Remedies(list_cells=" (ffd check MESH lists such cells)",
+                        deform_anyway=", or give --force to deform it anyway",
+                        write_anyway=" (--force writes it anyway)", forced=" (--force)")
 
     comm = console.comm
     # MPI: each rank keeps its local mesh (its nodes, their halo, every marker node), never every node
@@ -80,7 +85,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     qd = q.to_dict() if q is not None else None
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
     for w in enforce(q, mesh_path=design.mesh, design_path=design.path, force=force,
-                     recovery=result.recovery):
+                     recovery=result.recovery, remedies=remedies):
         console.warn(w)
     constraints = None
     if design.data.get("constraints"):     # evaluated before writing: a bad item is exit 2, nothing written
