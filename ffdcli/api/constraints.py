@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffdcli.constraints.geometric import (
+from ffdcli.constraints import (
     ConstraintInputs,
     build_constraints,
     constraint_bounds,
@@ -27,7 +27,7 @@ class ConstraintsMixin:
 
     @property
     def constraints(self) -> list:
-        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints.geometric`),
+        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints`),
         built once on the baseline surface and lattice; several components: every component's, in
         component order (see :attr:`constraint_groups`)."""
         return [c for _, group in self.constraint_groups for c in group]

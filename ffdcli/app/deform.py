@@ -17,7 +17,7 @@ from ffdcli.app.run import DesignRun, load_run
 from ffdcli.app.write import write_outputs
 from ffdcli.io.formats.su2_ffd import describe
 from ffdcli.io.outputs import plan_deform
-from ffdcli.quality.gate import enforce
+from ffdcli.quality.gate import Remedies, enforce
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
                   force: bool = False, cache_dir=None, use_cache: bool = True, progress=None, comm=None,
                   run: DesignRun | None = None, P=None,
                   constraints_table: Callable[[DesignRun], list[dict]] | None = None,
-                  warn: Callable[[str], None] | None = None) -> DeformReport:
+                  warn: Callable[[str], None] | None = None, remedies: Remedies = Remedies()) -> DeformReport:
     """Deform a loaded design and write its outputs together: what ``ffd deform`` does.
 
     Parameters
@@ -71,6 +71,8 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     constraints_table : callable, optional
         ``f(run) -> rows`` of the constraints table, evaluated before anything is written when the
         design has ``constraints:`` (a bad item is an input error, nothing written).
+    remedies : ffdcli.quality.gate.Remedies
+        The caller's words for how to override the gate (the command line names ``--force``).
     warn : callable, optional
         Called with each warning as it arises (the command line prints it at once, so that a run the
         gate then refuses still shows what was noticed before); the report keeps them all.
@@ -99,7 +101,7 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     result = deform(run, P=P, progress=progress)
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
-                     recovery=result.recovery):
+                     recovery=result.recovery, remedies=remedies):
         note(w)
     constraints = constraints_table(run) if constraints_table and design.data.get("constraints") else None
     # every output once, together: rank 0 of an MPI run (every node's coordinates gathered there)

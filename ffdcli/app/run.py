@@ -23,7 +23,8 @@ from ffdcli.parameterization import components as comp_mod
 from ffdcli.parameterization.changes import apply_changes
 from ffdcli.parameterization.components import design_variables, layout, set_design_variables
 from ffdcli.progress import no_progress
-from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part, part_reference, quality_reference
+from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
+from ffdcli.quality.reference import part_reference, quality_reference
 from ffdcli.volume.surface_motion import component_displacement, component_frames, frame_gradient_inputs, full3
 from ffdcli.volume.warp import WarpModel, WarpSettings, prepare_mesh_warp, warp
 
@@ -46,7 +47,7 @@ class DesignRun:
     _quality_part: object = field(default=None, repr=False)  # MPI: (this rank's MeshPart, its PartReference)
 
     def quality_reference(self):
-        """The quality gate's :class:`~ffdcli.quality.gate.QualityReference` of the input mesh, computed
+        """The quality gate's :class:`~ffdcli.quality.reference.QualityReference` of the input mesh, computed
         once: every design of a loop is judged against it without recomputing the input's quality."""
         if self._quality_ref is None:
             self._quality_ref = quality_reference(self.prep.mesh)
