@@ -174,7 +174,7 @@ def test_function_local_imports_only_in_cli_or_for_optional_packages():
 
 #: Being split (issue 27): each leaves this list when it is under the limit.
 SPLITTING = {"api.py", "parameterization/changes.py", "quality/gate.py", "app/pipeline.py",
-             "constraints/geometric.py", "volume/warp.py", "testing/wings.py", "lattice/embedding.py",
+             "constraints/geometric.py", "volume/warp.py", "lattice/embedding.py",
              "io/formats/su2.py", "io/formats/cgns.py"}
 
 
