@@ -80,7 +80,7 @@ class PointSet:
     def jacobian(self, D: np.ndarray) -> np.ndarray:
         """(k, 3, n_vars) dX/dv for the lattice Jacobian ``D`` (n_ctrl*3, n_vars)."""
         nv = D.shape[1]
-        by_point = D.reshape(-1, 3 * nv)
+        by_point = D.reshape(D.shape[0] // 3, 3 * nv)     # not -1: zero variables are a design too
         return np.asarray(self.basis @ by_point).reshape(self.n_points, 3, nv)
 
     def jvp(self, D: np.ndarray, dv) -> np.ndarray:

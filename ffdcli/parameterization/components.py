@@ -136,7 +136,7 @@ class Component:
         f = self.frozen
         if f:
             n, m, l, _ = self.P0.shape
-            Jr = J.reshape(n, m, l, 3, -1)
+            Jr = J.reshape(n, m, l, 3, J.shape[1])
             Jr[:, :f] = 0.0
         return J
 
