@@ -553,12 +553,12 @@ def _finite_or_none(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def read_sensitivity_for(model: DesignModel, path, *, points=None):
+def read_sensitivity_for(model: DesignModel, path, *, points=None, tol: float | None = None):
     """Read a sensitivity file against the deformed mesh of ``model`` (SPEC: coordinates of the
-    design being differentiated). Returns (g (N, 3) dense, Sensitivity)."""
+    design being differentiated; ``tol`` as :func:`read_sensitivity`). Returns (g (N, 3) dense, Sensitivity)."""
     mesh = model.run.prep.mesh
     pts = model.mesh_points() if points is None else points
-    sens = read_sensitivity(path, pts, mesh.dim)
+    sens = read_sensitivity(path, pts, mesh.dim, tol=tol)
     return sens.to_dense(mesh.n_points), sens
 
 
@@ -584,16 +584,21 @@ class Gradient:
     through_volume: bool
 
 
-def gradient_from_file(model: DesignModel, path, *, progress=None) -> Gradient:
+def gradient_from_file(model: DesignModel, path, *, progress=None, tol: float | None = None) -> Gradient:
     """dJ/dv of every design variable of ``model`` by the chain rule from a sensitivity file (dJ/dX at
     the nodes of the deformed mesh). The file must cover every surface node (InputError otherwise);
-    volume rows go through the volume-mesh motion's exact transpose when the design moves the volume."""
-    g, sens = read_sensitivity_for(model, path)
+    volume rows go through the volume-mesh motion's exact transpose when the design moves the volume.
+    A gradient that overflows float64 (finite but huge sensitivities) is an InputError naming the file."""
+    g, sens = read_sensitivity_for(model, path, tol=tol)
     sens.check_covers(model.surface_ids, path)
     on_surface = np.isin(sens.ids, model.surface_ids)
     volume_nodes = int((~on_surface).sum())
     through = bool(volume_nodes and model.uses_volume())
-    grad = model.mesh_vjp(g, progress=progress) if through else model.surface_vjp(g[model.surface_ids])
+    with np.errstate(over="ignore", invalid="ignore"):
+        grad = model.mesh_vjp(g, progress=progress) if through else model.surface_vjp(g[model.surface_ids])
+    if not np.all(np.isfinite(grad)):
+        raise InputError(f"the gradient overflows float64 (sensitivities up to {np.abs(g).max():.3g}); scale "
+                         "the function J down", path=path)
     return Gradient(values={name: float(v) for name, v in zip(model.names, grad, strict=True)},
                     sensitivity=sens, surface_nodes=int(on_surface.sum()), volume_nodes=volume_nodes,
                     through_volume=through)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -19,8 +18,11 @@ from ffdcli.cli import cli, common_options
               help="Write {variable: dJ/dv} here (JSON) as well as printing it.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
+@click.option("--tolerance", type=click.FloatRange(min=0.0), metavar="DIST",
+              help="How far (mesh units) the file's coordinates may stand from the mesh nodes "
+                   "(default 1e-6 of the mesh diagonal); farther, the file is refused.")
 @common_options
-def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
+def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console):
     """dJ/d(design variable) for every design variable of DESIGN.yaml, by the chain rule.
 
     \b
@@ -40,6 +42,7 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     from ffdcli.api import DesignModel, gradient_from_file
     from ffdcli.app.pipeline import load_run
     from ffdcli.design import load_design
+    from ffdcli.io.jsontext import to_json
     from ffdcli.io.outputs import plan_outputs
 
     t0 = time.perf_counter()
@@ -49,7 +52,7 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     model = DesignModel(load_run(design, cache_dir=cache_dir, progress=console.progress, comm=console.comm),
                         comm=console.comm)
     sens_file = sens
-    grad = gradient_from_file(model, sens_file, progress=console.progress)
+    grad = gradient_from_file(model, sens_file, progress=console.progress, tol=tolerance)
     sens, result, volume_nodes = grad.sensitivity, grad.values, grad.volume_nodes
     summary = {
         "design": str(design_file), "sensitivity": str(sens_file),
@@ -60,7 +63,7 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     }
     if output:
         # once: rank 0 of an MPI run
-        console.comm.root_then_bcast(plan.write, {"grad": lambda tmp: tmp.write_text(json.dumps(result, indent=1))})
+        console.comm.root_then_bcast(plan.write, {"grad": lambda tmp: tmp.write_text(to_json(result, indent=1))})
         summary["output"] = str(output)
     lines = [f"ffd grad: {Path(design_file).name}, {len(sens.ids)} sensitivity rows matched by "
              f"{sens.matched_by}" + (f" (worst distance {sens.worst_distance:.2e})"
