@@ -56,8 +56,8 @@ from ffdcli.io.outputs import plan_deform
 from ffdcli.lattice.lattice import derivatives
 from ffdcli.lattice.pointset import PointSet
 from ffdcli.parallel.comm import SerialComm
-from ffdcli.parameterization.bounds import make_bounds
-from ffdcli.parameterization.changes import design_bounds, design_units
+from ffdcli.parameterization.changes import design_units
+from ffdcli.parameterization.components import variable_bounds
 from ffdcli.parameterization.derivatives import surface_jvp, vjp
 from ffdcli.quality.gate import enforce
 from ffdcli.volume.frames import (  # noqa: F401  (re-exported: the API's names of PR 7)
@@ -94,12 +94,7 @@ class DesignModel:
         self.comm = comm or getattr(run, "comm", None) or SerialComm()
         self.names, self.values = run.variables()
         self.units = [u for c in run.components for u in design_units(list(c.changes))]
-        natural = np.concatenate([design_bounds(c.P0, c.box.frame, list(c.changes)) for c in run.components]) \
-            if run.components else np.zeros((0, 2))
-        design = run.design
-        spec = (getattr(design, "data", None) or {}).get("bounds")
-        error = getattr(design, "error", None)
-        self.bounds = make_bounds(self.names, natural, spec, values=self.values, error=error)
+        self.bounds = variable_bounds(run.components, run.design)
         self._B = None
         self._cache = {}            # what depends on the values (cleared by set_values)
         self._static = {}           # what does not (constraint geometry on the baseline)

@@ -649,6 +649,7 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     if len(comps) > 1:
         comp_mod.check_shared_nodes(comps, path=design.path)
         comp_mod.check_overlap(comps, path=design.path)
+    comp_mod.variable_bounds(comps, design)      # bounds: checked for every command, as DesignModel does
     return DesignRun(design=design, components=comps, comm=comm, _quality_part=None if part is None else (part, None))
 
 

@@ -18,9 +18,9 @@ import click
 
 from ffdcli import __version__
 from ffdcli.cli.console import Console, StdoutError
-from ffdcli.io.jsontext import to_json
 from ffdcli.errors import FfdError
 from ffdcli.io.atomic import Terminated, interrupts_outside_compilers
+from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 

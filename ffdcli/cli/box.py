@@ -113,8 +113,14 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
     inputs = (mpath, mesh if is_design_file(mesh) else None, from_file, settings.file if settings else None)
     plan = plan_outputs([("lattice", out, False, "--lattice"), ("plot3d", export_plot3d, False, "--export-plot3d")],
                         inputs=inputs)          # every output checked before the work
-    prep = prepare_box(mesh_path, surface, settings, cache_dir=cache_dir, rebuild=rebuild,
-                       progress=console.progress, comm=console.comm)
+    if is_design_file(mesh) and not surfaces and all(v is None for v in (points, degree, sections, root, margin,
+                                                                         from_file)):
+        from ffdcli.app.pipeline import load_run       # the whole file checked (changes, bounds), as every command
+
+        prep = load_run(design, cache_dir=cache_dir, rebuild=rebuild, progress=console.progress, comm=console.comm).prep
+    else:
+        prep = prepare_box(mesh_path, surface, settings, cache_dir=cache_dir, rebuild=rebuild,
+                           progress=console.progress, comm=console.comm)
     writers = {"lattice": lambda tmp: write_lattice_vtk(tmp, prep.box.control_points)}
     if export_plot3d:
         from ffdcli.io.formats.plot3d import write_plot3d

@@ -38,7 +38,8 @@ from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.spline import basis_derivs
 from ffdcli.mesh.idsets import unique_ids
 from ffdcli.parallel.distributed import global_ids
-from ffdcli.parameterization.changes import Chord, Shape, Twist
+from ffdcli.parameterization.bounds import Bounds, make_bounds
+from ffdcli.parameterization.changes import Chord, Shape, Twist, design_bounds
 from ffdcli.parameterization.changes import design_variables as change_variables
 from ffdcli.parameterization.changes import set_design_variables as set_change_values
 from ffdcli.parameterization.derivatives import lattice_jacobian
@@ -373,6 +374,18 @@ def design_variables(components: list[Component]) -> tuple[list[str], np.ndarray
         names += [comp.spec.prefix + x for x in n]
         values.append(v)
     return names, (np.concatenate(values) if values else np.zeros(0))
+
+
+def variable_bounds(components: list[Component], design) -> Bounds:
+    """The :class:`~ffdcli.parameterization.bounds.Bounds` of every variable: natural ones from the changes,
+    the design file's ``bounds:`` checked against the names and values (an unknown name, lower above
+    upper, a value outside its bounds: :class:`InputError` naming ``bounds.<key>`` and its line). The one
+    validation of ``bounds:``: ``load_run`` calls it for every command, ``DesignModel`` keeps its result."""
+    names, values = design_variables(components)
+    natural = np.concatenate([design_bounds(c.P0, c.box.frame, list(c.changes)) for c in components]) \
+        if components else np.zeros((0, 2))
+    spec = (getattr(design, "data", None) or {}).get("bounds")
+    return make_bounds(names, natural, spec, values=values, error=getattr(design, "error", None))
 
 
 def set_design_variables(components: list[Component], values) -> list[Component]:
