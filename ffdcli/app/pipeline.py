@@ -646,6 +646,7 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
         if junction is not None and junction.frozen:
             changes = comp_mod.check_body_changes(spec, changes, junction, error)
         comps.append(comp_mod.Component(spec=spec, prep=prep, changes=tuple(changes), junction=junction))
+        comp_mod.check_frozen_motion(comps[-1], error)
     if len(comps) > 1:
         comp_mod.check_shared_nodes(comps, path=design.path)
         comp_mod.check_overlap(comps, path=design.path)
@@ -711,6 +712,10 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     mesh, ids = run.prep.mesh, run.surface_ids
     P1 = run.lattice_after() if P is None else P
     disp = run.surface_displacement(P1)
+    if not np.any(disp) and any(not np.array_equal(Q, c.P0) for Q, c in zip(run._per_component(P1), run.components,
+                                                                             strict=True)):
+        raise InputError("the design moves the lattice but no surface point (is the surface outside the lattice?); "
+                         "nothing was written", path=run.design.path)    # never a silent success
     t["changes"] = time.perf_counter() - t0
     points = mesh.points.copy()
     method = volume_method(run)
