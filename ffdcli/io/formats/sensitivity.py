@@ -16,7 +16,6 @@ Two layouts are read (see SPEC.md, "Derivatives"):
 from __future__ import annotations
 
 import io
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
