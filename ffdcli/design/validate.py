@@ -169,3 +169,15 @@ def _check_part(data: dict, at: tuple, fail) -> None:
             if clash:
                 fail(here + (clash[0],), "rows gives every thickness row; write upper/lower "
                                          "or random as another change")
+
+
+def validate_section(value, schema: dict, at: tuple) -> None:
+    """Raise :class:`InputError` for the first problem of ``value``, a section of a design file given
+    outside a file (the API's ``set_constraints``), against its ``schema``: the same words and key
+    path (``at`` + the path inside) as a design file's check, without a file or line."""
+    for parts, v in _walk_nonfinite(value, tuple(at)):
+        raise InputError(f"must be a finite number, got {_shown(v)}", key=key_path(parts) or None)
+    problems = [_describe(e) for e in jsonschema.Draft202012Validator(schema).iter_errors(value)]
+    if problems:
+        parts, message = max(problems, key=lambda p: len(p[0]))
+        raise InputError(message, key=key_path(tuple(at) + tuple(parts)) or None)
