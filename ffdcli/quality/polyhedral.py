@@ -41,13 +41,13 @@ from ffdcli.mesh.polyhedra import (
     face_centres_areas,
     pyramid_volumes,
 )
-from ffdcli.quality.gate import (
+from ffdcli.quality.report import QualityReport
+from ffdcli.quality.rules import (
     DEFAULT_COLLAPSE,
     DEFAULT_ORTHO_LOSS,
     DEFAULT_ORTHO_MIN,
     DEFAULT_RELATIVE,
     DEFAULT_THRESHOLD,
-    QualityReport,
     cell_rule,
     collapse_floor,
 )
