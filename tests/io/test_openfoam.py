@@ -326,3 +326,27 @@ def test_2d_case_with_one_empty_patch_deforms_in_plane(tmp_path):
     got, src = read_mesh(tmp_path / "out" / "d"), read_mesh(case)
     assert np.array_equal(got.points[:, 2], src.points[:, 2])
     assert np.abs(got.points - src.points).max() > 1e-3
+
+
+def test_folder_output_is_whole_or_nothing_and_stale_folders_are_swept(tmp_path, wing):
+    from ffdcli.io.atomic import _HOST
+    from ffdcli.io.outputs import plan_outputs
+
+    case = _case(tmp_path, wing)
+    mesh = read_mesh(case)
+    out = tmp_path / "result"
+    stale = tmp_path / f".result.{_HOST}-999999-abc123.part"           # a killed run's folder
+    stale.mkdir()
+    (stale / "constant").mkdir()
+    plan = plan_outputs([("mesh", out)], inputs=(case,))
+
+    def broken(tmp):
+        write_mesh(mesh, tmp, mesh.points + 1.0)
+        raise OSError(28, "No space left on device")
+
+    with pytest.raises(Exception, match="no space left"):
+        plan.write({"mesh": broken})
+    assert not out.exists() and not stale.exists()
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
+    assert plan.write({"mesh": lambda tmp: write_mesh(mesh, tmp, mesh.points + 1.0)}) == {"mesh": str(out)}
+    assert np.array_equal(read_mesh(out).points, mesh.points + 1.0)
