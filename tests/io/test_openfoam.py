@@ -350,3 +350,18 @@ def test_folder_output_is_whole_or_nothing_and_stale_folders_are_swept(tmp_path,
     assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".")] == []
     assert plan.write({"mesh": lambda tmp: write_mesh(mesh, tmp, mesh.points + 1.0)}) == {"mesh": str(out)}
     assert np.array_equal(read_mesh(out).points, mesh.points + 1.0)
+
+
+def test_init_and_box_take_a_case(tmp_path, wing):
+    case = _case(tmp_path, wing, binary=True)
+    r = run_ffd("init", case, "-o", tmp_path / "start.yaml", cwd=tmp_path)     # the wall patch is the surface
+    assert r.returncode == 0, r.stderr
+    text = (tmp_path / "start.yaml").read_text()
+    assert "mesh: case" in text and "surface: wing" in text
+    r = run_ffd("deform", tmp_path / "start.yaml", cwd=tmp_path)             # unedited: the input back
+    assert r.returncode == 0, r.stderr
+    out = tmp_path / "out" / "start"
+    for f in (case / "constant" / "polyMesh").iterdir():
+        assert (out / "constant" / "polyMesh" / f.name).read_bytes() == f.read_bytes()
+    r = run_ffd("box", case, "--surface", "wing", "--points", "5,4,2", "--lattice", tmp_path / "l.vtk", cwd=tmp_path)
+    assert r.returncode == 0 and (tmp_path / "l.vtk").is_file(), r.stderr
