@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.mesh.polyhedra import (
+    CHUNK,
     ROOTVSMALL,
     VSMALL,
     Polyhedra,
@@ -152,11 +153,14 @@ def skewness(points: np.ndarray, poly: Polyhedra, fc: np.ndarray, fa: np.ndarray
     sv_mag = np.linalg.norm(sv, axis=1)
     sv_hat = sv / (sv_mag + ROOTVSMALL)[:, None]
     fd = np.where(inner, 0.2, 0.4) * np.linalg.norm(d, axis=1) + ROOTVSMALL
-    # the face's extent along sv_hat: the largest |sv_hat . (p - fc)| over its nodes
-    size = poly.face_sizes
-    fid = np.repeat(np.arange(poly.n_faces), size)
-    along = np.abs(np.einsum("ij,ij->i", sv_hat[fid], points[poly.face_nodes] - fc[fid]))
-    extent = np.maximum.reduceat(along, poly.face_offsets[:-1]) if len(along) else np.zeros(0)
+    # the face's extent along sv_hat: the largest |sv_hat . (p - fc)| over its nodes (by chunks of faces)
+    extent = np.zeros(poly.n_faces)
+    for a in range(0, poly.n_faces, CHUNK):
+        b = min(poly.n_faces, a + CHUNK)
+        off = poly.face_offsets[a:b + 1]
+        fid = np.repeat(np.arange(a, b), np.diff(off))
+        along = np.abs(np.einsum("ij,ij->i", sv_hat[fid], points[poly.face_nodes[off[0]:off[-1]]] - fc[fid]))
+        extent[a:b] = np.maximum.reduceat(along, off[:-1] - off[0])
     return sv_mag / np.maximum(fd, extent)
 
 
