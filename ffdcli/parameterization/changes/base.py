@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -155,6 +156,9 @@ class SpecContext:
         The change's key path in the design file (``changes[2].twist``).
     error
         ``error(message, key) -> Exception``: the error to raise (the design file's, with its line).
+    box, surface
+        The :class:`ffdcli.box.box.Box` and the wing's surface points (N, 3), for the changes that
+        read the geometry (the control surfaces); None where no change needs them.
     """
 
     n: int
@@ -163,6 +167,8 @@ class SpecContext:
     dim: int
     key: str = "changes"
     error: Callable[[str, str], Exception] | None = None
+    box: Any = None
+    surface: np.ndarray | None = None
 
     def fail(self, message: str, key: str | None = None) -> Exception:
         """The exception for ``message`` at ``key`` (default: the change's own key)."""
