@@ -75,7 +75,7 @@ def refine_box(box: Box, chord=(), span=(), thickness=()) -> tuple[Box, np.ndarr
     Av = As.get(1)
     out = replace(box, control_points=np.ascontiguousarray(P), knots=tuple(knots))
     if Av is not None:
-        out = replace(out, stations=Av @ box.stations, le_points=Av @ box.le_points,
+        out = replace(out, base_sections=box.sections_table(), stations=Av @ box.stations, le_points=Av @ box.le_points,
                       te_points=Av @ box.te_points, margins=Av @ box.margins)
     ref = section_weights(out, out.te_points)
     out = replace(out, ref_weights=ref)
@@ -97,13 +97,13 @@ def refine_embedding(box: Box, emb: Embedding) -> Embedding:
 def edges_at(box: Box, fraction: float) -> tuple[np.ndarray, np.ndarray]:
     """(le, te) (3,) the baseline leading- and trailing-edge points at span ``fraction`` (root 0, tip
     1: the station ``stations[0] + fraction (stations[-1] - stations[0])``), interpolated linearly
-    between the box's sections; in 2D the airfoil's."""
+    between the sections the box was fitted with (:meth:`Box.sections_table`); in 2D the airfoil's."""
     if box.dim == 2:
         return box.le_points[0], box.te_points[0]
-    s = box.stations[0] + fraction * (box.stations[-1] - box.stations[0])
-    le = np.array([np.interp(s, box.stations, box.le_points[:, d]) for d in range(3)])
-    te = np.array([np.interp(s, box.stations, box.te_points[:, d]) for d in range(3)])
-    return le, te
+    table = box.sections_table()
+    st = table[:, 0]
+    s = st[0] + fraction * (st[-1] - st[0])
+    return np.array([np.interp(s, st, table[:, c]) for c in range(1, 7)]).reshape(2, 3)
 
 
 def lattice_params(box: Box, points: np.ndarray, what: str = "a point") -> np.ndarray:

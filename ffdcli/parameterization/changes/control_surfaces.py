@@ -158,11 +158,13 @@ class ControlSurface(Change):
     def apply(self, P, frame):
         H, _ = self._hinges(P)
         omega, _, _ = self._axis(H, frame)
-        R = rodrigues(omega, self._theta())
+        theta = self._theta()
         out = np.array(P, dtype=float, copy=True)
-        rows = self.geometry.rows
-        Y = P[rows] - H[0]
-        out[rows] = H[0] + np.einsum("jab,ijkb->ijka", R, Y)
+        # only the turning rows of the sections that turn (a 0 degree device is no change, bit for bit)
+        i, j = np.flatnonzero(self.geometry.rows), np.flatnonzero(theta != 0.0)
+        R = rodrigues(omega, theta[j])
+        Y = P[np.ix_(i, j)] - H[0]
+        out[np.ix_(i, j)] = H[0] + np.einsum("jab,ijkb->ijka", R, Y)
         return out
 
     def _domega(self, H, v, sign, dH):

@@ -39,6 +39,8 @@ DEFAULT_BLEND = 0.05
 DEFAULT_TRANSITION = 0.1
 #: Tolerance (parameter) when reading which knots are a device's.
 KNOT_TOL = 1e-9
+#: A parameter this close to a knot is that knot (:func:`snap`).
+SNAP = 1e-6
 
 
 @dataclass(frozen=True)
@@ -93,15 +95,37 @@ def _params(box: Box, points: np.ndarray) -> np.ndarray:
     return lattice_params(box, points, "a control surface's hinge (is the hinge fraction or the span range right?)")
 
 
+#: Points along the hinge line where the device's parameters are read (3D).
+HINGE_SAMPLES = 17
+
+
+def hinge_samples(box: Box, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(k, 3) points along the straight hinge line between the ends' hinge points and (k, 3) the
+    local baseline chord vector (leading to trailing edge) at each; in 2D the one hinge point."""
+    if len(ends) == 1:
+        return ends[:, 2], ends[:, 1] - ends[:, 0]
+    s = np.linspace(0.0, 1.0, HINGE_SAMPLES)[:, None]
+    H = ends[0, 2] + s * (ends[1, 2] - ends[0, 2])
+    st = H @ box.span_dir
+    f = (st - box.stations[0]) / (box.stations[-1] - box.stations[0])
+    chords = np.array([np.subtract(*edges_at(box, x)[::-1]) for x in f])
+    return H, chords
+
+
 def _hinge_params(box: Box, surface, spec: DeviceSpec):
-    """(hinge u, transition-end u) of the device and the end points."""
+    """(hinge u, transition-end u, end points, hinge samples' parameters): the knot at the hinge is
+    the largest (flap; slat: smallest) chordwise parameter of the hinge line, the end of the
+    transition the largest (smallest) parameter of the points ``transition`` local chords behind
+    (ahead of) it, so that every point ahead of (behind) the hinge line depends on no turning row and
+    every point behind (ahead of) the transition on turning rows only."""
     ends = end_points(box, surface, spec)
-    le, te, hinge = ends[:, 0], ends[:, 1], ends[:, 2]
-    ahead = hinge + spec.sign * spec.transition * (te - le)
-    u = _params(box, np.concatenate([hinge, ahead]))[:, 0]
-    E = len(ends)
+    H, chords = hinge_samples(box, ends)
+    ahead = H + spec.sign * spec.transition * chords
+    k = len(H)
+    params = _params(box, np.concatenate([H, ahead]))
+    u = params[:, 0]
     pick = np.max if spec.sign > 0 else np.min
-    return float(pick(u[:E])), float(pick(u[E:])), ends
+    return float(pick(u[:k])), float(pick(u[k:])), ends, params[:k]
 
 
 def _span_params(box: Box, surface, spec: DeviceSpec) -> list[tuple[float, float]]:
@@ -123,7 +147,7 @@ def _span_params(box: Box, surface, spec: DeviceSpec) -> list[tuple[float, float
 
 def device_knots(box: Box, surface, spec: DeviceSpec) -> tuple[np.ndarray, np.ndarray]:
     """(chordwise knots, spanwise knots) the device needs in ``box`` (empty spanwise in 2D)."""
-    uh, ut, _ = _hinge_params(box, surface, spec)
+    uh, ut, _, _ = _hinge_params(box, surface, spec)
     if not spec.sign * (ut - uh) > 0:
         raise InputError(f"the {spec.kind}'s transition ({spec.transition:g} chords) leaves the box")
     p = box.degree[0]
@@ -150,7 +174,8 @@ class DeviceGeometry:
     hinge0
         (E,) the hinge fractions the rows were made for (the hinge moves along ``T - L`` from them).
     transition
-        (E,) chord width from the hinge to where the device turns rigidly, local chords (printed).
+        (k,) chord width from the hinge line to where the device turns rigidly, in local chords, at
+        points along the hinge line (the largest is printed).
     """
 
     rows: np.ndarray
@@ -167,11 +192,19 @@ def _rows_of(points: np.ndarray, box: Box) -> np.ndarray:
     return e.basis_matrix().toarray()
 
 
+def snap(knots: np.ndarray, u: float) -> float:
+    """``u`` as the nearest knot when within :data:`SNAP` of it (a parameter read again by Newton
+    on the refined lattice differs from the knot inserted for it by the embedding's tolerance)."""
+    k = knots[np.argmin(np.abs(knots - u))]
+    return float(k) if abs(k - u) < SNAP else float(u)
+
+
 def device_geometry(box: Box, surface, spec: DeviceSpec) -> DeviceGeometry:
     """The :class:`DeviceGeometry` of ``spec`` in ``box`` (refined with :func:`device_knots`)."""
     n, m, l = box.shape
-    uh, ut, ends = _hinge_params(box, surface, spec)
+    uh, ut, ends, hp = _hinge_params(box, surface, spec)
     t = box.knots[0]
+    uh, ut = snap(t, uh), snap(t, ut)
     p = box.degree[0]
     if spec.sign > 0:
         rows = t[:n] >= uh - KNOT_TOL
@@ -181,19 +214,18 @@ def device_geometry(box: Box, surface, spec: DeviceSpec) -> DeviceGeometry:
     if box.dim == 3:
         v, q = box.knots[1], box.degree[1]
         a, b = spec.span
-        lo = _params(box, end_points(box, surface, spec)[:, 2])[:, 1]
-        va, vb = (0.0 if a <= 0 else lo[0]), (1.0 if b >= 1 else lo[1])
+        lo = _params(box, ends[:, 2])[:, 1]
+        va, vb = (0.0 if a <= 0 else snap(v, lo[0])), (1.0 if b >= 1 else snap(v, lo[1]))
         j = np.arange(m)
         weights = ((v[j + q + 1] > va + KNOT_TOL) & (v[j] < vb - KNOT_TOL)).astype(float)
     E = len(ends)
     B = _rows_of(ends.reshape(-1, 3), box).reshape(E, 3, -1)
-    # the transition: from each end's hinge to the parameter ut, measured along the local chord
-    lat = box.lattice()
-    hp = _params(box, ends[:, 2])
+    # the transition: from the hinge line to the parameter ut, along the local chord (largest of the samples)
+    H, chords = hinge_samples(box, ends)
+    hp = hp.copy()
     hp[:, 0] = ut
-    from_lattice = _lattice_points(lat, hp, box)
-    chord = np.linalg.norm(ends[:, 1] - ends[:, 0], axis=1)
-    width = np.abs((from_lattice - ends[:, 2]) @ box.chord_dir) / chord
+    lengths = np.linalg.norm(chords, axis=1)
+    width = np.abs(np.einsum("kd,kd->k", _lattice_points(box.lattice(), hp, box) - H, chords)) / lengths ** 2
     return DeviceGeometry(rows=rows, weights=weights, L=B[:, 0], T=B[:, 1], M=B[:, 2],
                           hinge0=np.array(spec.hinge, dtype=float), transition=width)
 
