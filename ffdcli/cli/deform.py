@@ -107,6 +107,8 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         "plot_3d": written.get("plot_3d"),
         "surface_file": written.get("surface_file"),
         "changes": [next(iter(c)) for c in design.changes_spec],
+        "devices": {f"c{i}": ch.describe() for comp in run.components for i, ch in enumerate(comp.changes)
+                    if hasattr(ch, "describe")},
         "lattice": list(run.box.lattice_shape),
         "surface_points": int(len(run.surface_ids)),
         "max_displacement": result.max_displacement,
@@ -134,6 +136,12 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     lines = [
         head,
         *([f"  changes   {', '.join(summary['changes']) or '(none)'}"] if run.single else per),
+        *[f"  {d['kind']:<9} {name}: {d['angle']:g} deg"
+          + (f", span {d['span'][0]:g}-{d['span'][1]:g} (blend {d['blend']:g})" if d["span"] else "")
+          + f", hinge {'/'.join(f'{h:g}' for h in d['hinge'])} of the local chord; turns rigidly beyond a "
+            f"transition of {d['transition']:.3f} local chords {'behind' if d['kind'] == 'flap' else 'ahead of'}"
+            " the hinge"
+          for name, d in summary["devices"].items()],
         *([f"  root      on the body {run.components[0].junction.marker!r} (its nodes and the junction do "
             f"not move)"] if run.single and run.components[0].junction is not None else []),
         f"  moved     max surface displacement {result.max_displacement:.4g}; volume: {result.volume_method}"

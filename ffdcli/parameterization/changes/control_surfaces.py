@@ -209,6 +209,16 @@ class ControlSurface(Change):
         out[..., rows, :, :, :] = self._hinge_motion(P, frame, dH, dP[..., rows, :, :, :])
         return out
 
+    def describe(self) -> dict:
+        """What ``ffd deform`` prints: the device as set up, and the chord width of the transition
+        behind (flap; slat: ahead of) the hinge, after which the device turns rigidly."""
+        return {"kind": self.kind, "angle": float(self.angle), "hinge": [float(h) for h in self.hinge],
+                "span": None if self.spec.span is None else list(self.spec.span),
+                "blend": None if self.spec.span is None else self.spec.blend,
+                "transition": float(self.geometry.transition.max()),
+                "turning_rows": int(self.geometry.rows.sum()),
+                "turning_sections": int(self.geometry.weights.sum())}
+
     def hinge_line(self, P) -> np.ndarray:
         """(E, 3) the hinge points of lattice ``P`` (for pictures)."""
         return self._hinges(P)[0]
