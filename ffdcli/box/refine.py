@@ -102,8 +102,15 @@ def edges_at(box: Box, fraction: float) -> tuple[np.ndarray, np.ndarray]:
         return box.le_points[0], box.te_points[0]
     table = box.sections_table()
     st = table[:, 0]
-    s = st[0] + fraction * (st[-1] - st[0])
-    return np.array([np.interp(s, st, table[:, c]) for c in range(1, 7)]).reshape(2, 3)
+    fr = (st - st[0]) / (st[-1] - st[0])          # increasing (the stations decrease on a left wing)
+    return np.array([np.interp(fraction, fr, table[:, c]) for c in range(1, 7)]).reshape(2, 3)
+
+
+def span_fractions(box: Box, X: np.ndarray) -> np.ndarray:
+    """(k,) span fraction (root 0, tip 1) of points ``X`` (k, 3): where their span coordinate lies
+    between the root and tip sections the box was fitted with."""
+    st = box.sections_table()[:, 0]
+    return (np.asarray(X)[..., box.axes.span] - st[0]) / (st[-1] - st[0])
 
 
 def lattice_params(box: Box, points: np.ndarray, what: str = "a point") -> np.ndarray:

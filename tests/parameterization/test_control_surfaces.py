@@ -14,14 +14,14 @@ import pytest
 from test_derivatives import assert_matches_fd
 
 from ffdcli.box.box import fit_box
-from ffdcli.box.refine import edges_at
+from ffdcli.box.refine import edges_at, span_fractions
 from ffdcli.errors import InputError
 from ffdcli.lattice.lattice import evaluate
 from ffdcli.mesh import CellBlock
 from ffdcli.parameterization.changes import Twist, apply_changes, changes_from_spec, design_variables
 from ffdcli.parameterization.changes.control_surfaces import refine_for_devices, rodrigues
 from ffdcli.settings import BoxSettings
-from ffdcli.testing.wings import crm_planform, naca4, rect_wing_planform, wing_surface
+from ffdcli.testing.wings import Planform, crm_planform, naca4, rect_wing_planform, wing_surface
 
 
 @pytest.fixture(scope="module")
@@ -36,6 +36,20 @@ def crm():
     pts, faces = wing_surface(crm_planform(), n_chord=61, n_span=41)
     box, emb, _ = fit_box(pts, [CellBlock("quad", faces)], BoxSettings(points=(6, 8, 2)))
     return pts, box, emb
+
+
+@pytest.fixture(scope="module")
+def left():
+    pf = Planform(le_sweep_deg=25, taper=0.5, dihedral_deg=4, sections="yz", span_sign=-1.0, root_airfoil="2412")
+    pts, faces = wing_surface(pf, n_chord=61, n_span=31)
+    box, emb, _ = fit_box(pts, [CellBlock("quad", faces)], BoxSettings(points=(6, 8, 2)))
+    return pts, box, emb
+
+
+def test_left_wing_span_along_minus_x(left):
+    assert left[1].span_dir @ np.array([1.0, 0, 0]) == -1.0
+    check_oracles(left, {"flap": {"span": [0.2, 0.6], "hinge": 0.7, "angle": 20}})
+    check_oracles(left, {"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}})
 
 
 def build(case, items):
@@ -53,10 +67,9 @@ def surface_after(box, emb, P):
 
 def local_coords(box, X):
     """(span fraction, chord fraction) of points X (the baseline chord at their station)."""
-    st = X @ box.span_dir
-    f = (st - box.stations[0]) / (box.stations[-1] - box.stations[0])
-    le = np.array([np.interp(st, box.stations, box.le_points[:, d]) for d in range(3)]).T
-    te = np.array([np.interp(st, box.stations, box.te_points[:, d]) for d in range(3)]).T
+    f = span_fractions(box, X)
+    edges = np.array([edges_at(box, x) for x in np.clip(f, 0, 1)])
+    le, te = edges[:, 0], edges[:, 1]
     cf = np.einsum("ij,ij->i", X - le, te - le) / np.einsum("ij,ij->i", te - le, te - le)
     return f, cf
 
@@ -74,8 +87,8 @@ def check_oracles(case, item):
     H = dev.hinge_line(P0)
     # the hinge line's chord fraction at each point's station (a straight line: not linear in the
     # fraction on a tapered wing)
-    sa, sb = H @ box.span_dir
-    Hs = H[0] + np.clip((X @ box.span_dir - sa) / (sb - sa), -1, 2)[:, None] * (H[1] - H[0])
+    sa, sb = span_fractions(box, H)
+    Hs = H[0] + np.clip((f - sa) / (sb - sa), -1, 2)[:, None] * (H[1] - H[0])
     h = local_coords(box, Hs)[1]
     omega, _, _ = dev._axis(H, box.frame)
     R = rodrigues(omega, np.array([np.radians(dev.angle)]))[0]

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.box.box import Box
-from ffdcli.box.refine import edges_at, lattice_params
+from ffdcli.box.refine import edges_at, lattice_params, span_fractions
 from ffdcli.errors import InputError
 from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.lattice import evaluate
@@ -106,8 +106,7 @@ def hinge_samples(box: Box, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return ends[:, 2], ends[:, 1] - ends[:, 0]
     s = np.linspace(0.0, 1.0, HINGE_SAMPLES)[:, None]
     H = ends[0, 2] + s * (ends[1, 2] - ends[0, 2])
-    st = H @ box.span_dir
-    f = (st - box.stations[0]) / (box.stations[-1] - box.stations[0])
+    f = span_fractions(box, H)
     chords = np.array([np.subtract(*edges_at(box, x)[::-1]) for x in f])
     return H, chords
 
