@@ -103,7 +103,7 @@ def _device_schema(kind: str, part: str, down: str) -> dict:
                            f"blend: w, transition: c}}; angle in degrees, positive: {down} down; hinge: "
                            "chord fraction of the local chord at each end (a list of two: design "
                            "variables); blend: span width over which the rotation fades at each end "
-                           "(default 0.05); transition: chord width behind the hinge where the surface "
+                           "(default 0.2); transition: chord width behind the hinge where the surface "
                            "bends (default 0.1); in 2D no span and no blend",
             "type": "object", "additionalProperties": False, "required": ["hinge", "angle"],
             "properties": {

@@ -308,7 +308,9 @@ def _section_panel(ax, part: Part, label: str, value: float, j: int, q0, q1, nam
                                              colors=color, linewidths=lw, zorder=z))
             ax.autoscale_view()
         else:
-            o = _order_loop(q2)
+            # the cut points are material points: the deformed section in the original's order (a
+            # drooped flap is not star-shaped about its centroid)
+            o = _order_loop(q0) if len(q0) == len(q2) else _order_loop(q2)
             ax.plot(np.r_[q2[o, 0], q2[o[:1], 0]], np.r_[q2[o, 1], q2[o[:1], 1]], "-", lw=lw,
                     color=color, zorder=z)
     for P, color in ((part.P0, GREY), (part.P1, RED)):

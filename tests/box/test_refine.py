@@ -7,25 +7,20 @@ the shape variables of a refined lattice have exact derivatives.
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from test_derivatives import assert_matches_fd
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "parameterization"))
-from test_derivatives import assert_matches_fd  # noqa: E402
-
-from ffdcli.box.box import Box, fit_box  # noqa: E402
-from ffdcli.box.refine import apply_refine, refine_box, region_knots  # noqa: E402
-from ffdcli.design import refine_regions  # noqa: E402
-from ffdcli.errors import InputError  # noqa: E402
-from ffdcli.lattice.lattice import Lattice, evaluate  # noqa: E402
-from ffdcli.lattice.spline import basis, insertion_matrix, refinement_matrix  # noqa: E402
-from ffdcli.mesh import CellBlock  # noqa: E402
-from ffdcli.parameterization.changes import Shape, Twist, changes_from_spec  # noqa: E402
-from ffdcli.settings import BoxSettings  # noqa: E402
-from ffdcli.testing.wings import Planform, wing_surface  # noqa: E402
+from ffdcli.box.box import Box, fit_box
+from ffdcli.box.refine import apply_refine, refine_box, region_knots
+from ffdcli.design import refine_regions
+from ffdcli.errors import InputError
+from ffdcli.lattice.lattice import Lattice, evaluate
+from ffdcli.lattice.spline import basis, insertion_matrix, refinement_matrix
+from ffdcli.mesh import CellBlock
+from ffdcli.parameterization.changes import Shape, Twist, changes_from_spec
+from ffdcli.settings import BoxSettings
+from ffdcli.testing.wings import Planform, wing_surface
 
 
 @pytest.fixture(scope="module")

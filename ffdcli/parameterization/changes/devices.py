@@ -34,7 +34,7 @@ from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.lattice import evaluate
 
 #: Default span width (span fraction) over which a device's rotation fades at each end.
-DEFAULT_BLEND = 0.05
+DEFAULT_BLEND = 0.2
 #: Default chord width of the transition behind a flap's hinge (ahead of a slat's), local chords.
 DEFAULT_TRANSITION = 0.1
 #: Tolerance (parameter) when reading which knots are a device's.
