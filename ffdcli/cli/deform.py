@@ -91,7 +91,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     if design.data.get("constraints"):     # evaluated before writing: a bad item is exit 2, nothing written
         from ffdcli.api import constraints_report
 
-        constraints = constraints_report(run)
+        constraints = constraints_report(run, result.points)
     # every output once, together: rank 0 of an MPI run (every node's coordinates gathered there)
     written = write_outputs(run, result, plan=plan, progress=console.progress, comm=comm)
     su2_ffd = written.pop("su2_ffd", None)
