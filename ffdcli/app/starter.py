@@ -19,7 +19,7 @@ import numpy as np
 import yaml
 
 from ffdcli import __version__
-from ffdcli.app.pipeline import resolve_surface, space_dim
+from ffdcli.app.prepare import resolve_surface, space_dim
 from ffdcli.design import design_schema
 from ffdcli.errors import InputError
 from ffdcli.geometry.axes import AXIS_NAMES, detect_axes

@@ -388,7 +388,7 @@ def test_rotation_fade_bounds_the_overshoot(tmp_path):
     """
     import yaml
 
-    from ffdcli.app.pipeline import load_run
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
 
     root = Path(__file__).resolve().parents[2]
