@@ -165,22 +165,29 @@ def test_derivative_through_the_volume_motion_tets_and_quads(tmp_path):
         _fd_constraint(model, step=1e-4 if surface == "wing" else 1e-5)
 
 
-def test_the_constraint_sees_a_refusal_coming(tmp_path):
-    """A growing tip twist on the bundled rectangular wing, volume defaults, recovery off: the
-    constraint falls below its bound (0.3) at a twist the gate still accepts (45 deg), and is far
-    below it where the gate refuses (60 deg)."""
+@pytest.mark.parametrize("change, path", [
+    ({"twist": {"tip": 0}}, {15.0: "ok", 45.0: "warned", 60.0: "refused"}),
+    ({"dihedral": 0}, {20.0: "ok", 32.0: "warned", 38.0: "refused"}),
+])
+def test_the_constraint_sees_a_refusal_coming(tmp_path, change, path):
+    """A growing tip twist (dihedral) on the bundled rectangular wing, volume defaults, recovery off:
+    the constraint falls below its bound (0.3) at a value the gate still accepts, and is below 0 (a
+    cell inverted) where the gate refuses. (Measured on this mesh: the gate refuses from 48 deg of tip
+    twist, 36 deg of dihedral; mesh_quality crosses 0.3 near 33 and 27 deg.)"""
     design = tmp_path / "rect.yaml"
     design.write_text(json.dumps({"mesh": str(RECT), "surface": "wing", "box": {"points": [6, 8, 2]},
-                                  "changes": [{"twist": {"tip": 0}}], "constraints": MQ}))
+                                  "changes": [change], "constraints": MQ}))
     model = DesignModel.from_file(design, cache_dir=tmp_path)
-    seen = {}
-    for tip in (15.0, 45.0, 60.0):
-        model.set_values([tip])
+    for value, expect in path.items():
+        model.set_values([value])
         gate = deform(model.run, P=model.lattice(), recover=False).quality
-        seen[tip] = (float(model.constraint_values()[0]), gate.ok)
-    assert seen[15.0][0] > 0.3 and seen[15.0][1]
-    assert seen[45.0][0] < 0.3 and seen[45.0][1]             # warned before the gate fails ...
-    assert seen[60.0][0] < 0.0 and not seen[60.0][1]         # ... which it does at 60 deg (inverted cells)
+        mq = float(model.constraint_values()[0])
+        if expect == "ok":
+            assert gate.ok and mq > 0.3, (value, mq)
+        elif expect == "warned":                     # warned before the gate fails ...
+            assert gate.ok and mq < 0.3, (value, mq)
+        else:                                        # ... which it does here, with inverted cells
+            assert not gate.ok and gate.n_new_inverted > 0 and mq < 0.0, (value, mq)
 
 
 def test_a_step_up_the_gradient_raises_the_worst_cell(tmp_path):
@@ -228,6 +235,11 @@ def test_ffd_constraints_table_and_jacobian(tmp_path):
         np.testing.assert_allclose(z["jacobian"][1], model.constraint_jacobian()[1], rtol=1e-10)
     text = run_ffd("constraints", design, cwd=tmp_path).stdout
     assert "k1.mesh_quality" in text
+    # ffd deform --json reports it on the mesh it deformed (the same mesh here: no recovery needed)
+    proc = run_ffd("deform", design, "--json", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    got = {r["name"]: r for r in json.loads(proc.stdout)["constraints"]}
+    assert got["k1.mesh_quality"]["value"] == pytest.approx(rows["k1.mesh_quality"]["value"], rel=1e-12)
 
 
 def test_bad_input_names_the_key(tmp_path):
