@@ -24,7 +24,7 @@ Two levels:
   as SU2, cached by the hash of its parameters.
 
 The cells are in VTK order with positive volume and the boundary triangles face out of the fluid. A
-generated mesh with a cell of quality <= 0 (:func:`ffdcli.quality.gate.cell_quality`) is an error.
+generated mesh with a cell of quality <= 0 (:func:`ffdcli.quality.metrics.cell_quality`) is an error.
 gmsh (the ``[test]`` or ``[samples]`` extra) is imported only inside :func:`fluid_tets`, so this module
 and its cases import without it.
 """
@@ -43,7 +43,7 @@ import numpy as np
 from ffdcli.io.formats import write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
-from ffdcli.quality.gate import cell_quality
+from ffdcli.quality.metrics import cell_quality
 from ffdcli.testing.cells import tet_volumes
 from ffdcli.testing.planform import Planform, crm_planform
 from ffdcli.testing.prisms import add_prism_layers

@@ -14,7 +14,7 @@ import numpy as np
 
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
-from ffdcli.quality.gate import cell_quality
+from ffdcli.quality.metrics import cell_quality
 
 
 def add_prism_layers(points: np.ndarray, tets: np.ndarray, markers: dict[str, np.ndarray], *,
