@@ -173,8 +173,7 @@ def test_function_local_imports_only_in_cli_or_for_optional_packages():
 
 
 #: Being split (issue 27): each leaves this list when it is under the limit.
-SPLITTING = {"volume/warp.py", "lattice/embedding.py",
-             "io/formats/cgns.py"}
+SPLITTING = {"volume/warp.py", "lattice/embedding.py", "io/formats/cgns.py"}
 #: Functions over 100 lines being split (issue 27), as "module:function".
 LONG_FUNCTIONS = {"box/imported.py:import_box", "io/formats/cgns.py:_read_tree", "io/formats/su2_ffd.py:parse_section",
                   "volume/warp.py:prepare_warp"}

@@ -13,6 +13,9 @@ from ffdcli.constraints import (
     evaluate,
     satisfied,
 )
+from ffdcli.design.schema import constraints_schema
+from ffdcli.design.validate import validate_section
+from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_write
 
 
@@ -46,7 +49,16 @@ class ConstraintsMixin:
         return self._static["constraints"]
 
     def set_constraints(self, specs, component: int = 0) -> None:
-        """Replace the constraints of one component (default the first) by a ``constraints:`` list."""
+        """Replace the constraints of one component (default the first, by index) by a ``constraints:``
+        list. Checked as a design file's ``constraints:`` is (the schema's words, the key path): an
+        :class:`~ffdcli.errors.InputError` for a bad item or a component that does not exist."""
+        n = len(self.run.components)
+        if isinstance(component, bool) or not isinstance(component, (int, np.integer)) or not 0 <= component < n:
+            raise InputError(f"set_constraints: component {component!r} does not exist; the design has {n} "
+                             f"component{'s' if n > 1 else ''} (index 0{f' to {n - 1}' if n > 1 else ''})")
+        at = ("components", int(component), "constraints") if "components" in (self.run.design.data or {}) \
+            else ("constraints",)
+        validate_section(specs, constraints_schema(), at)
         groups = [g for g in self.constraint_groups if g[0] != component]
         groups.append((component, self._build_constraints(specs, component)))
         self._static["constraints"] = sorted(groups, key=lambda g: g[0])

@@ -71,8 +71,11 @@ def box_of(mesh, *, surfaces=(), options: dict | None = None, lattice_out=None, 
     inputs = (mpath, mesh if design is not None else None, options.get("file"), settings.file)
     plan = plan_outputs([("lattice", out, False, "--lattice"), ("plot3d", export_plot3d, False, "--export-plot3d")],
                         inputs=inputs)          # every output checked before the work
-    prep = prepare_box(mesh_path, surface, settings, cache_dir=cache_dir, rebuild=rebuild, progress=progress,
-                       comm=comm)
+    if design is not None and not surfaces and not options:      # the whole file checked (changes, bounds)
+        prep = load_run(design, cache_dir=cache_dir, rebuild=rebuild, progress=progress, comm=comm).prep
+    else:
+        prep = prepare_box(mesh_path, surface, settings, cache_dir=cache_dir, rebuild=rebuild, progress=progress,
+                           comm=comm)
     writers = {"lattice": lambda tmp: write_lattice_vtk(tmp, prep.box.control_points)}
     if export_plot3d:
         writers["plot3d"] = lambda tmp: write_plot3d(tmp, [prep.box.control_points])

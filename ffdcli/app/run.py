@@ -323,7 +323,9 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
         if junction is not None and junction.frozen:
             changes = comp_mod.check_body_changes(spec, changes, junction, error)
         comps.append(comp_mod.Component(spec=spec, prep=prep, changes=tuple(changes), junction=junction))
+        comp_mod.check_frozen_motion(comps[-1], error)
     if len(comps) > 1:
         comp_mod.check_shared_nodes(comps, path=design.path)
         comp_mod.check_overlap(comps, path=design.path)
+    comp_mod.variable_bounds(comps, design)      # bounds: checked for every command, as DesignModel does
     return DesignRun(design=design, components=comps, comm=comm, _quality_part=None if part is None else (part, None))
