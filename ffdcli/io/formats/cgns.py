@@ -18,7 +18,9 @@ Conventions of the :class:`~ffdcli.mesh.Mesh` returned by :func:`read`:
   order: CGNS and VTK agree for the linear types except the prism (``PENTA_6``), whose two triangles
   are reversed (:data:`WEDGE_CGNS_TO_VTK`, both ways). Higher-order elements keep their corner nodes.
   ``MIXED`` sections are split by type and by dimension (their faces are boundary elements).
-  ``NGON_n``/``NFACE_n`` sections are skipped (listed in ``source.skipped``, with a warning).
+  ``NGON_n``/``NFACE_n`` sections are read as polyhedral cells (:mod:`ffdcli.io.formats.cgns_ngon`,
+  ``mesh.polyhedra``; the standard volume cells of other zones then become polyhedra too, one cell
+  model per mesh). An element type ffd cannot read is an InputError naming the section, never skipped.
   Structured zones become hexahedra (3D) or quads, mirrored for a left-handed block so that cell
   volumes (areas of a planar 2D mesh) are positive; quads of a surface in space keep the file's
   orientation.
@@ -52,7 +54,6 @@ from __future__ import annotations
 import shutil
 import subprocess
 import tempfile
-import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -61,9 +62,11 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.formats import cgns_ngon
 from ffdcli.io.formats.common import check_finite_rows
 from ffdcli.mesh import CELL_DIM, CELL_NODES, CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
+from ffdcli.mesh.polyhedra import concat_polyhedra, polyhedra_from_cells
 from ffdcli.parallel.partition import local_mesh_of_blocks, localize, node_owners
 
 HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -306,7 +309,7 @@ class _Section:
         return out
 
 
-def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str]) -> _Section | None:
+def _read_section(sec, offset: int, n_points: int, file: Path):
     head = _data(sec)
     rng = _index_data(sec, "ElementRange")
     conn = _index_data(sec, "ElementConnectivity")
@@ -317,10 +320,9 @@ def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str
     start, end = (int(v) for v in rng.ravel())
     n = end - start + 1
     conn = conn.ravel()
-    if code in (NGON_N, NFACE_N):
-        skipped.append(f"{sec.name}: {'NGON_n' if code == NGON_N else 'NFACE_n'} polyhedral elements "
-                       "are not supported (skipped)")
-        return None
+    if code in (NGON_N, NFACE_N):          # polyhedra: faces and cells (one model with OpenFOAM)
+        return cgns_ngon.read_section(sec, code, start, end, conn, _index_data(sec, "ElementStartOffset"),
+                                      offset, n_points, file)
     if code == MIXED:
         table = _nodes_per_type_table()
         starts = _index_data(sec, "ElementStartOffset")
@@ -334,8 +336,8 @@ def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str
         codes = conn[offsets[:-1]]
     else:
         if code not in ELEMENT_TYPES:
-            skipped.append(f"{sec.name}: element type code {code} is not supported (skipped)")
-            return None
+            raise InputError(f"element type code {code} is not supported (ffd reads the linear and higher-order "
+                             "standard elements, MIXED, NGON_n and NFACE_n)", path=file, key=sec.name)
         npe = ELEMENT_TYPES[code][1]
         if conn.size != n * npe:
             raise InputError(f"ElementConnectivity has {conn.size} entries, expected {n} x {npe}",
@@ -348,8 +350,7 @@ def _read_section(sec, offset: int, n_points: int, file: Path, skipped: list[str
     for c in np.unique(codes):
         c = int(c)
         if c not in ELEMENT_TYPES:
-            skipped.append(f"{sec.name}: element type code {c} inside MIXED is not supported (skipped)")
-            continue
+            raise InputError(f"element type code {c} inside MIXED is not supported", path=file, key=sec.name)
         t, npe = ELEMENT_TYPES[c]
         k = CELL_NODES[t]
         which = np.flatnonzero(codes == c)
@@ -709,6 +710,7 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
     ms = _MarkerSet()
     zones: list[CgnsZone] = []
     skipped: list[str] = []
+    polys: list = []
     surface_cells: dict[str, list[tuple[np.ndarray, list[CellBlock]]]] = {}
     section_markers: list[tuple[str, list[CellBlock]]] = []
     offset = 0
@@ -747,10 +749,14 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
                 if rows is not None:        # one rank's rows of a volume section (BCs never name them)
                     in_order.append(rows)
                     continue
-                got = _read_section(sec, offset, n_points, file, skipped)
-                if got is not None:
-                    in_order.append(len(sections))
-                    sections.append(got)
+                in_order.append(len(sections))
+                sections.append(_read_section(sec, offset, n_points, file))
+            poly = cgns_ngon.zone_polyhedra(sections, pts, offset, cell_dim, file)
+            if poly is not None:
+                if share is not None:
+                    raise InputError("MPI runs on NGON_n/NFACE_n (polyhedral) zones are not supported yet; run "
+                                     "without mpiexec", path=file, key=zn.name)
+                polys.append(poly)
             used: set[int] = set()
             for zbc in _children(zn, "ZoneBC_t"):
                 for bc in _children(zbc, "BC_t"):
@@ -761,6 +767,8 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
                     zone_blocks.append(si)
                     continue
                 s = sections[si]
+                if isinstance(s, cgns_ngon.PolySection):       # polyhedra: read above, never a marker
+                    continue
                 # a MIXED section may hold both volume cells and boundary faces: split by dimension
                 inner = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
                          if t in s.blocks and CELL_DIM[t] >= cell_dim]
@@ -794,14 +802,19 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
         if name not in markers and np.all(np.ptp(every, axis=0) > 0):
             markers[name] = _merge([b for _, blocks in parts for b in blocks])
     markers = {k: _merge(v) for k, v in markers.items()}
-    if skipped:
-        warnings.warn(f"{file}: " + "; ".join(skipped), stacklevel=3)
     cell_blocks = ([CellBlock(t, np.vstack(cells[t])) for t in _TYPE_ORDER if t in cells] if share is None
                    else [r for t in _TYPE_ORDER for r in cells.get(t, [])])
+    polyhedra = None
+    if polys:           # one cell model for the mesh: the other zones' volume cells become polyhedra too
+        volume = [b for b in cell_blocks if CELL_DIM[b.type] == 3]
+        if volume:
+            polys.append(polyhedra_from_cells(volume)[0])
+        polyhedra = concat_polyhedra(polys)
+        cell_blocks = [b for b in cell_blocks if CELL_DIM[b.type] != 3]
     source = CgnsSource(container, zones, {k: _merge(v) for k, v in ms.by_bc.items()}, ms.bc_family,
                         skipped)
     mesh = Mesh(points=np.vstack(points), dim=dim, cells=cell_blocks, markers=markers, path=file,
-                format="cgns", source=source)
+                format="cgns", source=source, polyhedra=polyhedra)
     return mesh if share is None else (mesh, point_rows)
 
 
