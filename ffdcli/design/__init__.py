@@ -14,7 +14,7 @@ The parts, each readable alone:
 
 Every problem is an :class:`~ffdcli.errors.InputError` naming the file, the key path and the line.
 
-Defaults where SPEC.md is silent (documented in the README):
+Defaults where SPEC.md is silent (documented in docs/design-file.md):
 
 - ``output.mesh``: ``out/<design stem><mesh suffix>`` beside the design file, so that two designs
   of one mesh never overwrite each other; ``output.lattice``: ``out/<design stem>_lattice.vtk``;
