@@ -23,6 +23,8 @@ from hostile import (
     no_parts,
     snapshot,
 )
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 pytest_plugins = ["hostile"]        # the workspaces: fixtures ws, ws2
 
@@ -446,3 +448,179 @@ def test_imported_lattice_total_is_bounded(ws2):
                    names=["big_box.xyz"])
     (ws2 / "big_box.xyz").unlink()
 
+
+
+# ----------------------------------------------------------------------------------------------
+# Issue 29: the whole file is checked the same way by every command (bounds: included)
+# ----------------------------------------------------------------------------------------------
+
+BAD_BOUNDS = {
+    "outside": ({"c0.twist": [-1, 1]}, "outside its bounds", "bounds.c0.twist"),
+    "unknown": ({"c9.span": [0.5, 2]}, "no design variable", "bounds.c9.span"),
+    "reversed": ({"c1.chord": {"lower": 2, "upper": 1}}, "above the upper", "bounds.c1.chord"),
+    "not_numbers": ({"c0.twist": ["a", 1]}, "", "bounds.c0.twist"),
+}
+COMMANDS = {"deform": ["deform", "{d}", "-o", "out_b.su2"], "box": ["box", "{d}"],
+            "plot": ["plot", "{d}", "-o", "b.png"], "vars": ["vars", "{d}"], "constraints": ["constraints", "{d}"],
+            "jacobian": ["jacobian", "{d}", "-o", "b.npz"], "grad": ["grad", "{d}", "--sens", "good.yaml"]}
+
+
+@pytest.mark.parametrize("bad", list(BAD_BOUNDS))
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_every_command_checks_the_bounds_the_same_way(ws, command, bad):
+    """The probe: deform, box and plot wrote a design whose value lies outside its bounds (or whose
+    bounds name no variable, or run backwards) with exit 0, while vars, constraints and grad refused it."""
+    spec, words, key = BAD_BOUNDS[bad]
+    name = edit_design(ws, f"bounds_{bad}.yaml", lambda d: d.update(bounds=spec))
+    args = [a.format(d=name) for a in COMMANDS[command]]
+    line = assert_hostile(ws, args, 2, words, names=[f"{name}:", key])
+    assert line.count("ffd: error:") == 1
+
+
+# ----------------------------------------------------------------------------------------------
+# Issue 29: a design whose variables cannot move anything is exit 2 naming the key
+# ----------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def body(tmp_path_factory):
+    d = tmp_path_factory.mktemp("body")
+    shutil.copyfile(SAMPLES / "wing_body.su2", d / "wing_body.su2")
+    return d
+
+
+def _body_design(folder, points, changes, root=None):
+    box = {"points": list(points)} | ({"root": root} if root else {})
+    text = yaml.safe_dump({"mesh": "wing_body.su2", "surface": "wing", "box": box, "changes": changes},
+                          sort_keys=False)
+    path = folder / f"body_{points[1]}_{root}_{abs(hash(text)) % 10**8}.yaml"
+    path.write_text(text)
+    return path
+
+
+BODY_CHANGES = [[{"twist": {"tip": 4}}], [{"dihedral": 3}], [{"sweep": 5}], [{"chord": {"tip": 0.8}}],
+                [{"span": 1.1}], [{"twist": {"tip": 0}}, {"dihedral": -2}]]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sections", [3, 4])
+@pytest.mark.parametrize("changes", BODY_CHANGES, ids=lambda c: "+".join(next(iter(x)) for x in c))
+def test_a_wing_on_a_body_whose_sections_are_all_frozen_is_refused(body, sections, changes):
+    """The probe: ``box.points=[6,4,2]`` on the wing on a body deformed nothing with exit 0 (every
+    section carries the junction). Every non-zero change is exit 2 naming its key and line."""
+    from ffdcli.app.run import load_run
+    from ffdcli.design import load_design
+    from ffdcli.errors import InputError
+
+    path = _body_design(body, (6, sections, 2), changes)
+    with pytest.raises(InputError) as e:
+        load_run(load_design(path))
+    k = next(i for i, c in enumerate(changes) if next(iter(c.values())) not in ({"tip": 0},))
+    msg = str(e.value)
+    assert f"{path.name}:" in msg and f"changes[{k}].{next(iter(changes[k]))}" in msg and "box.points" in msg, msg
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("changes", BODY_CHANGES[:3], ids=lambda c: "+".join(next(iter(x)) for x in c))
+def test_a_root_at_the_wrong_end_is_refused_naming_box_root(body, changes):
+    from ffdcli.app.run import load_run
+    from ffdcli.design import load_design
+    from ffdcli.errors import InputError
+
+    path = _body_design(body, (6, 10, 2), changes, root="max")
+    with pytest.raises(InputError) as e:
+        load_run(load_design(path))
+    assert "box.root" in str(e.value) and f"{path.name}:" in str(e.value), str(e.value)
+
+
+@pytest.mark.slow
+def test_a_wing_on_a_body_with_free_sections_still_moves(body):
+    """The control: enough sections, the root where the body is: the design moves the wing."""
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
+    from ffdcli.design import load_design
+
+    run = load_run(load_design(_body_design(body, (6, 6, 2), [{"twist": {"tip": 4}}])))
+    assert deform(run, check=False).max_displacement > 1e-3
+
+
+@pytest.mark.slow
+def test_the_probe_frozen_case_through_the_command_line(body):
+    data = yaml.safe_load((REPO / "configs" / "wing_body.yaml").read_text())
+    data["mesh"] = "wing_body.su2"
+    data.pop("output")
+    (body / "wb.yaml").write_text(yaml.safe_dump(data, sort_keys=False))
+    proc = run_ffd("deform", "wb.yaml", "--set", "box.points=[6,4,2]", "-o", "wb_out.su2", "--json", cwd=body)
+    assert_clean_failure(proc, 2, "wb.yaml:", "changes[0].twist")
+    assert not (body / "wb_out.su2").exists()
+
+
+# ----------------------------------------------------------------------------------------------
+# Issue 29: every input error names the file, the line and the full key path
+# ----------------------------------------------------------------------------------------------
+
+TWIST_PROBLEMS = [({"tip": 1, "values": [1, 2]}, "values"), ({"root": 1}, "root"), ({"axis": 0.25}, None),
+                  ({"tip": 1, "angle": 2}, "angle")]
+
+
+@settings(max_examples=30, deadline=None, derandomize=True)
+@given(n_comp=st.integers(1, 3), data=st.data())
+def test_errors_inside_a_component_name_the_full_key_path_and_line(n_comp, data):
+    """The probe: a twist error inside components[1] was reported as ``changes[0].twist`` with no line."""
+    from ffdcli.design.validate import validate
+    from ffdcli.design.yamlmap import load_yaml, yaml_lines
+    from ffdcli.errors import InputError
+
+    c = data.draw(st.integers(0, n_comp - 1))
+    k = data.draw(st.integers(0, 2))
+    bad, sub = data.draw(st.sampled_from(TWIST_PROBLEMS))
+    comps = []
+    for i in range(n_comp):
+        changes = [{"span": 1.0}] * 3
+        if i == c:
+            changes = changes[:k] + [{"twist": bad}] + changes[k + 1:]
+        comps.append({"name": f"part{i}", "surface": f"m{i}", "changes": changes})
+    text = yaml.safe_dump({"mesh": "m.su2", "components": comps}, sort_keys=False)
+    data_, lines = load_yaml(text), yaml_lines(text)
+    with pytest.raises(InputError) as e:
+        validate(data_, path="d.yaml", lines=lines)
+    key = f"components[{c}].changes[{k}].twist"
+    assert e.value.key in (key, f"{key}.{sub}"), (e.value.key, key)
+    assert e.value.line is not None
+    assert text.splitlines()[e.value.line - 1].strip().startswith(("- twist", "twist", "tip", "root", "values",
+                                                                   "axis", "angle", "-")), (e.value.line, text)
+
+
+# ----------------------------------------------------------------------------------------------
+# Issue 29: thickness stations: the schema and the run agree
+# ----------------------------------------------------------------------------------------------
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(x=st.one_of(st.sampled_from([0.0, 1.0, -0.0, 1e-300, 1 - 1e-16, 0.5, -1e-9, 1 + 1e-9]),
+                   st.floats(-0.5, 1.5, allow_nan=False)), which=st.sampled_from(["chord", "span"]))
+def test_thickness_stations_schema_and_run_agree(x, which):
+    """The probe: chord stations 0 and 1 passed the schema (and the docs) and failed at run time, with a
+    hint naming the trailing edge for chord 0. Now chord stations lie strictly inside (0, 1) for both."""
+    import jsonschema
+
+    from ffdcli.constraints.geometric import _fractions
+    from ffdcli.design.schema import constraints_schema
+    from ffdcli.errors import InputError
+
+    item = {"thickness": {"chord": [0.5], "span": [0.5]}}
+    item["thickness"][which] = [x]
+    schema_ok = jsonschema.Draft202012Validator(constraints_schema()).is_valid([item])
+    try:
+        _fractions(item["thickness"], which, "constraints[0].thickness", lambda m, k: InputError(m, key=k))
+        run_ok = True
+    except InputError:
+        run_ok = False
+    assert schema_ok == run_ok
+    assert schema_ok == ((0 < x < 1) if which == "chord" else (0 <= x <= 1))
+
+
+@pytest.mark.parametrize("x", [0, 1])
+def test_chord_station_at_an_edge_names_the_key_and_line(ws, x):
+    name = edit_design(ws, f"chord_{x}.yaml", lambda d: d.update(
+        constraints=[{"thickness": {"chord": [0.3, x], "span": [0.5]}}]))
+    assert_hostile(ws, ["constraints", name], 2, "less than 1" if x else "greater than 0",
+                   names=[f"{name}:", "constraints[0].thickness.chord[1]"])
