@@ -12,9 +12,7 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
-import threading
 import time
 from pathlib import Path
 
@@ -24,8 +22,6 @@ from conftest import file_hash, popen_ffd, run_ffd
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from wingcase import write_design, write_volume_wing
-
-from ffdcli.io.atomic import interrupts_outside_compilers
 
 N, M = 6, 8     # lattice points chordwise and spanwise of write_design's default box (6, 8, 2)
 
@@ -261,33 +257,3 @@ def test_concurrent_runs_share_the_cache(tmp_path):
     assert json.loads(proc.stdout)["from_cache"] is True
     assert file_hash(tmp_path / "out_c.su2") == file_hash(tmp_path / "out_a.su2")
     assert file_hash(mesh) == mesh_hash
-
-
-
-def test_an_interrupt_inside_numba_is_held_until_it_returns():
-    """Ctrl-C while numba/llvmlite code is on the stack is held (raising it there crashed the
-    interpreter) and raised once that code has returned; elsewhere at once."""
-    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
-        pytest.skip("signals are handled in the main thread of a POSIX process")
-    fake = {"__file__": os.path.join(os.sep, "x", "numba", "core", "fake.py")}
-    exec(compile("def inside(f):\n    return f()\n", fake["__file__"], "exec"), fake)   # a frame "in numba"
-    seen = []
-
-    def busy():
-        os.kill(os.getpid(), signal.SIGINT)
-        t0 = time.perf_counter()
-        while time.perf_counter() - t0 < 0.2:      # the interrupt arrives here, "in numba": held
-            pass
-        seen.append("returned")
-
-    with interrupts_outside_compilers():
-        with pytest.raises(KeyboardInterrupt):
-            fake["inside"](busy)
-            t0 = time.perf_counter()
-            while time.perf_counter() - t0 < 2.0:  # raised within a poll of leaving numba
-                pass
-        assert seen == ["returned"]
-        with pytest.raises(KeyboardInterrupt):     # outside numba: at once
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(2.0)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
