@@ -441,10 +441,10 @@ def make_volume_sens(out: Path) -> dict:
     Not an adjoint solution (SU2 is not available where the samples are made): a real sensitivity of
     a functional known in closed form, so that ``ffd grad`` has a file to read and its answer can be
     checked (README, docs/su2.md). The volume and its exact gradient are those of ffd's ``volume``
-    constraint (:class:`ffdcli.constraints.geometric.Volume`: the half wing closed by its symmetry plane z = 0).
+    constraint (:class:`ffdcli.constraints.volume.Volume`: the half wing closed by its symmetry plane z = 0).
     The marker's triangles face into the wing (out of the fluid), hence the sign.
     """
-    from ffdcli.constraints.geometric import Volume, surface_triangles
+    from ffdcli.constraints import Volume, surface_triangles
     from ffdcli.geometry.surface import extract_surface
     from ffdcli.io.formats import read_mesh
 

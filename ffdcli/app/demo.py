@@ -12,8 +12,10 @@ import sys
 import time
 from pathlib import Path
 
+from ffdcli.app.deformation import deform
 from ffdcli.app.fit import fit_design
-from ffdcli.app.pipeline import deform, load_run, write_outputs
+from ffdcli.app.run import load_run
+from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
 from ffdcli.errors import FfdError
 from ffdcli.io.atomic import atomic_write

@@ -189,7 +189,7 @@ def output_schema() -> dict:
 
 
 def constraints_schema() -> dict:
-    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints.geometric`)."""
+    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints`)."""
     frac = {"type": "number", "minimum": 0, "maximum": 1}
     fracs = {"type": "array", "items": frac, "minItems": 1}
     bound = {"type": ["number", "null"]}

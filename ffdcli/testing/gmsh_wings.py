@@ -19,7 +19,7 @@ Every mesh is a half wing whose root lies in a symmetry plane and whose TIP IS I
   inverts.
 
 Markers: ``wing``, ``symmetry``, ``farfield``. The cells are in VTK order with positive volume
-(checked with :func:`ffdcli.quality.gate.cell_quality`: a generated mesh with a cell of quality <= 0 is an
+(checked with :func:`ffdcli.quality.metrics.cell_quality`: a generated mesh with a cell of quality <= 0 is an
 error). :data:`CASES` names a set with variety; :func:`write_case` writes one as SU2, cached by the
 hash of its parameters.
 """
@@ -36,7 +36,7 @@ import numpy as np
 from ffdcli.io.formats import write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
-from ffdcli.quality.gate import cell_quality
+from ffdcli.quality.metrics import cell_quality
 from ffdcli.testing.wings import Planform, crm_planform
 
 #: Bump when the generator changes what it writes (part of the cache key).
