@@ -554,7 +554,7 @@ def read_sensitivity_for(model: DesignModel, path, *, points=None):
     design being differentiated). Returns (g (N, 3) dense, Sensitivity)."""
     mesh = model.run.prep.mesh
     pts = model.mesh_points() if points is None else points
-    sens = read_sensitivity(path, pts, mesh.dim)
+    sens = read_sensitivity(path, pts, mesh.dim, mesh=mesh)
     return sens.to_dense(mesh.n_points), sens
 
 

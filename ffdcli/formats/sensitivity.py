@@ -115,8 +115,12 @@ def _parse_rows(text: str, p: Path):
     return data, _Rows(linenos, header)
 
 
-def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None) -> Sensitivity:
-    """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3)."""
+def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None,
+                     mesh=None) -> Sensitivity:
+    """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3).
+
+    ``mesh`` (:class:`ffdcli.mesh.Mesh`, optional): needed for SU2's continuous-adjoint file, whose
+    gradient is −S n̂ from its ``Surface_Sensitivity`` column (:func:`surface_sensitivity_rows`)."""
     p = Path(path)
     if existing_kind(p) is None:
         raise InputError("no such sensitivity file", path=p)
@@ -137,7 +141,7 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         idc = next(col[h] for h in ID_COLUMNS if h in col)
         names = ["sensitivity_x", "sensitivity_y", "sensitivity_z"][:gd]
         missing = [n for n in names if n not in col]
-        if missing:
+        if missing and "surface_sensitivity" not in col:
             raise InputError(f"missing column(s) {', '.join(missing)}; expected {', '.join(names)}",
                              path=p, line=1)
         ids = data[:, idc]
@@ -147,7 +151,9 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
                              path=p, line=lines.lineno(bad))
         ids = ids.astype(np.int64)
         values = np.zeros((len(ids), 3))
-        values[:, :gd] = data[:, [col[n] for n in names]]
+        if not missing:
+            values[:, :gd] = data[:, [col[n] for n in names]]
+        values = surface_sensitivity_rows(values, data, col, ids, points, mesh, p)
         worst = float("nan")
         cc = [c for c in ("x", "y", "z")[:gd] if c in col]
         if len(cc) == gd:
@@ -176,3 +182,22 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         node = int(uniq[counts > 1][0])
         raise InputError(f"two rows give mesh node {node}", path=p)
     return Sensitivity(ids=ids, values=values, matched_by=how, worst_distance=worst)
+
+
+def surface_sensitivity_rows(values: np.ndarray, data: np.ndarray, col: dict, ids: np.ndarray, points: np.ndarray,
+                             mesh, p: Path) -> np.ndarray:
+    """The rule that an all-zero sensitivity is never a gradient: ``values`` (K, 3) as read, unless every
+    ``Sensitivity_*`` column is zero. Then SU2's continuous-adjoint file (a ``Surface_Sensitivity``
+    column S) gives dJ/dX = −S n̂ (:func:`ffdcli.formats.wall_normals.surface_sensitivity_gradient`,
+    which needs ``mesh``); any other all-zero file is an :class:`InputError`."""
+    if np.any(values):
+        return values
+    if "surface_sensitivity" not in col:
+        raise InputError("every Sensitivity_x/y/z value is zero: that is no gradient (a continuous adjoint "
+                         "writes its sensitivity in a Surface_Sensitivity column, which this file lacks)", path=p)
+    if mesh is None:
+        raise InputError("this is a continuous-adjoint file (Sensitivity_x/y/z all zero, Surface_Sensitivity "
+                         "given): reading it as dJ/dX = -S n needs the mesh", path=p)
+    from ffdcli.formats.wall_normals import surface_sensitivity_gradient
+
+    return surface_sensitivity_gradient(mesh, points, ids, data[:, col["surface_sensitivity"]])
