@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ffdcli.errors import InputError
-from ffdcli.inputs import check_input_file, existing_kind
+from ffdcli.io.inputs import check_input_file, existing_kind
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import yaml
 
-from ffdcli.atomic import atomic_write
+from ffdcli.io.atomic import atomic_write
 from ffdcli.errors import InputError
 
 _PART = re.compile(r"([A-Za-z_]+)|\[(\d+)\]")

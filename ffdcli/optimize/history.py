@@ -17,9 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.atomic import atomic_path, atomic_write
+from ffdcli.io.atomic import atomic_path, atomic_write
 from ffdcli.optimize.store import Evaluation
-from ffdcli.plot import _pyplot
+from ffdcli.viz.plot import _pyplot
 
 
 def history_rows(evaluations: list[Evaluation], *, objective: str, functions: list[str], constraint_names: list[str],

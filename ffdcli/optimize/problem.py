@@ -20,8 +20,8 @@ import numpy as np
 from ffdcli.errors import InputError, QualityError
 from ffdcli.optimize.solvers.base import Solver, SolverFailure
 from ffdcli.optimize.store import Evaluation, EvaluationStore
-from ffdcli.outputs import plan_outputs
-from ffdcli.pipeline import deform, write_outputs
+from ffdcli.io.outputs import plan_outputs
+from ffdcli.app.pipeline import deform, write_outputs
 from ffdcli.quality import enforce
 
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.atomic import atomic_write
+from ffdcli.io.atomic import atomic_write
 from ffdcli.errors import InputError
 
 

@@ -27,7 +27,7 @@ import numpy as np
 import yaml
 
 from ffdcli.errors import InputError
-from ffdcli.formats import read_mesh
+from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.base import FlowResult, Sensitivity, Solver, SolverFailure, SolverInfo
 
 FUNCTIONS = ("DRAG", "LIFT", "MOMENT_Z")

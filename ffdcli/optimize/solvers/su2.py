@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
-from ffdcli.formats import read_mesh
-from ffdcli.formats.wall_normals import surface_sensitivity_gradient
+from ffdcli.io.formats import read_mesh
+from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
 from ffdcli.optimize.solvers.base import (
     FlowResult,
     Sensitivity,
