@@ -273,6 +273,8 @@ def optimize_schema() -> dict:
             "feasibility": {**positive(), "description": "a constraint counts as met within this (default 1e-4)"},
             "step": {**positive(), "description": "the first step of the optimiser as a fraction of each "
                                                   "variable's bound range (default 0.1)"},
+            "warm_start": {"type": "boolean", "description": "start each solve from the nearest finished "
+                                                             "evaluation's solution (default true)"},
             "line_search": {"type": "integer", "minimum": 1,
                             "description": "evaluations of one line search before the run ends (default 4)"},
         }}

@@ -40,15 +40,18 @@ class OptimizationProblem:
         The solver's functions that the run needs (objective first); each gets an adjoint.
     report : callable, optional
         Called with each evaluation once it is finished (a flow, or its adjoints): the progress line.
+    warm_start : bool
+        Offer the solver the nearest finished evaluation's folder to start from.
     """
 
     def __init__(self, model, solver: Solver, store: EvaluationStore, functions: list[str],
-                 report: Callable[[Evaluation, str], None] | None = None):
+                 report: Callable[[Evaluation, str], None] | None = None, warm_start: bool = True):
         self.model = model
         self.solver = solver
         self.store = store
         self.functions = list(functions)
         self.report = report or (lambda ev, stage: None)
+        self.warm_start = warm_start
         self.iteration = 0
         self.counts = {"flow": 0, "adjoint": 0, "evaluations": 0, "reused": 0}
         self.seconds = {"solver": 0.0, "ffd": 0.0}
@@ -96,7 +99,7 @@ class OptimizationProblem:
         if ev.failed is None:
             ran = True
             try:
-                flow = self.solver.flow(ev.folder, ev.folder / self.mesh_name)
+                flow = self.solver.flow(ev.folder, ev.folder / self.mesh_name, start=self._nearest(ev.values))
                 t_solver = flow.seconds
                 missing = [f for f in self.functions if f not in flow.functions]
                 if missing:
@@ -116,7 +119,6 @@ class OptimizationProblem:
 
     def _adjoints(self, ev: Evaluation) -> Evaluation:
         """Run the adjoint of every function still missing and chain each to dJ/dv (n_vars,)."""
-        model = self.model
         grads = dict(ev.gradients)
         t_solver = t_ffd = 0.0
         mesh_path = ev.folder / self.mesh_name
@@ -124,7 +126,7 @@ class OptimizationProblem:
             if name in grads:
                 continue
             try:
-                sens = self.solver.adjoint(ev.folder, mesh_path, name)
+                sens = self.solver.adjoint(ev.folder, mesh_path, name, start=self._nearest(ev.values, name))
             except SolverFailure as e:
                 self.counts["adjoint"] += 1
                 ev = ev.with_(failed=f"adjoint of {name}: {e.reason}", log=None if e.log is None else str(e.log))
@@ -134,14 +136,26 @@ class OptimizationProblem:
             t0 = time.perf_counter()
             grads[name] = self.chain(ev.values, sens)
             t_ffd += time.perf_counter() - t0
-            ev = ev.with_(solves={**ev.solves, "adjoint": ev.solves["adjoint"] + 1})
-        ev = ev.with_(gradients=grads, seconds={"solver": ev.seconds["solver"] + t_solver,
-                                                "ffd": ev.seconds["ffd"] + t_ffd})
+            ev = ev.with_(solves={**ev.solves, "adjoint": ev.solves["adjoint"] + 1}, gradients=dict(grads),
+                          seconds={"solver": ev.seconds["solver"] + sens.seconds,
+                                   "ffd": ev.seconds["ffd"] + time.perf_counter() - t0})
+            ev = self.store.save(ev)             # each finished adjoint kept (Ctrl-C loses none)
         self.seconds["solver"] += t_solver
         self.seconds["ffd"] += t_ffd
         ev = self.store.save(ev)
         self.report(ev, "adjoint")
         return ev
+
+    def _nearest(self, values: np.ndarray, adjoint_of: str | None = None) -> Path | None:
+        """The folder of the finished evaluation nearest to ``values`` (with the adjoint of ``adjoint_of``
+        when given): where the solver may start from. None when warm starts are off or none exists."""
+        if not self.warm_start:
+            return None
+        done = [e for e in self.store.all() if e.failed is None and e.functions
+                and (adjoint_of is None or adjoint_of in e.gradients) and not np.array_equal(e.values, values)]
+        if not done:
+            return None
+        return min(done, key=lambda e: float(np.linalg.norm(e.values - values))).folder
 
     def chain(self, values: np.ndarray, sens) -> np.ndarray:
         """dJ/dv (n_vars,) of a solver's dJ/dX (:class:`~ffdcli.optimize.solvers.base.Sensitivity`) at the

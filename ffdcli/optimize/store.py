@@ -74,7 +74,7 @@ def file_hash(path: Path) -> str:
 
 #: Keys of ``optimize:`` that steer the optimiser but do not change what an evaluation computes.
 RUN_KEYS = ("iterations", "tolerance", "max_failures", "method", "line_search", "step", "scale", "folder",
-            "feasibility", "functions", "objective", "variables")
+            "feasibility", "functions", "objective", "variables", "warm_start")
 
 
 def inputs_hash(mesh: Path, solver_state: str, data: dict, names: list[str]) -> str:

@@ -81,7 +81,7 @@ class AnalyticSolver(Solver):
         ids = mesh.marker_point_ids(marker)
         return ids, mesh.points[ids]
 
-    def flow(self, folder: Path, mesh: Path) -> FlowResult:
+    def flow(self, folder: Path, mesh: Path, start: Path | None = None) -> FlowResult:
         t0 = time.perf_counter()
         self.flows += 1
         log = folder / "flow.log"
@@ -100,7 +100,7 @@ class AnalyticSolver(Solver):
             raise SolverFailure(failed, log)
         return FlowResult(functions=values, seconds=time.perf_counter() - t0, log=log)
 
-    def adjoint(self, folder: Path, mesh: Path, function: str) -> Sensitivity:
+    def adjoint(self, folder: Path, mesh: Path, function: str, start: Path | None = None) -> Sensitivity:
         t0 = time.perf_counter()
         self.adjoints += 1
         ids, X = self._wall(mesh)

@@ -85,12 +85,16 @@ class Solver(ABC):
         """Before any work: the programs, the configuration; InputError (exit 2) when one is missing."""
 
     @abstractmethod
-    def flow(self, folder: Path, mesh: Path) -> FlowResult:
-        """Solve the flow on ``mesh`` inside ``folder`` (files and logs stay there); SolverFailure if it fails."""
+    def flow(self, folder: Path, mesh: Path, start: Path | None = None) -> FlowResult:
+        """Solve the flow on ``mesh`` inside ``folder`` (files and logs stay there); SolverFailure if it fails.
+
+        ``start``: the folder of an earlier evaluation of the same mesh (a nearby design) whose solution
+        the solver may start from (a warm start), or None."""
 
     @abstractmethod
-    def adjoint(self, folder: Path, mesh: Path, function: str) -> Sensitivity:
-        """After :meth:`flow` in the same folder: dJ/dX of ``function``; SolverFailure if it fails."""
+    def adjoint(self, folder: Path, mesh: Path, function: str, start: Path | None = None) -> Sensitivity:
+        """After :meth:`flow` in the same folder: dJ/dX of ``function``; SolverFailure if it fails.
+        ``start``: an earlier evaluation's folder that has this function's adjoint (a warm start), or None."""
 
     def state(self) -> str:
         """The solver's inputs as text (its configuration): part of the key of a cached evaluation."""

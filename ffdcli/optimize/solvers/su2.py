@@ -5,7 +5,9 @@ the physics and numerics, is the user's file as written):
 
 * every run: ``MESH_FILENAME`` (the deformed mesh ffd wrote), ``MESH_FORMAT= SU2``, ``TABULAR_FORMAT= CSV``,
   ``SOLUTION_FILENAME= solution_flow.dat``, ``RESTART_FILENAME= restart_flow.dat``,
-  ``RESTART_ADJ_FILENAME= restart_adj.dat``, ``RESTART_SOL= NO``;
+  ``SOLUTION_ADJ_FILENAME= solution_adj.dat``, ``RESTART_ADJ_FILENAME= restart_adj.dat``, ``RESTART_SOL``:
+  ``YES`` when the run starts from the solution of the nearest earlier evaluation (a warm start: its
+  ``restart_flow.dat``, or ``restart_adj_<suffix>.dat`` for an adjoint, copied in), else ``NO``;
 * the flow: ``MATH_PROBLEM= DIRECT``, ``CONV_FILENAME= history``, ``OUTPUT_FILES= (RESTART, SURFACE_CSV)``,
   ``HISTORY_OUTPUT`` the config's list plus ``AERO_COEFF`` (SU2's default has no function columns);
 * each adjoint (one per function with a gradient, after the flow, whose ``restart_flow.dat`` is copied to
@@ -189,10 +191,11 @@ class SU2(Solver):
         return "\n".join(self.lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
 
     # -- runs ---------------------------------------------------------------------------------
-    def _common(self, mesh: Path) -> dict[str, str]:
+    def _common(self, mesh: Path, warm: bool) -> dict[str, str]:
         return {"MESH_FILENAME": mesh.name, "MESH_FORMAT": "SU2", "TABULAR_FORMAT": "CSV",
                 "SOLUTION_FILENAME": "solution_flow.dat", "RESTART_FILENAME": "restart_flow.dat",
-                "RESTART_ADJ_FILENAME": "restart_adj.dat", "RESTART_SOL": "NO"}
+                "SOLUTION_ADJ_FILENAME": "solution_adj.dat", "RESTART_ADJ_FILENAME": "restart_adj.dat",
+                "RESTART_SOL": "YES" if warm else "NO"}
 
     def _run(self, program: str, folder: Path, name: str, changes: dict[str, str]) -> tuple[Path, float]:
         cfg = folder / f"{name}.cfg"
@@ -227,9 +230,12 @@ class SU2(Solver):
             items.append("AERO_COEFF")
         return "(" + ", ".join(items) + ")"
 
-    def flow(self, folder: Path, mesh: Path) -> FlowResult:
+    def flow(self, folder: Path, mesh: Path, start: Path | None = None) -> FlowResult:
+        warm = start is not None and (Path(start) / "restart_flow.dat").is_file()
+        if warm:                      # SU2 starts from a nearby design's solution (same mesh topology)
+            shutil.copyfile(Path(start) / "restart_flow.dat", folder / "solution_flow.dat")
         log, seconds = self._run("SU2_CFD", folder, "flow", {
-            **self._common(mesh), "MATH_PROBLEM": "DIRECT", "CONV_FILENAME": "history",
+            **self._common(mesh, warm), "MATH_PROBLEM": "DIRECT", "CONV_FILENAME": "history",
             "OUTPUT_FILES": "(RESTART, SURFACE_CSV)", "HISTORY_OUTPUT": self._history_output()})
         hist_path = folder / "history.csv"
         if not hist_path.is_file():
@@ -247,12 +253,15 @@ class SU2(Solver):
             raise SolverFailure("SU2_CFD wrote no restart_flow.dat", log)
         return FlowResult(functions=functions, seconds=seconds, log=log)
 
-    def adjoint(self, folder: Path, mesh: Path, function: str) -> Sensitivity:
+    def adjoint(self, folder: Path, mesh: Path, function: str, start: Path | None = None) -> Sensitivity:
         sfx = ADJOINT_SUFFIX.get(function, function.lower())
         shutil.copyfile(folder / "restart_flow.dat", folder / "solution_flow.dat")
+        warm = start is not None and (Path(start) / f"restart_adj_{sfx}.dat").is_file()
+        if warm:                      # the adjoint starts from a nearby design's adjoint solution
+            shutil.copyfile(Path(start) / f"restart_adj_{sfx}.dat", folder / f"solution_adj_{sfx}.dat")
         discrete = self.adjoint_kind == "discrete"
         log, seconds = self._run("SU2_CFD_AD" if discrete else "SU2_CFD", folder, f"adjoint_{sfx}", {
-            **self._common(mesh), "MATH_PROBLEM": "DISCRETE_ADJOINT" if discrete else "CONTINUOUS_ADJOINT",
+            **self._common(mesh, warm), "MATH_PROBLEM": "DISCRETE_ADJOINT" if discrete else "CONTINUOUS_ADJOINT",
             "OBJECTIVE_FUNCTION": function, "OBJECTIVE_WEIGHT": "1.0", "CONV_FILENAME": f"history_adj_{sfx}",
             "SURFACE_ADJ_FILENAME": f"surface_adjoint_{sfx}", "OUTPUT_FILES": "(RESTART, RESTART_ASCII, SURFACE_CSV)"})
         hist = folder / f"history_adj_{sfx}.csv"
