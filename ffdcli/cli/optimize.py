@@ -60,8 +60,8 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
     exit_code = summary.pop("exit_code")
     obj = summary["objective"]
     text = [f"ffd optimize: {summary['status']} ({summary['message']}) after {summary['iterations']} iterations, "
-            f"{summary['evaluations']} evaluations ({summary['flow_solves']} flow + {summary['adjoint_solves']} adjoint "
-            f"solves)",
+            f"{summary['evaluations']} evaluations ({summary['flow_solves']} flow + "
+            f"{summary['adjoint_solves']} adjoint solves)",
             f"  objective {obj['initial']} -> {obj['best']}"
             + ("" if summary["constraints_satisfied"] else "  (NO FEASIBLE DESIGN)"),
             "  " + "  ".join(f"{k} {v:.6g}" for k, v in summary["functions"].items()),

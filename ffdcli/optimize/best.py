@@ -15,8 +15,8 @@ from pathlib import Path
 
 import yaml
 
-from ffdcli.io.atomic import atomic_write
 from ffdcli.errors import InputError
+from ffdcli.io.atomic import atomic_write
 
 _PART = re.compile(r"([A-Za-z_]+)|\[(\d+)\]")
 

@@ -17,11 +17,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ffdcli.app.pipeline import deform, write_outputs
 from ffdcli.errors import InputError, QualityError
+from ffdcli.io.outputs import plan_outputs
 from ffdcli.optimize.solvers.base import Solver, SolverFailure
 from ffdcli.optimize.store import Evaluation, EvaluationStore
-from ffdcli.io.outputs import plan_outputs
-from ffdcli.app.pipeline import deform, write_outputs
 from ffdcli.quality import enforce
 
 

@@ -17,8 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.io.atomic import atomic_write
 from ffdcli.errors import InputError
+from ffdcli.io.atomic import atomic_write
 
 
 @dataclass(frozen=True, eq=False)

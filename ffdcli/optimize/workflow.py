@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.api import DesignModel
-from ffdcli.io.atomic import Terminated, atomic_path, signals_raise
+from ffdcli.app.pipeline import load_run
 from ffdcli.design import load_design
 from ffdcli.design.optimize import OptimizeSettings, optimize_settings, select_variables
 from ffdcli.errors import FfdError
+from ffdcli.io.atomic import Terminated, atomic_path, signals_raise
 from ffdcli.optimize.best import best_design_data, write_best
 from ffdcli.optimize.check import gradient_check
 from ffdcli.optimize.driver import Driver, Outcome, StopRun, violation
@@ -30,7 +31,6 @@ from ffdcli.optimize.solvers.analytic import AnalyticSolver
 from ffdcli.optimize.solvers.base import Solver
 from ffdcli.optimize.solvers.su2 import SU2
 from ffdcli.optimize.store import EvaluationStore, inputs_hash
-from ffdcli.app.pipeline import load_run
 
 #: The solvers ``optimize.solver`` names.
 SOLVERS: dict[str, type[Solver]] = {"su2": SU2, "analytic": AnalyticSolver}
