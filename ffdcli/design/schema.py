@@ -275,6 +275,9 @@ def optimize_schema() -> dict:
                                                   "variable's bound range (default 0.1)"},
             "warm_start": {"type": "boolean", "description": "start each solve from the nearest finished "
                                                              "evaluation's solution (default true)"},
+            "screen": {"type": ["number", "null"], "minimum": 0,
+                       "description": "a constraint function farther than this (scaled) from its bounds reuses its "
+                                      "latest adjoint gradient (default 0.3; null: every adjoint at every iterate)"},
             "line_search": {"type": "integer", "minimum": 1,
                             "description": "evaluations of one line search before the run ends (default 4)"},
         }}

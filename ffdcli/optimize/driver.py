@@ -12,6 +12,13 @@ What the optimiser sees (every scale applied to a value and its gradient alike):
   is an equality; each geometric constraint (``constraints:``, exact Jacobian) the same with
   ``s = 1 / max(|bound|, 1)``.
 
+Constraint screening (``optimize.screen``, default 0.3): an aerodynamic constraint whose scaled margin
+at the design (the smallest ``s (value - lower)``, ``s (upper - value)``) is above ``screen`` is inactive
+there; its adjoint is not run again and SLSQP's linearisation uses its latest adjoint gradient (the
+"temporary deletion" of far-from-active constraints of structural optimisation). The objective's
+adjoint and every constraint within ``screen`` of its bound are computed at every iterate; ``screen:
+null`` computes every adjoint at every iterate.
+
 Failures: an evaluation that failed (solver, NaN, not converged, gate) is answered with the last good
 design's (the last accepted iterate's) scaled objective plus ``max(1, |value|)`` and its constraints,
 which SLSQP's line search rejects: it shortens the step toward the last good design (a factor 0.1 to
@@ -115,6 +122,7 @@ class Driver:
         self.anchor: Evaluation | None = None
         self.sides: list[Side] = []
         self.f_scale = 1.0
+        self.latest: dict[str, np.ndarray] = {}      # the latest adjoint gradient of each function
 
     # -- the variables -------------------------------------------------------------------------
     def values_of(self, x: np.ndarray) -> np.ndarray:
@@ -130,6 +138,7 @@ class Driver:
             raise StopRun("baseline", f"the baseline design failed: {base.failed}" + (f" (log: {base.log})"
                                                                                       if base.log else ""))
         self.anchor = base
+        self.latest.update(base.gradients)
         model = self.problem.model
         names = model.constraint_names if model.constraints else []
         lower = model.constraint_lower if model.constraints else []
@@ -145,10 +154,24 @@ class Driver:
         return base
 
     # -- evaluations with the failure rules ------------------------------------------------------
+    def needed(self, ev: Evaluation) -> list[str]:
+        """The functions whose adjoint runs at ``ev``: the objective, and each constraint function with no
+        gradient yet or within ``screen`` (scaled) of a bound."""
+        out = [self.settings.objective]
+        for f in self.settings.functions:
+            sides = [s for s in self.sides if s.kind == "function" and s.name == f.name]
+            margin = min((0.0 if s.equality else s.scale * s.sign * (ev.functions[f.name] - s.bound)
+                          for s in sides), default=0.0)
+            if f.name not in self.latest or self.settings.screen is None or margin <= self.settings.screen:
+                out.append(f.name)
+        return out
+
     def _get(self, x: np.ndarray, gradient: bool) -> Evaluation:
         before = self.problem.counts["evaluations"] + self.problem.counts["reused"]
         self.problem.iteration = self.iterations
-        ev = self.problem.evaluate(self.values_of(x), gradient=gradient)
+        ev = self.problem.evaluate(self.values_of(x))
+        if gradient and ev.failed is None:
+            ev = self.problem.evaluate(self.values_of(x), gradient=True, functions=self.needed(ev))
         fresh = self.problem.counts["evaluations"] + self.problem.counts["reused"] > before
         if fresh:
             self.since_accept.add(ev.key)
@@ -162,7 +185,12 @@ class Driver:
                                              f"after iteration {self.iterations} without an accepted step")
         if gradient and ev.failed is None:
             self.anchor = ev
+            self.latest.update(ev.gradients)
         return ev
+
+    def gradient(self, ev: Evaluation, name: str) -> np.ndarray:
+        """dJ/dv (n_vars,) of function ``name`` at ``ev``: its own, or (screened) the latest computed."""
+        return ev.gradients[name] if name in ev.gradients else self.latest[name]
 
     def _response(self, x: np.ndarray, gradient: bool) -> Evaluation:
         ev = self._get(x, gradient)
@@ -175,7 +203,7 @@ class Driver:
 
     def objective_grad(self, x):
         ev = self._response(x, True)
-        return self.f_scale * self.r * ev.gradients[self.settings.objective][self.chosen]
+        return self.f_scale * self.r * self.gradient(ev, self.settings.objective)[self.chosen]
 
     def _sides(self, x, equality: bool, jac: bool):
         sides = [s for s in self.sides if s.equality == equality]
@@ -186,7 +214,7 @@ class Driver:
         rows = []
         for s in sides:
             if jac:
-                g = ev.gradients[s.name] if s.kind == "function" else J[s.index]
+                g = self.gradient(ev, s.name) if s.kind == "function" else J[s.index]
                 rows.append(s.scale * s.sign * self.r * g[self.chosen])
             else:
                 value = ev.functions[s.name] if s.kind == "function" else geo[s.index]

@@ -59,8 +59,9 @@ class OptimizationProblem:
         self._seen: set[str] = set()        # keys of the evaluations this process has handed out
 
     # -- the public entry ---------------------------------------------------------------------
-    def evaluate(self, values: np.ndarray, gradient: bool = False) -> Evaluation:
-        """The evaluation of the design vector ``values`` (n_vars,), with gradients when ``gradient``."""
+    def evaluate(self, values: np.ndarray, gradient: bool = False, functions: list[str] | None = None) -> Evaluation:
+        """The evaluation of the design vector ``values`` (n_vars,), with gradients when ``gradient``: of
+        every function of the run, or of ``functions`` only."""
         values = np.asarray(values, dtype=float)
         ev = self.store.find(values)
         if ev is None:
@@ -68,8 +69,9 @@ class OptimizationProblem:
         elif ev.key not in self._seen:
             self.counts["reused"] += 1          # finished by an earlier run (--resume)
         self._seen.add(ev.key)
-        if gradient and ev.failed is None and set(self.functions) - set(ev.gradients):
-            ev = self._adjoints(ev)
+        want = self.functions if functions is None else [f for f in self.functions if f in functions]
+        if gradient and ev.failed is None and set(want) - set(ev.gradients):
+            ev = self._adjoints(ev, want)
         return ev
 
     # -- the stages ------------------------------------------------------------------------------
@@ -117,12 +119,12 @@ class OptimizationProblem:
         self.report(ev, "flow")
         return ev
 
-    def _adjoints(self, ev: Evaluation) -> Evaluation:
-        """Run the adjoint of every function still missing and chain each to dJ/dv (n_vars,)."""
+    def _adjoints(self, ev: Evaluation, functions: list[str]) -> Evaluation:
+        """Run the adjoint of each of ``functions`` still missing and chain each to dJ/dv (n_vars,)."""
         grads = dict(ev.gradients)
         t_solver = t_ffd = 0.0
         mesh_path = ev.folder / self.mesh_name
-        for name in self.functions:
+        for name in functions:
             if name in grads:
                 continue
             try:

@@ -74,7 +74,7 @@ def file_hash(path: Path) -> str:
 
 #: Keys of ``optimize:`` that steer the optimiser but do not change what an evaluation computes.
 RUN_KEYS = ("iterations", "tolerance", "max_failures", "method", "line_search", "step", "scale", "folder",
-            "feasibility", "functions", "objective", "variables", "warm_start")
+            "feasibility", "functions", "objective", "variables", "warm_start", "screen")
 
 
 def inputs_hash(mesh: Path, solver_state: str, data: dict, names: list[str]) -> str:

@@ -21,7 +21,7 @@ from ffdcli.errors import InputError
 from ffdcli.optimize.solvers.analytic import AnalyticSolver
 from ffdcli.optimize.workflow import run_optimize
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 MESH = ROOT / "samples" / "naca0012_2d.su2"
 VARIABLES = ["c0", "c1.shape.upper[1]", "c1.shape.upper[2]", "c1.shape.upper[3]", "c1.shape.upper[4]",
              "c1.shape.lower[1]", "c1.shape.lower[2]", "c1.shape.lower[3]", "c1.shape.lower[4]"]
@@ -82,6 +82,25 @@ def test_converges_feasible_with_outputs(tmp_path):
     assert best.mesh == MESH.resolve()
     assert (folder / "best.su2").read_bytes() == (folder / "evals" / f"{out['best_evaluation']:04d}" /
                                                   "mesh.su2").read_bytes()
+
+
+def test_screening_skips_the_adjoint_of_a_far_constraint(tmp_path):
+    far = [{"name": "LIFT", "lower": 0.1}, {"name": "MOMENT_Z", "lower": -10.0}]
+    path = write_case(tmp_path, functions=far, iterations=4)
+    solver = solver_for(path)
+    out = run_optimize(path, solver=solver)
+    rows = history(tmp_path / "opt" / "history.csv")
+    grads = [json.loads((tmp_path / "opt" / r["folder"] / "result.json").read_text())["gradients"] for r in rows]
+    with_grad = [g for g in grads if g]
+    assert set(with_grad[0]) == {"DRAG", "LIFT", "MOMENT_Z"}          # the baseline: every adjoint
+    assert all(set(g) == {"DRAG", "LIFT"} for g in with_grad[1:])      # then MOMENT_Z (margin 1.0) screened
+    assert out["adjoint_solves"] == solver.adjoints == 2 * len(with_grad) + 1
+    # screen: null runs every adjoint at every iterate
+    (tmp_path / "b").mkdir()
+    path = write_case(tmp_path / "b", functions=far, iterations=4, screen=None)
+    out = run_optimize(path, solver=solver_for(path))
+    assert out["adjoint_solves"] == 3 * sum(1 for r in history(tmp_path / "b" / "opt" / "history.csv")
+                                            if int(r["adjoint_solves"]))
 
 
 def test_resume_reuses_every_finished_evaluation(tmp_path):
