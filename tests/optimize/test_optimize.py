@@ -227,3 +227,10 @@ def test_optimize_settings_paths_and_launch(tmp_path):
     assert s.config == (tmp_path / "analytic.yaml").resolve() and s.folder == (tmp_path / "opt").resolve()
     assert s.function_names == ["DRAG", "LIFT"] and s.method == "SLSQP" and s.max_failures == 3
     assert select_variables(["c0.twist", "c1.shape.upper[1]", "c10.span"], ["c1"]) == [1]
+
+
+def test_trust_constr_runs_feasible(tmp_path):
+    path = write_case(tmp_path, method="trust-constr", iterations=15)
+    out = run_optimize(path, solver=solver_for(path))
+    assert out["status"] in ("converged", "iterations")
+    assert out["constraints_satisfied"] and out["objective"]["best"] < out["objective"]["initial"]
