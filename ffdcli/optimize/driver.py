@@ -23,8 +23,11 @@ Failures: an evaluation that failed (solver, NaN, not converged, gate) is answer
 design's (the last accepted iterate's) scaled objective plus ``max(1, |value|)`` and its constraints,
 which SLSQP's line search rejects: it shortens the step toward the last good design (a factor 0.1 to
 0.5 per try). After ``max_failures`` failures the run stops (:class:`StopRun`, exit 1). A line search
-that spends more than ``line_search`` evaluations without an accepted step ends the run with that
-reason instead of spending solves.
+that spends more than ``line_search`` evaluations (its full step included) without an accepted step
+ends the run with that reason instead of spending solves.
+
+Iterations are scipy's: SLSQP counts one when an iteration's full step has been evaluated; the steps
+back of its line search and the accepted design (whose gradients are asked) belong to it.
 """
 
 from __future__ import annotations
@@ -118,7 +121,8 @@ class Driver:
                                strict=True))
         self.failures = 0
         self.iterations = 0
-        self.since_accept: set[str] = set()
+        self.since_accept: set[str] = set()          # the evaluations since the last accepted design
+        self.trial_next = True                       # the next new design is an iteration's full step
         self.anchor: Evaluation | None = None
         self.sides: list[Side] = []
         self.f_scale = 1.0
@@ -168,7 +172,8 @@ class Driver:
 
     def _get(self, x: np.ndarray, gradient: bool) -> Evaluation:
         before = self.problem.counts["evaluations"] + self.problem.counts["reused"]
-        self.problem.iteration = self.iterations
+        # scipy counts an iteration once its full step is evaluated: label that step with it
+        self.problem.iteration = self.iterations + (1 if self.trial_next and not gradient else 0)
         ev = self.problem.evaluate(self.values_of(x))
         if gradient and ev.failed is None:
             ev = self.problem.evaluate(self.values_of(x), gradient=True, functions=self.needed(ev))
@@ -182,8 +187,10 @@ class Driver:
                                               f"{self.settings.max_failures}); the last: {ev.failed}")
             if len(self.since_accept) > self.settings.line_search:
                 raise StopRun("line_search", f"line search collapsed: {len(self.since_accept)} evaluations "
-                                             f"after iteration {self.iterations} without an accepted step")
+                                             f"in iteration {self.iterations} without an accepted step")
         if gradient and ev.failed is None:
+            self.since_accept = set()
+            self.trial_next = True
             self.anchor = ev
             self.latest.update(ev.gradients)
         return ev
@@ -222,9 +229,10 @@ class Driver:
         return np.array(rows)
 
     def accepted(self, *args) -> None:
-        """scipy's callback: an iteration ended (its step was accepted)."""
+        """scipy's callback: SLSQP calls it once an iteration's full step is evaluated (its line search
+        follows); trust-constr after each iteration."""
         self.iterations += 1
-        self.since_accept = set()
+        self.trial_next = False
 
     # -- the run -----------------------------------------------------------------------------------
     def run(self) -> Outcome:
