@@ -85,7 +85,7 @@ def write_picture(path: Path, evaluations: list[Evaluation], violations: dict[in
     ax2.set_ylabel("worst constraint violation", color="C3")
     lines = ax.get_legend_handles_labels()
     lines2 = ax2.get_legend_handles_labels()
-    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], loc="upper right", fontsize=8)
+    ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], loc="best", fontsize=8)
     ax.set_title(f"{objective} and the worst violation per iteration ({len(evaluations)} evaluations)", fontsize=9)
     fig.tight_layout()
     with atomic_path(path) as tmp:
