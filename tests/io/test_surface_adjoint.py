@@ -77,3 +77,31 @@ def test_nonzero_columns_win_over_s(tmp_path):
     write_file(tmp_path / "s.csv", ids, mesh.points[ids], np.ones(len(ids)), sx=g)
     sens = read_sensitivity(tmp_path / "s.csv", mesh.points, 2, mesh=mesh)
     assert np.allclose(sens.values[:, :2], g)
+
+
+def test_ffd_grad_reads_a_continuous_adjoint_file(tmp_path, capsys):
+    """``ffd grad --sens surface_adjoint.csv``: the gradient is the chain of -S n, not zero."""
+    import json
+
+    import yaml
+
+    from ffdcli.api import DesignModel
+    from ffdcli.cli import main
+
+    design = tmp_path / "d.yaml"
+    changes = [{"twist": 0.0}, {"shape": {"upper": [0.0] * 6, "lower": [0.0] * 6}}]
+    design.write_text(yaml.safe_dump({"mesh": str(MESH), "surface": "airfoil", "box": {"points": [6, 2]},
+                                      "changes": changes}))
+    mesh = read_mesh(MESH)
+    ids = mesh.marker_point_ids("airfoil")
+    S = np.random.default_rng(7).normal(size=len(ids))
+    write_file(tmp_path / "surface_adjoint.csv", ids, mesh.points[ids], S)
+    with pytest.raises(SystemExit) as e:
+        main(["grad", str(design), "--sens", str(tmp_path / "surface_adjoint.csv"), "--json", "-q"])
+    assert e.value.code == 0
+    got = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["gradient"]
+    model = DesignModel.from_file(design)
+    _, n = wall_vertex_normals(mesh, mesh.points, ["airfoil"])
+    want = model.surface_vjp(-S[:, None] * n)
+    assert np.allclose([got[k] for k in model.names], want, rtol=1e-10, atol=1e-12)
+    assert np.abs(want).max() > 0
