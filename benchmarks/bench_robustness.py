@@ -150,7 +150,8 @@ def _write_design(folder: Path, mesh: Path, surface: str, name: str, changes: li
 
 def run_one(mesh_path: Path, surface: str, design: str, *, work: Path, overrides=(), points=(6, 8, 2)) -> dict:
     """Deform one mesh by one design as ``ffd deform`` does; a row of the table (nothing written)."""
-    from ffdcli.app.pipeline import deform, load_run
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
     from ffdcli.errors import InputError, QualityError
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.app.pipeline import is_surface_mesh, space_dim
+from ffdcli.app.prepare import is_surface_mesh, space_dim
 from ffdcli.errors import InputError
 from ffdcli.geometry.axes import Axes, detect_axes
 from ffdcli.geometry.surface import default_surface, extract_surface

@@ -39,7 +39,7 @@ def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
     import numpy as np
 
     from ffdcli.api import DesignModel
-    from ffdcli.app.pipeline import load_run
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
     from ffdcli.io.outputs import plan_outputs
 

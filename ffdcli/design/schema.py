@@ -189,7 +189,7 @@ def output_schema() -> dict:
 
 
 def constraints_schema() -> dict:
-    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints.geometric`)."""
+    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints`)."""
     frac = {"type": "number", "minimum": 0, "maximum": 1}
     fracs = {"type": "array", "items": frac, "minItems": 1}
     bound = {"type": ["number", "null"]}
@@ -202,7 +202,12 @@ def constraints_schema() -> dict:
             body["required"] = list(required)
         return {"description": desc, "anyOf": [{"type": "null"}, body]}
 
-    grid = {"chord": {**fracs, "description": "chord fractions of the local section, 0 = leading edge"},
+    # chord stations strictly inside: at the leading edge (and a sharp trailing edge) the thickness
+    # is zero and a ratio to it has no meaning; span stations 0 and 1 are read just inside the ends
+    inner = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    grid = {"chord": {"type": "array", "items": inner, "minItems": 1,
+                      "description": "chord fractions of the local section strictly between 0 (leading "
+                                     "edge) and 1 (trailing edge): the thickness is zero at the edges"},
             "span": {**fracs, "description": "span fractions, 0 = root, 1 = tip (3D only)"}}
     kinds = {
         "thickness": obj("thickness between the upper and lower surface along the thickness axis at a "

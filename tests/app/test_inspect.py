@@ -98,7 +98,7 @@ def test_unknown_surface_lists_markers(tmp_path):
 # --------------------------------------------------------------------------------------------------
 
 def _box_axes(path, surface=None):
-    from ffdcli.app.pipeline import prepare_box
+    from ffdcli.app.prepare import prepare_box
 
     prep = prepare_box(path, surface, use_cache=False)
     return prep.box.axes.as_dict(), prep.box.axes.root, prep.warnings

@@ -10,7 +10,7 @@ import yaml
 from conftest import REPO, assert_clean_failure, run_ffd
 
 from ffdcli.app.fit import fit_design
-from ffdcli.app.pipeline import load_run
+from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 from ffdcli.io.formats.airfoil import write_airfoil
 from ffdcli.parameterization.fit import build_problem, solve
