@@ -49,7 +49,7 @@ def _size(shape) -> str:
 def deform_design(design, *, output=None, lattice=None, surface_file=None, plot: bool = False,
                   force: bool = False, cache_dir=None, use_cache: bool = True, progress=None, comm=None,
                   run: DesignRun | None = None, P=None,
-                  constraints_table: Callable[[DesignRun], list[dict]] | None = None,
+                  constraints_table: Callable[[DesignRun, object], list[dict]] | None = None,
                   warn: Callable[[str], None] | None = None, remedies: Remedies = Remedies()) -> DeformReport:
     """Deform a loaded design and write its outputs together: what ``ffd deform`` does.
 
@@ -69,8 +69,9 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
         A run already loaded (the API's) and its deformed lattice(s); default: loaded here, the
         design's own changes.
     constraints_table : callable, optional
-        ``f(run) -> rows`` of the constraints table, evaluated before anything is written when the
-        design has ``constraints:`` (a bad item is an input error, nothing written).
+        ``f(run, points) -> rows`` of the constraints table (``points`` (N, 3): the deformed mesh,
+        which ``mesh_quality`` reads), evaluated before anything is written when the design has
+        ``constraints:`` (a bad item is an input error, nothing written).
     remedies : ffdcli.quality.gate.Remedies
         The caller's words for how to override the gate (the command line names ``--force``).
     warn : callable, optional
@@ -103,7 +104,8 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
                      recovery=result.recovery, remedies=remedies):
         note(w)
-    constraints = constraints_table(run) if constraints_table and design.data.get("constraints") else None
+    constraints = (constraints_table(run, result.points) if constraints_table and design.data.get("constraints")
+                   else None)
     # every output once, together: rank 0 of an MPI run (every node's coordinates gathered there)
     written = write_outputs(run, result, plan=plan, progress=progress, comm=comm)
     su2_ffd = written.pop("su2_ffd", None)

@@ -14,7 +14,7 @@ The parts, each readable alone:
 
 Every problem is an :class:`~ffdcli.errors.InputError` naming the file, the key path and the line.
 
-Defaults where SPEC.md is silent (documented in the README):
+Defaults where SPEC.md is silent (documented in docs/design-file.md):
 
 - ``output.mesh``: ``out/<design stem><mesh suffix>`` beside the design file, so that two designs
   of one mesh never overwrite each other; ``output.lattice``: ``out/<design stem>_lattice.vtk``;
@@ -49,7 +49,7 @@ from ffdcli.design.yamlmap import (
 )
 from ffdcli.errors import InputError
 from ffdcli.io.formats import FORMATS
-from ffdcli.io.inputs import check_input_file, existing_kind
+from ffdcli.io.inputs import check_input_file, check_mesh_path, existing_kind
 from ffdcli.lattice.limits import check_lattice_size
 from ffdcli.parameterization.changes import Change, changes_from_spec
 from ffdcli.parameterization.components import ComponentSpec
@@ -125,7 +125,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
 
     mesh = resolve(data["mesh"])
     if check_files:
-        check_input_file(mesh, "mesh file", design=path, key="mesh", line=line_at(lines, ("mesh",)))
+        check_mesh_path(mesh, design=path, key="mesh", line=line_at(lines, ("mesh",)))
     surface = data.get("surface")
     if isinstance(surface, str):
         surface = [surface]

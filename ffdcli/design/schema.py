@@ -267,6 +267,12 @@ def constraints_schema() -> dict:
                          "the baseline (> 0: the box does not fold)",
                          {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
                                       "description": "samples per knot span and direction (default 4)"}}),
+        "mesh_quality": obj("smooth (KS) minimum over the volume cells of the scaled Jacobian after the design "
+                            "over the cell's input value (1: no cell got worse, < 0: a cell inverted); lower "
+                            "defaults to 0.3",
+                            {"gap": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                     "description": "the smooth minimum is at most this below the worst "
+                                                    "cell's ratio (default 0.05)"}}),
     }
     return {"type": "array",
             "description": "geometric constraints for optimisation; named k<index>.<kind>[<j>]",
