@@ -223,6 +223,12 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         return vjp(B, g, self.lattice_jacobian())
 
 
-def constraints_report(run) -> list[dict]:
-    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.app.pipeline.DesignRun` (``ffd deform --json``)."""
-    return DesignModel(run).constraints_table()
+def constraints_report(run, mesh_points: np.ndarray | None = None) -> list[dict]:
+    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.app.run.DesignRun` (``ffd deform --json``).
+
+    ``mesh_points``: (N, 3) the mesh as deformed already (``mesh_quality`` reads it instead of
+    deforming the mesh once more)."""
+    model = DesignModel(run)
+    if mesh_points is not None:
+        model._cache["mesh"] = np.asarray(mesh_points, dtype=float)
+    return model.constraints_table()

@@ -14,8 +14,13 @@ from ffdcli.app.deform import deform_design
 from ffdcli.app.deformation import deform, volume_method
 from ffdcli.app.prepare import is_surface_mesh
 from ffdcli.mesh.numbers import as_numbers
+from ffdcli.quality.gate import Remedies
 from ffdcli.volume.surface_motion import frame_jacobian
 from ffdcli.volume.warp import warp, warp_vjp
+
+#: How the API's user overrides the quality gate (the gate states the rule; :meth:`write` names its argument).
+_REMEDIES = Remedies(deform_anyway=", or pass force=True to deform it anyway",
+                     write_anyway=" (force=True writes it anyway)", forced=" (force=True)")
 
 
 class VolumeMixin:
@@ -42,7 +47,8 @@ class VolumeMixin:
         quality gate (nothing written unless ``force``), all outputs written together or none.
         ``mesh=None``: the design file's ``output:``. Returns {kind: path}."""
         report = deform_design(self.run.design, output=mesh, lattice=lattice, plot=plot, force=force,
-                               progress=progress, comm=self.comm, run=self.run, P=self.lattice())
+                               progress=progress, comm=self.comm, run=self.run, P=self.lattice(),
+                               remedies=_REMEDIES)
         return report.written
 
     def _frame_jacobian(self):

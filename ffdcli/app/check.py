@@ -8,7 +8,8 @@ from dataclasses import dataclass
 from ffdcli.errors import QualityError
 from ffdcli.io.formats import read_mesh, read_part
 from ffdcli.parallel.comm import SerialComm
-from ffdcli.quality.gate import DEFAULT_THRESHOLD, QualityReport, check_quality, check_quality_part
+from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
+from ffdcli.quality.rules import DEFAULT_THRESHOLD
 
 
 @dataclass(frozen=True)

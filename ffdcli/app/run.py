@@ -21,9 +21,11 @@ from ffdcli.parallel.distributed import diagonal as global_diagonal
 from ffdcli.parallel.partition import localize, node_owners, rank_part
 from ffdcli.parameterization import components as comp_mod
 from ffdcli.parameterization.changes import apply_changes
+from ffdcli.parameterization.changes.control_surfaces import refine_for_devices
 from ffdcli.parameterization.components import design_variables, layout, set_design_variables
 from ffdcli.progress import no_progress
-from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part, part_reference, quality_reference
+from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
+from ffdcli.quality.reference import part_reference, quality_reference
 from ffdcli.volume.surface_motion import component_displacement, component_frames, frame_gradient_inputs, full3
 from ffdcli.volume.warp import WarpModel, WarpSettings, prepare_mesh_warp, warp
 
@@ -46,7 +48,7 @@ class DesignRun:
     _quality_part: object = field(default=None, repr=False)  # MPI: (this rank's MeshPart, its PartReference)
 
     def quality_reference(self):
-        """The quality gate's :class:`~ffdcli.quality.gate.QualityReference` of the input mesh, computed
+        """The quality gate's :class:`~ffdcli.quality.reference.QualityReference` of the input mesh, computed
         once: every design of a loop is judged against it without recomputing the input's quality."""
         if self._quality_ref is None:
             self._quality_ref = quality_reference(self.prep.mesh)
@@ -311,12 +313,17 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
                                  key=spec.subkey("surface"), line=design.line_of(spec.subkey("surface")),
                                  hint=e.hint) from None
             raise
-        n, m, l = prep.box.shape
 
         def error(message, key, spec=spec):
             return design.error(message, spec.subkey(key))
 
-        changes = changes_from_spec(list(spec.changes_spec), n, m, l, prep.box.dim, error=error)
+        # a flap or slat: the knots at its hinge and ends, by exact knot insertion (the surface stays)
+        box, emb = refine_for_devices(prep.box, prep.embedding, prep.surface.points, list(spec.changes_spec),
+                                      error=error)
+        prep = replace(prep, box=box, embedding=emb)
+        n, m, l = prep.box.shape
+        changes = changes_from_spec(list(spec.changes_spec), n, m, l, prep.box.dim, error=error, box=prep.box,
+                                    surface=prep.surface.points)
         others = [x for s in specs if s is not spec for x in (s.surface or ())]
         junction = comp_mod.find_junction(mesh, prep, prep.surface.names, others)
         if junction is not None and junction.frozen:

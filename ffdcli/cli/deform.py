@@ -35,7 +35,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
 
     \b
     The box (lattice and embedding) is loaded from its cache, or built and cached. The changes
-    (twist, span, sweep, dihedral, chord, shape) are applied in file order to the lattice; the wing
+    (twist, span, sweep, dihedral, chord, shape, flap, slat) are applied in file order to the lattice; the wing
     surface follows exactly (X = X0 + B (P' - P0)), the rest of the mesh by inverse-distance
     warping (volume.method: idw) or not at all (none). Every cell and node is checked (the gate of
     `ffd check`, same words): if the design inverts a cell, makes one markedly worse (below 0.05,
@@ -53,9 +53,15 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     from ffdcli.api import constraints_report
     from ffdcli.app.deform import deform_design
     from ffdcli.design import load_design
+    from ffdcli.quality.gate import Remedies
 
+    # the gate states its rule; the command line says which flag overrides it
+    remedies = Remedies(list_cells=" (ffd check MESH lists such cells)",
+                        deform_anyway=", or give --force to deform it anyway",
+                        write_anyway=" (--force writes it anyway)", forced=" (--force)")
     design = load_design(design_file, overrides=overrides)
     report = deform_design(design, output=output, lattice=lattice_out, surface_file=surface_file, plot=plot,
                            force=force, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress,
-                           comm=console.comm, constraints_table=constraints_report, warn=console.warn)
+                           comm=console.comm, constraints_table=constraints_report, warn=console.warn,
+                           remedies=remedies)
     console.result(report.summary, report.text)

@@ -7,7 +7,7 @@ prepared box (axes and root detected on its own surface), its changes. The run
 and their lattices for the derivatives: the basis matrix of the run is block diagonal (each surface
 point belongs to one component), so ``dX/dv = B @ dP'/dv`` holds for the whole design unchanged.
 
-Rules where SPEC is silent (README, docs/design-file.md):
+Rules where SPEC is silent (docs/design-choices.md, docs/design-file.md):
 
 - **Axes of a component.** The chord axis of every lifting surface is the flow direction, so when a
   component after the first has no ``box.sections``, its chord axis is the first component's and its
