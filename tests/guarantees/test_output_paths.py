@@ -256,3 +256,9 @@ def test_default_outputs_go_to_out_beside_the_design(tmp_path):
     names = sorted(p.name for p in (tmp_path / "out").iterdir())
     assert [n for n in names if n != "d_3d.png"] == ["d.png", "d.su2", "d_lattice.vtk"]   # + 3D view with pyvista
 
+
+
+def test_zz_the_workspace_is_as_it_was(ws):
+    """Last: no case touched the mesh or left a .part file."""
+    assert file_hash(ws / "vwing.su2") == (ws / "vwing.su2.sha256").read_text()
+    assert not list(ws.rglob("*.part*"))

@@ -10,6 +10,7 @@ import json
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -161,3 +162,69 @@ def test_a_writer_error_names_the_output_not_its_temporary_file(ws2, monkeypatch
     assert_clean_failure(proc, 2, "named.su2: cannot be written")
     assert ".part" not in proc.stderr and no_parts(ws2) == []
 
+
+
+# ----------------------------------------------------------------------------------------------
+# Issue 29: one temporary file per output; the sweep finds everything a killed run can leave
+# ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("out,extra", [("o.su2", []), ("o.vtu", []), ("o.su2", ["--surface-file", "o_surf.dat"]),
+                                       ("o.su2", ["--plot"])], ids=["su2", "vtu", "surface-file", "plot"])
+def test_one_temporary_file_per_output(ws2, monkeypatch, out, extra):
+    """The probe: the SU2 writer made its own temporary file inside the plan's (``..name.….part.su2.
+    ….part.su2``), which a killed run left behind and no sweep found. Every writer writes the temporary
+    file it is handed; ``make_temp`` runs once per output."""
+    import ffdcli.io.atomic as atomic
+
+    made = []
+    real = atomic.make_temp
+
+    def counting(path):
+        made.append(Path(path).name)
+        return real(path)
+
+    monkeypatch.setattr(atomic, "make_temp", counting)
+    import ffdcli.io.outputs as outputs
+
+    monkeypatch.setattr(outputs, "make_temp", counting)
+    proc = ffd("deform", "good.yaml", "-o", out, *extra, cwd=ws2)
+    assert proc.returncode == 0, proc.stderr
+    assert all(not atomic.is_temp(m) for m in made), made          # never a temporary file of a temporary file
+    assert len(made) == len(set(made)), made
+    assert no_parts(ws2) == []
+
+
+def _leftover(folder: Path, name: str, *, host: str, pid: int, nested: bool = False, age: float = 0.0) -> Path:
+    p = folder / f".{name}.{host}-{pid}-abc123_x.part{Path(name).suffix}"
+    if nested:
+        p = folder / f".{p.name}.{host}-{pid}-def456_y.part{Path(name).suffix}"
+    p.write_text("x")
+    if age:
+        t = time.time() - age
+        os.utime(p, (t, t))
+    return p
+
+
+def test_the_sweep_finds_every_leftover_and_nothing_else(tmp_path):
+    """Any output's temporary file of a dead process of this host goes (nested ones too, and another
+    host's once stale); a live process's, another host's fresh one and a stranger's file stay."""
+    import subprocess as sp
+
+    from ffdcli.io.atomic import _HOST, STALE_AGE, make_temp
+
+    dead = sp.Popen(["true"])
+    dead.wait()
+    gone = [_leftover(tmp_path, "a.su2", host=_HOST, pid=dead.pid),
+            _leftover(tmp_path, "other_lattice.vtk", host=_HOST, pid=dead.pid),
+            _leftover(tmp_path, "a.su2", host=_HOST, pid=dead.pid, nested=True),
+            _leftover(tmp_path, "b.su2", host="farhost", pid=1, nested=True, age=2 * STALE_AGE),
+            _leftover(tmp_path, "a.su2", host="farhost", pid=1, age=2 * STALE_AGE)]
+    stay = [_leftover(tmp_path, "a.su2", host=_HOST, pid=os.getppid()),
+            _leftover(tmp_path, "b.su2", host="farhost", pid=1),
+            _leftover(tmp_path, "c.su2", host="farhost", pid=1, age=2 * STALE_AGE)]
+    (tmp_path / ".notes.part").write_text("mine")
+    stay.append(tmp_path / ".notes.part")
+    tmp = make_temp(tmp_path / "a.su2")
+    tmp.unlink()
+    assert [p for p in gone if p.exists()] == []
+    assert all(p.exists() for p in stay), [p for p in stay if not p.exists()]
