@@ -15,7 +15,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ffdcli.io.formats.cgns import _chars, _node, _str_attr
+from ffdcli.io.formats.cgns_nodes import _chars, _node, _str_attr
 
 NGON_N, NFACE_N = 22, 23
 

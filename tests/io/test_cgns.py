@@ -12,7 +12,7 @@ import pytest
 from conftest import shared_file
 
 from ffdcli.errors import InputError
-from ffdcli.io.formats import cgns, read_mesh, write_mesh
+from ffdcli.io.formats import cgns, cgns_nodes, read_mesh, write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 
 REAL_HDF5 = [
@@ -301,7 +301,7 @@ def _fake_adf(tmp_path):
 def test_adf_without_adf2hdf_says_what_to_do(tmp_path, monkeypatch):
     p = _fake_adf(tmp_path)
     assert cgns.container_of(p) == "adf"
-    monkeypatch.setattr(cgns.shutil, "which", lambda name: None)
+    monkeypatch.setattr(cgns_nodes.shutil, "which", lambda name: None)
     with pytest.raises(InputError) as exc:
         read_mesh(p)
     msg = str(exc.value)
