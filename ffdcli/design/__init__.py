@@ -14,7 +14,7 @@ The parts, each readable alone:
 
 Every problem is an :class:`~ffdcli.errors.InputError` naming the file, the key path and the line.
 
-Defaults where SPEC.md is silent (documented in the README):
+Defaults where SPEC.md is silent (documented in docs/design-file.md):
 
 - ``output.mesh``: ``out/<design stem><mesh suffix>`` beside the design file, so that two designs
   of one mesh never overwrite each other; ``output.lattice``: ``out/<design stem>_lattice.vtk``;
@@ -146,7 +146,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
                            degree=tuple(b["degree"]) if "degree" in b else None,
                            sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
                            root=b.get("root"), file=None if box_file is None else str(box_file),
-                           block=b.get("block"))
+                           block=b.get("block"), refine=refine_regions(b.get("refine") or ()))
 
     box = box_settings(data.get("box"))
     components = None
@@ -198,6 +198,18 @@ def _not_a_mesh(path: Path) -> None:
         raise InputError(f"is a mesh ({fmt.upper() if fmt in FORMATS.values() else fmt}), not a design file",
                          path=path, hint=f"start a design file for it with: ffd init {path.name} -o design.yaml; "
                                          "then ffd deform design.yaml")
+
+
+def refine_regions(items) -> tuple[tuple, ...]:
+    """``box.refine`` as :attr:`BoxSettings.refine` tuples: ``{span: [a, b], sections: N}`` ->
+    ``("span", a, b, N)``, ``{chord: [a, b], points: N}`` -> ``("chord", a, b, N)`` (the schema
+    has checked the forms; the settings check the numbers)."""
+    out = []
+    for item in items:
+        what = "span" if "span" in item else "chord"
+        a, b = item[what]
+        out.append((what, float(a), float(b), int(item["sections" if what == "span" else "points"])))
+    return tuple(out)
 
 
 def build_changes(design: Design, n: int, m: int, l: int, dim: int) -> list[Change]:

@@ -4,7 +4,7 @@ The volume warp (:mod:`ffdcli.volume.warp`) moves every mesh node that is neithe
 nor on a fixed marker; this module decides those roles from the mesh's markers and ``volume.fixed``
 / ``volume.sliding``, fits the planes of sliding markers and builds their projectors.
 
-**Marker rules** (the README copies this list):
+**Marker rules** (docs/design-choices.md copies this list):
 
 - The deforming surface: its nodes get exactly the FFD displacement, bit for bit.
 - ``fixed`` markers: their nodes do not move, and they are sources of zero motion.

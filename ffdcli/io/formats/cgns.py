@@ -180,6 +180,66 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
     return pts, zone
 
 
+def _unstructured_zone(zn, pts, zone, offset, n_points, cell_dim, phys_dim, file, share, ms, polys,
+                       section_markers) -> list:
+    """The interior cell blocks of an unstructured zone (whole, or one MPI rank's :class:`_Rows`); its
+    boundary conditions go into ``ms``, its polyhedra into ``polys``, and the boundary faces of its
+    sections that no BC names into ``section_markers`` (markers named after the section)."""
+    zone_blocks: list = []
+    sections, in_order = [], []      # in_order: per Elements_t, its _Rows or its index in sections
+    for sec in _children(zn, "Elements_t"):
+        rows = _interior_rows(sec, offset, n_points, cell_dim, file, share) \
+            if share is not None and cell_dim in (phys_dim, 3) else None
+        if rows is not None:        # one rank's rows of a volume section (BCs never name them)
+            in_order.append(rows)
+            continue
+        in_order.append(len(sections))
+        sections.append(_read_section(sec, offset, n_points, file))
+    poly = cgns_ngon.zone_polyhedra(sections, pts, offset, cell_dim, file)
+    if poly is not None:
+        if share is not None:
+            raise InputError("MPI runs on NGON_n/NFACE_n (polyhedral) zones are not supported yet; run "
+                             "without mpiexec", path=file, key=zn.name)
+        polys.append(poly)
+    used: set[int] = set()
+    for zbc in _children(zn, "ZoneBC_t"):
+        for bc in _children(zbc, "BC_t"):
+            bc_name, name = _bc_marker_name(bc)
+            ms.add_bc(bc_name, name, _unstructured_bc(bc, zone, sections, cell_dim, file, used))
+    for si in in_order:
+        if isinstance(si, _Rows):
+            zone_blocks.append(si)
+            continue
+        s = sections[si]
+        if isinstance(s, cgns_ngon.PolySection):       # polyhedra: read above, never a marker
+            continue
+        # a MIXED section may hold both volume cells and boundary faces: split by dimension
+        inner = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
+                 if t in s.blocks and CELL_DIM[t] >= cell_dim]
+        outer = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
+                 if t in s.blocks and CELL_DIM[t] < cell_dim]
+        zone_blocks.extend(inner)
+        if outer and si not in used:
+            section_markers.append((s.name, outer))
+    return zone_blocks
+
+
+def _markers(ms, section_markers, surface_cells) -> dict:
+    """The markers of the file: its BCs, then the boundary sections no BC names, then the surface
+    zones of a surface mesh in space (by base name)."""
+    markers = ms.markers
+    for name, blocks in section_markers:
+        if name in ms.from_bc:
+            continue
+        markers.setdefault(name, []).extend(blocks)
+    for name, parts in surface_cells.items():
+        # a planar 2D mesh stored with a constant third coordinate is not a surface in space
+        every = np.vstack([p for p, _ in parts])
+        if name not in markers and np.all(np.ptp(every, axis=0) > 0):
+            markers[name] = _merge([b for _, blocks in parts for b in blocks])
+    return {k: _merge(v) for k, v in markers.items()}
+
+
 def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) -> Mesh:
     """The mesh of the file. ``share`` (``share(n) -> (a, b)``, one MPI rank's): the interior cells
     are read as rows ``[a, b)`` of each section / zone (hyperslabs of ``ElementConnectivity``),
@@ -229,41 +289,8 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
                     bc_name, name = _bc_marker_name(bc)
                     ms.add_bc(bc_name, name, _structured_bc(bc, zone, file, handed))
         else:
-            sections, in_order = [], []      # in_order: per Elements_t, its _Rows or its index in sections
-            for sec in _children(zn, "Elements_t"):
-                rows = _interior_rows(sec, offset, n_points, cell_dim, file, share) \
-                    if share is not None and cell_dim in (phys_dim, 3) else None
-                if rows is not None:        # one rank's rows of a volume section (BCs never name them)
-                    in_order.append(rows)
-                    continue
-                in_order.append(len(sections))
-                sections.append(_read_section(sec, offset, n_points, file))
-            poly = cgns_ngon.zone_polyhedra(sections, pts, offset, cell_dim, file)
-            if poly is not None:
-                if share is not None:
-                    raise InputError("MPI runs on NGON_n/NFACE_n (polyhedral) zones are not supported yet; run "
-                                     "without mpiexec", path=file, key=zn.name)
-                polys.append(poly)
-            used: set[int] = set()
-            for zbc in _children(zn, "ZoneBC_t"):
-                for bc in _children(zbc, "BC_t"):
-                    bc_name, name = _bc_marker_name(bc)
-                    ms.add_bc(bc_name, name, _unstructured_bc(bc, zone, sections, cell_dim, file, used))
-            for si in in_order:
-                if isinstance(si, _Rows):
-                    zone_blocks.append(si)
-                    continue
-                s = sections[si]
-                if isinstance(s, cgns_ngon.PolySection):       # polyhedra: read above, never a marker
-                    continue
-                # a MIXED section may hold both volume cells and boundary faces: split by dimension
-                inner = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
-                         if t in s.blocks and CELL_DIM[t] >= cell_dim]
-                outer = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
-                         if t in s.blocks and CELL_DIM[t] < cell_dim]
-                zone_blocks.extend(inner)
-                if outer and si not in used:
-                    section_markers.append((s.name, outer))
+            zone_blocks = _unstructured_zone(zn, pts, zone, offset, n_points, cell_dim, phys_dim, file, share, ms,
+                                             polys, section_markers)
         for b in zone_blocks:
             if share is not None and not isinstance(b, _Rows):      # read whole: keep this rank's rows
                 a, e = share(len(b))
@@ -278,17 +305,7 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
             bar.update(1)
     if bar:
         bar.close()
-    markers = ms.markers
-    for name, blocks in section_markers:
-        if name in ms.from_bc:
-            continue
-        markers.setdefault(name, []).extend(blocks)
-    for name, parts in surface_cells.items():
-        # a planar 2D mesh stored with a constant third coordinate is not a surface in space
-        every = np.vstack([p for p, _ in parts])
-        if name not in markers and np.all(np.ptp(every, axis=0) > 0):
-            markers[name] = _merge([b for _, blocks in parts for b in blocks])
-    markers = {k: _merge(v) for k, v in markers.items()}
+    markers = _markers(ms, section_markers, surface_cells)
     cell_blocks = ([CellBlock(t, np.vstack(cells[t])) for t in _TYPE_ORDER if t in cells] if share is None
                    else [r for t in _TYPE_ORDER for r in cells.get(t, [])])
     polyhedra = None
