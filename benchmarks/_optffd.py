@@ -1,0 +1,119 @@
+"""``ffd optimize`` on SU2's NACA0012 case: the ``--ffd`` rows (c) of ``bench_optimize``.
+
+The design: SU2's mesh and flow (``inv_NACA0012_basic.cfg``, Euler, M 0.8, alpha 1.25 deg), ffd's
+automatic box (8 x 2 control points), twist (about the trailing edge) and 2 x 8 shape variables; the
+constrained version bounds LIFT >= 0.328486 and MOMENT_Z >= 0 (each with its own adjoint) and keeps the
+thickness at 30 % chord at least the baseline's (0.12 of the chord there, the NACA0012's maximum, so
+SU2_GEO's ``AIRFOIL_THICKNESS`` >= 0.12 follows); 8 SLSQP iterations. ``ffd optimize`` runs in a cached
+folder like the peers, in the benchmark's solver slot (one SU2 process at a time). ``ffd_path`` points
+to the tree that has the command (``--ffd-path``; default this repository).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+from pathlib import Path
+
+from benchmarks import _optpeers, _su2
+
+SHAPE_BOUND = 0.02        # chord lengths, each shape variable
+TWIST_BOUND = 3.0         # degrees
+
+
+def design_text(adjoint: str, constrained: bool, iterations: int = _optpeers.ITERATIONS) -> str:
+    """The design file of a (c) run (mesh and config copied beside it as ``mesh.su2``, ``flow.cfg``)."""
+    zeros = ", ".join(["0.0"] * 8)
+    lines = [
+        "mesh: mesh.su2", "surface: airfoil", "box: {points: [8, 2]}", "changes:", "  - twist: 0.0",
+        f"  - shape: {{upper: [{zeros}], lower: [{zeros}]}}",
+        "bounds:", f"  c0.twist: [{-TWIST_BOUND}, {TWIST_BOUND}]",
+        f"  c1.shape: [{-SHAPE_BOUND}, {SHAPE_BOUND}]",
+    ]
+    if constrained:
+        lines += ["constraints:", "  - thickness: {chord: [0.3], lower: 1.0}"]
+    lines += ["optimize:", "  solver: su2", "  config: flow.cfg", "  objective: DRAG"]
+    if constrained:
+        lines += ["  functions:", f"    - {{name: LIFT, lower: {_optpeers.BOUNDS['LIFT']}}}",
+                  "    - {name: MOMENT_Z, lower: 0.0}"]
+    lines += ["  method: SLSQP", f"  iterations: {iterations}", "  folder: opt/", f"  adjoint: {adjoint}",
+              "output: {mesh: out/naca.su2}"]
+    return "\n".join(lines) + "\n"
+
+
+def flow_config() -> str:
+    """SU2's basic config as the user would give it (ffd changes only mesh and output names)."""
+    return _su2.cfg_set(_su2.NACA_CFG.read_text(), MESH_FILENAME="mesh.su2")
+
+
+def has_optimize(ffd_path: Path) -> bool:
+    """Whether the ffd tree at ``ffd_path`` has the ``optimize`` command."""
+    return (Path(ffd_path) / "ffdcli" / "cli" / "optimize.py").exists()
+
+
+def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None = None,
+             force: bool = False) -> dict:
+    """Run (or reuse) ``ffd optimize`` for one row; returns the result dict with its JSON summary."""
+    root = Path(root or _su2.SCRATCH / "ffd")
+    label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
+    design = design_text(adjoint, constrained)
+    cfg = flow_config()
+    cmd = [sys.executable, "-m", "ffdcli", "optimize", "design.yaml", "--json"]
+    src = sorted(Path(ffd_path).joinpath("ffdcli").rglob("*.py"))
+
+    def body(folder: Path) -> dict:
+        shutil.copyfile(_su2.NACA_MESH, folder / "mesh.su2")
+        (folder / "flow.cfg").write_text(cfg)
+        (folder / "design.yaml").write_text(design)
+        env = _su2.su2_env()
+        env["PYTHONPATH"] = f"{ffd_path}:{env['PYTHONPATH']}"
+        rc, wall = _su2.run(cmd, folder, "optimize.log", env=env)
+        summary = None
+        for line in reversed((folder / "optimize.log").read_text().splitlines()):
+            if line.startswith("{"):
+                try:
+                    summary = json.loads(line)
+                    break
+                except json.JSONDecodeError:
+                    continue
+        return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path)}
+
+    return _su2.cached_run(root, label, design + cfg, [_su2.NACA_MESH, *src], cmd[2:], body, force=force)
+
+
+def _best_mesh(folder: Path, summary: dict) -> Path | None:
+    for cand in (folder / "out" / "naca.su2", *sorted((folder / "opt").glob("best*.su2"))):
+        if cand.exists():
+            return cand
+    return None
+
+
+def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
+    """The table row of a finished (c) run, read from its JSON summary and its ``history.csv``."""
+    folder = Path(result["folder"])
+    s = result.get("summary") or {}
+    fn = s.get("functions") or {}
+    values = {"CD": fn.get("DRAG", float("nan")), "CL": fn.get("LIFT", float("nan")),
+              "CMz": fn.get("MOMENT_Z", float("nan"))}
+    hist = folder / "opt" / "history.csv"
+    if hist.exists() and any(math.isnan(v) for v in values.values()):
+        rows = _su2.read_history(hist)
+        best = min((r for r in rows if not r.get("failed")), key=lambda r: r.get("DRAG", math.inf))
+        values.update(CD=best.get("DRAG", values["CD"]), CL=best.get("LIFT", values["CL"]),
+                      CMz=best.get("MOMENT_Z", values["CMz"]))
+    mesh = _best_mesh(folder, s)
+    geo = folder / "final_geometry"
+    if (geo / "of_eval.csv").exists():
+        values["tc"] = _su2.last_history(geo / "of_eval.csv")["AIRFOIL_THICKNESS"]
+    elif mesh is not None:
+        values["tc"] = _optpeers.airfoil_thickness(mesh, geo)
+    else:
+        values["tc"] = float("nan")
+    viol = _optpeers.worst_violation(values)
+    return {"run": "(c) ffd optimize, automatic box (17)", "adjoint": adjoint, "constrained": constrained,
+            **values, "worst_violation": viol, "feasible": viol <= 1e-4,
+            "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
+            "wall_s": result["wall_s"], "designs": s.get("evaluations"), "status": s.get("status"),
+            "rc": result["rc"], "folder": str(folder)}
