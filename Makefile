@@ -39,7 +39,7 @@ $(VENV)/.stamp-viz: $(VENV)/.stamp-core
 venv: $(VENV)/.stamp-test
 
 demo: $(VENV)/.stamp-viz
-	$(BIN)/python -m ffdcli.demo --out $(OUT)
+	$(BIN)/python -m ffdcli.app.demo --out $(OUT)
 
 test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz
 	$(BIN)/python -m pytest -q

@@ -13,8 +13,8 @@ NOTES = "Target: the box's own work (cuts, fitting, rebuilds) adds no more than 
 
 
 def _case(n_chord: int, n_span: int) -> dict:
-    from ffdcli.box import fit_box
-    from ffdcli.embedding import embed
+    from ffdcli.box.box import fit_box
+    from ffdcli.lattice.embedding import embed
     from ffdcli.mesh import CellBlock
     from ffdcli.settings import BoxSettings
     from ffdcli.testing.wings import Planform, wing_surface

@@ -99,8 +99,8 @@ def _best(fn, repeat=REPEAT, budget=0.5, max_repeat=50) -> float:
 
 def measure(lattice_name: str, npts: int, seed: int = 0) -> dict:
     """One case, in this process: embed time, residual, deform times, memory."""
-    from ffdcli.embedding import embed
-    from ffdcli.lattice import Lattice, evaluate
+    from ffdcli.lattice.embedding import embed
+    from ffdcli.lattice.lattice import Lattice, evaluate
 
     shape, degree = LATTICES[lattice_name]
     lattice = Lattice(wing_control_points(shape), degree)

@@ -3,19 +3,19 @@
 One child process (``python -m benchmarks.bench_derivatives --child N``) so that its peak memory is
 its own. The lattice is the 8 x 6 x 2, degree (3, 3, 1) curved wing lattice of
 :mod:`benchmarks.bench_core` (swept, tapered, twisted, bent); N points at random parameters are
-mapped through it and embedded with :func:`ffdcli.embedding.embed` (untimed here: bench_core times
-it). The design has 101 variables, built with :mod:`ffdcli.changes` on
+mapped through it and embedded with :func:`ffdcli.lattice.embedding.embed` (untimed here: bench_core times
+it). The design has 101 variables, built with :mod:`ffdcli.parameterization.changes` on
 ``LatticeFrame.from_lattice`` (chord x, thickness z, span y), in this order:
 twist [6 per-section angles], span, sweep, dihedral, chord [6 factors], sweep offsets [6],
 shape upper (8 x 6 points), shape upper/lower (8 + 8, all sections), shape rows (2 x 8) = 101.
 
 Rows:
-* ``dP/dv``: :func:`ffdcli.derivatives.lattice_jacobian` (288 x 101);
+* ``dP/dv``: :func:`ffdcli.parameterization.derivatives.lattice_jacobian` (288 x 101);
 * ``B``: ``Embedding.basis_matrix()`` (sparse CSR, N x 96, 32 nonzeros per row);
 * factored Jacobian = dP/dv + B: what ``ffd jacobian`` writes (dX/dv = B @ dP/dv);
-* dense dX/dv: :func:`ffdcli.derivatives.surface_jacobian` (N*3 x 101 float64, 2.4 GB at 1M),
+* dense dX/dv: :func:`ffdcli.parameterization.derivatives.surface_jacobian` (N*3 x 101 float64, 2.4 GB at 1M),
   for reference; the time includes allocating and filling the output;
-* vjp: :func:`ffdcli.derivatives.vjp` of a random dJ/dX (N, 3) = g^T dX/dv without the dense product.
+* vjp: :func:`ffdcli.parameterization.derivatives.vjp` of a random dJ/dX (N, 3) = g^T dX/dv without the dense product.
 Each time is the best of several runs after a warm-up call (numba kernels loaded, pages touched).
 """
 
@@ -36,7 +36,7 @@ SHAPE, DEGREE = (8, 6, 2), (3, 3, 1)
 NOTES = """
 Lattice 8 x 6 x 2, degree (3, 3, 1), the curved wing lattice of bench_core; N random points inside,
 embedded (untimed). Design: 101 variables (twist x6, span, sweep, dihedral, chord x6, sweep offsets
-x6, shape upper 8x6, shape upper/lower 8+8, shape rows 2x8), changes built with ffdcli.changes.
+x6, shape upper 8x6, shape upper/lower 8+8, shape rows 2x8), changes built with ffdcli.parameterization.changes.
 "factored" = lattice_jacobian + basis_matrix: the two factors of dX/dv = B @ dP/dv that `ffd jacobian`
 writes. "dense" = surface_jacobian (N*3 x 101 float64 in memory: 2.4 GB at 1M). Best of 3-5 runs after
 a warm-up; peak RSS = the child process (points, embedding, B, and the dense Jacobian included).
@@ -46,7 +46,7 @@ Targets (issue 7): Jacobian 1M x 101 <= 2 s (pyGeo measured here: 25.8 s); vjp <
 
 def design_changes(m: int, n: int, l: int) -> list:
     """The 101-variable design on an (n, m, l) = (8, 6, 2) lattice (see the module docstring)."""
-    from ffdcli.changes import Chord, Dihedral, Shape, Span, Sweep, Twist
+    from ffdcli.parameterization.changes import Chord, Dihedral, Shape, Span, Sweep, Twist
 
     j = np.arange(m) / (m - 1)
     i = np.arange(n) / (n - 1)
@@ -83,10 +83,10 @@ def _best(fn, repeat: int) -> float:
 
 def measure(npts: int, seed: int = 0) -> dict:
     from benchmarks.bench_core import wing_control_points
-    from ffdcli.changes import LatticeFrame, design_variables
-    from ffdcli.derivatives import lattice_jacobian, surface_jacobian, vjp
-    from ffdcli.embedding import embed
-    from ffdcli.lattice import Lattice, evaluate
+    from ffdcli.lattice.embedding import embed
+    from ffdcli.lattice.lattice import Lattice, evaluate
+    from ffdcli.parameterization.changes import LatticeFrame, design_variables
+    from ffdcli.parameterization.derivatives import lattice_jacobian, surface_jacobian, vjp
 
     lattice = Lattice(wing_control_points(SHAPE), DEGREE)
     P0 = lattice.control_points

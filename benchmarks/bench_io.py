@@ -3,7 +3,7 @@
 ``run(sizes)`` builds, for each size N, a structured n x n x n grid (n**3 ~ N points) split into six
 tetrahedra per cube (~6 N tets), with markers ``wing`` (the z = 0 face) and ``farfield`` (the
 other five faces), writes it as an SU2 file in a temporary folder, and times in a fresh process
-each: ``read`` (ffdcli.formats.su2.read), ``write_patch`` (every point moved, the point block of a
+each: ``read`` (ffdcli.io.formats.su2.read), ``write_patch`` (every point moved, the point block of a
 copy of the file rewritten) and ``write_new`` (the whole file written from scratch). Peak memory is
 the child process's maximum resident set size (``resource.getrusage``), including the interpreter
 and NumPy (about 40 MB on their own).
@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-TITLE = "SU2 mesh I/O (ffdcli.formats.su2): read and write a synthetic tet mesh"
+TITLE = "SU2 mesh I/O (ffdcli.io.formats.su2): read and write a synthetic tet mesh"
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -62,7 +62,7 @@ def structured_tet_mesh(n_points: int):
 _CHILD = r"""
 import json, sys, time
 import numpy as np
-from ffdcli.formats import su2
+from ffdcli.io.formats import su2
 op, src, out = sys.argv[1:4]
 t = time.perf_counter()
 mesh = su2.read(src)
@@ -102,7 +102,7 @@ def run(quick: bool = False) -> list[dict]:
 
 def run_sizes(sizes=(100_000, 1_000_000)) -> list[dict]:
     """Time read / patch write / new write of a synthetic SU2 tet mesh of each size (points)."""
-    from ffdcli.formats import su2
+    from ffdcli.io.formats import su2
 
     rows = []
     with tempfile.TemporaryDirectory(prefix="ffd-bench-io-") as tmp:
@@ -141,7 +141,7 @@ def main(argv=None) -> None:
     sizes = tuple(int(float(a)) for a in argv) or (100_000, 1_000_000)
     t = time.perf_counter()
     rows = run_sizes(sizes)
-    print("SU2 I/O (ffdcli.formats.su2), synthetic tet meshes; peak = max RSS of the process")
+    print("SU2 I/O (ffdcli.io.formats.su2), synthetic tet meshes; peak = max RSS of the process")
     print(f"{'points':>9} {'tets':>9} {'file MB':>8} | {'read s':>7} {'peak MB':>8} | "
           f"{'patch s':>7} {'peak MB':>8} | {'new s':>6} {'peak MB':>8}")
     for r in rows:

@@ -96,8 +96,8 @@ def _timed(comm, fn, repeat=REPEAT) -> float:
 
 def child_embed(comm, npts: int, own: bool = False) -> dict:
     from benchmarks.bench_core import wing_control_points
-    from ffdcli.embedding import embed
-    from ffdcli.lattice import Lattice, evaluate
+    from ffdcli.lattice.embedding import embed
+    from ffdcli.lattice.lattice import Lattice, evaluate
 
     lat = Lattice(wing_control_points((8, 6, 2)), (3, 3, 1))
     X = evaluate(lat, np.random.default_rng(0).uniform(0.0, 1.0, (npts, 3)))
@@ -111,7 +111,7 @@ def child_embed(comm, npts: int, own: bool = False) -> dict:
 
 def child_warp(comm, n_volume: int, n_surface: int) -> dict:
     from benchmarks.bench_warp import synthetic_mesh, twist_motion
-    from ffdcli.warp import WarpSettings, prepare_warp, warp
+    from ffdcli.volume.warp import WarpSettings, prepare_warp, warp
 
     pts, sid, fid, areas = synthetic_mesh(n_volume, n_surface)
     b, R = twist_motion(pts[sid])
@@ -132,8 +132,8 @@ def child_warp(comm, n_volume: int, n_surface: int) -> dict:
 
 
 def child_read(comm, path: str, mode: str) -> dict:
-    from ffdcli.formats import read_mesh, read_part
-    from ffdcli.partition import localize, node_owners
+    from ffdcli.io.formats import read_mesh, read_part
+    from ffdcli.parallel.partition import localize, node_owners
 
     def once():
         if mode == "bcast":          # the route of the formats read whole (VTK, ADF CGNS)
@@ -154,8 +154,8 @@ def child_read(comm, path: str, mode: str) -> dict:
 
 
 def child_gate(comm, path: str) -> dict:
-    from ffdcli.formats import read_part
-    from ffdcli.quality import check_quality, check_quality_part
+    from ffdcli.io.formats import read_part
+    from ffdcli.quality.gate import check_quality, check_quality_part
 
     mesh, part = read_part(path, comm)          # the rank's local mesh (every marker node: the far field)
     size = comm.allreduce_max(float(np.ptp(mesh.points, axis=0).max()))
@@ -214,8 +214,8 @@ def child_memory(comm, design: str, mode: str) -> dict:
     """``ffd deform``'s pipeline (load_run, deform, write_outputs) on local meshes (``mode`` local) or
     with every node on every rank (``whole``, the path before issue 17's local meshes): the resident
     and peak MB of every rank after each phase, and each rank's local rows."""
+    from ffdcli.app.pipeline import deform, load_run, write_outputs
     from ffdcli.design import load_design
-    from ffdcli.pipeline import deform, load_run, write_outputs
 
     phases = {}
 
@@ -237,7 +237,7 @@ def child_memory(comm, design: str, mode: str) -> dict:
 
 
 def _child(argv) -> int:
-    from ffdcli.parallel import world
+    from ffdcli.parallel.comm import world
 
     comm = world()
     case, *args = argv
@@ -274,7 +274,7 @@ def _launch(ranks: int, threads: int, args: list[str], cwd=None) -> tuple[float,
 _FFD_PEAK = (
     "import json, sys\n"
     "from ffdcli.cli import main\n"
-    "from ffdcli.parallel import world\n"
+    "from ffdcli.parallel.comm import world\n"
     "import io, contextlib\n"
     "buf = io.StringIO()\n"
     "code = 0\n"
@@ -297,7 +297,7 @@ _FFD_PEAK = (
 def _cases(folder: Path, quick: bool) -> list[tuple[str, int, list[str], Path | None]]:
     """(case, N, child argv, cwd) of every case; builds the 1M-node mesh (SU2 and CGNS) in ``folder``."""
     from benchmarks.bench_pipeline import FULL, QUICK, build_case
-    from ffdcli.formats import read_mesh, write_mesh
+    from ffdcli.io.formats import read_mesh, write_mesh
 
     facts = build_case(folder, QUICK if quick else FULL)
     write_mesh(read_mesh(folder / "wing.su2"), folder / "wing.cgns")

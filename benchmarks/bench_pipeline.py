@@ -13,12 +13,12 @@ caches the 8 x 6 x 2 lattice once (untimed for the deform rows, reported as its 
   is the wall time of the process (interpreter start-up and imports included; ``cmd s`` is the
   command's own ``seconds``), peak RSS is that process's VmHWM (printed at exit by a small wrapper
   around ``python -m ffdcli``: ``ru_maxrss`` would include the parent's peak, inherited at exec).
-* the same steps in one child process through :mod:`ffdcli.pipeline`, timed per phase: ``read+box``
+* the same steps in one child process through :mod:`ffdcli.app.pipeline`, timed per phase: ``read+box``
   (``load_design`` + ``load_run``: read the mesh, load the cached box), ``changes`` / ``volume`` /
-  ``quality`` (``Deformation.seconds`` of :func:`ffdcli.pipeline.deform`) and ``write``
+  ``quality`` (``Deformation.seconds`` of :func:`ffdcli.app.pipeline.deform`) and ``write``
   (``write_outputs``).
-* issue 6 on this mesh: the ``volume`` phase of that run (:func:`ffdcli.warp.prepare_mesh_warp`,
-  the surface rotations and :func:`ffdcli.warp.warp`). ``python -m benchmarks.bench_pipeline --warp
+* issue 6 on this mesh: the ``volume`` phase of that run (:func:`ffdcli.volume.warp.prepare_mesh_warp`,
+  the surface rotations and :func:`ffdcli.volume.warp.warp`). ``python -m benchmarks.bench_pipeline --warp
   DESIGN.yaml`` times prepare and warp separately (not part of the table).
 """
 
@@ -48,7 +48,7 @@ n_span=196)` = 1,003,520 hex-mesh nodes, 50,176 wing nodes, written as SU2 (ASCI
 by `ffd box design.yaml` before the timed runs. `ffd deform` rows: wall time of the whole process
 (start-up, read, cached box, changes, volume, quality check, write), the faster of two runs (the
 slower beside it, and the load average before and after), peak RSS (VmHWM) of that process. Phase
-rows: the same steps through `ffdcli.pipeline` in one process (`Deformation.seconds` per phase).
+rows: the same steps through `ffdcli.app.pipeline` in one process (`Deformation.seconds` per phase).
 Issue-6 row: the `volume` phase (prepare_mesh_warp + surface rotations + warp, IDW with rotations,
 default tolerance) of the idw phases run.
 Targets: issue 5 deform + write of a 1M-node mesh with a cached box <= 20 s; issue 6 1M volume
@@ -60,7 +60,7 @@ def build_case(folder: Path, sizes: dict) -> dict:
     """Write ``wing.su2`` and the design files into ``folder``; returns mesh facts."""
     import numpy as np
 
-    from ffdcli.formats import write_mesh
+    from ffdcli.io.formats import write_mesh
     from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
     t0 = time.perf_counter()
@@ -137,8 +137,8 @@ def timed_process(args: list[str], cwd: Path) -> dict:
 
 def phases(design: str) -> dict:
     """In this process: the steps of `ffd deform` through the library, timed per phase."""
+    from ffdcli.app.pipeline import deform, load_run, write_outputs
     from ffdcli.design import load_design
-    from ffdcli.pipeline import deform, load_run, write_outputs
 
     t0 = time.perf_counter()
     d = load_design(design)
@@ -156,9 +156,9 @@ def phases(design: str) -> dict:
 
 def warp_only(design: str) -> dict:
     """In this process: prepare_mesh_warp and warp of the design's surface motion on its mesh."""
+    from ffdcli.app.pipeline import load_run
     from ffdcli.design import load_design
-    from ffdcli.pipeline import load_run
-    from ffdcli.warp import WarpSettings, prepare_mesh_warp, warp
+    from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp
 
     run = load_run(load_design(design))
     mesh, surf = run.prep.mesh, run.prep.surface

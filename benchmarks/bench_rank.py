@@ -86,10 +86,10 @@ def measure(quick: bool = False, seed: int = 0) -> dict:
 
     from benchmarks.bench_core import wing_control_points
     from benchmarks.bench_derivatives import design_changes
-    from ffdcli.changes import LatticeFrame
-    from ffdcli.derivatives import lattice_jacobian, vjp
-    from ffdcli.embedding import embed
-    from ffdcli.lattice import Lattice, evaluate
+    from ffdcli.lattice.embedding import embed
+    from ffdcli.lattice.lattice import Lattice, evaluate
+    from ffdcli.parameterization.changes import LatticeFrame
+    from ffdcli.parameterization.derivatives import lattice_jacobian, vjp
 
     lattice = Lattice(wing_control_points(SHAPE), DEGREE)
     rng = np.random.default_rng(seed)

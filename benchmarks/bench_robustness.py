@@ -1,13 +1,13 @@
 """Robustness of the volume-mesh follow: plausible designs x wing meshes, with the default settings.
 
 For every mesh and design, the design file is deformed exactly as ``ffd deform`` does
-(:func:`ffdcli.pipeline.deform`, the quality gate of :mod:`ffdcli.quality`) and the table shows
+(:func:`ffdcli.app.pipeline.deform`, the quality gate of :mod:`ffdcli.quality.gate`) and the table shows
 whether the gate refused it, the inverted cells, the minimum scaled Jacobian before -> after and
 SU2's node orthogonality of the gate (the smallest before -> after, and the largest loss of a
 node). Target: 0 refusals and 0 inverted cells with the default ``volume:`` settings.
 
 Meshes: the bundled wings (``samples/rect_wing.su2``, ``samples/crm_wing.su2``), the ONERA M6 of
-``../shared/data`` (skipped when absent) and the generated wings of :mod:`ffdcli.testmeshes`
+``../shared/data`` (skipped when absent) and the generated wings of :mod:`ffdcli.testing.gmsh_wings`
 (``gen:<case>``: span along x, y and z, left and right, kinked, flat and round tips, blunt trailing
 edge, prism layers, far field at 5 and 50 chords). Generated meshes, design files and box caches go
 to ``--work`` (default ``out/robustness`` of the repository).
@@ -102,12 +102,12 @@ class MeshSource:
     name: str
     surface: str
     bundled: str | None = None      # a path (relative to the repo, or absolute)
-    case: str | None = None         # a ffdcli.testmeshes case
+    case: str | None = None         # a ffdcli.testing.gmsh_wings case
 
     def path(self, work: Path) -> Path | None:
         """The mesh file (generated into ``work`` when needed); None when it is not available."""
         if self.case is not None:
-            from ffdcli import testmeshes
+            from ffdcli.testing import gmsh_wings as testmeshes
 
             try:
                 import gmsh  # noqa: F401
@@ -120,7 +120,7 @@ class MeshSource:
 
 
 def _meshes() -> dict[str, MeshSource]:
-    from ffdcli.testmeshes import CASES
+    from ffdcli.testing.gmsh_wings import CASES
 
     out = {"rect_wing": MeshSource("rect_wing", "wing", bundled="samples/rect_wing.su2"),
            "crm_wing": MeshSource("crm_wing", "wing", bundled="samples/crm_wing.su2"),
@@ -150,9 +150,9 @@ def _write_design(folder: Path, mesh: Path, surface: str, name: str, changes: li
 
 def run_one(mesh_path: Path, surface: str, design: str, *, work: Path, overrides=(), points=(6, 8, 2)) -> dict:
     """Deform one mesh by one design as ``ffd deform`` does; a row of the table (nothing written)."""
+    from ffdcli.app.pipeline import deform, load_run
     from ffdcli.design import load_design
     from ffdcli.errors import InputError, QualityError
-    from ffdcli.pipeline import deform, load_run
 
     folder = work / "designs" / mesh_path.stem
     folder.mkdir(parents=True, exist_ok=True)

@@ -1,4 +1,4 @@
-"""Volume-mesh warp (``ffdcli.warp``): time, peak memory and tree error on a synthetic wing mesh.
+"""Volume-mesh warp (``ffdcli.volume.warp``): time, peak memory and tree error on a synthetic wing mesh.
 
 The mesh: a half wing (elliptic sections, chord 1 at the root, taper 0.5, span 3, 12 % thick; see
 :func:`wing_surface`) sampled on a parametric grid of ``n_surface`` nodes, and volume nodes
@@ -104,7 +104,7 @@ def measure(n_volume: int, n_surface: int, n_subset: int, tolerance: float = 1e-
             old: bool = False, repeats: int = 3) -> dict:
     """Everything in this process (run it in a child for a clean peak memory). ``old``: the
     defaults before issue 13 (alpha 0.25, no rotation fade), for the speed ratio."""
-    from ffdcli.warp import WarpSettings, prepare_warp, warp
+    from ffdcli.volume.warp import WarpSettings, prepare_warp, warp
 
     pts, sid, fid, areas = synthetic_mesh(n_volume, n_surface)
     settings = WarpSettings(tolerance=tolerance)

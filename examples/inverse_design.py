@@ -26,7 +26,7 @@ SHAPE_LO = [0.0, -0.003, -0.004, -0.002, -0.001, 0.0]
 
 def write_case(folder: Path) -> Path:
     """A small surface wing and its design file (all values at the baseline) in ``folder``."""
-    from ffdcli.formats import write_mesh
+    from ffdcli.io.formats import write_mesh
     from ffdcli.testing.wings import rect_wing_planform, surface_mesh
 
     write_mesh(surface_mesh(rect_wing_planform(semi_span=3.0), n_chord=25, n_span=11), folder / "wing.su2")

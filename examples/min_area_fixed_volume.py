@@ -30,7 +30,7 @@ STATIONS = 21
 
 def write_case(folder: Path) -> Path:
     """A small surface wing and its design file in ``folder``."""
-    from ffdcli.formats import write_mesh
+    from ffdcli.io.formats import write_mesh
     from ffdcli.testing.wings import rect_wing_planform, surface_mesh
 
     write_mesh(surface_mesh(rect_wing_planform(semi_span=3.0), n_chord=25, n_span=11), folder / "wing.su2")
@@ -100,7 +100,7 @@ def run(folder: Path | None = None, maxiter: int = 60, disp: bool = False) -> di
     import openmdao.api as om
 
     from ffdcli.api import DesignModel
-    from ffdcli.constraints import chord_lines
+    from ffdcli.constraints.geometric import chord_lines
     from ffdcli.openmdao import FFDComponent
 
     tmp = tempfile.TemporaryDirectory() if folder is None else None

@@ -1,12 +1,19 @@
 """ffd: automatic free-form deformation for aerodynamic design.
 
-Data flows one way through the package::
+The folders are the stages of the data flow, in order; a stage imports only the ones before it::
 
-    formats (mesh I/O) -> surface -> axes -> box (automatic lattice) -> embedding (cached)
-      -> changes (design on the lattice) -> embedding.displace (B @ dP) -> warp (volume follows)
-      -> quality (check) -> formats (write)
+    mesh/ -> parallel/ -> io/ (formats: read) -> geometry/ (surface, axes, sections)
+      -> lattice/ (splines, embedding) -> box/ (the automatic lattice, cached)
+      -> parameterization/ (changes on the lattice, derivatives) -> constraints/
+      -> volume/ (the mesh follows) -> quality/ (the gate) -> io/ (formats: write)
 
-The command line (`ffdcli.cli`) is a thin layer over these modules; everything is usable from Python.
+``design/`` reads the design file, ``viz/`` draws, ``app/`` holds one workflow per command,
+``api.py`` and ``openmdao.py`` are the objects an optimisation keeps, ``optimize/`` drives a flow
+solver, and ``cli/`` only parses, calls ``app/`` and prints. ``docs/ARCHITECTURE.md`` has the map.
 """
 
+from ffdcli import _compat
+
 __version__ = "0.1.0"
+
+_compat.install()

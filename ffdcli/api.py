@@ -12,13 +12,13 @@ Nothing is re-embedded: the box and embedding are loaded (or built and cached) o
 
 Derivatives are exact (no finite differences):
 
-* surface: ``dX/dv = B dP'/dv`` (:mod:`ffdcli.derivatives`);
+* surface: ``dX/dv = B dP'/dv`` (:mod:`ffdcli.parameterization.derivatives`);
 * volume (``volume.method: idw``): the warp is linear in the surface translations ``b`` and frame
-  parts ``M = F - I`` (:func:`ffdcli.warp.warp_vjp` is its transpose). With ``volume.carry:
+  parts ``M = F - I`` (:func:`ffdcli.volume.warp.warp_vjp` is its transpose). With ``volume.carry:
   gradient`` (the default) the frame of a surface point is the FFD map's deformation gradient
   ``F = J(P') J(P0)^-1``, linear in the control points (``dF = J(dP') J(P0)^-1``). With ``carry:
   rotation`` it is the rotation ``R``, the polar factor of the surface-frame gradient F_s of F
-  (:mod:`ffdcli.rotations`, with its derivative): ``dR = R Omega`` with ``Omega`` skew solving
+  (:mod:`ffdcli.volume.frames`, with its derivative): ``dR = R Omega`` with ``Omega`` skew solving
   ``Omega U + U Omega = R^T dF - dF^T R`` (``U = R^T F``), i.e. in 3D
   ``(tr(U) I - U) omega = axial(R^T dF - dF^T R)``; in 2D the angle's derivative in closed form.
 """
@@ -29,14 +29,45 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 
+from ffdcli.app.pipeline import (
+    deform,
+    frame_gradient_inputs,
+    full3,
+    is_surface_mesh,
+    load_run,
+    volume_method,
+    write_outputs,
+)
+from ffdcli.constraints.geometric import (
+    ConstraintInputs,
+    build_constraints,
+    constraint_bounds,
+    constraint_names,
+    evaluate,
+    satisfied,
+)
+from ffdcli.design import load_design
 from ffdcli.errors import InputError
-from ffdcli.formats.sensitivity import Sensitivity, read_sensitivity
-from ffdcli.rotations import (  # noqa: F401  (re-exported: the API's names of PR 7)
+from ffdcli.io.atomic import atomic_write
+from ffdcli.io.formats.sensitivity import Sensitivity, read_sensitivity
+from ffdcli.io.outputs import plan_deform
+from ffdcli.lattice.lattice import derivatives
+from ffdcli.lattice.pointset import PointSet
+from ffdcli.parallel.comm import SerialComm
+from ffdcli.parameterization.bounds import make_bounds
+from ffdcli.parameterization.changes import design_bounds, design_units
+from ffdcli.parameterization.derivatives import surface_jvp, vjp
+from ffdcli.quality.gate import enforce
+from ffdcli.volume.frames import (  # noqa: F401  (re-exported: the API's names of PR 7)
     planar_rotation_derivative,
     polar_rotation_derivative,
     rotations_from_deformation_gradient,
+    surface_frame_gradient,
+    surface_frame_gradient_jvp,
 )
+from ffdcli.volume.warp import warp, warp_vjp
 
 
 class DesignModel:
@@ -44,23 +75,20 @@ class DesignModel:
 
     Attributes
     ----------
-    run : ffdcli.pipeline.DesignRun
+    run : ffdcli.app.pipeline.DesignRun
         The design file with its box (loaded from the cache or built once) and its changes.
     names : list of str
         (n_vars,) design-variable names, ``c<index>.<kind>[<j>]`` as in ``ffd grad``.
     values : ndarray, shape (n_vars,)
         Their current values (degrees for angles, factors, mesh units for offsets and shape).
-    bounds : ffdcli.bounds.Bounds
+    bounds : ffdcli.parameterization.bounds.Bounds
         Natural (open) and user (``bounds:``, closed) bounds; :attr:`lower` and :attr:`upper`.
     """
 
     def __init__(self, run, comm=None):
-        """``comm`` (:mod:`ffdcli.parallel`; default the run's, else serial): under MPI every rank
+        """``comm`` (:mod:`ffdcli.parallel.comm`; default the run's, else serial): under MPI every rank
         holds the same model (names, values, surface); point sets are per rank (each adds its own
         mesh partition's points) and their reverse products are summed over the ranks."""
-        from ffdcli.bounds import make_bounds
-        from ffdcli.changes import design_bounds, design_units
-        from ffdcli.parallel import SerialComm
 
         self.run = run
         self.comm = comm or getattr(run, "comm", None) or SerialComm()
@@ -94,11 +122,9 @@ class DesignModel:
             False neither reads nor writes the cache.
         progress : callable, optional
             A progress factory (:mod:`ffdcli.progress`).
-        comm : ffdcli.parallel.SerialComm, optional
+        comm : ffdcli.parallel.comm.SerialComm, optional
             MPI communicator: rank 0 reads the mesh and the cache and broadcasts them.
         """
-        from ffdcli.design import load_design
-        from ffdcli.pipeline import load_run
 
         design = load_design(path, overrides=overrides)
         return cls(load_run(design, cache_dir=cache_dir, use_cache=use_cache, progress=progress, comm=comm),
@@ -158,7 +184,6 @@ class DesignModel:
 
         Returns ``{"points": k, "outside": count, "outside_ids": [...], "outside_worst": distance}``:
         points outside the lattice are kept and never move."""
-        from ffdcli.pointset import PointSet
 
         ps = PointSet.embed(str(name), self.run.box, X, progress=progress)
         self._point_sets[str(name)] = ps
@@ -170,7 +195,7 @@ class DesignModel:
         return list(self._point_sets)
 
     def point_set(self, name: str):
-        """The :class:`ffdcli.pointset.PointSet` named ``name``."""
+        """The :class:`ffdcli.lattice.pointset.PointSet` named ``name``."""
         try:
             return self._point_sets[name]
         except KeyError:
@@ -200,7 +225,7 @@ class DesignModel:
     # -- constraints ---------------------------------------------------------------------------
     @property
     def constraints(self) -> list:
-        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints`),
+        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints.geometric`),
         built once on the baseline surface and lattice; several components: every component's, in
         component order (see :attr:`constraint_groups`)."""
         return [c for _, group in self.constraint_groups for c in group]
@@ -226,7 +251,6 @@ class DesignModel:
         self._cache.clear()
 
     def _build_constraints(self, specs, c: int = 0) -> list:
-        from ffdcli.constraints import build_constraints
 
         comp = self.run.components[c]
         design_error = getattr(self.run.design, "error", None)
@@ -236,7 +260,6 @@ class DesignModel:
     @property
     def constraint_names(self) -> list[str]:
         """(C,) ``k<index>.<kind>[<j>]`` of every constraint item (``<component>.k...`` with components)."""
-        from ffdcli.constraints import constraint_names
 
         return [self.run.components[c].spec.prefix + n for c, group in self.constraint_groups
                 for n in constraint_names(group)]
@@ -244,21 +267,18 @@ class DesignModel:
     @property
     def constraint_lower(self) -> np.ndarray:
         """(C,) lower bounds of the constraint items (``-inf``: none)."""
-        from ffdcli.constraints import constraint_bounds
 
         return constraint_bounds(self.constraints)[0]
 
     @property
     def constraint_upper(self) -> np.ndarray:
         """(C,) upper bounds of the constraint items (``inf``: none)."""
-        from ffdcli.constraints import constraint_bounds
 
         return constraint_bounds(self.constraints)[1]
 
     def _constraint_inputs(self, c: int = 0):
         """What component ``c``'s constraints read: its lattice, its rows of dP'/dv (every variable's
         column), its surface points and basis."""
-        from ffdcli.constraints import ConstraintInputs
 
         if self.run.single:
             emb = self.run.prep.embedding
@@ -274,7 +294,6 @@ class DesignModel:
                                 lambda: emb.basis_matrix().tocsr(), emb.rmatvec if comp.box.dim == 3 else None)
 
     def _evaluate_constraints(self, jacobian: bool):
-        from ffdcli.constraints import evaluate
 
         vals, jacs = [np.zeros(0)], [np.zeros((0, self.n_vars))]
         for c, group in self.constraint_groups:
@@ -305,7 +324,6 @@ class DesignModel:
 
     def constraints_table(self) -> list[dict]:
         """One ``{"name", "value", "lower", "upper", "satisfied"}`` per constraint item (None: no bound)."""
-        from ffdcli.constraints import satisfied
 
         v = self.constraint_values()
         lo, hi = self.constraint_lower, self.constraint_upper
@@ -323,7 +341,6 @@ class DesignModel:
 
     def write_constraint_jacobian(self, path) -> None:
         """Write :meth:`constraint_jacobian_arrays` as ``.npz``, whole or not at all."""
-        from ffdcli.atomic import atomic_write
 
         arrays = self.constraint_jacobian_arrays()
         with atomic_write(path, "wb") as f:
@@ -343,7 +360,6 @@ class DesignModel:
         Several components: block diagonal, the columns of the components' lattices one after the
         other (file order), the rows as ``surface_ids``."""
         if self._B is None:
-            import scipy.sparse as sp
 
             comps = self.run.components
             if len(comps) == 1:
@@ -395,18 +411,16 @@ class DesignModel:
         """(B, D): dX/dv = B @ D reshaped, B (S, n_ctrl) sparse, D (n_ctrl*3, n_vars) dense.
 
         The product for point s, coordinate c, variable v is ``(B @ D.reshape(n_ctrl, 3*n_vars))
-        [s, c*n_vars + v]``; :func:`ffdcli.derivatives.surface_jacobian` forms it."""
+        [s, c*n_vars + v]``; :func:`ffdcli.parameterization.derivatives.surface_jacobian` forms it."""
         return self.basis, self.lattice_jacobian()
 
     def surface_jvp(self, dv) -> np.ndarray:
         """(S, 3) surface motion dX/dv @ dv for ``dv`` (n_vars,)."""
-        from ffdcli.derivatives import surface_jvp
 
         return surface_jvp(self.basis, self.lattice_jacobian(), self._check_dv(dv, "surface_jvp"))
 
     def surface_vjp(self, g) -> np.ndarray:
         """(n_vars,) dJ/dv for g = dJ/dX at the surface points (S, 3)."""
-        from ffdcli.derivatives import vjp
 
         g = np.asarray(g, dtype=float)
         if g.shape != (len(self.surface_ids), 3):
@@ -422,26 +436,21 @@ class DesignModel:
 
     def uses_volume(self) -> bool:
         """True when the volume mesh follows the surface (``volume.method: idw`` on a volume mesh)."""
-        from ffdcli.pipeline import is_surface_mesh, volume_method
 
         mesh = self.run.prep.mesh
         return volume_method(self.run) == "idw" and mesh.n_cells > 0 and not is_surface_mesh(mesh)
 
     def mesh_points(self, progress=None) -> np.ndarray:
         """(N, 3) every mesh node as ``ffd deform`` places it."""
-        from ffdcli.pipeline import deform
 
         return deform(self.run, P=self.lattice(), progress=progress, check=False).points
 
     def write(self, mesh=None, *, lattice=None, plot: bool = False, force: bool = False, progress=None) -> dict:
         """Write the deformed mesh of the current values (and the lattice VTK, with ``plot`` the
         picture) as ``ffd deform -o MESH --lattice LATTICE [--plot] [--force]`` does: every output
-        checked before the work (:func:`ffdcli.outputs.plan_deform`), the quality gate
-        (:func:`ffdcli.quality.enforce`: nothing written unless ``force``), all outputs
+        checked before the work (:func:`ffdcli.io.outputs.plan_deform`), the quality gate
+        (:func:`ffdcli.quality.gate.enforce`: nothing written unless ``force``), all outputs
         written together or none. ``mesh=None``: the design file's ``output:``. Returns {kind: path}."""
-        from ffdcli.outputs import plan_deform
-        from ffdcli.pipeline import deform, write_outputs
-        from ffdcli.quality import enforce
 
         design = self.run.design
         plan = plan_deform(design, mesh=mesh, lattice=lattice, plot=plot)
@@ -451,15 +460,12 @@ class DesignModel:
 
     def _frame_jacobian(self):
         """d(frame)/dv (n_vars, S, 3, 3) at the surface points (zero for points outside the lattice):
-        the derivative of :meth:`ffdcli.pipeline.DesignRun.surface_frames` (``volume.carry``)."""
+        the derivative of :meth:`ffdcli.app.pipeline.DesignRun.surface_frames` (``volume.carry``)."""
         if "dR" not in self._cache:
             self._cache["dR"] = self._frame_jacobian_uncached()
         return self._cache["dR"]
 
     def _frame_jacobian_uncached(self):
-        from ffdcli.lattice import derivatives
-        from ffdcli.pipeline import frame_gradient_inputs, full3
-        from ffdcli.rotations import surface_frame_gradient, surface_frame_gradient_jvp
 
         run = self.run
         lay = run.layout
@@ -502,14 +508,13 @@ class DesignModel:
         """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW.
 
         The warp is a fixed linear map of the surface translations and frame parts ``M = F - I``
-        (:func:`ffdcli.warp.warp`), so the product is the warp of ``(dX_s/dv dv, I + dF/dv dv)``; the
+        (:func:`ffdcli.volume.warp.warp`), so the product is the warp of ``(dX_s/dv dv, I + dF/dv dv)``; the
         surface nodes get ``dX_s/dv dv`` exactly. The transpose of :meth:`mesh_vjp`."""
         dv = self._check_dv(dv, "mesh_jvp")
         ids = self.surface_ids
         dXs = self.surface_jvp(dv)
         out = np.zeros((self.run.prep.mesh.n_points, 3))
         if self.uses_volume():
-            from ffdcli.warp import warp
 
             dR = np.tensordot(dv, self._frame_jacobian(), axes=1)
             out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, progress=progress)
@@ -527,7 +532,6 @@ class DesignModel:
         ids = self.surface_ids
         if not self.uses_volume():
             return self.surface_vjp(g[ids])
-        from ffdcli.warp import warp_vjp
 
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
@@ -541,7 +545,7 @@ class DesignModel:
 
 
 def constraints_report(run) -> list[dict]:
-    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.pipeline.DesignRun` (``ffd deform --json``)."""
+    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.app.pipeline.DesignRun` (``ffd deform --json``)."""
     return DesignModel(run).constraints_table()
 
 

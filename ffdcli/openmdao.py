@@ -39,7 +39,7 @@ NO_BOUND = 1e30
 
 
 def _optimiser_bounds(bounds) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) (n_vars,) closed bounds for an optimiser from :class:`ffdcli.bounds.Bounds`."""
+    """(lower, upper) (n_vars,) closed bounds for an optimiser from :class:`ffdcli.parameterization.bounds.Bounds`."""
     lo, hi = bounds.lower.copy(), bounds.upper.copy()
     lo_open = (bounds.natural[:, 0] >= bounds.user[:, 0]) & np.isfinite(lo)
     hi_open = (bounds.natural[:, 1] <= bounds.user[:, 1]) & np.isfinite(hi)

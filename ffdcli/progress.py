@@ -12,6 +12,8 @@ import sys
 from collections.abc import Callable
 from typing import Protocol
 
+from tqdm import tqdm
+
 
 class Bar(Protocol):
     def update(self, n: int = 1) -> None: ...
@@ -50,7 +52,6 @@ def terminal_progress(enabled: bool = True, stream=None) -> ProgressFactory:
         return no_progress
 
     def factory(label: str, total: int) -> Bar:
-        from tqdm import tqdm
 
         return tqdm(total=total, desc=label, file=stream, leave=False, unit_scale=True,
                     dynamic_ncols=True, mininterval=0.2)

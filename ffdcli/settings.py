@@ -179,7 +179,7 @@ class BoxSettings:
 
 
 # ----------------------------------------------------------------------------------------------
-# The volume mesh: how it follows the surface (ffdcli.warp) and the quality gate (ffdcli.quality)
+# The volume mesh: how it follows the surface (ffdcli.volume.warp) and the quality gate (ffdcli.quality.gate)
 
 #: Volume-motion methods.
 METHODS = ("idw", "none")
@@ -325,7 +325,7 @@ class WarpSettings:
         """JSON-schema fragment of the design file's ``volume:`` block: THE one schema of it.
 
         Every :class:`WarpSettings` field and the quality gate's keys (:data:`GATE_KEYS`, read by
-        :mod:`ffdcli.quality` through :mod:`ffdcli.pipeline`); the design-file schema uses this."""
+        :mod:`ffdcli.quality.gate` through :mod:`ffdcli.app.pipeline`); the design-file schema uses this."""
         doc = cls.field_docs()
         def names():
             return {"anyOf": [{"type": "string", "minLength": 1},
@@ -355,7 +355,7 @@ class WarpSettings:
                 "properties": props, "additionalProperties": False}
 
 
-#: The quality gate's keys of ``volume:`` (the gate lives in :mod:`ffdcli.quality`; its default
+#: The quality gate's keys of ``volume:`` (the gate lives in :mod:`ffdcli.quality.gate`; its default
 #: threshold there is ``DEFAULT_THRESHOLD``, checked equal to this one by the tests).
 GATE_KEYS = {
     "threshold": {"type": "number", "exclusiveMinimum": 0, "maximum": 1, "default": 0.05,

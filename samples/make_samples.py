@@ -9,7 +9,7 @@ The outputs are committed, so neither the tests nor CI need gmsh. The 3D wings a
 OpenCASCADE kernel through NACA sections from :mod:`ffdcli.testing.wings` (same planform parameters as
 ``rect_wing_planform`` / ``crm_planform``), cut from a box far field and meshed with tetrahedra; the 2D
 O-grid is :func:`ffdcli.testing.wings.airfoil_ogrid` (pure NumPy). The SU2 files are written by the small
-writer below (``ffdcli.formats.su2`` is not used so that this script stays independent of it).
+writer below (``ffdcli.io.formats.su2`` is not used so that this script stays independent of it).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
-from ffdcli.atomic import atomic_write  # noqa: E402
+from ffdcli.io.atomic import atomic_write  # noqa: E402
 from ffdcli.mesh import VTK_ID  # noqa: E402
 from ffdcli.testing import wings  # noqa: E402
 
@@ -441,12 +441,12 @@ def make_volume_sens(out: Path) -> dict:
     Not an adjoint solution (SU2 is not available where the samples are made): a real sensitivity of
     a functional known in closed form, so that ``ffd grad`` has a file to read and its answer can be
     checked (README, docs/su2.md). The volume and its exact gradient are those of ffd's ``volume``
-    constraint (:class:`ffdcli.constraints.Volume`: the half wing closed by its symmetry plane z = 0).
+    constraint (:class:`ffdcli.constraints.geometric.Volume`: the half wing closed by its symmetry plane z = 0).
     The marker's triangles face into the wing (out of the fluid), hence the sign.
     """
-    from ffdcli.constraints import Volume, surface_triangles
-    from ffdcli.formats import read_mesh
-    from ffdcli.surface import extract_surface
+    from ffdcli.constraints.geometric import Volume, surface_triangles
+    from ffdcli.geometry.surface import extract_surface
+    from ffdcli.io.formats import read_mesh
 
     m = read_mesh(HERE / "rect_wing.su2")
     surf = extract_surface(m, ["wing"])

@@ -14,6 +14,12 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "samples"
 
+# The test folders mirror the package (tests/io/ tests ffdcli/io/, ...). A test reuses another
+# folder's fixtures by module name (``from test_su2 import HEX2``): every folder is on the path.
+for _folder in sorted(Path(__file__).resolve().parent.iterdir()):
+    if _folder.is_dir() and _folder.name[0] not in "._" and str(_folder) not in sys.path:
+        sys.path.append(str(_folder))
+
 
 def _find_shared_data() -> Path | None:
     env = os.environ.get("FFD_SHARED_DATA")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffdcli.lattice import Lattice
+from ffdcli.lattice.lattice import Lattice
 
 
 def wing_grid(shape, span=4.0, chord=1.0, thickness=0.3):

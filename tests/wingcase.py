@@ -6,7 +6,7 @@ from pathlib import Path
 
 import yaml
 
-from ffdcli.formats import write_mesh
+from ffdcli.io.formats import write_mesh
 from ffdcli.testing.wings import Planform, extruded_wing_mesh, surface_mesh
 
 

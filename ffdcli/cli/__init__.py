@@ -18,9 +18,9 @@ import traceback
 import click
 
 from ffdcli import __version__
-from ffdcli.atomic import Terminated, interrupts_outside_compilers
 from ffdcli.cli.console import Console, StdoutError, jsonable
 from ffdcli.errors import FfdError
+from ffdcli.io.atomic import Terminated, interrupts_outside_compilers
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
@@ -78,13 +78,13 @@ def main(argv=None):
     """Entry point of the ``ffd`` console script.
 
     Under ``mpiexec -n N`` (N > 1, the ``[mpi]`` extra) the command runs on every rank with one
-    communicator (:func:`ffdcli.parallel.world`); at the end the ranks agree on the outcome, so they
+    communicator (:func:`ffdcli.parallel.comm.world`); at the end the ranks agree on the outcome, so they
     all exit with the same status and only rank 0 prints the error."""
     _register()
     argv = list(sys.argv[1:] if argv is None else argv)
     as_json = "--json" in argv
     verbose = "-v" in argv or "--verbose" in argv
-    from ffdcli.parallel import SerialComm, world
+    from ffdcli.parallel.comm import SerialComm, world
 
     try:
         comm = world()

@@ -75,14 +75,14 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
       ffd box wing.su2 --surface wing --points 8,10,2 --sections xz --json
       ffd box design.yaml --lattice out/lattice.vtk
     """
-    from ffdcli.limits import check_lattice_size
+    from ffdcli.lattice.limits import check_lattice_size
     from ffdcli.settings import BoxSettings
 
     if points is not None:           # refused in a fraction of a second, before the heavy imports
         check_lattice_size(points, path=mesh, key="--points")
 
-    from ffdcli.formats.lattice_vtk import write_lattice_vtk
-    from ffdcli.pipeline import prepare_box
+    from ffdcli.app.pipeline import prepare_box
+    from ffdcli.io.formats.lattice_vtk import write_lattice_vtk
 
     if is_design_file(mesh):
         from ffdcli.design import load_design
@@ -97,9 +97,9 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
         surface = list(surfaces) or None
     settings = (settings or BoxSettings()).with_options(points=points, degree=degree, sections=sections,
                                                         root=root, margin=margin, file=from_file)
-    from ffdcli.formats import format_of
-    from ffdcli.inputs import check_input_file
-    from ffdcli.outputs import plan_outputs
+    from ffdcli.io.formats import format_of
+    from ffdcli.io.inputs import check_input_file
+    from ffdcli.io.outputs import plan_outputs
 
     if is_design_file(mesh) and getattr(design, "components", None):
         if surfaces or any(v is not None for v in (points, degree, sections, root, margin, from_file)):
@@ -117,12 +117,12 @@ def box_cmd(mesh, surfaces, points, degree, sections, root, margin, lattice_out,
                        progress=console.progress, comm=console.comm)
     writers = {"lattice": lambda tmp: write_lattice_vtk(tmp, prep.box.control_points)}
     if export_plot3d:
-        from ffdcli.formats.plot3d import write_plot3d
+        from ffdcli.io.formats.plot3d import write_plot3d
 
         writers["plot3d"] = lambda tmp: write_plot3d(tmp, [prep.box.control_points])
     console.comm.root_then_bcast(plan.write, writers)        # once: rank 0 of an MPI run
     out = plan.path("lattice")
-    from ffdcli.components import find_junction
+    from ffdcli.parameterization.components import find_junction
 
     junction = find_junction(prep.mesh, prep, prep.surface.names)
     s = prep.summary()
@@ -174,10 +174,9 @@ def _check_outside(s: dict, prep, mpath) -> None:
 def _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, console) -> None:
     """``ffd box DESIGN.yaml`` of a design with ``components:``: every component's box, one lattice
     file per component (``<stem>_<component>.vtk``), one Plot3D file with a block per component."""
-    from ffdcli.components import component_lattice_path, lattice_kind
-    from ffdcli.formats.lattice_vtk import write_lattice_vtk
-    from ffdcli.outputs import plan_outputs
-    from ffdcli.pipeline import load_run
+    from ffdcli.app.pipeline import load_run
+    from ffdcli.io.formats.lattice_vtk import write_lattice_vtk
+    from ffdcli.io.outputs import component_lattice_path, lattice_kind, plan_outputs
 
     mpath = Path(design.mesh)
     base = Path(lattice_out) if lattice_out else mpath.with_name(mpath.stem + "_lattice.vtk")
@@ -189,7 +188,7 @@ def _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, cons
     writers = {lattice_kind(c.name): (lambda tmp, c=c: write_lattice_vtk(tmp, c.P0))
                for c in run.components}
     if export_plot3d:
-        from ffdcli.formats.plot3d import write_plot3d
+        from ffdcli.io.formats.plot3d import write_plot3d
 
         writers["plot3d"] = lambda tmp: write_plot3d(tmp, [c.P0 for c in run.components])
     console.comm.root_then_bcast(plan.write, writers)        # once: rank 0 of an MPI run

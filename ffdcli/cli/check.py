@@ -34,8 +34,8 @@ def check_cmd(mesh, threshold, n_worst, console):
       ffd check mesh.su2 --threshold 0.01 --worst 10 --json
     """
     from ffdcli.errors import InputError, QualityError
-    from ffdcli.formats import read_mesh, read_part
-    from ffdcli.quality import DEFAULT_THRESHOLD, check_quality, check_quality_part
+    from ffdcli.io.formats import read_mesh, read_part
+    from ffdcli.quality.gate import DEFAULT_THRESHOLD, check_quality, check_quality_part
 
     if threshold is not None and not (-1.0 <= threshold <= 1.0):
         raise InputError(f"expected a scaled Jacobian in [-1, 1], got {threshold}", key="--threshold")

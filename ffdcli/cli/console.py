@@ -12,7 +12,7 @@ from ffdcli.progress import ProgressFactory, terminal_progress
 
 @dataclass
 class Console:
-    """What a command prints. ``comm`` is the run's communicator (:mod:`ffdcli.parallel`); under
+    """What a command prints. ``comm`` is the run's communicator (:mod:`ffdcli.parallel.comm`); under
     ``mpiexec`` only rank 0 prints (messages, warnings, progress and the ``--json`` summary)."""
 
     quiet: bool = False
@@ -22,7 +22,7 @@ class Console:
 
     def __post_init__(self):
         if self.comm is None:
-            from ffdcli.parallel import SerialComm
+            from ffdcli.parallel.comm import SerialComm
 
             self.comm = SerialComm()
         if not self.comm.is_root:

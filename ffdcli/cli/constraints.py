@@ -39,9 +39,9 @@ def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
     import numpy as np
 
     from ffdcli.api import DesignModel
+    from ffdcli.app.pipeline import load_run
     from ffdcli.design import load_design
-    from ffdcli.outputs import plan_outputs
-    from ffdcli.pipeline import load_run
+    from ffdcli.io.outputs import plan_outputs
 
     design = load_design(design_file, overrides=overrides)
     plan = plan_outputs([("jacobian", jacobian_file, False, "--jacobian")], inputs=(design.mesh, design.path))

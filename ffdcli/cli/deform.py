@@ -54,15 +54,15 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
       for t in 5 10 15; do ffd deform design.yaml --set changes.0.twist.tip=$t -o out/t$t.su2; done
     """
     from ffdcli.design import load_design
-    from ffdcli.outputs import plan_deform
+    from ffdcli.io.outputs import plan_deform
 
     t0 = time.perf_counter()
     design = load_design(design_file, overrides=overrides)
     plan = plan_deform(design, mesh=output, lattice=lattice_out, plot=plot,    # every output, before the work
                        extra=[("surface_file", surface_file, False, "--surface-file")])
     # the heavy part, once the input is checked
-    from ffdcli.pipeline import deform, load_run, write_outputs
-    from ffdcli.quality import enforce
+    from ffdcli.app.pipeline import deform, load_run, write_outputs
+    from ffdcli.quality.gate import enforce
 
     comm = console.comm
     # MPI: each rank keeps its local mesh (its nodes, their halo, every marker node), never every node
@@ -147,7 +147,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
         lines.append(f"  constraints {len(constraints)} items, " + (f"{len(bad)} not satisfied: {', '.join(bad[:5])}"
                                                                     if bad else "all satisfied"))
     if su2_ffd is not None:
-        from ffdcli.formats.su2_ffd import describe
+        from ffdcli.io.formats.su2_ffd import describe
 
         lines.append(f"  su2 ffd   {describe(su2_ffd)}")
     lines += [f"  wrote     {p}" for v in written.values() for p in (v if isinstance(v, list) else [v])]

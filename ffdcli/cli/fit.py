@@ -35,7 +35,7 @@ def fit_cmd(design_file, target, output, overrides, rows, console):
       ffd fit configs/naca0012_s1223.yaml --target samples/s1223.dat -o out/s1223.yaml
       ffd deform out/s1223.yaml
     """
-    from ffdcli.fit import fit_design
+    from ffdcli.app.fit import fit_design
 
     out = Path(output) if output else Path(design_file).with_name(Path(design_file).stem + "_fitted.yaml")
     rep = fit_design(design_file, target, out, overrides=overrides, rows=rows, progress=console.progress)

@@ -38,9 +38,9 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
       ffd grad design.yaml --sens surface_sens.csv -o grad.json
     """
     from ffdcli.api import DesignModel, gradient_from_file
+    from ffdcli.app.pipeline import load_run
     from ffdcli.design import load_design
-    from ffdcli.outputs import plan_outputs
-    from ffdcli.pipeline import load_run
+    from ffdcli.io.outputs import plan_outputs
 
     t0 = time.perf_counter()
     design = load_design(design_file, overrides=overrides)
@@ -98,9 +98,9 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     import numpy as np
 
     from ffdcli.api import DesignModel
+    from ffdcli.app.pipeline import load_run
     from ffdcli.design import load_design
-    from ffdcli.outputs import plan_outputs
-    from ffdcli.pipeline import load_run
+    from ffdcli.io.outputs import plan_outputs
 
     design = load_design(design_file, overrides=overrides)
     plan = plan_outputs([("jacobian", output, False, "-o")], inputs=(design.mesh, design.path))
@@ -110,7 +110,7 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
                   B_data=B.data, B_indices=B.indices, B_indptr=B.indptr, B_shape=np.array(B.shape), D=D,
                   points=model.surface_points())
     if dense:
-        from ffdcli.derivatives import surface_jacobian
+        from ffdcli.parameterization.derivatives import surface_jacobian
 
         arrays["J"] = surface_jacobian(B, D)
     def write(tmp):

@@ -30,9 +30,9 @@ def init_cmd(mesh, surfaces, output, force, console):
       ffd plot wing.yaml                 # look at it
       ffd deform wing.yaml               # out/wing.su2
     """
-    from ffdcli.atomic import atomic_write, check_writable
+    from ffdcli.app.starter import default_design_path, starter_design
     from ffdcli.errors import InputError
-    from ffdcli.starter import default_design_path, starter_design
+    from ffdcli.io.atomic import atomic_write, check_writable
 
     out = Path(output) if output else default_design_path(mesh)
     if out.suffix.lower() not in (".yaml", ".yml"):

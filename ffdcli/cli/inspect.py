@@ -20,7 +20,7 @@ def inspect_cmd(mesh, surfaces, console):
     a domain boundary (far, farfield, sym, symmetry, inlet, outlet, inflow, outflow, freestream,
     box); when that is ambiguous the axes are not shown and the markers are listed.
     """
-    from ffdcli.inspection import inspect_mesh
+    from ffdcli.app.inspection import inspect_mesh
 
     info = inspect_mesh(mesh, surfaces, progress=console.progress)
     console.result(info.summary(), info.text())

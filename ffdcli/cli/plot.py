@@ -36,15 +36,15 @@ def plot_cmd(design_file, output, overrides, view3d, target, console):
       ffd plot configs/rect_twist_linear.yaml -o out/twist.png
       ffd plot out/s1223.yaml --target samples/s1223.dat -o out/fit.png
     """
+    from ffdcli.app.pipeline import deform, deform_writers, load_run
     from ffdcli.design import load_design
-    from ffdcli.outputs import plan_plot
-    from ffdcli.pipeline import deform, deform_writers, load_run
+    from ffdcli.io.outputs import plan_plot
 
     design = load_design(design_file, overrides=overrides)
     plan = plan_plot(design, output, view3d=view3d)       # checked before the work
     coords = None
     if target is not None:
-        from ffdcli.formats.airfoil import read_airfoil
+        from ffdcli.io.formats.airfoil import read_airfoil
 
         coords = read_airfoil(target).coords
     run = load_run(design, progress=console.progress)

@@ -10,7 +10,7 @@ The parts, each readable alone:
 - :mod:`ffdcli.design.validate`: validation against the schema, in words a user reads;
 - this module: :class:`Design` and :func:`load_design` (paths resolved relative to the file), and
   :func:`build_changes`; each change is built from its YAML by its own class in
-  :mod:`ffdcli.changes` (``from_spec``).
+  :mod:`ffdcli.parameterization.changes` (``from_spec``).
 
 Every problem is an :class:`~ffdcli.errors.InputError` naming the file, the key path and the line.
 
@@ -34,7 +34,6 @@ from pathlib import Path
 
 import yaml
 
-from ffdcli.changes import Change, changes_from_spec
 from ffdcli.design.overrides import apply_overrides
 from ffdcli.design.schema import ADDABLE, CHANGE_KINDS, design_schema
 from ffdcli.design.validate import validate
@@ -49,8 +48,11 @@ from ffdcli.design.yamlmap import (
     yaml_lines,
 )
 from ffdcli.errors import InputError
-from ffdcli.inputs import check_input_file, existing_kind
-from ffdcli.limits import check_lattice_size
+from ffdcli.io.formats import FORMATS
+from ffdcli.io.inputs import check_input_file, existing_kind
+from ffdcli.lattice.limits import check_lattice_size
+from ffdcli.parameterization.changes import Change, changes_from_spec
+from ffdcli.parameterization.components import ComponentSpec
 from ffdcli.settings import BoxSettings
 
 __all__ = ["ADDABLE", "CHANGE_KINDS", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "Design", "apply_overrides",
@@ -76,7 +78,7 @@ class Design:
     output: dict[str, Path]
     data: dict = field(repr=False)
     lines: dict[str, int] = field(default_factory=dict, repr=False)
-    components: list | None = None     # ffdcli.components.ComponentSpec per item of components:, or None
+    components: list | None = None     # a ComponentSpec per item of components:, or None
 
     def line_of(self, key: str) -> int | None:
         """The YAML line of a key path like ``changes[2].twist`` (or of its closest parent)."""
@@ -149,7 +151,6 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     box = box_settings(data.get("box"))
     components = None
     if "components" in data:
-        from ffdcli.components import ComponentSpec
 
         components = []
         for c, item in enumerate(data["components"]):
@@ -180,7 +181,6 @@ _MESH_MAGIC = ((b"\x89HDF", "CGNS/HDF5"), (b"# vtk DataFile", "legacy VTK"), (b"
 def _not_a_mesh(path: Path) -> None:
     """InputError when ``path`` is a mesh (by its extension or its first bytes): say so and how to
     start a design file, instead of quoting the mesh back as a YAML error."""
-    from ffdcli.formats import FORMATS
 
     fmt = FORMATS.get(path.suffix.lower())
     if fmt is None:

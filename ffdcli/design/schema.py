@@ -60,7 +60,7 @@ def _shear(what: str) -> dict:
 
 
 # --------------------------------------------------------------------------------------------------
-# The changes, one piece per kind (the classes are in ffdcli.changes, each with its from_spec)
+# The changes, one piece per kind (the classes are in ffdcli.parameterization.changes, each with its from_spec)
 # --------------------------------------------------------------------------------------------------
 
 def twist_schema() -> dict:
@@ -117,7 +117,7 @@ def shape_schema() -> dict:
 
 
 #: The change kinds in the order ``ffd schema`` lists them; each kind is a class of
-#: :mod:`ffdcli.changes` with the same ``kind``.
+#: :mod:`ffdcli.parameterization.changes` with the same ``kind``.
 CHANGE_SCHEMAS: dict[str, Callable[[], dict]] = {
     "twist": twist_schema, "span": span_schema, "sweep": sweep_schema, "dihedral": dihedral_schema,
     "chord": chord_schema, "shape": shape_schema,
@@ -189,7 +189,7 @@ def output_schema() -> dict:
 
 
 def constraints_schema() -> dict:
-    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints`)."""
+    """The JSON Schema of ``constraints:`` (see :mod:`ffdcli.constraints.geometric`)."""
     frac = {"type": "number", "minimum": 0, "maximum": 1}
     fracs = {"type": "array", "items": frac, "minItems": 1}
     bound = {"type": ["number", "null"]}
@@ -225,7 +225,7 @@ def constraints_schema() -> dict:
 
 
 def bounds_schema() -> dict:
-    """The JSON Schema of ``bounds:`` (see :mod:`ffdcli.bounds`)."""
+    """The JSON Schema of ``bounds:`` (see :mod:`ffdcli.parameterization.bounds`)."""
     bound = {"type": ["number", "null"]}
     return {"type": "object",
             "description": "bounds of design variables by name (c0.twist.tip) or name prefix (c0.twist: every "

@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import math
 
+import jsonschema  # 0.1 s: here, not at the top, so that ``ffd schema`` and ``--help`` do not pay it
+
 from ffdcli.design.schema import CHANGE_KINDS, design_schema
 from ffdcli.design.yamlmap import key_path, line_at
 from ffdcli.errors import InputError
@@ -96,7 +98,6 @@ def _walk_nonfinite(value, parts=()):
 
 def validate(data, path=None, lines: dict | None = None) -> None:
     """Raise :class:`InputError` for the first problem (in file order) of ``data``; None if valid."""
-    import jsonschema  # 0.1 s: here, not at the top, so that ``ffd schema`` and ``--help`` do not pay it
 
     lines = lines or {}
 

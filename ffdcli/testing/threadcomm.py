@@ -1,6 +1,6 @@
 """A communicator of ranks that are threads of one process: the MPI code paths in a plain test.
 
-:class:`ThreadComm` has the collectives of :class:`ffdcli.parallel.MPIComm` (same results, same
+:class:`ThreadComm` has the collectives of :class:`ffdcli.parallel.comm.MPIComm` (same results, same
 rank order), exchanged through shared memory between threads; :func:`run_ranks` runs a function
 on ``size`` such ranks and returns every rank's result. Tests use it to check that a partitioned
 computation equals the serial one for 2, 3, 5 ranks in a second, without ``mpiexec``. Not for runs.
@@ -12,7 +12,7 @@ import threading
 
 import numpy as np
 
-from ffdcli.parallel import MPIComm
+from ffdcli.parallel.comm import MPIComm
 
 
 class _Hub:

@@ -12,7 +12,7 @@ Conventions
 * A wing is described in local coordinates ``(c, t, s)``: chordwise, thickness ("up") and spanwise
   distance from the root plane. :class:`Planform` maps them to mesh axes (``sections="xy"``: chord
   x, thickness y, span z; ``"xz"``: chord x, thickness z, span y; any choice of
-  :data:`ffdcli.axes.SECTION_CHOICES`), a span sign (+1: the wing grows along +span axis, -1 a left
+  :data:`ffdcli.geometry.axes.SECTION_CHOICES`), a span sign (+1: the wing grows along +span axis, -1 a left
   wing growing along -span) and a root offset.
 * Sections lie in planes normal to the span axis. The spanwise station is ``eta`` in [0, 1]
   (0 = root plane, 1 = tip plane), at span distance ``eta * semi_span``.
@@ -24,9 +24,10 @@ import re
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.interpolate import CubicSpline
 from scipy.optimize import minimize_scalar
 
-from ffdcli.axes import SECTION_CHOICES, parse_sections
+from ffdcli.geometry.axes import SECTION_CHOICES, parse_sections
 from ffdcli.mesh import CellBlock, Mesh
 
 # ----------------------------------------------------------------------------------------------
@@ -582,7 +583,6 @@ def _resample_airfoil(coords: np.ndarray, n: int) -> np.ndarray:
     """``n`` points along the airfoil curve (Selig order, both trailing-edge ends kept), clustered at
     the leading and trailing edges: cosine spacing in arc length on each side of the leading edge
     (the point farthest from the trailing-edge mid-point), a cubic spline through the input."""
-    from scipy.interpolate import CubicSpline
 
     xy = np.asarray(coords, dtype=np.float64)
     keep = np.r_[True, np.any(np.diff(xy, axis=0) != 0, axis=1)]   # drop repeated points

@@ -1,0 +1,1 @@
+"""The volume mesh follows the surface: IDW warp, marker roles, source tree, frame rotations, recovery."""
