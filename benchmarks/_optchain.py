@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks import _su2
-from ffdcli.formats import read_mesh
-from ffdcli.formats.sensitivity import read_sensitivity
+from ffdcli.io.formats import read_mesh
+from ffdcli.io.formats.sensitivity import read_sensitivity
 
 HH_PARAM = "( 1, 0.50 )"          # the upper-surface bump at mid-chord of SU2's 38
 HH_STEP = 1e-3                    # SU2_DEF value of the bump (linear: any value gives its response)

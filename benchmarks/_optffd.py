@@ -1,10 +1,10 @@
 """``ffd optimize`` on SU2's NACA0012 case: the ``--ffd`` rows (c) of ``bench_optimize``.
 
 The design: SU2's mesh and flow (``inv_NACA0012_basic.cfg``, Euler, M 0.8, alpha 1.25 deg), ffd's
-automatic box (8 x 2 control points), twist (about the trailing edge) and 2 x 8 shape variables; the
-constrained version bounds LIFT >= 0.328486 and MOMENT_Z >= 0 (each with its own adjoint) and keeps the
-thickness at 30 % chord at least the baseline's (0.12 of the chord there, the NACA0012's maximum, so
-SU2_GEO's ``AIRFOIL_THICKNESS`` >= 0.12 follows); 8 SLSQP iterations. ``ffd optimize`` runs in a cached
+automatic box (10 x 2 control points), twist (about the trailing edge) and 2 x 9 shape variables (the
+trailing-edge column left out); the constrained version bounds LIFT >= 0.328486 and MOMENT_Z >= 0 (each
+with its own adjoint) and keeps t/c at 30 % chord at least the baseline's (the NACA0012's maximum
+thickness station); 8 SLSQP iterations. ``ffd optimize`` runs in a cached
 folder like the peers, in the benchmark's solver slot (one SU2 process at a time). ``ffd_path`` points
 to the tree that has the command (``--ffd-path``; default this repository).
 """
@@ -19,27 +19,31 @@ from pathlib import Path
 
 from benchmarks import _optpeers, _su2
 
-SHAPE_BOUND = 0.02        # chord lengths, each shape variable
+SHAPE_BOUND = 0.05        # chord lengths, each shape variable
 TWIST_BOUND = 3.0         # degrees
+POINTS = 10               # chordwise control points of the automatic box (x 2 rows)
 
 
 def design_text(adjoint: str, constrained: bool, iterations: int = _optpeers.ITERATIONS) -> str:
-    """The design file of a (c) run (mesh and config copied beside it as ``mesh.su2``, ``flow.cfg``)."""
-    zeros = ", ".join(["0.0"] * 8)
+    """The design file of a (c) run: ``configs/naca0012_optimize.yaml`` of the ``optimize`` branch (box
+    10 x 2, twist and every shape move but the trailing-edge column's, bounds +-3 deg and +-0.05
+    chord, t/c at 30 % chord >= the baseline's) with the mesh and config copied beside it."""
+    zeros = ", ".join(["0"] * POINTS)
+    shape = [f'"c1.shape.{side}[{i}]"' for side in ("upper", "lower") for i in range(POINTS - 1)]
     lines = [
-        "mesh: mesh.su2", "surface: airfoil", "box: {points: [8, 2]}", "changes:", "  - twist: 0.0",
+        "mesh: mesh.su2", "surface: airfoil", f"box: {{points: [{POINTS}, 2]}}", "changes:", "  - twist: 0",
         f"  - shape: {{upper: [{zeros}], lower: [{zeros}]}}",
         "bounds:", f"  c0.twist: [{-TWIST_BOUND}, {TWIST_BOUND}]",
         f"  c1.shape: [{-SHAPE_BOUND}, {SHAPE_BOUND}]",
     ]
     if constrained:
-        lines += ["constraints:", "  - thickness: {chord: [0.3], lower: 1.0}"]
+        lines += ["constraints:", "  - thickness_to_chord: {chord: [0.3], lower: 1.0}"]
     lines += ["optimize:", "  solver: su2", "  config: flow.cfg", "  objective: DRAG"]
     if constrained:
         lines += ["  functions:", f"    - {{name: LIFT, lower: {_optpeers.BOUNDS['LIFT']}}}",
                   "    - {name: MOMENT_Z, lower: 0.0}"]
-    lines += ["  method: SLSQP", f"  iterations: {iterations}", "  folder: opt/", f"  adjoint: {adjoint}",
-              "output: {mesh: out/naca.su2}"]
+    lines += [f"  variables: [c0.twist, {', '.join(shape)}]", "  method: SLSQP", f"  iterations: {iterations}",
+              "  folder: opt/", f"  adjoint: {adjoint}", "  max_failures: 3", "output: {mesh: out/naca.su2}"]
     return "\n".join(lines) + "\n"
 
 
@@ -84,7 +88,8 @@ def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None 
 
 
 def _best_mesh(folder: Path, summary: dict) -> Path | None:
-    for cand in (folder / "out" / "naca.su2", *sorted((folder / "opt").glob("best*.su2"))):
+    named = [Path(summary["best_mesh"])] if summary.get("best_mesh") else []
+    for cand in (*named, *sorted((folder / "opt").glob("best*.su2")), folder / "out" / "naca.su2"):
         if cand.exists():
             return cand
     return None
@@ -112,7 +117,7 @@ def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
     else:
         values["tc"] = float("nan")
     viol = _optpeers.worst_violation(values)
-    return {"run": "(c) ffd optimize, automatic box (17)", "adjoint": adjoint, "constrained": constrained,
+    return {"run": "(c) ffd optimize, automatic box (19)", "adjoint": adjoint, "constrained": constrained,
             **values, "worst_violation": viol, "feasible": viol <= 1e-4,
             "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
             "wall_s": result["wall_s"], "designs": s.get("evaluations"), "status": s.get("status"),
