@@ -69,11 +69,14 @@ def _solver_run(root: Path, label: str, cfg: str, mesh: Path, program: str, link
     return _su2.cached_run(root, label, cfg, inputs, [program, *sorted(links)], body, force=force)
 
 
+HISTORY = "(ITER, RMS_RES, AERO_COEFF)"     # SU2's default history of this config has no coefficients
+
+
 def flow(root: Path, mesh: Path, restart_from: Path | None = None, force: bool = False) -> dict:
     """A converged flow on ``mesh`` (optionally restarted from a baseline ``restart_flow.dat``)."""
     if restart_from is None:
-        return _solver_run(root, "flow", base_config(), mesh, "SU2_CFD", force=force)
-    cfg = base_config(RESTART_SOL="YES")
+        return _solver_run(root, "flow", base_config(HISTORY_OUTPUT=HISTORY), mesh, "SU2_CFD", force=force)
+    cfg = base_config(RESTART_SOL="YES", HISTORY_OUTPUT=HISTORY)
     return _solver_run(root, "flow", cfg, mesh, "SU2_CFD", {"solution_flow.dat": restart_from}, force=force)
 
 
@@ -138,14 +141,25 @@ def read_surface_csv(path: Path) -> dict:
     return {h: data[:, i] for i, h in enumerate(head)}
 
 
-def continuous_dJdX(mesh, surface_adjoint: Path, marker: str = "airfoil") -> tuple[np.ndarray, np.ndarray]:
-    """(ids, dJ/dX (K, 2)) = -S n_hat from the continuous adjoint's ``surface_adjoint.csv``."""
+def continuous_dJdX(mesh, surface_adjoint: Path, marker: str = "airfoil") -> tuple[np.ndarray, np.ndarray, str]:
+    """(ids, dJ/dX (K, 2), whose reader) = -S n_hat from the continuous adjoint's ``surface_adjoint.csv``.
+
+    ffd's own reader (``ffdcli.io.formats.wall_normals``, from the ``optimize`` work) when the package
+    has it, else :func:`wall_normals_2d` of this module."""
     cols = read_surface_csv(surface_adjoint)
+    pid = (cols["Point"] if "Point" in cols else cols["PointID"]).astype(np.int64)
+    try:
+        from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient  # noqa: PLC0415
+    except ImportError:
+        surface_sensitivity_gradient = None
+    if surface_sensitivity_gradient is not None:
+        order = np.argsort(pid)
+        ids, S = pid[order], cols["Surface_Sensitivity"][order]
+        return ids, surface_sensitivity_gradient(mesh, mesh.points, ids, S)[:, :2], "ffdcli.io.formats.wall_normals"
     ids, nhat = wall_normals_2d(mesh, marker)
     s = np.zeros(len(mesh.points))
-    s[cols["Point"].astype(np.int64) if "Point" in cols else cols["PointID"].astype(np.int64)] = \
-        cols["Surface_Sensitivity"]
-    return ids, -s[ids][:, None] * nhat
+    s[pid] = cols["Surface_Sensitivity"]
+    return ids, -s[ids][:, None] * nhat, "benchmarks._optchain.wall_normals_2d"
 
 
 def write_sens_csv(path: Path, points: np.ndarray, ids: np.ndarray, djdx: np.ndarray) -> None:
@@ -155,15 +169,17 @@ def write_sens_csv(path: Path, points: np.ndarray, ids: np.ndarray, djdx: np.nda
     np.savetxt(path, rows, fmt=["%d"] + ["%.17g"] * 4, delimiter=",", header=header, comments="")
 
 
-def read_of_grad(path: Path) -> float:
-    """The one gradient of SU2's ``of_grad.dat`` (``GRAD_OBJFUNC_FILENAME``; first numeric row)."""
-    for line in Path(path).read_text().splitlines():
-        tok = line.replace(",", " ").split()
-        try:
-            return float(tok[-1])
-        except (ValueError, IndexError):
-            continue
-    raise RuntimeError(f"{path}: no gradient")
+def read_of_grad(folder: Path) -> float:
+    """The gradient of the one design variable in SU2_DOT's ``of_grad*`` file: the ``GRADIENT`` column
+    of SU2_DOT_AD's CSV, or the number under SU2_DOT's ``DRAG gradient`` line."""
+    files = sorted(Path(folder).glob("of_grad*"))
+    if not files:
+        raise RuntimeError(f"{folder}: no of_grad file")
+    lines = [ln for ln in files[0].read_text().splitlines() if ln.strip()]
+    head = [h.strip().strip('"').strip() for h in lines[0].split(",")]
+    if "GRADIENT" in head:
+        return float(lines[1].split(",")[head.index("GRADIENT")])
+    return float(lines[1].replace(",", " ").split()[0])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -185,10 +201,11 @@ def _dot(root: Path, adj_dir: Path, kind: str) -> float:
         program = "SU2_DOT"
     else:
         cfg = base_config(MATH_PROBLEM="DISCRETE_ADJOINT", OBJECTIVE_FUNCTION="DRAG")
-        links = {"solution_adj_cd.dat": Path(adj_dir) / "restart_adj_cd.dat"}
+        links = {"solution_adj_cd.dat": Path(adj_dir) / "restart_adj_cd.dat",
+                 "solution_flow.dat": Path(adj_dir) / "solution_flow.dat"}
         program = "SU2_DOT_AD"
     r = _solver_run(root, f"dot-{kind[:4]}", cfg, _su2.NACA_MESH, program, links)
-    return read_of_grad(Path(r["folder"]) / "of_grad.dat")
+    return read_of_grad(Path(r["folder"]))
 
 
 def projection_check(root: Path, flow_dir: Path, adj: dict) -> list[dict]:
@@ -201,8 +218,8 @@ def projection_check(root: Path, flow_dir: Path, adj: dict) -> list[dict]:
         adj_dir = Path(adj[(kind, "DRAG")]["folder"])
         su2 = _dot(root, adj_dir, kind)
         if kind == "continuous":
-            ids, g = continuous_dJdX(mesh, adj_dir / "surface_adjoint.csv")
-            src = "surface_adjoint.csv: -S n_hat at the wall"
+            ids, g, reader = continuous_dJdX(mesh, adj_dir / "surface_adjoint.csv")
+            src = f"surface_adjoint.csv: -S n_hat at the wall ({reader})"
         else:
             sens = read_sensitivity(adj_dir / "restart_adj_cd.csv", mesh.points, dim=2)
             ids, g = sens.ids, sens.values[:, :2]
@@ -283,7 +300,7 @@ def gradient_check(root: Path, flow_dir: Path, adj: dict, quick: bool = False) -
             sens = d / f"restart_adj_{suffix}.csv"
         else:
             sens = d / "dJdX_from_S.csv"
-            ids, g = continuous_dJdX(base, d / "surface_adjoint.csv")
+            ids, g, _ = continuous_dJdX(base, d / "surface_adjoint.csv")
             write_sens_csv(sens, base.points, ids, g)
         grads[(kind, fn)] = _gradient(work, sens)
     restart = Path(flow_dir) / "restart_flow.dat"

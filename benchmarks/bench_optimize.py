@@ -187,6 +187,8 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true",
                     help="constrained rows only; chain (ii) with twist and one shape variable")
     ap.add_argument("--ffd-path", type=Path, default=_su2.REPO, help="the ffd tree that has `ffd optimize`")
+    ap.add_argument("--finished-only", action="store_true",
+                    help="--peers/--ffd: only the runs already finished in the root (start no new run)")
     ap.add_argument("--write-doc", action="store_true", help="write the tables into docs/optimize.md")
     ap.add_argument("--json", type=Path, help="also write every row as JSON here")
     args = ap.parse_args(argv)
@@ -200,9 +202,9 @@ def main(argv=None) -> int:
     sections = []
     rows = []
     if args.peers:
-        rows += peer_rows(only_constrained=args.quick)
+        rows += peer_rows(only_constrained=args.quick, run_missing=not args.finished_only)
     if args.ffd:
-        rows += ffd_rows(args.ffd_path, only_constrained=args.quick)
+        rows += ffd_rows(args.ffd_path, only_constrained=args.quick, run_missing=not args.finished_only)
     if rows:
         out["side_by_side"] = rows
         sections.append("## Side by side with SU2's optimiser\n\n" + _side_intro() + side_by_side_table(rows))

@@ -499,7 +499,7 @@ def make_su2_drag_sens(out: Path) -> dict:
         t = Path(tmp)
         shutil.copyfile(HERE / "naca0012_2d.su2", t / "naca0012_2d.su2")
         (t / "flow.cfg").write_text(cfg)
-        (t / "adj.cfg").write_text(cfg + "MATH_PROBLEM= DISCRETE_ADJOINT\nOBJECTIVE_FUNCTION= DRAG\n")
+        (t / "adj.cfg").write_text(cfg.replace("MATH_PROBLEM= DIRECT", "MATH_PROBLEM= DISCRETE_ADJOINT"))
         for prog, conf in (("SU2_CFD", "flow.cfg"), ("SU2_CFD_AD", "adj.cfg")):
             with open(t / f"{prog}.log", "w") as log:
                 rc = subprocess.run([str(bindir / prog), conf], cwd=t, stdout=log, stderr=subprocess.STDOUT).returncode
