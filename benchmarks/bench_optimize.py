@@ -46,13 +46,14 @@ NOTES = ("Runs are started by `python -m benchmarks.bench_optimize --peers --ffd
          "benchmarks` reports the finished ones it finds.")
 DOC = _su2.REPO / "docs" / "optimize.md"
 BEGIN, END = "<!-- bench_optimize:begin -->", "<!-- bench_optimize:end -->"
+ADJOINTS = ("discrete", "continuous")
 
 
-def peer_rows(only_constrained: bool = False, run_missing: bool = True) -> list[dict]:
+def peer_rows(only_constrained: bool = False, run_missing: bool = True, adjoints=ADJOINTS) -> list[dict]:
     """The (a)/(b) rows: run (or reuse) each peer and read its folder."""
     rows = []
     for case in _optpeers.all_cases():
-        if only_constrained and not case.constrained:
+        if (only_constrained and not case.constrained) or case.adjoint not in adjoints:
             continue
         if not run_missing and _cached(case.label, _su2.SCRATCH / "peers") is None:
             continue
@@ -62,7 +63,8 @@ def peer_rows(only_constrained: bool = False, run_missing: bool = True) -> list[
     return rows
 
 
-def ffd_rows(ffd_path: Path, only_constrained: bool = False, run_missing: bool = True) -> list[dict]:
+def ffd_rows(ffd_path: Path, only_constrained: bool = False, run_missing: bool = True,
+             adjoints=ADJOINTS) -> list[dict]:
     """The (c) rows, when the tree at ``ffd_path`` has ``ffd optimize`` (else none, with a message)."""
     if not _optffd.has_optimize(ffd_path):
         print(f"  (c) skipped: {ffd_path} has no `ffd optimize` yet", flush=True)
@@ -71,7 +73,7 @@ def ffd_rows(ffd_path: Path, only_constrained: bool = False, run_missing: bool =
     for constrained in (True, False):
         if only_constrained and not constrained:
             continue
-        for adjoint in ("discrete", "continuous"):
+        for adjoint in adjoints:
             label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
             if not run_missing and _cached(label, _su2.SCRATCH / "ffd") is None:
                 continue
@@ -186,6 +188,8 @@ def main(argv=None) -> int:
     ap.add_argument("--chain", action="store_true", help="the chain checks (i), (ii)")
     ap.add_argument("--quick", action="store_true",
                     help="constrained rows only; chain (ii) with twist and one shape variable")
+    ap.add_argument("--adjoint", action="append", choices=ADJOINTS,
+                    help="--peers/--ffd: only this adjoint (repeatable; default both)")
     ap.add_argument("--ffd-path", type=Path, default=_su2.REPO, help="the ffd tree that has `ffd optimize`")
     ap.add_argument("--finished-only", action="store_true",
                     help="--peers/--ffd: only the runs already finished in the root (start no new run)")
@@ -202,9 +206,11 @@ def main(argv=None) -> int:
     sections = []
     rows = []
     if args.peers:
-        rows += peer_rows(only_constrained=args.quick, run_missing=not args.finished_only)
+        rows += peer_rows(only_constrained=args.quick, run_missing=not args.finished_only,
+                          adjoints=tuple(args.adjoint or ADJOINTS))
     if args.ffd:
-        rows += ffd_rows(args.ffd_path, only_constrained=args.quick, run_missing=not args.finished_only)
+        rows += ffd_rows(args.ffd_path, only_constrained=args.quick, run_missing=not args.finished_only,
+                         adjoints=tuple(args.adjoint or ADJOINTS))
     if rows:
         out["side_by_side"] = rows
         sections.append("## Side by side with SU2's optimiser\n\n" + _side_intro() + side_by_side_table(rows))
