@@ -52,7 +52,7 @@ def _best(fn, repeat: int) -> float:
 def measure(npts: int) -> dict:
     from benchmarks.bench_derivatives import design_changes
     from ffdcli.box.box import fit_box
-    from ffdcli.constraints.geometric import ConstraintInputs, build_constraints, constraint_names, evaluate
+    from ffdcli.constraints import ConstraintInputs, build_constraints, constraint_names, evaluate
     from ffdcli.geometry.surface import extract_surface
     from ffdcli.parameterization.changes import apply_changes, design_variables
     from ffdcli.parameterization.derivatives import lattice_jacobian

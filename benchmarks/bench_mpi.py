@@ -214,7 +214,9 @@ def child_memory(comm, design: str, mode: str) -> dict:
     """``ffd deform``'s pipeline (load_run, deform, write_outputs) on local meshes (``mode`` local) or
     with every node on every rank (``whole``, the path before issue 17's local meshes): the resident
     and peak MB of every rank after each phase, and each rank's local rows."""
-    from ffdcli.app.pipeline import deform, load_run, write_outputs
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
+    from ffdcli.app.write import write_outputs
     from ffdcli.design import load_design
 
     phases = {}

@@ -137,7 +137,9 @@ def timed_process(args: list[str], cwd: Path) -> dict:
 
 def phases(design: str) -> dict:
     """In this process: the steps of `ffd deform` through the library, timed per phase."""
-    from ffdcli.app.pipeline import deform, load_run, write_outputs
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
+    from ffdcli.app.write import write_outputs
     from ffdcli.design import load_design
 
     t0 = time.perf_counter()
@@ -156,7 +158,7 @@ def phases(design: str) -> dict:
 
 def warp_only(design: str) -> dict:
     """In this process: prepare_mesh_warp and warp of the design's surface motion on its mesh."""
-    from ffdcli.app.pipeline import load_run
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
     from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp
 

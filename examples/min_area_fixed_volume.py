@@ -100,7 +100,7 @@ def run(folder: Path | None = None, maxiter: int = 60, disp: bool = False) -> di
     import openmdao.api as om
 
     from ffdcli.api import DesignModel
-    from ffdcli.constraints.geometric import chord_lines
+    from ffdcli.constraints import chord_lines
     from ffdcli.openmdao import FFDComponent
 
     tmp = tempfile.TemporaryDirectory() if folder is None else None

@@ -12,8 +12,10 @@ import sys
 import time
 from pathlib import Path
 
+from ffdcli.app.deformation import deform
 from ffdcli.app.fit import fit_design
-from ffdcli.app.pipeline import deform, load_run, write_outputs
+from ffdcli.app.run import load_run
+from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
 from ffdcli.errors import FfdError
 from ffdcli.io.atomic import atomic_write
@@ -21,7 +23,7 @@ from ffdcli.io.formats.airfoil import read_airfoil
 from ffdcli.progress import no_progress
 from ffdcli.viz.plot import plot_3d, plot_design
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]     # ffdcli/app/demo.py -> the repository
 #: cases that also get the pyvista 3D view (each costs ~10-20 s off-screen here)
 VIEW_3D = {"rect_twist_linear", "crm_twist_tip"}
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import yaml
 
-from ffdcli.app.pipeline import load_run
+from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 from ffdcli.errors import InputError
 from ffdcli.io.formats.airfoil import read_airfoil

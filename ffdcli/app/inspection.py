@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.app.pipeline import is_surface_mesh, space_dim
+from ffdcli.app.prepare import is_surface_mesh, space_dim
 from ffdcli.errors import InputError
 from ffdcli.geometry.axes import Axes, detect_axes
 from ffdcli.geometry.surface import default_surface, extract_surface
@@ -129,6 +129,8 @@ def inspect_mesh(mesh: Mesh | str | Path, surfaces=(), progress=None) -> MeshInf
     cells: dict[str, int] = {}
     for b in mesh.cells:
         cells[b.type] = cells.get(b.type, 0) + len(b)
+    if mesh.polyhedra is not None:         # polyhedral cells by shape, as checkMesh's table
+        cells.update({k: v for k, v in mesh.polyhedra.shape_counts().items() if v})
     markers = {}
     for name, blocks in mesh.markers.items():
         ids = [b.data.ravel() for b in blocks]

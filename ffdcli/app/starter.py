@@ -19,13 +19,13 @@ import numpy as np
 import yaml
 
 from ffdcli import __version__
-from ffdcli.app.pipeline import resolve_surface, space_dim
+from ffdcli.app.prepare import resolve_surface, space_dim
 from ffdcli.design import design_schema
 from ffdcli.errors import InputError
 from ffdcli.geometry.axes import AXIS_NAMES, detect_axes
 from ffdcli.geometry.surface import extract_surface
 from ffdcli.io.formats import read_mesh
-from ffdcli.quality.gate import DEFAULT_THRESHOLD
+from ffdcli.quality.rules import DEFAULT_THRESHOLD
 from ffdcli.settings import DEFAULT_POINTS
 from ffdcli.volume.extruded import one_cell_thick
 from ffdcli.volume.warp import WarpSettings

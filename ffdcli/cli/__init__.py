@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import os
 import sys
 import traceback
@@ -18,9 +17,10 @@ import traceback
 import click
 
 from ffdcli import __version__
-from ffdcli.cli.console import Console, StdoutError, jsonable
+from ffdcli.cli.console import Console, StdoutError
 from ffdcli.errors import FfdError
 from ffdcli.io.atomic import Terminated, interrupts_outside_compilers
+from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
@@ -140,7 +140,7 @@ def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, sho
         if extra:
             obj["report"] = extra
         try:
-            click.echo(json.dumps(obj, default=jsonable))
+            click.echo(to_json(obj))
             sys.stdout.flush()
         except OSError:
             _quiet_stdout()

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import time
-from pathlib import Path
-
 import click
 
 from ffdcli.cli import cli, common_options
@@ -19,8 +15,11 @@ from ffdcli.cli import cli, common_options
               help="Write {variable: dJ/dv} here (JSON) as well as printing it.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
+@click.option("--tolerance", type=click.FloatRange(min=0.0), metavar="DIST",
+              help="How far (mesh units) the file's coordinates may stand from the mesh nodes "
+                   "(default 1e-6 of the mesh diagonal); farther, the file is refused.")
 @common_options
-def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
+def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console):
     """dJ/d(design variable) for every design variable of DESIGN.yaml, by the chain rule.
 
     \b
@@ -37,39 +36,12 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
     Example:
       ffd grad design.yaml --sens surface_sens.csv -o grad.json
     """
-    from ffdcli.api import DesignModel, gradient_from_file
-    from ffdcli.app.pipeline import load_run
+    from ffdcli.api.gradient import grad_design
     from ffdcli.design import load_design
-    from ffdcli.io.outputs import plan_outputs
 
-    t0 = time.perf_counter()
     design = load_design(design_file, overrides=overrides)
-    # never over an input (the mesh, the design, the sensitivity file); checked before the work
-    plan = plan_outputs([("grad", output, False, "-o")], inputs=(design.mesh, design.path, sens))
-    model = DesignModel(load_run(design, cache_dir=cache_dir, progress=console.progress, comm=console.comm),
-                        comm=console.comm)
-    sens_file = sens
-    grad = gradient_from_file(model, sens_file, progress=console.progress)
-    sens, result, volume_nodes = grad.sensitivity, grad.values, grad.volume_nodes
-    summary = {
-        "design": str(design_file), "sensitivity": str(sens_file),
-        "gradient": result, "matched_by": sens.matched_by,
-        "worst_match_distance": sens.worst_distance, "surface_nodes": grad.surface_nodes,
-        "volume_nodes": volume_nodes, "through_volume": grad.through_volume,
-        "seconds": round(time.perf_counter() - t0, 3),
-    }
-    if output:
-        # once: rank 0 of an MPI run
-        console.comm.root_then_bcast(plan.write, {"grad": lambda tmp: tmp.write_text(json.dumps(result, indent=1))})
-        summary["output"] = str(output)
-    lines = [f"ffd grad: {Path(design_file).name}, {len(sens.ids)} sensitivity rows matched by "
-             f"{sens.matched_by}" + (f" (worst distance {sens.worst_distance:.2e})"
-                                      if sens.worst_distance == sens.worst_distance else "")
-             + (f", {volume_nodes} volume nodes through the volume motion" if summary["through_volume"] else "")]
-    lines += [f"  {k:<24} {v: .10e}" for k, v in result.items()]
-    if output:
-        lines.append(f"  wrote {output}")
-    console.result(summary, "\n".join(lines))
+    console.result(*grad_design(design, sens, output=output, cache_dir=cache_dir, progress=console.progress,
+                                comm=console.comm, tol=tolerance))
 
 
 @cli.command("jacobian")
@@ -95,28 +67,8 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     Example:
       ffd jacobian design.yaml -o jac.npz
     """
-    import numpy as np
-
-    from ffdcli.api import DesignModel
-    from ffdcli.app.pipeline import load_run
+    from ffdcli.api.gradient import jacobian_design
     from ffdcli.design import load_design
-    from ffdcli.io.outputs import plan_outputs
 
     design = load_design(design_file, overrides=overrides)
-    plan = plan_outputs([("jacobian", output, False, "-o")], inputs=(design.mesh, design.path))
-    model = DesignModel(load_run(design, progress=console.progress, comm=console.comm), comm=console.comm)
-    B, D = model.jacobian_factors()
-    arrays = dict(names=np.array(model.names), point_ids=model.surface_ids, values=model.values,
-                  B_data=B.data, B_indices=B.indices, B_indptr=B.indptr, B_shape=np.array(B.shape), D=D,
-                  points=model.surface_points())
-    if dense:
-        from ffdcli.parameterization.derivatives import surface_jacobian
-
-        arrays["J"] = surface_jacobian(B, D)
-    def write(tmp):
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
-
-    console.comm.root_then_bcast(plan.write, {"jacobian": write})        # once: rank 0 of an MPI run
-    console.result({"output": str(output), "variables": len(model.names), "points": int(B.shape[0])},
-                   f"ffd jacobian: {len(model.names)} variables x {B.shape[0]} surface points -> {output}")
+    console.result(*jacobian_design(design, output, dense=dense, progress=console.progress, comm=console.comm))

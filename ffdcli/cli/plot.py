@@ -36,30 +36,11 @@ def plot_cmd(design_file, output, overrides, view3d, target, console):
       ffd plot configs/rect_twist_linear.yaml -o out/twist.png
       ffd plot out/s1223.yaml --target samples/s1223.dat -o out/fit.png
     """
-    from ffdcli.app.pipeline import deform, deform_writers, load_run
+    from ffdcli.app.plot import plot_design_file
     from ffdcli.design import load_design
-    from ffdcli.io.outputs import plan_plot
 
     design = load_design(design_file, overrides=overrides)
-    plan = plan_plot(design, output, view3d=view3d)       # checked before the work
-    coords = None
-    if target is not None:
-        from ffdcli.io.formats.airfoil import read_airfoil
-
-        coords = read_airfoil(target).coords
-    run = load_run(design, progress=console.progress)
-    result = deform(run, progress=console.progress)
-    q = result.quality
-    if q is not None and not q.ok:
-        console.warn(f"the quality gate would refuse this design (ffd deform writes nothing without "
-                     f"--force): {q.summary()}")
-    writers = {k: w for k, w in deform_writers(run, result, target=coords).items() if k in plan}
-    written = plan.write(writers)
-    if "plot_3d" in plan and "plot_3d" not in written and run.box.dim == 3:
-        console.warn("no 3D view: pyvista or an off-screen OpenGL backend is missing "
-                     "(pip install 'ffdcli[viz]'); the 2D views are written")
-    png = written["plot"]
-    console.result({"plot": png, "plots": list(written.values()), "max_displacement": result.max_displacement,
-                    "refused": bool(q is not None and not q.ok),
-                    "quality": q.to_dict() if q is not None else None},
-                   "ffd plot: wrote " + ", ".join(written.values()))
+    report = plot_design_file(design, output=output, view3d=view3d, target=target, progress=console.progress)
+    for w in report.warnings:
+        console.warn(w)
+    console.result(report.summary, report.text)

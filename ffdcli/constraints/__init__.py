@@ -1,37 +1,42 @@
-"""Geometric constraints on the design (thickness, t/c, volume, LE/TE, fold-free) with exact Jacobians."""
+"""Constraints on the design with exact Jacobians, one module per kind (pyGeo's layout).
 
-from ffdcli.constraints.geometric import (  # the face: the names `ffdcli.constraints` offered before the packages
+:mod:`~ffdcli.constraints.base` (the protocol, what a constraint reads, the evaluation of a list),
+:mod:`~ffdcli.constraints.build` (from the design file's ``constraints:``) and the kinds:
+:mod:`~ffdcli.constraints.thickness` (thickness, thickness_to_chord), :mod:`~ffdcli.constraints.volume`,
+:mod:`~ffdcli.constraints.le_te`, :mod:`~ffdcli.constraints.fold_free`, :mod:`~ffdcli.constraints.mesh_quality`.
+"""
+
+from ffdcli.constraints.base import (
     CONSTRAINT_KINDS,
-    END_INSET,
-    FOLD_SAMPLES,
     SATISFIED_TOL,
     Constraint,
     ConstraintInputs,
-    FoldFree,
-    LeTe,
-    Thickness,
-    Volume,
-    build_constraints,
-    chord_lines,
     constraint_bounds,
     constraint_names,
-    enclosed_volume,
     evaluate,
-    project_thickness,
     satisfied,
     surface_segments,
     surface_triangles,
 )
+from ffdcli.constraints.build import build_constraints
+from ffdcli.constraints.fold_free import FOLD_SAMPLES, FoldFree
+from ffdcli.constraints.le_te import LeTe
+from ffdcli.constraints.mesh_quality import KS_GAP, MESH_QUALITY_LOWER, MeshQuality, ks_min
+from ffdcli.constraints.thickness import END_INSET, Thickness, chord_lines, project_thickness
+from ffdcli.constraints.volume import Volume, enclosed_volume
 
 __all__ = [
     "CONSTRAINT_KINDS",
     "END_INSET",
     "FOLD_SAMPLES",
+    "KS_GAP",
+    "MESH_QUALITY_LOWER",
     "SATISFIED_TOL",
     "Constraint",
     "ConstraintInputs",
     "FoldFree",
     "LeTe",
+    "MeshQuality",
     "Thickness",
     "Volume",
     "build_constraints",
@@ -40,6 +45,7 @@ __all__ = [
     "constraint_names",
     "enclosed_volume",
     "evaluate",
+    "ks_min",
     "project_thickness",
     "satisfied",
     "surface_segments",

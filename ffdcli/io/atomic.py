@@ -20,6 +20,7 @@ import errno
 import glob
 import os
 import re
+import shutil
 import signal
 import socket
 import stat
@@ -164,7 +165,29 @@ def sweep_stale(path: str | Path, *, now: float | None = None) -> list[Path]:
             if stat.S_ISREG(st.st_mode):
                 q.unlink()
                 removed.append(q)
+            elif stat.S_ISDIR(st.st_mode):        # a folder output (an OpenFOAM case) or the one it replaced
+                shutil.rmtree(q)
+                removed.append(q)
     return removed
+
+
+def replace_folder(tmp: Path, dest: Path) -> None:
+    """Put the finished folder ``tmp`` at ``dest``: renamed into place; an existing ``dest`` (the
+    caller checked it may be replaced) is first renamed aside to a temporary name beside it (which
+    :func:`sweep_stale` removes if the process dies before it is deleted), then deleted. Call with
+    signals deferred."""
+    if not dest.exists() and not dest.is_symlink():
+        os.replace(tmp, dest)
+        return
+    folder = dest.parent if str(dest.parent) else Path(".")
+    aside = Path(tempfile.mkdtemp(prefix=f"{_temp_prefix(dest)}{_HOST}-{os.getpid()}-", suffix=".part", dir=folder))
+    os.replace(dest, aside)                       # onto the empty folder just made
+    try:
+        os.replace(tmp, dest)
+    except OSError:
+        os.replace(aside, dest)                   # put the old one back
+        raise
+    shutil.rmtree(aside, ignore_errors=True)
 
 
 _TEMP_TAIL = re.compile(r"(?:(?P<host>[A-Za-z0-9_]+)-(?P<pid>[0-9]+)-)?[a-z0-9_]+\.part(?:\.[^.]*)?")
@@ -359,7 +382,10 @@ def atomic_write(path: str | Path, mode: str = "wb") -> Iterator:
 
 
 def keep_mode(dest: Path, tmp: Path) -> None:
-    """Give the new file the permissions a normally created file would have (or the old file's)."""
+    """Give the new file the permissions a normally created file would have (or the old file's).
+    A folder keeps the permissions it was made with."""
+    if tmp.is_dir():
+        return
     try:
         mode = dest.stat().st_mode & 0o777 if dest.exists() else 0o666 & ~_umask()
         os.chmod(tmp, mode)

@@ -9,7 +9,9 @@ import pytest
 from conftest import run_ffd
 from wingcase import write_design, write_surface_wing
 
-from ffdcli.app.pipeline import deform, load_run, write_outputs
+from ffdcli.app.deformation import deform
+from ffdcli.app.run import load_run
+from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
 from ffdcli.io.formats import read_mesh
 from ffdcli.testing.wings import Planform

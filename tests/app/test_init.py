@@ -148,7 +148,7 @@ def test_init_of_an_extruded_airfoil_says_so_and_puts_the_span_along_the_extrusi
                                            le_sweep_deg=40.0),        # low aspect ratio, swept (a fin)
                                       dict(sections="yx", semi_span=4.0, root_chord=1.0)])
 def test_init_writes_the_axes_ffd_box_detects(tmp_path, planform):
-    from ffdcli.app.pipeline import prepare_box
+    from ffdcli.app.prepare import prepare_box
 
     mesh = surface_mesh(Planform(**planform), n_chord=25, n_span=9)
     path = tmp_path / "w.su2"

@@ -35,7 +35,8 @@ def test_plot_3d_twist(tmp_path):
 def test_sections_coincide_at_root_and_differ_at_tip(tmp_path):
     """The sections drawn are the same material points before and after: equal at the root (fixed),
     rotated at the tip by the twist."""
-    from ffdcli.app.pipeline import deform, load_run
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
     from ffdcli.viz.plot import section_curves
 
@@ -87,7 +88,8 @@ def test_plot_3d_view_when_pyvista_is_there(tmp_path):
 # --------------------------------------------------------------------------------------------------
 
 def _run(tmp_path, changes, **planform):
-    from ffdcli.app.pipeline import deform, load_run
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
 
     mesh = write_surface_wing(tmp_path, **planform)

@@ -9,7 +9,7 @@ import pytest
 from conftest import run_ffd, shared_file
 from wingcase import write_surface_wing
 
-from ffdcli.app.pipeline import prepare_box
+from ffdcli.app.prepare import prepare_box
 from ffdcli.box.box import fit_box
 from ffdcli.box.cache import load
 from ffdcli.geometry.surface import extract_surface

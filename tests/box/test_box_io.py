@@ -9,7 +9,7 @@ import pytest
 from conftest import REPO, run_ffd, shared_file
 from wingcase import write_surface_wing
 
-from ffdcli.app.pipeline import prepare_box
+from ffdcli.app.prepare import prepare_box
 from ffdcli.io.formats.plot3d import read_plot3d
 from ffdcli.settings import BoxSettings
 

@@ -87,7 +87,8 @@ def test_affine_oracles(tmp_path, wing):
 
 def test_volume_is_the_closed_volume(tmp_path):
     """The half wing closed by its symmetry plane: the same volume as the wing with its root capped."""
-    from ffdcli.constraints.geometric import _enclosed, enclosed_volume, surface_triangles
+    from ffdcli.constraints.base import surface_triangles
+    from ffdcli.constraints.volume import _enclosed, enclosed_volume
     from ffdcli.testing.wings import Planform, surface_mesh
 
     m = model_for(tmp_path, "tapered_swept_y", [{"span": 1.0}])

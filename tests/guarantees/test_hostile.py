@@ -438,8 +438,9 @@ def test_missing_mesh_inspect(ws):
 
 
 def test_mesh_is_a_folder(ws):
+    # a folder is a mesh only when it is an OpenFOAM case (docs/openfoam.md): this one is not
     (ws / "folder.su2").mkdir(exist_ok=True)
-    assert_hostile(ws, ["inspect", "folder.su2"], 2, "directory", names=["folder.su2"], usage=True)
+    assert_hostile(ws, ["inspect", "folder.su2"], 2, "folder without an OpenFOAM mesh", names=["folder.su2"])
 
 
 def test_mesh_unknown_extension(ws):

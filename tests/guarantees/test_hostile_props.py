@@ -89,7 +89,9 @@ OUTCOMES: list[bool] = []       # quality verdicts of the drawn designs (both ki
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(changes=DESIGN)
 def test_random_valid_designs_write_or_are_refused(wing, changes):
-    from ffdcli.app.pipeline import deform, load_run, write_outputs
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
+    from ffdcli.app.write import write_outputs
     from ffdcli.design import load_design
     from ffdcli.errors import QualityError
 

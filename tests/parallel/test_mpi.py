@@ -44,7 +44,8 @@ def _compiled_kernels(tmp_path_factory):
     once here as a failed 2-rank embedding right after a kernel changed)."""
     if not (_have_mpi4py() and MPIEXEC):
         return
-    from ffdcli.app.pipeline import deform, load_run
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
 
     design = tmp_path_factory.mktemp("warmup") / "design.yaml"

@@ -15,7 +15,9 @@ import pytest
 import yaml
 from conftest import SAMPLES
 
-from ffdcli.app.pipeline import deform, load_run, write_outputs
+from ffdcli.app.deformation import deform
+from ffdcli.app.run import load_run
+from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
 from ffdcli.io import formats
 from ffdcli.io.formats.su2_surface import read_surface_file

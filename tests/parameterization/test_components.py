@@ -18,7 +18,9 @@ import yaml
 from conftest import run_ffd
 
 from ffdcli.api import DesignModel
-from ffdcli.app.pipeline import deform, load_run, write_outputs
+from ffdcli.app.deformation import deform
+from ffdcli.app.run import load_run
+from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
 from ffdcli.errors import InputError
 from ffdcli.io.formats import read_mesh, write_mesh
@@ -204,7 +206,7 @@ def test_wing_tail_fin_volume_one_motion_one_gate(tmp_path):
     np.testing.assert_array_equal(res.points[sym, 1], mesh.points[sym, 1])       # slides in y = 0
     for comp in run.components:         # each surface exactly where its own lattice puts it
         ids = comp.prep.surface.ids
-        from ffdcli.app.pipeline import component_displacement
+        from ffdcli.volume.surface_motion import component_displacement
 
         P = run.lattices_after()[run.components.index(comp)]
         np.testing.assert_array_equal(res.points[ids], mesh.points[ids] + component_displacement(comp, P))

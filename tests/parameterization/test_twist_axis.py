@@ -79,7 +79,8 @@ def test_from_lattice_frame_has_the_midpoint_leading_edge():
 # --------------------------------------------------------------------------------------------------
 
 def _deform(tmp_path, changes, **planform):
-    from ffdcli.app.pipeline import deform, load_run
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
 
     mesh = write_surface_wing(tmp_path, **planform)
     run = load_run(load_design(write_design(tmp_path, mesh, changes)))
@@ -123,7 +124,8 @@ def test_tip_section_rotates_about_its_quarter_chord_and_the_root_stays(tmp_path
 
 
 def test_2d_twist_about_the_quarter_chord(tmp_path):
-    from ffdcli.app.pipeline import deform, load_run
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
 
     src = SAMPLES / "naca0012_2d.su2"
     d = tmp_path / "a.yaml"

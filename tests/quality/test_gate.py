@@ -11,7 +11,7 @@ from conftest import assert_clean_failure, file_hash, run_ffd, shared_file
 from wingcase import write_design
 
 from ffdcli.io.formats import read_mesh, write_mesh
-from ffdcli.quality.gate import cell_quality
+from ffdcli.quality.metrics import cell_quality
 from ffdcli.testing.wings import Planform, extruded_wing_mesh
 
 

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from ffdcli.mesh import CellBlock, Mesh
-from ffdcli.quality.gate import QualityReport, cell_orientation, cell_quality, check_quality
+from ffdcli.quality.gate import QualityReport, check_quality
+from ffdcli.quality.metrics import cell_orientation, cell_quality
 
 UNIT_TET = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
 REGULAR_TET = np.array([[1, 1, 1], [-1, 1, -1], [1, -1, -1], [-1, -1, 1.0]])   # det > 0 in this order
@@ -176,7 +177,7 @@ def test_a_mesh_whose_worst_cell_did_not_get_worse_is_not_refused():
 
 def test_a_cell_degenerate_in_the_input_is_an_input_problem():
     from ffdcli.errors import InputError, QualityError
-    from ffdcli.quality.gate import enforce
+    from ffdcli.quality.gate import Remedies, enforce
 
     mesh = _hex_grid(3)
     pts = mesh.points.copy()
@@ -191,7 +192,11 @@ def test_a_cell_degenerate_in_the_input_is_an_input_problem():
         enforce(r, mesh_path="m.su2", design_path="d.yaml")
     msg = str(e.value)
     assert e.value.exit_code == 2 and "m.su2" in msg and f"cell {w['cell']} (hexahedron)" in msg
-    assert "degenerate in the input mesh" in msg and "at (0.791667, 0.833333, 0.833333)" in msg and "--force" in msg
+    assert "degenerate in the input mesh" in msg and "at (0.791667, 0.833333, 0.833333)" in msg
+    assert "--force" not in msg and "ffd check" not in msg     # the library states the rule, not the CLI's flags
+    with pytest.raises(InputError) as e:                        # the caller adds how to override it
+        enforce(r, remedies=Remedies(deform_anyway=", or give --force to deform it anyway"))
+    assert str(e.value).endswith("repair or regenerate the mesh, or give --force to deform it anyway")
     assert len(enforce(r, force=True)) == 1
     # a cell the design inverts is exit 3, with the rule in the message
     moved = mesh.points.copy()
@@ -202,6 +207,7 @@ def test_a_cell_degenerate_in_the_input_is_an_input_problem():
         enforce(r, design_path="d.yaml")
     assert "inverted by the design" in str(e.value) and "a cell fails when the design inverts it" in str(e.value)
     assert "nothing was written" in str(e.value) and e.value.report["inverted_by_design"] == r.n_new_inverted
+    assert "--force" not in str(e.value)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -217,7 +223,7 @@ def _sheared_grid(n, s):
 
 @pytest.mark.parametrize("s", [0.0, 0.3, 1.0, 2.5])
 def test_orthogonality_of_a_sheared_grid_is_known_exactly(s):
-    from ffdcli.quality.gate import edge_orthogonality, node_orthogonality
+    from ffdcli.quality.orthogonality import edge_orthogonality, node_orthogonality
 
     mesh = _sheared_grid(3, s)
     theta = np.degrees(np.arctan(s))
@@ -240,7 +246,7 @@ def test_orthogonality_of_a_sheared_grid_is_known_exactly(s):
 
 
 def test_orthogonality_is_invariant_under_similarity_and_mirrored_order():
-    from ffdcli.quality.gate import node_orthogonality
+    from ffdcli.quality.orthogonality import node_orthogonality
 
     rng = np.random.default_rng(3)
     mesh = _sheared_grid(2, 0.7)
@@ -258,7 +264,7 @@ def test_orthogonality_is_invariant_under_similarity_and_mirrored_order():
 
 
 def test_orthogonality_numba_matches_numpy_on_mixed_cells():
-    from ffdcli.quality.gate import edge_topology, node_orthogonality
+    from ffdcli.quality.orthogonality import edge_topology, node_orthogonality
 
     rng = np.random.default_rng(5)
     # a hex grid, each hex also cut into 2 wedges and into 5 tets (a mixed mesh with shared edges)
@@ -283,7 +289,7 @@ def test_orthogonality_numba_matches_numpy_on_mixed_cells():
 
 
 def test_orthogonality_in_2d():
-    from ffdcli.quality.gate import node_orthogonality
+    from ffdcli.quality.orthogonality import node_orthogonality
 
     g = np.arange(4.0)
     X, Y = np.meshgrid(g, g, indexing="ij")
@@ -380,7 +386,7 @@ def test_ffd_check_reads_a_vtu(tmp_path):
 
 
 def test_scaled_jacobian_kernel_matches_its_numpy_reference():
-    from ffdcli.quality.gate import _raw_quality
+    from ffdcli.quality.metrics import raw_quality
 
     rng = np.random.default_rng(11)
     shapes = {"tetra": REGULAR_TET, "hexahedron": CUBE, "wedge": PRISM, "pyramid": PYRAMID}
@@ -389,12 +395,12 @@ def test_scaled_jacobian_kernel_matches_its_numpy_reference():
         pts = np.concatenate([ref + rng.normal(scale=0.4 * np.ptp(ref), size=ref.shape) for _ in range(300)])
         data = np.arange(300 * k).reshape(300, k)
         data[7] = data[7][0]                                     # a fully collapsed cell: q = 0
-        a = _raw_quality(pts, data, ctype, None)
-        b = _raw_quality(pts, data, ctype, None, use_numba=False)
+        a = raw_quality(pts, data, ctype, None)
+        b = raw_quality(pts, data, ctype, None, use_numba=False)
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-14)
         assert a[7] == 0.0 and (a < 0).any() and (a > 0).any()
     pts = np.concatenate([CUBE[:4] + rng.normal(scale=0.3, size=(4, 3)) * [1, 1, 0] for _ in range(50)])
     data = np.arange(200).reshape(50, 4)
     n = np.array([0.0, 0.0, 1.0])
-    np.testing.assert_allclose(_raw_quality(pts, data, "quad", n), _raw_quality(pts, data, "quad", n, use_numba=False),
+    np.testing.assert_allclose(raw_quality(pts, data, "quad", n), raw_quality(pts, data, "quad", n, use_numba=False),
                                atol=1e-14)

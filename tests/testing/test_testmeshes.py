@@ -10,7 +10,7 @@ import pytest
 pytest.importorskip("gmsh")
 
 from ffdcli.io.formats import read_mesh  # noqa: E402
-from ffdcli.quality.gate import cell_quality  # noqa: E402
+from ffdcli.quality.metrics import cell_quality  # noqa: E402
 from ffdcli.testing import gmsh_wings as tm  # noqa: E402
 
 #: Small versions of three cases with variety (span z / -y / x, right / left, prisms, round tip, kink).

@@ -9,7 +9,8 @@ import pytest
 import yaml
 from conftest import REPO, run_ffd
 
-from ffdcli.app.pipeline import deform, load_run
+from ffdcli.app.deformation import deform
+from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 from ffdcli.settings import WarpSettings
 from ffdcli.volume.recovery import attempts, incremental_warp

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from conftest import REPO, assert_clean_failure, file_hash, run_ffd
 
-from ffdcli.app.pipeline import deform, load_run
+from ffdcli.app.deformation import deform
+from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 
 SAMPLES = REPO / "samples"

@@ -388,7 +388,7 @@ def test_rotation_fade_bounds_the_overshoot(tmp_path):
     """
     import yaml
 
-    from ffdcli.app.pipeline import load_run
+    from ffdcli.app.run import load_run
     from ffdcli.design import load_design
 
     root = Path(__file__).resolve().parents[2]
@@ -412,7 +412,7 @@ def test_one_schema_for_volume():
     """The design file's volume: block is WarpSettings' schema, gate keys included, and agrees with
     WarpSettings on every default (one home)."""
     from ffdcli.design.schema import design_schema
-    from ffdcli.quality.gate import DEFAULT_THRESHOLD
+    from ffdcli.quality.rules import DEFAULT_THRESHOLD
     from ffdcli.settings import GATE_KEYS
 
     vol = design_schema()["properties"]["volume"]

@@ -1,0 +1,60 @@
+"""``ffd check``'s workflow: the quality gate's figures of any mesh (serial, or each MPI rank its part)."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+from ffdcli.errors import QualityError
+from ffdcli.io.formats import read_mesh, read_part
+from ffdcli.parallel.comm import SerialComm
+from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
+from ffdcli.quality.rules import DEFAULT_THRESHOLD
+
+
+@dataclass(frozen=True)
+class CheckReport:
+    """The gate's report of one mesh and what ``ffd check`` prints of it."""
+
+    summary: dict
+    text: str
+    report: QualityReport
+
+
+def check_mesh(mesh, *, threshold: float | None = None, n_worst: int = 5, progress=None, comm=None) -> CheckReport:
+    """Judge every cell and node of ``mesh`` (a path). Raises :class:`~ffdcli.errors.QualityError` when a
+    cell is inverted or degenerate, or below ``threshold`` when one is given (its report attached)."""
+    t0 = time.perf_counter()
+    comm = comm or SerialComm()
+    kw = {"threshold": DEFAULT_THRESHOLD if threshold is None else threshold, "n_worst": max(n_worst, 1)}
+    if comm.size > 1:        # MPI: each rank judges its part (its cells and nodes), the counts reduced
+        report = check_quality_part(read_part(mesh, comm, progress=progress)[1], comm, **kw)
+    else:
+        report = check_quality(read_mesh(mesh, progress=progress), **kw)
+    summary = {"mesh": str(mesh), **report.to_dict(), "seconds": time.perf_counter() - t0}
+    summary["worst"] = summary["worst"][:n_worst]
+    summary["worst_nodes"] = summary["worst_nodes"][:n_worst]
+    if report.count == 0:
+        return CheckReport(summary, f"{mesh}: no volume cells (surface-only mesh): nothing to check", report)
+    failed = report.n_inverted + (report.n_below if threshold is not None else 0)
+    if failed:
+        worst = report.worst[0]
+        where = ", ".join(f"{v:.6g}" for v in worst["centroid"])
+        what = "inverted or degenerate cells" if report.n_inverted else f"cells below {threshold:g}"
+        raise QualityError(f"{what}: {report.summary()}; worst: cell {worst['cell']} ({worst['type']}) "
+                           f"quality {worst['quality']:.3g} at ({where})", path=mesh, report=summary)
+    text = f"{mesh}: {report.summary()}"
+    if n_worst:
+        rows = [w for w in report.worst[:n_worst] if w["quality"] < report.threshold]
+        nodes = [w for w in report.worst_nodes[:n_worst] if w["after"] < report.ortho_min]
+        if rows or nodes:
+            text += "\n" + _rows(rows, nodes)
+    return CheckReport(summary, text, report)
+
+
+def _rows(worst: list[dict], nodes: list[dict]) -> str:
+    lines = [f"  cell {w['cell']} ({w['type']}): quality {w['quality']:.3g} at "
+             f"({', '.join(f'{v:.6g}' for v in w['centroid'])})" for w in worst]
+    lines += [f"  node {w['node']}: orthogonality {w['after']:.1f} deg at "
+              f"({', '.join(f'{v:.6g}' for v in w['point'])})" for w in nodes]
+    return "\n".join(lines)

@@ -1,0 +1,214 @@
+"""The constraints' common part: the protocol every kind follows, what they read of a design, the
+baseline surface's triangles, and the evaluation of a list.
+
+Each constraint item of a design file's ``constraints:`` becomes one object (:func:`ffdcli.constraints.
+build.build_constraints`), built once on the baseline (undeformed) surface and lattice; its values are
+ratios to the baseline unless said otherwise. Every object has
+
+``value(inp) -> (c,)`` and ``jacobian(inp) -> (c, n_vars)``
+    for the current design, ``inp`` a :class:`ConstraintInputs` (the deformed lattice ``P``, its
+    Jacobian ``D = dP'/dv`` (n_ctrl*3, n_vars), the deformed surface points and the basis ``B``).
+
+The kinds, one module each: :mod:`~ffdcli.constraints.thickness` (``thickness``,
+``thickness_to_chord``), :mod:`~ffdcli.constraints.volume`, :mod:`~ffdcli.constraints.le_te`,
+:mod:`~ffdcli.constraints.fold_free`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ffdcli.errors import InputError
+
+#: The kinds of ``constraints:`` items, in the order of the docs.
+CONSTRAINT_KINDS = ("thickness", "thickness_to_chord", "volume", "le_te", "fold_free", "mesh_quality")
+#: A constraint value within this of a bound is satisfied (the values are ratios near 1).
+SATISFIED_TOL = 1e-9
+
+
+class ConstraintInputs:
+    """What the constraints read of the current design, computed once and only when asked for.
+
+    Parameters
+    ----------
+    P : ndarray, shape (n, m, l, 3)
+        The deformed lattice.
+    P0 : ndarray, shape (n, m, l, 3)
+        The baseline lattice.
+    values : ndarray, shape (n_vars,)
+        The design-variable values.
+    lattice_jacobian : callable () -> ndarray (n_ctrl*3, n_vars)
+        ``dP'/dv`` (:func:`ffdcli.parameterization.derivatives.lattice_jacobian`).
+    surface_points : callable () -> ndarray (S, 3)
+        The deformed surface points.
+    basis : callable () -> sparse (S, n_ctrl)
+        The surface basis ``B``.
+    rmatvec : callable (G (S, 3)) -> (n_ctrl, 3), optional
+        ``B.T @ G`` by a faster route than ``basis`` (e.g. :meth:`ffdcli.lattice.embedding.Embedding.rmatvec`).
+    mesh_points : callable () -> ndarray (N, 3), optional
+        Every mesh node as the design places it, volume motion included (``mesh_quality``;
+        :meth:`ffdcli.api.DesignModel.mesh_points`).
+    mesh_vjp : callable (G (N, 3)) -> ndarray (n_vars,), optional
+        ``dJ/dv`` for ``G = dJ/dX`` at every mesh node, through the volume motion
+        (:meth:`ffdcli.api.DesignModel.mesh_vjp`).
+    """
+
+    def __init__(self, P, P0, values, lattice_jacobian: Callable, surface_points: Callable, basis: Callable,
+                 rmatvec: Callable | None = None, *, mesh_points: Callable | None = None,
+                 mesh_vjp: Callable | None = None):
+        self.P = np.asarray(P, dtype=float)
+        self.P0 = np.asarray(P0, dtype=float)
+        self.values = np.asarray(values, dtype=float)
+        self._D, self._X, self._B, self._rmatvec = lattice_jacobian, surface_points, basis, rmatvec
+        self._mesh_points, self._mesh_vjp = mesh_points, mesh_vjp
+
+    def _needs_mesh(self, what):
+        if what is None:
+            raise InputError("mesh_quality needs the motion of the volume mesh: evaluate it through a design "
+                             "model (ffdcli.api.DesignModel, ffd constraints), which gives mesh_points and mesh_vjp")
+        return what
+
+    @cached_property
+    def mesh_X(self) -> np.ndarray:
+        """(N, 3) every mesh node after the design."""
+        return np.asarray(self._needs_mesh(self._mesh_points)(), dtype=float)
+
+    def mesh_vjp(self, G: np.ndarray) -> np.ndarray:
+        """(n_vars,) ``dJ/dv`` for ``G`` (N, 3) ``= dJ/dX`` at every mesh node."""
+        return self._needs_mesh(self._mesh_vjp)(G)
+
+    def rmatvec(self, G: np.ndarray) -> np.ndarray:
+        """(n_ctrl, 3) ``B.T @ G`` for ``G`` (S, 3) (a compiled product when one was given)."""
+        if self._rmatvec is not None:
+            return self._rmatvec(G)
+        return np.asarray(self.B.T @ G)
+
+    @cached_property
+    def dP(self) -> np.ndarray:
+        """(n_ctrl, 3) ``(P' - P0).reshape(-1, 3)``."""
+        return (self.P - self.P0).reshape(-1, 3)
+
+    @cached_property
+    def D(self) -> np.ndarray:
+        """(n_ctrl*3, n_vars)."""
+        return self._D()
+
+    @cached_property
+    def X(self) -> np.ndarray:
+        """(S, 3)."""
+        return self._X()
+
+    @cached_property
+    def B(self):
+        """(S, n_ctrl) sparse."""
+        return self._B()
+
+
+# --------------------------------------------------------------------------------------------------
+# Geometry of the baseline: triangles, local chord lines, projection along the thickness axis
+# --------------------------------------------------------------------------------------------------
+
+def surface_triangles(faces) -> np.ndarray:
+    """(T, 3) local point indices of the triangles of triangle and quad blocks (quads split 0-1-2, 0-2-3)."""
+    out = [np.zeros((0, 3), dtype=np.int64)]
+    for b in faces:
+        d = np.asarray(b.data, dtype=np.int64)
+        if b.type == "triangle":
+            out.append(d)
+        elif b.type == "quad":
+            out += [d[:, [0, 1, 2]], d[:, [0, 2, 3]]]
+    return np.concatenate(out)
+
+
+
+def surface_segments(faces) -> np.ndarray:
+    """(E, 2) local point indices of the line blocks (a 2D surface)."""
+    out = [np.zeros((0, 2), dtype=np.int64)]
+    out += [np.asarray(b.data, dtype=np.int64) for b in faces if b.type == "line"]
+    return np.concatenate(out)
+
+
+
+@dataclass(frozen=True, eq=False)
+class Constraint:
+    """Common part: the position in ``constraints``, the kind, the bounds and the item names."""
+
+    index: int
+    lower: float
+    upper: float
+
+    kind = ""
+
+    @property
+    def size(self) -> int:  # pragma: no cover
+        raise NotImplementedError
+
+    @property
+    def scalar(self) -> bool:
+        """True when the constraint is one number named without brackets."""
+        return False
+
+    @property
+    def names(self) -> list[str]:
+        """``k<index>.<kind>`` or ``k<index>.<kind>[<j>]`` per item."""
+        base = f"k{self.index}.{self.kind}"
+        return [base] if self.scalar else [f"{base}[{j}]" for j in range(self.size)]
+
+    def value(self, inp: ConstraintInputs) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def jacobian(self, inp: ConstraintInputs) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def value_and_jacobian(self, inp: ConstraintInputs) -> tuple[np.ndarray, np.ndarray]:
+        """Both at once ((c,), (c, n_vars)); kinds that share the work override it."""
+        return self.value(inp), self.jacobian(inp)
+
+
+
+def read_bounds(spec: dict, lower=None, upper=None) -> tuple[float, float]:
+    """(lower, upper) of an item's settings (absent: the defaults given; ``None``: no bound)."""
+    return _bound(spec, "lower", lower), _bound(spec, "upper", upper)
+
+
+def _bound(spec: dict, key: str, default):
+    v = spec.get(key, default)
+    return -np.inf if v is None and key == "lower" else np.inf if v is None else float(v)
+
+
+
+# --------------------------------------------------------------------------------------------------
+# Evaluation of a list
+# --------------------------------------------------------------------------------------------------
+
+def constraint_names(constraints) -> list[str]:
+    """Every item name, in order."""
+    return [n for c in constraints for n in c.names]
+
+
+def constraint_bounds(constraints) -> tuple[np.ndarray, np.ndarray]:
+    """(lower (C,), upper (C,)) of every item (``-inf``/``inf``: none)."""
+    lo = np.concatenate([np.full(c.size, c.lower) for c in constraints] or [np.zeros(0)])
+    hi = np.concatenate([np.full(c.size, c.upper) for c in constraints] or [np.zeros(0)])
+    return lo, hi
+
+
+def evaluate(constraints, inp: ConstraintInputs, jacobian: bool = False):
+    """(values (C,), jacobian (C, n_vars) or None) of every item."""
+    if not jacobian:
+        vals = [c.value(inp) for c in constraints]
+        return (np.concatenate(vals) if vals else np.zeros(0)), None
+    both = [c.value_and_jacobian(inp) for c in constraints]
+    if not both:
+        return np.zeros(0), np.zeros((0, len(inp.values)))
+    return np.concatenate([b[0] for b in both]), np.concatenate([b[1] for b in both], axis=0)
+
+
+def satisfied(values, lower, upper, tol: float = SATISFIED_TOL) -> np.ndarray:
+    """(C,) bool: ``lower - tol <= value <= upper + tol``."""
+    values = np.asarray(values, dtype=float)
+    return (values >= lower - tol) & (values <= upper + tol)
