@@ -58,7 +58,7 @@ def has_optimize(ffd_path: Path) -> bool:
 
 
 def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None = None,
-             force: bool = False) -> dict:
+             force: bool = False, only_cached: bool = False) -> dict | None:
     """Run (or reuse) ``ffd optimize`` for one row; returns the result dict with its JSON summary."""
     root = Path(root or _su2.SCRATCH / "ffd")
     label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
@@ -84,7 +84,8 @@ def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None 
                     continue
         return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path)}
 
-    return _su2.cached_run(root, label, design + cfg, [_su2.NACA_MESH, *src], cmd[2:], body, force=force)
+    return _su2.cached_run(root, label, design + cfg, [_su2.NACA_MESH, *src], cmd[2:], body, force=force,
+                           only_cached=only_cached)
 
 
 def _best_mesh(folder: Path, summary: dict) -> Path | None:

@@ -76,7 +76,8 @@ def command(case: PeerCase) -> list[str]:
             "-f", "config.cfg"]
 
 
-def run_case(case: PeerCase, root: Path | None = None, force: bool = False) -> dict:
+def run_case(case: PeerCase, root: Path | None = None, force: bool = False,
+             only_cached: bool = False) -> dict | None:
     """Run (or reuse) one peer; returns its result dict (exit code, wall seconds, folder, ...)."""
     root = Path(root or _su2.SCRATCH / "peers")
     cfg = config_text(case)
@@ -89,7 +90,7 @@ def run_case(case: PeerCase, root: Path | None = None, force: bool = False) -> d
         return {"label": case.label, "rc": rc, "wall_s": wall, "command": " ".join(cmd[1:])}
 
     return _su2.cached_run(root, case.label, cfg, [case.mesh], [Path(c).name for c in cmd], body,
-                           force=force)
+                           force=force, only_cached=only_cached)
 
 
 # ----------------------------------------------------------------------------------------------

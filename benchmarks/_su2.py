@@ -153,11 +153,12 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 
 def cached_run(root: Path, label: str, cfg_text: str, inputs: list[Path], command: list[str],
-               body, force: bool = False) -> dict:
+               body, force: bool = False, only_cached: bool = False) -> dict | None:
     """Reuse ``<root>/<label>-<hash>/result.json`` if present, else run ``body(folder)`` -> dict and store it.
 
     ``body`` gets a fresh, empty folder; its dict gets ``folder``, ``hash``, ``load_before``,
-    ``load_after`` (1-minute load averages) and ``finished`` (UTC) added.
+    ``load_after`` (1-minute load averages) and ``finished`` (UTC) added. ``only_cached``: return
+    None instead of running when no finished run has this hash.
     """
     key = case_hash(cfg_text, inputs, command)
     folder = Path(root) / f"{label}-{key}"
@@ -166,6 +167,8 @@ def cached_run(root: Path, label: str, cfg_text: str, inputs: list[Path], comman
         data = json.loads(res.read_text())
         data["cached"] = True
         return data
+    if only_cached:
+        return None
     if folder.exists():
         shutil.rmtree(folder)
     folder.mkdir(parents=True)

@@ -55,9 +55,9 @@ def peer_rows(only_constrained: bool = False, run_missing: bool = True, adjoints
     for case in _optpeers.all_cases():
         if (only_constrained and not case.constrained) or case.adjoint not in adjoints:
             continue
-        if not run_missing and _cached(case.label, _su2.SCRATCH / "peers") is None:
+        r = _optpeers.run_case(case, only_cached=not run_missing)
+        if r is None:
             continue
-        r = _optpeers.run_case(case)
         print(f"  {case.label}: {'reused' if r.get('cached') else 'ran'} {r['folder']}", flush=True)
         rows.append(_read_row(_optpeers.peer_row, case, r))
     return rows
@@ -75,9 +75,9 @@ def ffd_rows(ffd_path: Path, only_constrained: bool = False, run_missing: bool =
             continue
         for adjoint in adjoints:
             label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
-            if not run_missing and _cached(label, _su2.SCRATCH / "ffd") is None:
+            r = _optffd.run_case(adjoint, constrained, ffd_path, only_cached=not run_missing)
+            if r is None:
                 continue
-            r = _optffd.run_case(adjoint, constrained, ffd_path)
             print(f"  {label}: {'reused' if r.get('cached') else 'ran'} {r['folder']}", flush=True)
             rows.append(_read_row(_optffd.ffd_row, adjoint, constrained, r))
     return rows
@@ -95,11 +95,6 @@ def _read_row(fn, *args) -> dict:
                 "worst_violation": float("nan"), "feasible": False, "flow": None, "adjoint_solves": None,
                 "wall_s": r.get("wall_s", float("nan")), "error": f"{type(exc).__name__}: {exc}",
                 "folder": r.get("folder")}
-
-
-def _cached(label: str, root: Path) -> Path | None:
-    hits = sorted(root.glob(f"{label}-*/result.json"), key=lambda p: p.stat().st_mtime)
-    return hits[-1] if hits else None
 
 
 # ----------------------------------------------------------------------------------------------
