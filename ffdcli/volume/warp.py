@@ -240,26 +240,8 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
 
     # sources and their areas
     src_ids = np.concatenate([surface_ids, fixed_ids])
-    if areas is None:
-        if faces is None:
-            raise ValueError("prepare_warp needs the area weights: pass areas= or faces=")
-        areas = vertex_areas(pts, faces, n)
-    areas = np.asarray(areas, dtype=np.float64)
-    if areas.shape != (n,):
-        raise ValueError(f"areas must have one value per mesh node ({n}), got {areas.shape}")
-    a = areas[src_ids].copy()
-    if np.any(~np.isfinite(a)) or np.any(a < 0):
-        raise ValueError("area weights must be finite and >= 0")
-    if a.size and np.any(a == 0):
-        pos = a[a > 0]
-        a[a == 0] = np.median(pos) if pos.size else 1.0
-    ns = len(surface_ids)
-    if ns:
-        flat = np.ptp(pts[surface_ids], axis=0).min() <= 1e-12 * size    # a 2D mesh: areas are lengths
-        total = float(a[:ns].sum())
-        chord = total / 2 if flat else total / (2 * size)
-        if not (chord > 0 and math.isfinite(chord)):
-            chord = size
+    a = _source_areas(pts, areas, faces, src_ids)
+    chord = _mean_chord(pts[surface_ids], a[:len(surface_ids)], size)
 
     # targets in Morton order: neighbours in memory walk the same tree nodes
     tpos = pts[target_ids] - origin
@@ -285,6 +267,37 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos, slide_rows,
                      slide_proj, origin, ldef, chord, spos_t, a_t, perm.astype(np.int64), nlo, nhi, nleft, nright,
                      center, radius, narea)
+
+
+def _source_areas(pts: np.ndarray, areas, faces, src_ids: np.ndarray) -> np.ndarray:
+    """(k,) area weights of the sources ``src_ids``: ``areas`` (N,) given, or from the boundary
+    ``faces`` (:func:`vertex_areas`); a source of zero area (a node on no face) gets the median."""
+    n = len(pts)
+    if areas is None:
+        if faces is None:
+            raise ValueError("prepare_warp needs the area weights: pass areas= or faces=")
+        areas = vertex_areas(pts, faces, n)
+    areas = np.asarray(areas, dtype=np.float64)
+    if areas.shape != (n,):
+        raise ValueError(f"areas must have one value per mesh node ({n}), got {areas.shape}")
+    a = areas[src_ids].copy()
+    if np.any(~np.isfinite(a)) or np.any(a < 0):
+        raise ValueError("area weights must be finite and >= 0")
+    if a.size and np.any(a == 0):
+        pos = a[a > 0]
+        a[a == 0] = np.median(pos) if pos.size else 1.0
+    return a
+
+
+def _mean_chord(surface: np.ndarray, area: np.ndarray, size: float) -> float:
+    """The wall's mean chord from its points (S, 3) and area weights (S,): half its area over its size
+    (a 2D mesh: half its length); ``size`` when that is not a positive number."""
+    if not len(surface):
+        return size
+    flat = np.ptp(surface, axis=0).min() <= 1e-12 * size    # a 2D mesh: areas are lengths
+    total = float(area.sum())
+    chord = total / 2 if flat else total / (2 * size)
+    return chord if chord > 0 and math.isfinite(chord) else size
 
 
 def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None,
