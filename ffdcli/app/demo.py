@@ -1,8 +1,8 @@
 """``python -m ffdcli.app.demo``: the paper's cases on the bundled samples, written to ``out/``.
 
-Runs every design file of ``configs/`` (deform, lattice VTK, PNG), the NACA0012 -> S1223 fit, and
-writes ``out/index.md`` listing each case with its one-line summary and picture. This is what
-``make demo`` runs.
+Runs every design file of ``configs/`` that is a deformation (:func:`demo_cases`: deform, lattice
+VTK, PNG), the NACA0012 -> S1223 fit, and writes ``out/index.md`` listing each case with its one-line
+summary and picture. This is what ``make demo`` runs.
 """
 
 from __future__ import annotations
@@ -11,6 +11,8 @@ import argparse
 import sys
 import time
 from pathlib import Path
+
+import yaml
 
 from ffdcli.app.deformation import deform
 from ffdcli.app.fit import fit_design
@@ -26,6 +28,22 @@ from ffdcli.viz.plot import plot_3d, plot_design
 REPO = Path(__file__).resolve().parents[2]     # ffdcli/app/demo.py -> the repository
 #: cases that also get the pyvista 3D view (each costs ~10-20 s off-screen here)
 VIEW_3D = {"rect_twist_linear", "crm_twist_tip"}
+
+
+def demo_cases(folder: Path) -> list[Path]:
+    """The design files of ``folder`` the demo deforms, by name: all but the fit's input
+    (``naca0012_s1223.yaml`` holds zero shape values: the fit case starts from it) and the inputs of
+    ``ffd optimize`` (an ``optimize:`` section: their deformation is the baseline, and their meshes may
+    need the solver's data first, e.g. ``onera_m6_optimize.yaml``'s generated mesh)."""
+    out = []
+    for c in sorted(Path(folder).glob("*.yaml")):
+        if c.stem == "naca0012_s1223":
+            continue
+        spec = yaml.safe_load(c.read_text())
+        if isinstance(spec, dict) and "optimize" in spec:
+            continue
+        out.append(c)
+    return out
 
 
 def run_case(config: Path, out: Path, progress, target=None) -> dict:
@@ -111,8 +129,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    # naca0012_s1223.yaml holds zero shape values: it is the input of the fit case, not a case itself
-    configs = [c for c in sorted(Path(args.configs).glob("*.yaml")) if c.stem != "naca0012_s1223"]
+    configs = demo_cases(Path(args.configs))
     if args.only:
         configs = [c for c in configs if c.stem in args.only]
 
