@@ -12,9 +12,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import REPO, SAMPLES, file_hash, run_ffd
-from hostile import (
-    assert_hostile,
-)
+from hostile import assert_hostile, design_with
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from wingcase import write_design, write_volume_wing
@@ -357,3 +355,14 @@ def test_openmdao_component_of_two_components_with_volume_constraints(forms):
     assert comp.input_names == ["c1_c0_twist", "c1_c1_chord", "htail_c0_dihedral", "vfin_c0_sweep"]
     assert [input_parts(n) for n in comp.input_names][1] == ("c1", 1, "chord")
     assert prob["c1_k0_volume"].shape == (1,) and prob["htail_k0_volume"].shape == (1,)
+
+
+@pytest.mark.parametrize("change", [{"span": 1e300}, {"chord": {"tip": 1e300}}])
+def test_constraints_that_overflow_are_an_error_never_nan(ws, change):
+    """No command reports or writes a non-finite number as a result: constraint values that overflow
+    (far too large design values) are exit 2 naming the item, no ``null``/NaN value, no Jacobian file."""
+    name = design_with(ws, f"overflow_{next(iter(change))}.yaml", [change],
+                       constraints=[{"volume": {"lower": 1}}, {"thickness": {"chord": [0.5], "span": [0.5]}}])
+    line = assert_hostile(ws, ["constraints", name, "--json", "--jacobian", "overflow.npz"], 2, "not a finite number",
+                          names=[name])
+    assert "constraint k" in line
