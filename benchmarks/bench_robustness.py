@@ -95,6 +95,9 @@ def _designs() -> dict:
         "mix4_a": [{"twist": {"tip": 8}}, {"span": 1.1}, {"sweep": 5}, {"dihedral": 3}],
         "mix4_b": [{"chord": {"tip": 0.6}}, {"sweep": -8}, {"twist": {"root": 2, "tip": -6}}, {"dihedral": -4}],
         "mix4_c": [{"span": 1.15}, {"sweep": 10}, {"twist": {"tip": -10}}, {"chord": {"tip": 0.5}}],
+        # control surfaces (issue 31), default blend and transition
+        **{f"flap{a}": [{"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": a}}] for a in (10, 20, 30)},
+        "slat15": [{"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}}],
     }
     return d
 

@@ -19,7 +19,6 @@ import click
 from ffdcli import __version__
 from ffdcli.cli.console import Console, StdoutError
 from ffdcli.errors import FfdError, SignalRecorder, Terminated
-from ffdcli.io.atomic import interrupts_outside_compilers
 from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -74,6 +73,22 @@ def _register():
     from ffdcli.cli import commands  # noqa: F401  (each module adds its command to ``cli``)
 
 
+def _compiled_code_guards(argv: list[str], notice: bool):
+    """Ctrl-C held while numba loads or compiles kernels (an interrupt there crashes the interpreter
+    later) and, when ``notice``, a line on stderr before the first compile of a kernel
+    (:mod:`ffdcli.jit`). Nothing for ``--help``/``--version``, which run no kernel: importing numba
+    would double the time of ``ffd --help``."""
+    if not argv or any(a in ("-h", "--help", "-V", "--version") for a in argv):
+        return contextlib.nullcontext()
+    from ffdcli.jit import compile_notice, interrupts_outside_compilers
+
+    stack = contextlib.ExitStack()
+    stack.enter_context(interrupts_outside_compilers())
+    if notice:
+        stack.enter_context(compile_notice())
+    return stack
+
+
 def main(argv=None):
     """Entry point of the ``ffd`` console script.
 
@@ -103,7 +118,8 @@ def _run(argv, as_json, verbose, signals):
         comm.signals = signals
     try:
         try:
-            with interrupts_outside_compilers():       # Ctrl-C inside numba's kernel loading crashes
+            quiet = "-q" in argv or "--quiet" in argv
+            with _compiled_code_guards(argv, comm.is_root and not quiet):
                 cli.main(args=argv, prog_name="ffd", standalone_mode=False, obj={"comm": comm})
             error = None
         except BaseException as e:   # noqa: BLE001 - agreed on below, then reported as before

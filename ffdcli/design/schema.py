@@ -17,7 +17,7 @@ from collections.abc import Callable
 from ffdcli.settings import ROOT_CHOICES, SECTION_CHOICES, WarpSettings
 
 #: Objects whose known keys ``--set`` may add when the file does not have them.
-ADDABLE = ("output", "volume", "box")
+ADDABLE = ("output", "volume", "box", "optimize")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -291,6 +291,54 @@ def bounds_schema() -> dict:
                 {"type": "object", "properties": {"lower": bound, "upper": bound}, "additionalProperties": False}]}}
 
 
+def optimize_schema() -> dict:
+    """``optimize:``: the optimisation with a flow solver (``ffd optimize``; :mod:`ffdcli.design.optimize`
+    turns it into :class:`~ffdcli.design.optimize.OptimizeSettings`)."""
+    bound = {"type": ["number", "null"]}
+    name = {"type": "string", "minLength": 1, "pattern": "^[A-Za-z_][A-Za-z0-9_]*$"}
+    function = {"type": "object", "additionalProperties": False, "required": ["name"],
+                "properties": {"name": {**name, "description": "a function the solver reports (LIFT, MOMENT_Z)"},
+                               "lower": {**bound, "description": "smallest allowed value (null: none)"},
+                               "upper": {**bound, "description": "largest allowed value (null: none)"},
+                               "scale": {**positive(), "description": "the optimiser sees scale * value "
+                                                                     "(default 1 / max(|bound|, |baseline|))"}}}
+    return {
+        "type": "object", "additionalProperties": False, "required": ["config"],
+        "description": "gradient-based optimisation of the design variables with a flow solver and its adjoint",
+        "properties": {
+            "solver": {"enum": ["su2", "analytic"], "description": "the flow solver (default su2; analytic: "
+                                                                   "ffd's stand-in solver for tests)"},
+            "config": {"type": "string", "minLength": 1,
+                       "description": "the solver's own configuration, relative to this file"},
+            "launch": {"type": "string", "description": "a prefix of the solver's commands (mpirun -n 8)"},
+            "objective": {**name, "description": "the function to minimise (default DRAG)"},
+            "scale": {**positive(), "description": "the optimiser sees scale * objective (default 1 / |baseline|)"},
+            "functions": {"type": "array", "items": function,
+                          "description": "aerodynamic constraints, each with its own adjoint"},
+            "variables": {"type": "array", "items": {"type": "string", "minLength": 1}, "minItems": 1,
+                          "description": "names or name prefixes of the variables to optimise; default all"},
+            "method": {"enum": ["SLSQP", "trust-constr"], "description": "the optimiser (default SLSQP)"},
+            "iterations": {"type": "integer", "minimum": 0, "description": "optimiser iterations at most"},
+            "tolerance": {**positive(), "description": "the optimiser's tolerance (default 1e-6)"},
+            "folder": {"type": "string", "minLength": 1,
+                       "description": "the run's folder, relative to this file (default opt/)"},
+            "adjoint": {"enum": ["discrete", "continuous"],
+                        "description": "discrete (SU2_CFD_AD, the default where found) | continuous (SU2_CFD)"},
+            "max_failures": {"type": "integer", "minimum": 0,
+                             "description": "solver or gate failures allowed before the run stops (exit 1)"},
+            "feasibility": {**positive(), "description": "a constraint counts as met within this (default 1e-4)"},
+            "step": {**positive(), "description": "the first step of the optimiser as a fraction of each "
+                                                  "variable's bound range (default 0.1)"},
+            "warm_start": {"type": "boolean", "description": "start each solve from the nearest finished "
+                                                             "evaluation's solution (default true)"},
+            "screen": {"type": ["number", "null"], "minimum": 0,
+                       "description": "a constraint function farther than this (scaled) from its bounds reuses its "
+                                      "latest adjoint gradient (default 0.3; null: every adjoint at every iterate)"},
+            "line_search": {"type": "integer", "minimum": 1,
+                            "description": "evaluations of one line search before the run ends (default 4)"},
+        }}
+
+
 #: The keys of one component (``components:`` items), besides ``name``; ``constraints`` joins them
 #: when the top level has it.
 COMPONENT_KEYS = ("surface", "box", "changes", "constraints")
@@ -313,7 +361,7 @@ def components_schema() -> dict:
 SECTIONS: dict[str, Callable[[], dict]] = {
     "mesh": mesh_schema, "surface": surface_schema, "box": box_schema, "volume": volume_schema,
     "changes": changes_schema, "constraints": constraints_schema, "bounds": bounds_schema,
-    "output": output_schema, "components": components_schema,
+    "output": output_schema, "components": components_schema, "optimize": optimize_schema,
 }
 #: Top-level keys a design file must have.
 REQUIRED = ("mesh",)

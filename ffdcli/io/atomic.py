@@ -297,66 +297,6 @@ def signals_deferred() -> Iterator[None]:
                 raise Terminated(s)
 
 
-#: Code inside which Ctrl-C must not raise: numba loads cached kernels and compiles through LLVM
-#: callbacks (ctypes), and a KeyboardInterrupt raised in one is dropped by ctypes and leaves LLVM's
-#: state half-made, so the interpreter crashes later (SIGSEGV: 2 to 3 interrupts in 60 of a cached
-#: ``ffd deform`` on a 100k-node mesh, 2026-12-02).
-UNSAFE_CODE = (f"{os.sep}numba{os.sep}", f"{os.sep}llvmlite{os.sep}")
-#: Seconds between two looks at the stack while an interrupt is held.
-HOLD_POLL = 0.02
-
-
-def _in_unsafe_code(frame) -> bool:
-    while frame is not None:
-        name = frame.f_code.co_filename
-        if any(part in name for part in UNSAFE_CODE):
-            return True
-        frame = frame.f_back
-    return False
-
-
-@contextlib.contextmanager
-def interrupts_outside_compilers() -> Iterator[None]:
-    """Ctrl-C (SIGINT) raises KeyboardInterrupt as usual, except while numba or llvmlite code is on
-    the stack (:data:`UNSAFE_CODE`): then it is held and raised as soon as that code has returned
-    (the stack is looked at again every :data:`HOLD_POLL` seconds, by SIGALRM). For the command
-    line's whole run. Outside the main thread, or when the program has its own SIGINT or SIGALRM
-    handler: a no-op."""
-    if (threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer")
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
-            or signal.getsignal(signal.SIGALRM) not in (signal.SIG_DFL, None)):
-        yield
-        return
-    held = False
-
-    def on_interrupt(signum, frame):
-        nonlocal held
-        if _in_unsafe_code(frame):
-            held = True
-            signal.setitimer(signal.ITIMER_REAL, HOLD_POLL)
-            return
-        raise KeyboardInterrupt
-
-    def on_alarm(signum, frame):
-        nonlocal held
-        if held:
-            if _in_unsafe_code(frame):
-                signal.setitimer(signal.ITIMER_REAL, HOLD_POLL)
-                return
-            held = False
-            raise KeyboardInterrupt
-
-    old = {signal.SIGINT: signal.signal(signal.SIGINT, on_interrupt),
-           signal.SIGALRM: signal.signal(signal.SIGALRM, on_alarm)}
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        for s, h in old.items():
-            with contextlib.suppress(ValueError, OSError):
-                signal.signal(s, h)
-
-
 # ----------------------------------------------------------------------------------------------
 # One file, whole or nothing
 # ----------------------------------------------------------------------------------------------

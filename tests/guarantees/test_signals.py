@@ -10,7 +10,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -21,8 +20,6 @@ from hostile import (
     no_parts,
 )
 from wingcase import write_design
-
-from ffdcli.io.atomic import interrupts_outside_compilers
 
 
 @pytest.fixture(scope="module")
@@ -102,36 +99,6 @@ def test_sigint_leaves_no_partial_output(big_wing):
                     f"{inside_write} inside a write)")
 
 
-def test_an_interrupt_inside_numba_is_held_until_it_returns():
-    """Ctrl-C while numba/llvmlite code is on the stack is held (raising it there crashed the
-    interpreter) and raised once that code has returned; elsewhere at once."""
-    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
-        pytest.skip("signals are handled in the main thread of a POSIX process")
-    fake = {"__file__": os.path.join(os.sep, "x", "numba", "core", "fake.py")}
-    exec(compile("def inside(f):\n    return f()\n", fake["__file__"], "exec"), fake)   # a frame "in numba"
-    seen = []
-
-    def busy():
-        os.kill(os.getpid(), signal.SIGINT)
-        t0 = time.perf_counter()
-        while time.perf_counter() - t0 < 0.2:      # the interrupt arrives here, "in numba": held
-            pass
-        seen.append("returned")
-
-    with interrupts_outside_compilers():
-        with pytest.raises(KeyboardInterrupt):
-            fake["inside"](busy)
-            t0 = time.perf_counter()
-            while time.perf_counter() - t0 < 2.0:  # raised within a poll of leaving numba
-                pass
-        assert seen == ["returned"]
-        with pytest.raises(KeyboardInterrupt):     # outside numba: at once
-            os.kill(os.getpid(), signal.SIGINT)
-            time.sleep(2.0)
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
-
-
-@pytest.fixture(scope="module")
 def mid_wing(tmp_path_factory):
     """A volume wing whose SU2 output takes a noticeable time to write, its box cached."""
     from ffdcli.io.formats import write_mesh
@@ -210,7 +177,6 @@ def test_stale_partial_files_are_swept(mid_wing):
         sleeper.wait()
         for f in mid_wing.glob(".out_mid*"):
             f.unlink()
-
 
 
 # ----------------------------------------------------------------------------------------------
