@@ -285,9 +285,9 @@ def test_components_without_changes_add_no_columns(forms, with_changes):
 @pytest.mark.slow
 def test_the_unedited_starter_file_differentiates(tmp_path):
     """``ffd init``'s file changes nothing: grad gives {}, jacobian and constraints --jacobian 0 columns."""
-    shutil.copyfile(SAMPLES / "rect_wing.su2", tmp_path / "rect_wing.su2")
-    shutil.copyfile(SAMPLES / "rect_wing_surface_sens.csv", tmp_path / "sens.csv")
-    assert run_ffd("init", "rect_wing.su2", "-o", "start.yaml", cwd=tmp_path).returncode == 0
+    shutil.copyfile(SAMPLES / "naca0012_2d.su2", tmp_path / "naca0012_2d.su2")
+    shutil.copyfile(SAMPLES / "naca0012_2d_cd_sens.csv", tmp_path / "sens.csv")
+    assert run_ffd("init", "naca0012_2d.su2", "-o", "start.yaml", cwd=tmp_path).returncode == 0
     proc = run_ffd("grad", "start.yaml", "--sens", "sens.csv", "--json", "-o", "g.json", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["gradient"] == {} and json.loads((tmp_path / "g.json").read_text()) == {}
