@@ -333,7 +333,7 @@ def multi_summary(rows: list[dict]) -> str:
     for r in rows:
         k = code.get(r["status"], "CRASH")
         counts[k] = counts.get(k, 0) + 1
-    recovered = sum(bool(r.get("recovered_with")) for r in rows)
+    recovered = sum(r["status"] == "ok" and bool(r.get("recovered_with")) for r in rows)
     return (f"{len(rows)} multi-component deformations: exit 0 x {counts.get(0, 0)}, exit 3 x {counts.get(3, 0)}, "
             f"exit 2 x {counts.get(2, 0)}, crashes {counts.get('CRASH', 0)}; {recovered} passed after a recovery")
 

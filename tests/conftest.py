@@ -19,6 +19,8 @@ SAMPLES = REPO / "samples"
 for _folder in sorted(Path(__file__).resolve().parent.iterdir()):
     if _folder.is_dir() and _folder.name[0] not in "._" and str(_folder) not in sys.path:
         sys.path.append(str(_folder))
+# tests/guarantees/hostile.py: the guarantee tests' helpers and workspaces (a plugin of those modules)
+pytest.register_assert_rewrite("hostile")
 
 
 def _find_shared_data() -> Path | None:

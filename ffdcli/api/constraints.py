@@ -117,14 +117,26 @@ class ConstraintsMixin:
                                 **mesh)
 
     def _evaluate_constraints(self, jacobian: bool):
-
+        """Values (C,) and (``jacobian``) the Jacobian (C, n_vars); a value or derivative that is not a
+        finite number (design values so large that the geometry overflows) is an InputError naming
+        the item and the design file: no command reports or writes a non-finite result."""
         vals, jacs = [np.zeros(0)], [np.zeros((0, self.n_vars))]
-        for c, group in self.constraint_groups:
-            v, j = evaluate(group, self._constraint_inputs(c), jacobian=jacobian)
-            vals.append(v)
-            if jacobian:
-                jacs.append(j)
-        return np.concatenate(vals), (np.concatenate(jacs, axis=0) if jacobian else None)
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            for c, group in self.constraint_groups:
+                v, j = evaluate(group, self._constraint_inputs(c), jacobian=jacobian)
+                vals.append(v)
+                if jacobian:
+                    jacs.append(j)
+        vals = np.concatenate(vals)
+        jac = np.concatenate(jacs, axis=0) if jacobian else None
+        bad = ~np.isfinite(vals) if jac is None else ~(np.isfinite(vals) & np.isfinite(jac).all(axis=1))
+        if bad.any():
+            k = int(np.flatnonzero(bad)[0])
+            raise InputError(f"constraint {self.constraint_names[k]} is not a finite number at these design values "
+                             f"({', '.join(f'{n} = {v:g}' for n, v in zip(self.names[:4], self.values[:4]))}"
+                             f"{' ...' if len(self.names) > 4 else ''}); are they far too large?",
+                             path=getattr(self.run.design, "path", None))
+        return vals, jac
 
     def constraint_values(self) -> np.ndarray:
         """(C,) the constraint items at the current values."""

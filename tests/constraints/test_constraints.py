@@ -147,13 +147,15 @@ def test_le_te_value(tmp_path):
     np.testing.assert_allclose(v.reshape(8, 2), [[0.0, 0.02]] * 8, atol=1e-15)
 
 
+# set_constraints speaks as the command line does for a design file (issue 29: the schema's words)
 @pytest.mark.parametrize("spec, words", [
-    ({"thickness": {"chord": [0.5], "span": [1.2]}}, "span stations run from 0 to 1"),
-    ({"thickness": {"chord": [-0.1], "span": [0.5]}}, "chord stations"),
-    ({"thickness": {"span": [0.5]}}, "needs chord"),
+    ({"thickness": {"chord": [0.5], "span": [1.2]}}, "span.0.: must be at most 1"),
+    ({"thickness": {"chord": [-0.1], "span": [0.5]}}, "chord.0.: must be greater than 0"),
+    ({"thickness": {"chord": [1.0], "span": [0.5]}}, "chord.0.: must be less than 1"),
+    ({"thickness": {"span": [0.5]}}, "missing key 'chord'"),
     ({"thickness": {"chord": [0.5]}}, "needs span"),
-    ({"thickness": {"chord": [1.0], "span": [0.5]}}, "misses the surface"),
-    ({"wobble": {}}, "unknown constraint"),
+    ({"thickness": {"chord": [0.999999999], "span": [0.5]}}, "misses the surface"),
+    ({"wobble": {}}, "unknown key 'wobble'"),
     ({"volume": {"lower": 2, "upper": 1}}, "above"),
 ])
 def test_bad_constraints(tmp_path, spec, words):

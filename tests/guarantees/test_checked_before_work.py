@@ -611,7 +611,7 @@ def test_thickness_stations_schema_and_run_agree(x, which):
     hint naming the trailing edge for chord 0. Now chord stations lie strictly inside (0, 1) for both."""
     import jsonschema
 
-    from ffdcli.constraints.geometric import _fractions
+    from ffdcli.constraints.thickness import _fractions
     from ffdcli.design.schema import constraints_schema
     from ffdcli.errors import InputError
 

@@ -12,9 +12,7 @@ import numpy as np
 import pytest
 import yaml
 from conftest import REPO, SAMPLES, file_hash, run_ffd
-from hostile import (
-    assert_hostile,
-)
+from hostile import assert_hostile, design_with
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from wingcase import write_design, write_volume_wing
@@ -287,9 +285,9 @@ def test_components_without_changes_add_no_columns(forms, with_changes):
 @pytest.mark.slow
 def test_the_unedited_starter_file_differentiates(tmp_path):
     """``ffd init``'s file changes nothing: grad gives {}, jacobian and constraints --jacobian 0 columns."""
-    shutil.copyfile(SAMPLES / "rect_wing.su2", tmp_path / "rect_wing.su2")
-    shutil.copyfile(SAMPLES / "rect_wing_surface_sens.csv", tmp_path / "sens.csv")
-    assert run_ffd("init", "rect_wing.su2", "-o", "start.yaml", cwd=tmp_path).returncode == 0
+    shutil.copyfile(SAMPLES / "naca0012_2d.su2", tmp_path / "naca0012_2d.su2")
+    shutil.copyfile(SAMPLES / "naca0012_2d_cd_sens.csv", tmp_path / "sens.csv")
+    assert run_ffd("init", "naca0012_2d.su2", "-o", "start.yaml", cwd=tmp_path).returncode == 0
     proc = run_ffd("grad", "start.yaml", "--sens", "sens.csv", "--json", "-o", "g.json", cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["gradient"] == {} and json.loads((tmp_path / "g.json").read_text()) == {}
@@ -357,3 +355,14 @@ def test_openmdao_component_of_two_components_with_volume_constraints(forms):
     assert comp.input_names == ["c1_c0_twist", "c1_c1_chord", "htail_c0_dihedral", "vfin_c0_sweep"]
     assert [input_parts(n) for n in comp.input_names][1] == ("c1", 1, "chord")
     assert prob["c1_k0_volume"].shape == (1,) and prob["htail_k0_volume"].shape == (1,)
+
+
+@pytest.mark.parametrize("change", [{"span": 1e300}, {"chord": {"tip": 1e300}}])
+def test_constraints_that_overflow_are_an_error_never_nan(ws, change):
+    """No command reports or writes a non-finite number as a result: constraint values that overflow
+    (far too large design values) are exit 2 naming the item, no ``null``/NaN value, no Jacobian file."""
+    name = design_with(ws, f"overflow_{next(iter(change))}.yaml", [change],
+                       constraints=[{"volume": {"lower": 1}}, {"thickness": {"chord": [0.5], "span": [0.5]}}])
+    line = assert_hostile(ws, ["constraints", name, "--json", "--jacobian", "overflow.npz"], 2, "not a finite number",
+                          names=[name])
+    assert "constraint k" in line

@@ -99,6 +99,7 @@ def test_sigint_leaves_no_partial_output(big_wing):
                     f"{inside_write} inside a write)")
 
 
+@pytest.fixture(scope="module")
 def mid_wing(tmp_path_factory):
     """A volume wing whose SU2 output takes a noticeable time to write, its box cached."""
     from ffdcli.io.formats import write_mesh
