@@ -24,7 +24,7 @@ def read_sensitivity_for(model, path, *, points=None, tol: float | None = None):
     design being differentiated; ``tol`` as :func:`read_sensitivity`). Returns (g (N, 3) dense, Sensitivity)."""
     mesh = model.run.prep.mesh
     pts = model.mesh_points() if points is None else points
-    sens = read_sensitivity(path, pts, mesh.dim, tol=tol)
+    sens = read_sensitivity(path, pts, mesh.dim, tol=tol, mesh=mesh)
     return sens.to_dense(mesh.n_points), sens
 
 

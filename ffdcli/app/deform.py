@@ -132,6 +132,8 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
         "plot_3d": written.get("plot_3d"),
         "surface_file": written.get("surface_file"),
         "changes": [next(iter(c)) for c in design.changes_spec],
+        "devices": {f"c{i}": ch.describe() for comp in run.components for i, ch in enumerate(comp.changes)
+                    if hasattr(ch, "describe")},
         "lattice": list(run.box.lattice_shape),
         "surface_points": int(len(run.surface_ids)),
         "max_displacement": result.max_displacement,
@@ -152,6 +154,15 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
     return summary
 
 
+def device_line(name: str, d: dict) -> str:
+    """One flap or slat as ``ffd deform`` prints it, with the chord width of its transition."""
+    where = "behind" if d["kind"] == "flap" else "ahead of"
+    span = f", span {d['span'][0]:g}-{d['span'][1]:g} (blend {d['blend']:g})" if d["span"] else ""
+    return (f"  {d['kind']:<9} {name}: {d['angle']:g} deg{span}, hinge {'/'.join(f'{h:g}' for h in d['hinge'])} "
+            f"of the local chord; turns rigidly beyond a transition of {d['transition']:.3f} local chords "
+            f"{where} the hinge")
+
+
 def _text(s: dict, run: DesignRun, result: Deformation, written: dict) -> str:
     """The summary as ``ffd deform`` prints it."""
     comps = s.get("components")
@@ -167,6 +178,7 @@ def _text(s: dict, run: DesignRun, result: Deformation, written: dict) -> str:
         junction = run.components[0].junction
         if junction is not None:
             lines.append(f"  root      on the body {junction.marker!r} (its nodes and the junction do not move)")
+    lines += [device_line(name, d) for name, d in s["devices"].items()]
     lines.append(f"  moved     max surface displacement {s['max_displacement']:.4g}; volume: {s['volume']}"
                  + (f" (recovered: {s['recovered_with']}, after the design's settings failed the gate)"
                     if s["recovered_with"] else ""))

@@ -23,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
+from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
 from ffdcli.io.inputs import check_input_file, existing_kind
 from ffdcli.mesh import diagonal
 from ffdcli.mesh.idsets import setdiff_ids
@@ -175,8 +176,12 @@ def _check_unique(ids: np.ndarray, lines: _Rows, p: Path) -> None:
                          line=lines.lineno(b))
 
 
-def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None) -> Sensitivity:
+def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None,
+                     mesh=None) -> Sensitivity:
     """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3).
+
+    ``mesh`` (:class:`ffdcli.mesh.Mesh`, optional): needed for SU2's continuous-adjoint file, whose
+    gradient is −S n̂ from its ``Surface_Sensitivity`` column (:func:`surface_sensitivity_rows`).
 
     ``tol`` (mesh units, default 1e-6 of the diagonal of ``points``): how far a row's coordinates may
     stand from its node, in both forms; farther, the file is refused (:func:`_check_distance`)."""
@@ -200,7 +205,7 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         idc = next(col[h] for h in ID_COLUMNS if h in col)
         names = ["sensitivity_x", "sensitivity_y", "sensitivity_z"][:gd]
         missing = [n for n in names if n not in col]
-        if missing:
+        if missing and "surface_sensitivity" not in col:
             raise InputError(f"missing column(s) {', '.join(missing)}; expected {', '.join(names)}",
                              path=p, line=1)
         ids = data[:, idc]
@@ -210,7 +215,9 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
                              path=p, line=lines.lineno(bad))
         ids = ids.astype(np.int64)
         values = np.zeros((len(ids), 3))
-        values[:, :gd] = data[:, [col[n] for n in names]]
+        if not missing:
+            values[:, :gd] = data[:, [col[n] for n in names]]
+        values = surface_sensitivity_rows(values, data, col, ids, points, mesh, p)
         worst = float("nan")
         cc = [c for c in ("x", "y", "z")[:gd] if c in col]
         if len(cc) == gd:
@@ -232,3 +239,20 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         how = "coordinates"
     _check_unique(ids, lines, p)
     return Sensitivity(ids=ids, values=values, matched_by=how, worst_distance=worst)
+
+
+def surface_sensitivity_rows(values: np.ndarray, data: np.ndarray, col: dict, ids: np.ndarray, points: np.ndarray,
+                             mesh, p: Path) -> np.ndarray:
+    """The rule that an all-zero sensitivity is never a gradient: ``values`` (K, 3) as read, unless every
+    ``Sensitivity_*`` column is zero. Then SU2's continuous-adjoint file (a ``Surface_Sensitivity``
+    column S) gives dJ/dX = −S n̂ (:func:`ffdcli.io.formats.wall_normals.surface_sensitivity_gradient`,
+    which needs ``mesh``); any other all-zero file is an :class:`InputError`."""
+    if np.any(values):
+        return values
+    if "surface_sensitivity" not in col:
+        raise InputError("every Sensitivity_x/y/z value is zero: that is no gradient (a continuous adjoint "
+                         "writes its sensitivity in a Surface_Sensitivity column, which this file lacks)", path=p)
+    if mesh is None:
+        raise InputError("this is a continuous-adjoint file (Sensitivity_x/y/z all zero, Surface_Sensitivity "
+                         "given): reading it as dJ/dX = -S n needs the mesh", path=p)
+    return surface_sensitivity_gradient(mesh, points, ids, data[:, col["surface_sensitivity"]])
