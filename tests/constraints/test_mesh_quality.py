@@ -272,29 +272,3 @@ def test_openmdao_component_outputs_mesh_quality(tmp_path):
         if of == "k0_mesh_quality":
             for key in ("J_fwd", "J_rev"):
                 np.testing.assert_allclose(d[key], d["J_fd"], rtol=1e-5, atol=1e-7, err_msg=f"{wrt} {key}")
-
-
-def test_under_mpi_ranks_every_rank_gets_the_serial_value_and_jacobian(tmp_path):
-    """``ffd constraints`` / the API under mpirun: every rank holds the whole mesh; the warp is shared
-    out by blocks and its transpose summed over the ranks, and mesh_quality is the serial one."""
-    from ffdcli.app.run import load_run
-    from ffdcli.design import load_design
-    from ffdcli.testing.threadcomm import run_ranks
-
-    mesh = write_volume_wing(tmp_path)
-    design = write_design(tmp_path, mesh, [{"twist": {"tip": 12}}, {"dihedral": 4}], volume={"method": "idw"},
-                          extra={"constraints": MQ})
-    serial = DesignModel.from_file(design)
-    v, J = serial.constraint_values(), serial.constraint_jacobian()
-
-    def one(comm):
-        model = DesignModel(load_run(load_design(design), use_cache=False, comm=comm), comm=comm)
-        return model.constraint_values(), model.constraint_jacobian()
-
-    for vr, Jr in run_ranks(3, one):
-        np.testing.assert_allclose(vr, v, rtol=1e-12)
-        np.testing.assert_allclose(Jr, J, rtol=1e-9, atol=1e-12)
-    # a mesh read by parts (mpirun ffd deform) is refused with the item's key
-    with pytest.raises(Exception, match="constraints\\[0\\].mesh_quality"):
-        run_ranks(2, lambda comm: DesignModel(load_run(load_design(design), use_cache=False, comm=comm,
-                                                       local=True), comm=comm).constraint_values())
