@@ -327,8 +327,8 @@ def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuali
         raise error("needs a volume mesh: the mesh has no interior cells whose quality the design could "
                     "spoil (a surface mesh?)", key)
     if getattr(mesh, "partial", False):
-        raise error("is evaluated on the whole mesh, not on a mesh read by parts (MPI); run ffd constraints "
-                    "(or the API) without mpirun", key)
+        raise error("is evaluated on a whole mesh, not on one read by parts (mpirun ffd deform): evaluate it "
+                    "with ffd constraints or the API (under mpirun too), and deform without it", key)
     try:
         check_types(cells, mesh.dim)
     except ValueError as e:
