@@ -15,7 +15,9 @@ file's values as defaults; :meth:`FFDComponent.design_var_bounds` (and :func:`ad
 their bounds for ``add_design_var`` (an open natural bound such as a factor > 0 moved inside by
 ``OPEN_INSET``). Outputs: ``surface`` (S, 3) in the order of
 ``DesignModel.surface_ids``; ``mesh`` (N, 3) when ``mesh=True``; one (k, 3) output per point set
-given in ``points={name: X}``; one output per ``constraints:`` item, ``k<index>_<kind>`` of its size.
+given in ``points={name: X}``; one output per ``constraints:`` item, ``k<index>_<kind>`` of its size
+(a component's: ``<component>_k<index>_<kind>``). Every name is unique and reversible
+(:func:`input_parts`) for every design the file format allows.
 
 Derivatives are matrix-free (``compute_jacvec_product``): forward products are
 ``DesignModel.surface_jvp``/``mesh_jvp``/``points_jvp`` and ``J @ dv`` for the constraints, reverse
@@ -48,11 +50,37 @@ def _optimiser_bounds(bounds) -> tuple[np.ndarray, np.ndarray]:
     return np.where(np.isfinite(lo), lo, -NO_BOUND), np.where(np.isfinite(hi), hi, NO_BOUND)
 
 
+#: A variable name: ``[<component>.]c<index>.<kind><rest>``; the component part is greedy, so a component
+#: named like a change (``c1``) is still told apart (``c1.c0.twist.tip``).
+_VARIABLE = re.compile(r"^(?:(?P<comp>.*)\.)?c(?P<index>\d+)\.(?P<kind>[A-Za-z_]+)(?:[.\[].*)?$")
+
+
 def input_name(variable: str) -> str:
-    """The input of the change a variable belongs to: ``c3.shape.upper[2]`` -> ``c3_shape``."""
-    m = re.match(r"^(.*?c\d+)\.([A-Za-z_]+)", variable)
-    head = f"{m.group(1)}_{m.group(2)}" if m else variable
-    return re.sub(r"[^A-Za-z0-9_]", "_", head)
+    """The input of the change a variable belongs to: ``c3.shape.upper[2]`` -> ``c3_shape``,
+    ``wing.c0.twist.tip`` -> ``wing_c0_twist``, ``c1.c0.twist.tip`` (component ``c1``) -> ``c1_c0_twist``.
+
+    Unique and reversible for every design the file allows: component names are letters, digits, ``_``
+    and ``-`` (all legal in OpenMDAO names, kept as written) and the name ends in ``c<index>_<kind>``,
+    so :func:`input_parts` reads the component, change index and kind back from the right."""
+    m = _VARIABLE.match(variable)
+    if m is None:
+        raise ValueError(f"not a design-variable name: {variable!r}")
+    head = f"c{m['index']}_{m['kind']}"
+    return f"{m['comp']}_{head}" if m["comp"] else head
+
+
+def input_parts(name: str) -> tuple[str | None, int, str]:
+    """(component name or None, change index, kind) of an input name (the inverse of :func:`input_name`)."""
+    m = re.match(r"^(?:(?P<comp>.*)_)?c(?P<index>\d+)_(?P<kind>[A-Za-z]+(?:_[A-Za-z]+)*)$", name)
+    if m is None:
+        raise ValueError(f"not an input name of FFDComponent: {name!r}")
+    return m["comp"], int(m["index"]), m["kind"]
+
+
+def constraint_output(component: str, index: int, kind: str) -> str:
+    """The output of constraint item ``index`` of a component (``""`` the single form): ``k0_volume``,
+    ``wing_k0_volume``: unique across components."""
+    return f"{component}_k{index}_{kind}" if component else f"k{index}_{kind}"
 
 
 class FFDComponent(om.ExplicitComponent):
@@ -115,12 +143,14 @@ class FFDComponent(om.ExplicitComponent):
             self.add_output(name, shape=(model.point_set(name).n_points, 3), desc=f"point set {name}")
         self._con_slices = []                       # (output name, slice of model.constraint_names)
         at = 0
-        for c in model.constraints:
-            if c.size:                               # (le_te of a design without shape moves has none)
-                out = f"k{c.index}_{c.kind}"
-                self.add_output(out, shape=(c.size,), desc=", ".join(c.names))
-                self._con_slices.append((out, slice(at, at + c.size)))
-            at += c.size
+        for ci, group in model.constraint_groups:
+            comp = model.run.components[ci].name or ""
+            for c in group:
+                if c.size:                           # (le_te of a design without shape moves has none)
+                    out = constraint_output(comp, c.index, c.kind)
+                    self.add_output(out, shape=(c.size,), desc=", ".join(c.names))
+                    self._con_slices.append((out, slice(at, at + c.size)))
+                at += c.size
 
     def design_var_bounds(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of input ``name`` for ``add_design_var`` (+-1e30 where there is no bound)."""

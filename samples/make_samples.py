@@ -1,20 +1,27 @@
 """Regenerate the bundled sample meshes and airfoil files of ``samples/``.
 
-Usage (from the repository root; needs the optional extra ``samples``, i.e. gmsh)::
+Usage (from the repository root; the 3D meshes need the optional extra ``samples``, i.e. gmsh)::
 
-    PYTHONPATH=$PWD python samples/make_samples.py            # all samples
-    PYTHONPATH=$PWD python samples/make_samples.py rect_wing  # one of them
+    PYTHONPATH=$PWD python samples/make_samples.py              # all samples
+    PYTHONPATH=$PWD python samples/make_samples.py rect_wing    # one of them
+    PYTHONPATH=$PWD python samples/make_samples.py --check      # rebuild in memory, compare with the files
 
-The outputs are committed, so neither the tests nor CI need gmsh. The 3D wings are lofted with the
-OpenCASCADE kernel through NACA sections from :mod:`ffdcli.testing.wings` (same planform parameters as
-``rect_wing_planform`` / ``crm_planform``), cut from a box far field and meshed with tetrahedra; the 2D
-O-grid is :func:`ffdcli.testing.wings.airfoil_ogrid` (pure NumPy). The SU2 files are written by the small
-writer below (``ffdcli.io.formats.su2`` is not used so that this script stays independent of it).
+The 3D meshes come from the one gmsh generator of the tests and the robustness benchmark,
+:func:`ffdcli.testing.gmsh_wings.fluid_tets` (OpenCASCADE lofts through NACA sections of
+:mod:`ffdcli.testing.planform`, cut from a box far field, meshed with tetrahedra); the 2D O-grid is
+:func:`ffdcli.testing.ogrid.airfoil_ogrid_mesh` (pure NumPy). The SU2 files are written by ffd's own
+writer (:func:`ffdcli.io.formats.write_mesh`).
+
+``--check`` rebuilds each mesh and compares it with the committed file: the same cells and markers
+node for node, the same coordinates to the 15 significant digits the committed files were printed
+with (they were written by an earlier private writer with ``%.15g`` and spaces; ffd's writer prints
+``%.17g`` with tabs, so a regenerated file differs in its bytes, not in its mesh).
 """
 
 from __future__ import annotations
 
 import sys
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -22,350 +29,46 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 
+from ffdcli.constraints import Volume, surface_triangles  # noqa: E402
+from ffdcli.geometry.surface import extract_surface  # noqa: E402
 from ffdcli.io.atomic import atomic_write  # noqa: E402
-from ffdcli.mesh import VTK_ID  # noqa: E402
-from ffdcli.testing import wings  # noqa: E402
+from ffdcli.io.formats import read_mesh, write_mesh  # noqa: E402
+from ffdcli.mesh import CellBlock, Mesh  # noqa: E402
+from ffdcli.testing.cells import quad_areas, tet_volumes  # noqa: E402
+from ffdcli.testing.gmsh_wings import fluid_tets, loft, planform_sections  # noqa: E402
+from ffdcli.testing.naca import naca4  # noqa: E402
+from ffdcli.testing.ogrid import airfoil_ogrid_mesh  # noqa: E402
+from ffdcli.testing.planform import Planform, crm_planform, rect_wing_planform  # noqa: E402
 
 # ----------------------------------------------------------------------------------------------
-# A minimal SU2 writer and checks
-# ----------------------------------------------------------------------------------------------
-
-
-def write_su2(path: Path, ndime: int, points: np.ndarray, cells: list[tuple[str, np.ndarray]],
-              markers: dict[str, list[tuple[str, np.ndarray]]]) -> None:
-    """Write an SU2 ASCII mesh: NDIME, NELEM (VTK ids, 0-based nodes, element index), NPOIN, NMARK."""
-    lines = [f"NDIME= {ndime}"]
-    n_elem = sum(len(c) for _, c in cells)
-    lines.append(f"NELEM= {n_elem}")
-    k = 0
-    for kind, conn in cells:
-        for row in conn:
-            lines.append(f"{VTK_ID[kind]} " + " ".join(map(str, row)) + f" {k}")
-            k += 1
-    lines.append(f"NPOIN= {len(points)}")
-    for i, p in enumerate(points[:, :ndime]):
-        lines.append(" ".join(f"{v:.15g}" for v in p) + f" {i}")
-    lines.append(f"NMARK= {len(markers)}")
-    for name, blocks in markers.items():
-        lines.append(f"MARKER_TAG= {name}")
-        lines.append(f"MARKER_ELEMS= {sum(len(c) for _, c in blocks)}")
-        for kind, conn in blocks:
-            for row in conn:
-                lines.append(f"{VTK_ID[kind]} " + " ".join(map(str, row)))
-    with atomic_write(path, "w") as fh:
-        fh.write("\n".join(lines) + "\n")
-
-
-def tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """Signed volumes of VTK-ordered tetrahedra (positive: p3 on the side of the normal of p0 p1 p2)."""
-    p = points[tets]
-    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
-
-
-# ----------------------------------------------------------------------------------------------
-# 3D wings with gmsh
+# 3D wings (gmsh)
 # ----------------------------------------------------------------------------------------------
 
 
-def mesh_wing(planform: wings.Planform, *, etas, box_lo, box_hi, h_wing: float, h_edge: float,
-              h_far: float, n_chord: int = 81, ruled: bool = True):
-    """Tetrahedral mesh of the fluid between a lofted wing and a box; returns points, tets, markers.
-
-    The wing is a loft (``ruled``: straight between consecutive sections) through the planform's
-    sections at ``etas``, closed by a flat tip cap; its root section lies in the box face at span 0
-    (the symmetry plane). Sizes: ``h_wing`` on the wing, ``h_edge`` near the leading and trailing
-    edges and the tip, growing to ``h_far`` at the box.
-    """
-    import gmsh
-
-    gmsh.initialize(["-nt", "1"])
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("wing")
-        occ = gmsh.model.occ
-        etas = np.asarray(etas, dtype=float)
-        coords = planform.airfoil_coords(etas, 2 * n_chord - 1)
-        wires = []
-        for j, eta in enumerate(etas):
-            xyz = planform.section_points(np.array([eta]), coords[j])[0]
-            le = n_chord - 1
-            tags = [occ.addPoint(*p) for p in xyz[:-1]]        # sharp TE: last point == first
-            tags.append(tags[0])
-            upper = occ.addSpline(tags[: le + 1])
-            lower = occ.addSpline(tags[le:])
-            wires.append(occ.addWire([upper, lower]))
-        wing = occ.addThruSections(wires, makeSolid=True, makeRuled=ruled)
-        lo, hi = np.asarray(box_lo, float), np.asarray(box_hi, float)
-        box = occ.addBox(*lo, *(hi - lo))
-        fluid, _ = occ.cut([(3, box)], wing)
-        occ.synchronize()
-        vols = gmsh.model.getEntities(3)
-        assert len(vols) == 1, vols
-        span_axis = planform.axes[2]
-        root_plane = planform.root_offset[span_axis]
-        groups = {"wing": [], "symmetry": [], "farfield": []}
-        tol = 1e-6 * float(np.max(hi - lo))
-        for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
-            bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
-            flat = np.abs(bb[0] - bb[1]) < tol
-            on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
-            on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
-            if on_box and on_box[0] == span_axis and abs(bb[0, span_axis] - root_plane) < tol:
-                groups["symmetry"].append(tag)
-            elif on_box:
-                groups["farfield"].append(tag)
-            else:
-                groups["wing"].append(tag)
-        for name, tags in groups.items():
-            assert tags, f"no surface classified as {name}"
-            gmsh.model.addPhysicalGroup(2, tags, name=name)
-        gmsh.model.addPhysicalGroup(3, [vols[0][1]], name="fluid")
-
-        # sizes: fine on the wing, finer at its edges (curves of the wing), growing to the box
-        wing_curves = sorted({abs(c[1]) for s in groups["wing"]
-                              for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
-        f = gmsh.model.mesh.field
-        d_s = f.add("Distance")
-        f.setNumbers(d_s, "SurfacesList", groups["wing"])
-        f.setNumber(d_s, "Sampling", 60)
-        t_s = f.add("Threshold")
-        f.setNumber(t_s, "InField", d_s)
-        f.setNumber(t_s, "SizeMin", h_wing)
-        f.setNumber(t_s, "SizeMax", h_far)
-        f.setNumber(t_s, "DistMin", 0.5 * h_wing)
-        f.setNumber(t_s, "DistMax", 0.6 * float(np.min(hi - lo)))
-        d_c = f.add("Distance")
-        f.setNumbers(d_c, "CurvesList", wing_curves)
-        f.setNumber(d_c, "Sampling", 200)
-        t_c = f.add("Threshold")
-        f.setNumber(t_c, "InField", d_c)
-        f.setNumber(t_c, "SizeMin", h_edge)
-        f.setNumber(t_c, "SizeMax", h_far)
-        f.setNumber(t_c, "DistMin", 0.5 * h_edge)
-        f.setNumber(t_c, "DistMax", 20 * h_wing)
-        m = f.add("Min")
-        f.setNumbers(m, "FieldsList", [t_s, t_c])
-        f.setAsBackgroundMesh(m)
-        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm", 6)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-        gmsh.option.setNumber("Mesh.Optimize", 1)
-        gmsh.model.mesh.generate(3)
-
-        node_tags, xyz, _ = gmsh.model.mesh.getNodes()
-        xyz = xyz.reshape(-1, 3)
-        etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
-        assert list(etypes) == [4], etypes                    # linear tetrahedra only
-        tets_tags = enodes[0].reshape(-1, 4).astype(np.int64)
-        marker_tags = {}
-        for name, tags in groups.items():
-            tris = []
-            for s in tags:
-                et, _, en = gmsh.model.mesh.getElements(2, s)
-                assert list(et) == [2], et
-                tris.append(en[0].reshape(-1, 3).astype(np.int64))
-            marker_tags[name] = np.concatenate(tris)
-    finally:
-        gmsh.finalize()
-
-    # compact 0-based numbering of the nodes the tetrahedra use
-    used = np.unique(tets_tags)
-    lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
-    lookup[used] = np.arange(len(used))
-    pos = np.full(len(lookup), -1, dtype=np.int64)
-    pos[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-    points = xyz[pos[used]]
-    tets = lookup[tets_tags]
-    vol = tet_volumes(points, tets)
-    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]              # VTK/SU2 orientation: all positive
-    markers = {}
-    for name, tris in marker_tags.items():
-        t = lookup[tris]
-        if np.any(t < 0):
-            raise RuntimeError(f"marker {name} references a node that no tetrahedron uses")
-        markers[name] = t
-    markers = _orient_boundary(points, tets, markers)
-    return points, tets, markers
+def tet_mesh(points: np.ndarray, tets: np.ndarray, markers: dict[str, np.ndarray]) -> Mesh:
+    """The generator's arrays as a Mesh (one tetra block, one triangle block per marker)."""
+    return Mesh(points=points, dim=3, cells=[CellBlock("tetra", tets)],
+                markers={k: [CellBlock("triangle", v)] for k, v in markers.items()})
 
 
-def _orient_boundary(points, tets, markers):
-    """Orient each boundary triangle with its normal out of the fluid (away from its tetrahedron)."""
-    faces = np.sort(np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]],
-                                    tets[:, [1, 2, 3]]]), axis=1)
-    opposite = np.concatenate([tets[:, 3], tets[:, 2], tets[:, 1], tets[:, 0]])
-    key = (faces[:, 0] * len(points) + faces[:, 1]) * len(points) + faces[:, 2]
-    order = np.argsort(key)
-    key_sorted = key[order]
-    out = {}
-    for name, tris in markers.items():
-        s = np.sort(tris, axis=1)
-        k = (s[:, 0] * len(points) + s[:, 1]) * len(points) + s[:, 2]
-        i = np.searchsorted(key_sorted, k)
-        if np.any(i >= len(key_sorted)) or np.any(key_sorted[np.minimum(i, len(key_sorted) - 1)] != k):
-            raise RuntimeError(f"marker {name} has a triangle that is not a tetrahedron face")
-        opp = points[opposite[order[i]]]
-        p = points[tris]
-        n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        inward = np.einsum("ij,ij->i", n, opp - p[:, 0]) > 0
-        t = tris.copy()
-        t[inward] = t[inward][:, [0, 2, 1]]
-        out[name] = t
-    return out
+def rect_wing() -> Mesh:
+    """NACA 0012, chord 1 along x, thickness y, span z 0..3, flat tip; box x -10..11, y -10..10, z 0..13."""
+    sections = planform_sections(rect_wing_planform(), [0.0, 1.0], n_chord=81)
+    return tet_mesh(*fluid_tets({"wing": partial(loft, sections=sections)}, (-10.0, -10.0, 0.0), (11.0, 10.0, 13.0),
+                                symmetry_axis=2, h_solid=0.035, h_edge=0.015, h_far=2.0, name="rect_wing"))
 
 
-def make_rect_wing(out: Path) -> dict:
-    pf = wings.rect_wing_planform()                    # NACA 0012, chord 1 x, thickness y, span z 0..3
-    pts, tets, markers = mesh_wing(pf, etas=[0.0, 1.0], box_lo=(-10.0, -10.0, 0.0), box_hi=(11.0, 10.0, 13.0),
-                                   h_wing=0.035, h_edge=0.015, h_far=2.0)
-    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
-    return summary(out, pts, tets, markers)
-
-
-def make_crm_wing(out: Path) -> dict:
-    pf = wings.crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.37)
-    etas = [0.0, pf.kink_eta, 1.0]
+def crm_wing() -> Mesh:
+    """The CRM-like planform scaled to trapezoid root chord 1, lofted through root, kink and tip."""
+    pf = crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.37)
     c = pf.root_chord
-    pts, tets, markers = mesh_wing(pf, etas=etas, box_lo=(-10 * c, 0.0, -10 * c),
-                                   box_hi=(13 * c, 3.0 + 10 * c, 10 * c),
-                                   h_wing=0.03, h_edge=0.01, h_far=2.0)
-    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
-    return summary(out, pts, tets, markers)
+    sections = planform_sections(pf, [0.0, pf.kink_eta, 1.0], n_chord=81)
+    return tet_mesh(*fluid_tets({"wing": partial(loft, sections=sections)}, (-10 * c, 0.0, -10 * c),
+                                (13 * c, 3.0 + 10 * c, 10 * c), symmetry_axis=1, h_solid=0.03, h_edge=0.01,
+                                h_far=2.0, name="crm_wing"))
 
 
-# ----------------------------------------------------------------------------------------------
-# Several components: wing + horizontal tail + fin, and a wing on a fuselage (issue 16)
-# ----------------------------------------------------------------------------------------------
-
-
-def _loft(occ, planform: wings.Planform, etas, n_chord: int = 61) -> int:
-    """OCC solid lofted straight through the planform's sections at ``etas`` (sharp TE, flat caps)."""
-    coords = planform.airfoil_coords(np.asarray(etas, float), 2 * n_chord - 1)
-    wires = []
-    for j, eta in enumerate(etas):
-        xyz = planform.section_points(np.array([eta]), coords[j])[0]
-        le = n_chord - 1
-        tags = [occ.addPoint(*p) for p in xyz[:-1]]
-        tags.append(tags[0])
-        wires.append(occ.addWire([occ.addSpline(tags[: le + 1]), occ.addSpline(tags[le:])]))
-    return occ.addThruSections(wires, makeSolid=True, makeRuled=True)[0][1]
-
-
-def mesh_parts(builders: dict, *, box_lo, box_hi, symmetry_axis: int, h_part: float, h_edge: float,
-               h_far: float, fuse: bool = False):
-    """Tetrahedral mesh of the fluid between several solids and a box; markers named after the solids.
-
-    ``builders`` maps a marker name to ``f(occ) -> volume tag``. ``fuse``: the solids intersect (a
-    wing on a fuselage) and are fused first, so that they share the junction curve. Every boundary
-    face of the fluid goes to ``symmetry`` (the box face at ``symmetry_axis`` = 0), ``farfield`` (the
-    other box faces) or to the solid whose bounding box holds it (the smallest such box).
-    """
-    import gmsh
-
-    gmsh.initialize(["-nt", "1"])
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add("parts")
-        occ = gmsh.model.occ
-        solids = {name: build(occ) for name, build in builders.items()}
-        occ.synchronize()
-        bbs = {name: np.array(gmsh.model.getBoundingBox(3, t)).reshape(2, 3) for name, t in solids.items()}
-        lo, hi = np.asarray(box_lo, float), np.asarray(box_hi, float)
-        tools = [(3, t) for t in solids.values()]
-        if fuse:
-            tools, _ = occ.fuse(tools[:1], tools[1:])
-        box = occ.addBox(*lo, *(hi - lo))
-        occ.cut([(3, box)], tools)
-        occ.synchronize()
-        vols = gmsh.model.getEntities(3)
-        assert len(vols) == 1, vols
-        groups = {name: [] for name in solids}
-        groups.update(symmetry=[], farfield=[])
-        tol = 1e-6 * float(np.max(hi - lo))
-        for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
-            bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
-            flat = np.abs(bb[0] - bb[1]) < tol
-            on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
-            on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
-            if on_box and on_box[0] == symmetry_axis and abs(bb[0, symmetry_axis]) < tol:
-                groups["symmetry"].append(tag)
-            elif on_box:
-                groups["farfield"].append(tag)
-            else:
-                holders = [n for n, b in bbs.items() if np.all(bb[0] >= b[0] - 1e-3) and np.all(bb[1] <= b[1] + 1e-3)]
-                assert holders, f"face {tag} {bb.tolist()} is in no solid's bounding box"
-                groups[min(holders, key=lambda n: float(np.prod(np.ptp(bbs[n], axis=0))))].append(tag)
-        part_faces = [t for n in solids for t in groups[n]]
-        for name, tags in groups.items():
-            assert tags, f"no surface classified as {name}"
-            gmsh.model.addPhysicalGroup(2, tags, name=name)
-        curves = sorted({abs(c[1]) for s in part_faces for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
-        f = gmsh.model.mesh.field
-        d_s = f.add("Distance")
-        f.setNumbers(d_s, "SurfacesList", part_faces)
-        f.setNumber(d_s, "Sampling", 60)
-        t_s = f.add("Threshold")
-        f.setNumber(t_s, "InField", d_s)
-        f.setNumber(t_s, "SizeMin", h_part)
-        f.setNumber(t_s, "SizeMax", h_far)
-        f.setNumber(t_s, "DistMin", 0.5 * h_part)
-        f.setNumber(t_s, "DistMax", 0.6 * float(np.min(hi - lo)))
-        d_c = f.add("Distance")
-        f.setNumbers(d_c, "CurvesList", curves)
-        f.setNumber(d_c, "Sampling", 200)
-        t_c = f.add("Threshold")
-        f.setNumber(t_c, "InField", d_c)
-        f.setNumber(t_c, "SizeMin", h_edge)
-        f.setNumber(t_c, "SizeMax", h_far)
-        f.setNumber(t_c, "DistMin", 0.5 * h_edge)
-        f.setNumber(t_c, "DistMax", 20 * h_part)
-        m = f.add("Min")
-        f.setNumbers(m, "FieldsList", [t_s, t_c])
-        f.setAsBackgroundMesh(m)
-        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm", 6)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-        gmsh.option.setNumber("Mesh.Optimize", 1)
-        gmsh.model.mesh.generate(3)
-        node_tags, xyz, _ = gmsh.model.mesh.getNodes()
-        xyz = xyz.reshape(-1, 3)
-        etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
-        assert list(etypes) == [4], etypes
-        tets_tags = enodes[0].reshape(-1, 4).astype(np.int64)
-        marker_tags = {}
-        for name, tags in groups.items():
-            tris = []
-            for s in tags:
-                et, _, en = gmsh.model.mesh.getElements(2, s)
-                assert list(et) == [2], et
-                tris.append(en[0].reshape(-1, 3).astype(np.int64))
-            marker_tags[name] = np.concatenate(tris)
-    finally:
-        gmsh.finalize()
-    used = np.unique(tets_tags)
-    lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
-    lookup[used] = np.arange(len(used))
-    pos = np.full(len(lookup), -1, dtype=np.int64)
-    pos[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-    points = xyz[pos[used]]
-    tets = lookup[tets_tags]
-    vol = tet_volumes(points, tets)
-    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
-    markers = {}
-    for name, tris in marker_tags.items():
-        t = lookup[tris]
-        if np.any(t < 0):
-            raise RuntimeError(f"marker {name} references a node that no tetrahedron uses")
-        markers[name] = t
-    return points, tets, _orient_boundary(points, tets, markers)
-
-
-# Chord x, span y, thickness z (as the CRM); the symmetry plane is y = 0.
+# Several components (issue 16). Chord x, span y, thickness z (as the CRM); the symmetry plane is y = 0.
 WING = dict(semi_span=2.5, root_chord=1.0, taper=0.4, le_sweep_deg=25.0, root_airfoil="0012", sections="xz")
 HTAIL = dict(semi_span=1.0, root_chord=0.5, taper=0.6, le_sweep_deg=30.0, root_airfoil="0010", sections="xz",
              root_offset=(3.0, 0.0, 0.0))
@@ -373,16 +76,18 @@ HTAIL = dict(semi_span=1.0, root_chord=0.5, taper=0.6, le_sweep_deg=30.0, root_a
 FIN = dict(semi_span=0.7, root_chord=0.5, taper=0.6, le_sweep_deg=35.0, root_airfoil="0010", sections="xy",
            root_offset=(3.1, 0.6, 0.3))
 FUSELAGE_RADIUS = 0.35
+#: Box, symmetry plane and sizes of the two multi-component samples.
+PARTS_BOX = dict(lo=(-6.0, 0.0, -6.0), hi=(10.0, 7.0, 6.0), symmetry_axis=1, h_solid=0.045, h_edge=0.018, h_far=2.0)
 
 
-def make_wing_tail_fin(out: Path) -> dict:
+def _wing_part(kw: dict):
+    return partial(loft, sections=planform_sections(Planform(**kw), [0.0, 1.0], n_chord=61))
+
+
+def wing_tail_fin() -> Mesh:
     """Wing + horizontal tail (roots on the symmetry plane) + a vertical fin (span along z)."""
-    parts = {"wing": (WING, [0.0, 1.0]), "htail": (HTAIL, [0.0, 1.0]), "vfin": (FIN, [0.0, 1.0])}
-    builders = {n: (lambda occ, kw=kw, e=e: _loft(occ, wings.Planform(**kw), e)) for n, (kw, e) in parts.items()}
-    pts, tets, markers = mesh_parts(builders, box_lo=(-6.0, 0.0, -6.0), box_hi=(10.0, 7.0, 6.0), symmetry_axis=1,
-                                    h_part=0.045, h_edge=0.018, h_far=2.0)
-    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
-    return summary(out, pts, tets, markers)
+    solids = {"wing": _wing_part(WING), "htail": _wing_part(HTAIL), "vfin": _wing_part(FIN)}
+    return tet_mesh(*fluid_tets(solids, name="wing_tail_fin", **PARTS_BOX))
 
 
 def _fuselage(occ) -> int:
@@ -395,30 +100,55 @@ def _fuselage(occ) -> int:
     return out[0][1]
 
 
-def make_wing_body(out: Path) -> dict:
+def wing_body() -> Mesh:
     """A low wing through a fuselage: the wing's root meets the fuselage, not the symmetry plane."""
-    wing = wings.Planform(**{**WING, "root_offset": (0.6, 0.0, -0.12)})
-    builders = {"fuselage": _fuselage, "wing": lambda occ: _loft(occ, wing, [0.0, 1.0])}
-    pts, tets, markers = mesh_parts(builders, box_lo=(-6.0, 0.0, -6.0), box_hi=(10.0, 7.0, 6.0), symmetry_axis=1,
-                                    h_part=0.045, h_edge=0.018, h_far=2.0, fuse=True)
-    write_su2(out, 3, pts, [("tetra", tets)], {k: [("triangle", v)] for k, v in markers.items()})
-    return summary(out, pts, tets, markers)
+    solids = {"fuselage": _fuselage, "wing": _wing_part({**WING, "root_offset": (0.6, 0.0, -0.12)})}
+    return tet_mesh(*fluid_tets(solids, fuse=True, name="wing_body", **PARTS_BOX))
 
 
-def make_naca0012_2d(out: Path) -> dict:
-    m = wings.airfoil_ogrid_mesh("0012", n_around=161, n_radial=41, farfield_radius=15.0)
-    write_su2(out, 2, m.points, [("quad", m.cells[0].data)],
-              {k: [("line", b[0].data)] for k, b in m.markers.items()})
-    q = m.cells[0].data
-    return {"file": out.name, "points": m.n_points, "quad": len(q),
-            "markers": {k: len(b[0]) for k, b in m.markers.items()},
-            "min_area": float(wings.quad_areas(m.points, q).min())}
+def naca0012_2d() -> Mesh:
+    """2D O-grid of quads around NACA 0012 (pure NumPy)."""
+    return airfoil_ogrid_mesh("0012", n_around=161, n_radial=41, farfield_radius=15.0)
 
 
-def summary(out, pts, tets, markers) -> dict:
-    return {"file": out.name, "points": len(pts), "tetra": len(tets),
-            "markers": {k: len(v) for k, v in markers.items()},
-            "min_volume": float(tet_volumes(pts, tets).min()), "bytes": out.stat().st_size}
+def summary(out: Path, m: Mesh) -> dict:
+    """What the README of samples/ lists: counts, markers, the smallest cell."""
+    block = m.cells[0]
+    size = (tet_volumes(m.points, block.data).min() if block.type == "tetra"
+            else quad_areas(m.points, block.data).min())
+    return {"file": out.name, "points": m.n_points, block.type: len(block),
+            "markers": {k: sum(len(b) for b in v) for k, v in m.markers.items()},
+            "min_size": float(size), "bytes": out.stat().st_size}
+
+
+def differences(made: Mesh, path: Path) -> tuple[list[str], list[str]]:
+    """How the mesh ``made`` differs from the committed file: (differences, notes). No difference: the
+    same cells and markers, the same coordinates to the 15 digits the file was printed with; a note:
+    symmetry nodes the generator now puts exactly in the plane (gmsh returns them to rounding)."""
+    old = read_mesh(path)
+    if made.n_points != old.n_points:
+        return [f"{made.n_points} points, the file has {old.n_points}"], []
+    out, notes = [], []
+    rounded = np.array([float(f"{v:.15g}") for v in made.points.ravel()]).reshape(made.points.shape)
+    rows, cols = np.nonzero(rounded != old.points)
+    if len(rows):
+        gap = float(np.abs(made.points - old.points).max())
+        sym = np.unique(np.concatenate([b.data.ravel() for b in made.markers.get("symmetry", [])] or [[]]))
+        axis = np.unique(cols)
+        if gap < 1e-12 and np.isin(rows, sym).all() and len(axis) == 1 and np.ptp(made.points[sym, axis[0]]) == 0:
+            notes.append(f"{len(np.unique(rows))} symmetry nodes now exactly in the plane (off by up to {gap:.2g} "
+                         "in the file)")
+        else:
+            out.append(f"coordinates of {len(np.unique(rows))} points differ, by up to {gap:.3g}")
+    for what, a, b in [("cells", made.cells, old.cells)] + [
+            (f"marker {k}", made.markers.get(k, []), old.markers.get(k, [])) for k in {**made.markers, **old.markers}]:
+        if [x.type for x in a] != [x.type for x in b] or any(not np.array_equal(x.data, y.data) for x, y in zip(a, b)):
+            out.append(f"{what}: {[(x.type, len(x)) for x in a]} made, {[(y.type, len(y)) for y in b]} in the file")
+    return out, notes
+
+
+MESHES = {"naca0012_2d": naca0012_2d, "rect_wing": rect_wing, "crm_wing": crm_wing,
+          "wing_tail_fin": wing_tail_fin, "wing_body": wing_body}
 
 
 def write_dat(out: Path, name: str, coords: np.ndarray) -> None:
@@ -426,8 +156,8 @@ def write_dat(out: Path, name: str, coords: np.ndarray) -> None:
 
 
 def make_airfoils() -> list[dict]:
-    naca = wings.naca4("0012", 133, closed_te=True)
-    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.testing.wings.naca4)",
+    naca = naca4("0012", 133, closed_te=True)
+    write_dat(HERE / "naca0012.dat", "NACA 0012 (closed trailing edge, cosine spacing, ffdcli.testing.naca.naca4)",
               naca)
     src = Path("/work/shared/data/airfoils/s1223.dat")
     if src.exists():
@@ -438,16 +168,14 @@ def make_airfoils() -> list[dict]:
 def make_volume_sens(out: Path) -> dict:
     """dJ/dX of J = the enclosed volume of ``rect_wing.su2``'s wing, in SU2's ``surface_sens.csv`` layout.
 
-    Not an adjoint solution (SU2 is not available where the samples are made): a real sensitivity of
-    a functional known in closed form, so that ``ffd grad`` has a file to read and its answer can be
-    checked (README, docs/su2.md). The volume and its exact gradient are those of ffd's ``volume``
-    constraint (:class:`ffdcli.constraints.volume.Volume`: the half wing closed by its symmetry plane z = 0).
-    The marker's triangles face into the wing (out of the fluid), hence the sign.
+    Not an adjoint solution: a sensitivity of a functional known in closed form, the oracle of
+    ``ffd grad``'s test (``configs/rect_grad.yaml``; written to ``out/``, not shipped: the bundled
+    sensitivity is SU2's real drag adjoint, :func:`make_su2_drag_sens`). The volume and its exact
+    gradient are those of ffd's ``volume`` constraint (:class:`ffdcli.constraints.Volume`: the half
+    wing closed by its symmetry plane z = 0). The marker's triangles face into the wing (out of the
+    fluid), hence the sign.
     """
-    from ffdcli.constraints import Volume, surface_triangles
-    from ffdcli.geometry.surface import extract_surface
-    from ffdcli.io.formats import read_mesh
-
+    out.parent.mkdir(parents=True, exist_ok=True)
     m = read_mesh(HERE / "rect_wing.su2")
     surf = extract_surface(m, ["wing"])
     vol = Volume(index=0, lower=None, upper=None, cells=surface_triangles(surf.faces),
@@ -462,17 +190,98 @@ def make_volume_sens(out: Path) -> dict:
     return {"file": out.name, "rows": len(surf.ids), "volume": abs(volume)}
 
 
+def su2_programs() -> Path | None:
+    """The folder of SU2's programs: ``SU2_RUN``, the ``PATH``, then ``../shared/su2/bin`` beside the
+    repository; None when SU2 is not installed."""
+    import os
+    import shutil
+
+    cands = [Path(os.environ["SU2_RUN"])] if os.environ.get("SU2_RUN") else []
+    if shutil.which("SU2_CFD"):
+        cands.append(Path(shutil.which("SU2_CFD")).resolve().parent)
+    cands.append(HERE.parent.parent / "shared" / "su2" / "bin")
+    return next((c for c in cands if (c / "SU2_CFD").is_file()), None)
+
+
+def make_su2_drag_sens(out: Path) -> dict:
+    """dJ/dX of the drag of ``naca0012_2d.su2`` at every node, by SU2's discrete adjoint.
+
+    Flow: SU2_CFD with ``naca0012_2d_euler.cfg`` (Euler, M 0.8, alpha 1.25 deg, residuals to 1e-12);
+    adjoint: SU2_CFD_AD with ``MATH_PROBLEM= DISCRETE_ADJOINT``, ``OBJECTIVE_FUNCTION= DRAG`` on that
+    flow (its ``restart_flow.dat`` copied to ``solution_flow.dat``). Of SU2's ``restart_adj_cd.csv``
+    (every node: adjoint variables and ``Sensitivity_x/y``) the file keeps the point id, coordinates
+    and sensitivities, 13 significant digits. Needs SU2 (``SU2_RUN``, ``PATH`` or ``../shared/su2/bin``).
+    """
+    import shutil
+    import subprocess
+    import tempfile
+
+    bindir = su2_programs()
+    if bindir is None or not (bindir / "SU2_CFD_AD").is_file():
+        raise SystemExit("SU2_CFD and SU2_CFD_AD are needed (SU2_RUN, PATH or ../shared/su2/bin)")
+    cfg = (HERE / "naca0012_2d_euler.cfg").read_text()
+    with tempfile.TemporaryDirectory() as tmp:
+        t = Path(tmp)
+        shutil.copyfile(HERE / "naca0012_2d.su2", t / "naca0012_2d.su2")
+        (t / "flow.cfg").write_text(cfg)
+        (t / "adj.cfg").write_text(cfg.replace("MATH_PROBLEM= DIRECT", "MATH_PROBLEM= DISCRETE_ADJOINT"))
+        for prog, conf in (("SU2_CFD", "flow.cfg"), ("SU2_CFD_AD", "adj.cfg")):
+            with open(t / f"{prog}.log", "w") as log:
+                rc = subprocess.run([str(bindir / prog), conf], cwd=t, stdout=log, stderr=subprocess.STDOUT).returncode
+            if rc != 0:
+                raise SystemExit(f"{prog} failed ({rc}): {(t / f'{prog}.log').read_text()[-2000:]}")
+            if prog == "SU2_CFD":
+                shutil.copyfile(t / "restart_flow.dat", t / "solution_flow.dat")
+                flow = (t / "history.csv").read_text().splitlines()
+        head = [h.strip().strip('"') for h in (t / "restart_adj_cd.csv").open().readline().split(",")]
+        data = np.loadtxt(t / "restart_adj_cd.csv", delimiter=",", skiprows=1, ndmin=2)
+    cols = [head.index(c) for c in ("PointID", "x", "y", "Sensitivity_x", "Sensitivity_y")]
+    rows = data[:, cols]
+    with atomic_write(out, "w") as fh:
+        fh.write('"PointID","x","y","Sensitivity_x","Sensitivity_y"\n')
+        np.savetxt(fh, rows, fmt=["%d"] + ["%.12e"] * 4, delimiter=",")
+    hh = [h.strip().strip('"') for h in flow[0].split(",")]
+    last = dict(zip(hh, flow[-1].split(",")))
+    return {"file": out.name, "rows": len(rows), "CD": float(last["CD"]), "CL": float(last["CL"]),
+            "iterations": int(float(last["Inner_Iter"])), "rms[Rho]": float(last["rms[Rho]"])}
+
+
+def make_mesh(name: str) -> dict:
+    out = HERE / f"{name}.su2"
+    mesh = MESHES[name]()
+    write_mesh(mesh, out)
+    return summary(out, mesh)
+
+
 MAKERS = {
-    "naca0012_2d": lambda: make_naca0012_2d(HERE / "naca0012_2d.su2"),
-    "rect_wing": lambda: make_rect_wing(HERE / "rect_wing.su2"),
-    "crm_wing": lambda: make_crm_wing(HERE / "crm_wing.su2"),
+    **{name: partial(make_mesh, name) for name in MESHES},
     "airfoils": make_airfoils,
-    "surface_sens": lambda: make_volume_sens(HERE / "rect_wing_surface_sens.csv"),
-    "wing_tail_fin": lambda: make_wing_tail_fin(HERE / "wing_tail_fin.su2"),
-    "wing_body": lambda: make_wing_body(HERE / "wing_body.su2"),
+    "surface_sens": lambda: make_volume_sens(HERE.parent / "out" / "rect_wing_volume_sens.csv"),
+    "naca0012_2d_sens": lambda: make_su2_drag_sens(HERE / "naca0012_2d_cd_sens.csv"),
 }
+NEEDS_SU2 = ("naca0012_2d_sens",)
+
+
+def main(argv: list[str]) -> int:
+    check = "--check" in argv
+    names = [a for a in argv if a != "--check"] or list(MESHES if check else MAKERS)
+    unknown = [n for n in names if n not in (MESHES if check else MAKERS)]
+    if unknown:
+        print(f"unknown sample(s) {unknown}; choose from {list(MESHES if check else MAKERS)}", file=sys.stderr)
+        return 2
+    status = 0
+    for name in names:
+        if check:
+            diff, notes = differences(MESHES[name](), HERE / f"{name}.su2")
+            status |= bool(diff)
+            print(f"{name}.su2: " + ("; ".join(diff) if diff else "the same mesh") + "".join(f" ({n})" for n in notes),
+                  flush=True)
+        elif name in NEEDS_SU2 and su2_programs() is None:
+            print(name, "skipped: SU2 is not installed (SU2_RUN, PATH or ../shared/su2/bin)", flush=True)
+        else:
+            print(name, MAKERS[name](), flush=True)
+    return status
 
 
 if __name__ == "__main__":
-    for name in sys.argv[1:] or list(MAKERS):
-        print(name, MAKERS[name](), flush=True)
+    sys.exit(main(sys.argv[1:]))

@@ -173,10 +173,9 @@ def test_function_local_imports_only_in_cli_or_for_optional_packages():
 
 
 #: Being split (issue 27): each leaves this list when it is under the limit.
-SPLITTING = {"testing/wings.py", "io/formats/cgns.py"}
+SPLITTING: set[str] = set()
 #: Functions over 100 lines being split (issue 27), as "module:function".
-LONG_FUNCTIONS = {"box/imported.py:import_box", "io/formats/cgns.py:_read_tree", "io/formats/su2_ffd.py:parse_section",
-                  "testing/gmsh_wings.py:_gmsh_tets", "testing/wings.py:airfoil_ogrid", "volume/warp.py:prepare_warp"}
+LONG_FUNCTIONS = {"volume/warp.py:prepare_warp"}
 
 
 @pytest.mark.parametrize("limit", [600])

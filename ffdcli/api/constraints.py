@@ -13,6 +13,9 @@ from ffdcli.constraints import (
     evaluate,
     satisfied,
 )
+from ffdcli.design.schema import constraints_schema
+from ffdcli.design.validate import validate_section
+from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_write
 
 
@@ -46,7 +49,16 @@ class ConstraintsMixin:
         return self._static["constraints"]
 
     def set_constraints(self, specs, component: int = 0) -> None:
-        """Replace the constraints of one component (default the first) by a ``constraints:`` list."""
+        """Replace the constraints of one component (default the first, by index) by a ``constraints:``
+        list. Checked as a design file's ``constraints:`` is (the schema's words, the key path): an
+        :class:`~ffdcli.errors.InputError` for a bad item or a component that does not exist."""
+        n = len(self.run.components)
+        if isinstance(component, bool) or not isinstance(component, (int, np.integer)) or not 0 <= component < n:
+            raise InputError(f"set_constraints: component {component!r} does not exist; the design has {n} "
+                             f"component{'s' if n > 1 else ''} (index 0{f' to {n - 1}' if n > 1 else ''})")
+        at = ("components", int(component), "constraints") if "components" in (self.run.design.data or {}) \
+            else ("constraints",)
+        validate_section(specs, constraints_schema(), at)
         groups = [g for g in self.constraint_groups if g[0] != component]
         groups.append((component, self._build_constraints(specs, component)))
         self._static["constraints"] = sorted(groups, key=lambda g: g[0])
@@ -57,7 +69,8 @@ class ConstraintsMixin:
         comp = self.run.components[c]
         design_error = getattr(self.run.design, "error", None)
         error = None if design_error is None else (lambda message, key: design_error(message, comp.spec.subkey(key)))
-        return build_constraints(specs, comp.box, comp.prep.surface, list(comp.changes), error=error)
+        return build_constraints(specs, comp.box, comp.prep.surface, list(comp.changes), error=error,
+                                 mesh=self.run.prep.mesh)
 
     @property
     def constraint_names(self) -> list[str]:
@@ -78,22 +91,30 @@ class ConstraintsMixin:
 
         return constraint_bounds(self.constraints)[1]
 
+    def _mesh_points_cached(self) -> np.ndarray:
+        """:meth:`mesh_points` once per design values (what ``mesh_quality`` reads)."""
+        if "mesh" not in self._cache:
+            self._cache["mesh"] = self.mesh_points()
+        return self._cache["mesh"]
+
     def _constraint_inputs(self, c: int = 0):
         """What component ``c``'s constraints read: its lattice, its rows of dP'/dv (every variable's
-        column), its surface points and basis."""
+        column), its surface points and basis, and the whole mesh's motion (``mesh_quality``)."""
 
+        mesh = {"mesh_points": self._mesh_points_cached, "mesh_vjp": self.mesh_vjp}
         if self.run.single:
             emb = self.run.prep.embedding
             rmatvec = emb.rmatvec if self.run.box.dim == 3 else None       # 3D: core = mesh coordinates
             return ConstraintInputs(self.lattice(), self.run.P0, self.values, self.lattice_jacobian,
-                                    self.surface_points, lambda: self.basis, rmatvec)
+                                    self.surface_points, lambda: self.basis, rmatvec, **mesh)
         comp, lay = self.run.components[c], self.run.layout
         o0, o1, rows = lay.ctrl_offsets[c], lay.ctrl_offsets[c + 1], lay.rows[c]
         emb = comp.prep.embedding
         return ConstraintInputs(self.lattices()[c], comp.P0, self.values,
                                 lambda: self.lattice_jacobian()[3 * o0:3 * o1],
                                 lambda: self.surface_points()[rows],
-                                lambda: emb.basis_matrix().tocsr(), emb.rmatvec if comp.box.dim == 3 else None)
+                                lambda: emb.basis_matrix().tocsr(), emb.rmatvec if comp.box.dim == 3 else None,
+                                **mesh)
 
     def _evaluate_constraints(self, jacobian: bool):
 

@@ -34,9 +34,10 @@ from ffdcli.api.volume import VolumeMixin
 from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 from ffdcli.errors import InputError
+from ffdcli.mesh.numbers import as_numbers
 from ffdcli.parallel.comm import SerialComm
-from ffdcli.parameterization.bounds import make_bounds
-from ffdcli.parameterization.changes import design_bounds, design_units
+from ffdcli.parameterization.changes import design_units
+from ffdcli.parameterization.components import variable_bounds
 from ffdcli.parameterization.derivatives import surface_jvp, vjp
 
 
@@ -64,12 +65,7 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         self.comm = comm or getattr(run, "comm", None) or SerialComm()
         self.names, self.values = run.variables()
         self.units = [u for c in run.components for u in design_units(list(c.changes))]
-        natural = np.concatenate([design_bounds(c.P0, c.box.frame, list(c.changes)) for c in run.components]) \
-            if run.components else np.zeros((0, 2))
-        design = run.design
-        spec = (getattr(design, "data", None) or {}).get("bounds")
-        error = getattr(design, "error", None)
-        self.bounds = make_bounds(self.names, natural, spec, values=self.values, error=error)
+        self.bounds = variable_bounds(run.components, run.design)
         self._B = None
         self._cache = {}            # what depends on the values (cleared by set_values)
         self._static = {}           # what does not (constraint geometry on the baseline)
@@ -129,7 +125,7 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
                                  f"{', '.join(self.names)}")
             v = self.values.copy()
             for k, x in values.items():
-                v[self.names.index(k)] = float(x)
+                v[self.names.index(k)] = as_numbers(x, (), f"set_values: {k}")
             values = v
         values = self.comm.run(self.bounds.check, values)     # a refusal on one rank stops every rank
         if self.comm.size > 1:      # one design on every rank, or the partitions disagree silently
@@ -142,11 +138,7 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         self._cache.clear()
 
     def _check_dv(self, dv, what: str) -> np.ndarray:
-        dv = np.asarray(dv, dtype=float)
-        if dv.shape != (self.n_vars,):
-            raise InputError(f"{what}: dv must have shape ({self.n_vars},) (one value per design variable, "
-                             f"in names order), got {dv.shape}")
-        return dv
+        return as_numbers(dv, (self.n_vars,), f"{what}: dv", hint="one value per design variable, in names order")
 
     # -- evaluation --------------------------------------------------------------------------
     @property
@@ -224,15 +216,19 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
     def surface_vjp(self, g) -> np.ndarray:
         """(n_vars,) dJ/dv for g = dJ/dX at the surface points (S, 3)."""
 
-        g = np.asarray(g, dtype=float)
-        if g.shape != (len(self.surface_ids), 3):
-            raise InputError(f"surface_vjp: g must have shape ({len(self.surface_ids)}, 3) (one row per "
-                             f"surface point, surface_ids order), got {g.shape}")
+        g = as_numbers(g, (len(self.surface_ids), 3), "surface_vjp: g",
+                       hint="one row per surface point, surface_ids order")
         # one component: the embedding's compiled B.T @ g (its rows are the surface points)
         B = self.run.components[0].prep.embedding if self.run.single else self.basis
         return vjp(B, g, self.lattice_jacobian())
 
 
-def constraints_report(run) -> list[dict]:
-    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.app.pipeline.DesignRun` (``ffd deform --json``)."""
-    return DesignModel(run).constraints_table()
+def constraints_report(run, mesh_points: np.ndarray | None = None) -> list[dict]:
+    """:meth:`DesignModel.constraints_table` of a :class:`ffdcli.app.run.DesignRun` (``ffd deform --json``).
+
+    ``mesh_points``: (N, 3) the mesh as deformed already (``mesh_quality`` reads it instead of
+    deforming the mesh once more)."""
+    model = DesignModel(run)
+    if mesh_points is not None:
+        model._cache["mesh"] = np.asarray(mesh_points, dtype=float)
+    return model.constraints_table()

@@ -13,7 +13,7 @@ import numpy as np
 from ffdcli.app.deform import deform_design
 from ffdcli.app.deformation import deform, volume_method
 from ffdcli.app.prepare import is_surface_mesh
-from ffdcli.errors import InputError
+from ffdcli.mesh.numbers import as_numbers
 from ffdcli.quality.gate import Remedies
 from ffdcli.volume.surface_motion import frame_jacobian
 from ffdcli.volume.warp import warp, warp_vjp
@@ -81,10 +81,8 @@ class VolumeMixin:
         """dJ/dv for g = dJ/dX at every mesh node (N, 3), through the volume motion when it is IDW.
 
         dJ/dv = (dX_s/dv)^T [g_s + (dX_v/db)^T g_v] + sum_s <(dX_v/dM_s)^T g_v, dR_s/dv>."""
-        g = np.asarray(g, dtype=float)
         mesh = self.run.prep.mesh
-        if g.shape != (mesh.n_points, 3):
-            raise InputError(f"mesh_vjp: g must be ({mesh.n_points}, 3), got {g.shape}")
+        g = as_numbers(g, (mesh.n_points, 3), "mesh_vjp: g", hint="one row per mesh node")
         ids = self.surface_ids
         if not self.uses_volume():
             return self.surface_vjp(g[ids])

@@ -14,7 +14,7 @@ from scipy.spatial import cKDTree
 
 from ffdcli.app.prepare import is_surface_mesh
 from ffdcli.app.run import DesignRun
-from ffdcli.errors import QualityError
+from ffdcli.errors import InputError, QualityError
 from ffdcli.parallel.distributed import local_rows
 from ffdcli.progress import no_progress
 from ffdcli.quality.gate import QualityReport
@@ -110,6 +110,10 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     mesh, ids = run.prep.mesh, run.surface_ids
     P1 = run.lattice_after() if P is None else P
     disp = run.surface_displacement(P1)
+    if not np.any(disp) and any(not np.array_equal(Q, c.P0) for Q, c in zip(run._per_component(P1), run.components,
+                                                                             strict=True)):
+        raise InputError("the design moves the lattice but no surface point (is the surface outside the lattice?); "
+                         "nothing was written", path=run.design.path)    # never a silent success
     t["changes"] = time.perf_counter() - t0
     points = mesh.points.copy()
     method = volume_method(run)

@@ -23,7 +23,7 @@ from ffdcli.io.formats.airfoil import read_airfoil
 from ffdcli.progress import no_progress
 from ffdcli.viz.plot import plot_3d, plot_design
 
-REPO = Path(__file__).resolve().parents[2]    # ffdcli/app/demo.py -> the checkout
+REPO = Path(__file__).resolve().parents[2]     # ffdcli/app/demo.py -> the repository
 #: cases that also get the pyvista 3D view (each costs ~10-20 s off-screen here)
 VIEW_3D = {"rect_twist_linear", "crm_twist_tip"}
 

@@ -62,30 +62,7 @@ def import_box(block: np.ndarray, points: np.ndarray, faces=(), settings: BoxSet
         chord_sign, _ = cutter.chord_sign()
     else:
         chord_sign, _ = leading_edge_sign([pts[:, [axes.chord, axes.thickness]]])
-    dirs = {"chord": np.eye(3)[axes.chord] * chord_sign, "span": np.eye(3)[axes.span] * axes.span_sign,
-            "thickness": np.eye(3)[axes.thickness]}
-    mean_edge = []
-    for a in range(3):
-        if blk.shape[a] < 2:
-            mean_edge.append(np.zeros(3))
-            continue
-        d = np.diff(blk, axis=a).reshape(-1, 3).mean(axis=0)
-        mean_edge.append(d / (np.linalg.norm(d) or 1.0))
-    mean_edge = np.array(mean_edge)
-    order = {}
-    left = [0, 1, 2]
-    for name in ("span", "chord", "thickness"):
-        score = [abs(mean_edge[a] @ dirs[name]) for a in left]
-        a = left[int(np.argmax(score))]
-        order[name] = a
-        left.remove(a)
-    P = blk.transpose(order["chord"], order["span"], order["thickness"], 3)
-    for ax, name in ((0, "chord"), (1, "span"), (2, "thickness")):
-        if P.shape[ax] > 1 and np.diff(P, axis=ax).reshape(-1, 3).mean(axis=0) @ dirs[name] < 0:
-            P = np.flip(P, axis=ax)
-    if dim == 2:
-        P = P[:, :1, :, :].copy()
-        P[..., axes.span] = float(np.mean(pts[:, axes.span]))
+    P = orient_block(blk, axes, chord_sign, dim, pts)
     P = np.ascontiguousarray(P)
     n, m, l, _ = P.shape
     want = (n, m, l) if dim == 3 else (n, l)
@@ -128,6 +105,38 @@ def import_box(block: np.ndarray, points: np.ndarray, faces=(), settings: BoxSet
                             "sweep and dihedral measure the angle from the lattice's own leading edge")
         box = replace(box, le_rows=rows)
     return box, core, {"rebuilds": 0, "warnings": warnings, "outside": n_out}
+
+
+def orient_block(blk: np.ndarray, axes, chord_sign: float, dim: int, pts: np.ndarray) -> np.ndarray:
+    """The block (ni, nj, nk, 3) with its index directions matched to chord, span and thickness (by the
+    alignment of each direction's mean edge with the mesh axes) and flipped so that ``i`` runs from
+    leading to trailing edge, ``j`` from root to tip and ``k`` upward; 2D: one section at the
+    surface's plane. Returns the (n, m, l, 3) control points (a view or a copy)."""
+    dirs = {"chord": np.eye(3)[axes.chord] * chord_sign, "span": np.eye(3)[axes.span] * axes.span_sign,
+            "thickness": np.eye(3)[axes.thickness]}
+    mean_edge = []
+    for a in range(3):
+        if blk.shape[a] < 2:
+            mean_edge.append(np.zeros(3))
+            continue
+        d = np.diff(blk, axis=a).reshape(-1, 3).mean(axis=0)
+        mean_edge.append(d / (np.linalg.norm(d) or 1.0))
+    mean_edge = np.array(mean_edge)
+    order = {}
+    left = [0, 1, 2]
+    for name in ("span", "chord", "thickness"):
+        score = [abs(mean_edge[a] @ dirs[name]) for a in left]
+        a = left[int(np.argmax(score))]
+        order[name] = a
+        left.remove(a)
+    P = blk.transpose(order["chord"], order["span"], order["thickness"], 3)
+    for ax, name in ((0, "chord"), (1, "span"), (2, "thickness")):
+        if P.shape[ax] > 1 and np.diff(P, axis=ax).reshape(-1, 3).mean(axis=0) @ dirs[name] < 0:
+            P = np.flip(P, axis=ax)
+    if dim == 2:
+        P = P[:, :1, :, :].copy()
+        P[..., axes.span] = float(np.mean(pts[:, axes.span]))
+    return P
 
 
 def _surface_le(cutter: Cutter, root: float, tip: float, chord_sign: float, path=None) -> np.ndarray:

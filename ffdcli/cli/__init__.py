@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import functools
-import json
 import os
 import sys
 import traceback
@@ -18,9 +17,9 @@ import traceback
 import click
 
 from ffdcli import __version__
-from ffdcli.cli.console import Console, StdoutError, jsonable
-from ffdcli.errors import FfdError
-from ffdcli.io.atomic import Terminated
+from ffdcli.cli.console import Console, StdoutError
+from ffdcli.errors import FfdError, SignalRecorder, Terminated
+from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
@@ -100,7 +99,14 @@ def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     as_json = "--json" in argv
     verbose = "-v" in argv or "--verbose" in argv
-    quiet = "-q" in argv or "--quiet" in argv
+    # under mpiexec, SIGTERM/SIGHUP are held from before MPI starts (``ffd``'s entry point holds
+    # them from before the imports): every rank stops together
+    with SignalRecorder() as signals:
+        _run(argv, as_json, verbose, signals)
+
+
+def _run(argv, as_json, verbose, signals):
+    """The command, its errors agreed on over the MPI ranks and reported once; exits."""
     from ffdcli.parallel.comm import SerialComm, world
 
     try:
@@ -108,15 +114,18 @@ def main(argv=None):
     except FfdError as e:
         comm = SerialComm()
         _fail(str(e), e.exit_code, as_json)
+    if comm.size > 1:
+        comm.signals = signals
     try:
         try:
+            quiet = "-q" in argv or "--quiet" in argv
             with _compiled_code_guards(argv, comm.is_root and not quiet):
                 cli.main(args=argv, prog_name="ffd", standalone_mode=False, obj={"comm": comm})
             error = None
         except BaseException as e:   # noqa: BLE001 - agreed on below, then reported as before
             error = e
         if comm.size > 1 and not getattr(error, "ffd_agreed", False):
-            comm.agree(error)        # the last agreement: every rank learns how every other ended
+            comm.agree(error, signals=False)   # the last agreement: every rank learns how every other ended
         if error is not None:
             raise error
     except click.exceptions.Exit as e:
@@ -128,7 +137,7 @@ def main(argv=None):
     except (click.Abort, KeyboardInterrupt):
         _fail("interrupted; nothing was written", 130, as_json)
     except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
-        _fail(f"{e}; nothing was written", 128 + e.signum, as_json)
+        _fail(f"{e}; nothing was written", 128 + e.signum, as_json, show=comm.is_root)
     except StdoutError as e:          # stdout full or closed: the outputs are complete; say it on stderr
         _quiet_stdout()
         _fail(str(e), 1, False)
@@ -157,7 +166,7 @@ def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, sho
         if extra:
             obj["report"] = extra
         try:
-            click.echo(json.dumps(obj, default=jsonable))
+            click.echo(to_json(obj))
             sys.stdout.flush()
         except OSError:
             _quiet_stdout()

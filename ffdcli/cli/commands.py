@@ -12,5 +12,6 @@ from ffdcli.cli import fit  # noqa: F401, I001
 from ffdcli.cli import grad  # noqa: F401, I001
 from ffdcli.cli import vars  # noqa: F401, I001
 from ffdcli.cli import constraints  # noqa: F401, I001
+from ffdcli.cli import optimize  # noqa: F401, I001
 from ffdcli.cli import check  # noqa: F401, I001
 from ffdcli.cli import schema  # noqa: F401, I001

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from dataclasses import dataclass
 
 from ffdcli.errors import FfdError
+from ffdcli.io.jsontext import plain, to_json
 from ffdcli.progress import ProgressFactory, terminal_progress
 
 
@@ -46,7 +46,7 @@ class Console:
     def result(self, summary: dict, text: str) -> None:
         """The command's summary: JSON with --json, else ``text``."""
         if self.json and self.comm.is_root:
-            _print(json.dumps(summary, default=jsonable))
+            _print(to_json(summary))
         else:
             self.say(text)
 
@@ -69,15 +69,8 @@ def _print(text: str) -> None:
                           "written by this run is complete", hint="check where stdout goes") from None
 
 
-def jsonable(o):
-    """``json.dumps(default=)`` for the values a summary holds: numpy scalars and arrays, paths."""
-    import numpy as np  # here: ``ffd --help`` and ``ffd schema`` do not load numpy
-
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    return str(o)
+#: ``json.dumps(default=)`` of old callers; new code writes JSON with :func:`ffdcli.io.jsontext.to_json`.
+jsonable = plain
 
 
 def bound_text(x) -> str:

@@ -15,8 +15,11 @@ from ffdcli.cli import cli, common_options
               help="Write {variable: dJ/dv} here (JSON) as well as printing it.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
+@click.option("--tolerance", type=click.FloatRange(min=0.0), metavar="DIST",
+              help="How far (mesh units) the file's coordinates may stand from the mesh nodes "
+                   "(default 1e-6 of the mesh diagonal); farther, the file is refused.")
 @common_options
-def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
+def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console):
     """dJ/d(design variable) for every design variable of DESIGN.yaml, by the chain rule.
 
     \b
@@ -38,7 +41,7 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, console):
 
     design = load_design(design_file, overrides=overrides)
     console.result(*grad_design(design, sens, output=output, cache_dir=cache_dir, progress=console.progress,
-                                comm=console.comm))
+                                comm=console.comm, tol=tolerance))
 
 
 @cli.command("jacobian")

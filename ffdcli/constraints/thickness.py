@@ -165,8 +165,14 @@ class Thickness(Constraint):
 
 
 def _fractions(spec, name, key, error) -> np.ndarray:
+    """The stations of ``name`` (the schema's rule, for callers that skip the schema: the API): span
+    in [0, 1], chord strictly inside (0, 1) (the thickness is zero at the leading edge)."""
     v = np.asarray(spec[name], dtype=float).reshape(-1)
     for q, x in enumerate(v):
+        if name == "chord" and not 0.0 < x < 1.0:
+            raise error(f"must be greater than 0 and less than 1, got {x:g}: chord stations lie strictly between "
+                        "the leading edge (0) and the trailing edge (1), where the thickness is zero",
+                        f"{key}.{name}[{q}]")
         if not 0.0 <= x <= 1.0:
             raise error(f"{x:g} is not a fraction: {name} stations run from 0 to 1", f"{key}.{name}[{q}]")
     return v
@@ -198,9 +204,10 @@ def build_thickness(kind, spec, key, index, lower, upper, box, surface, error, p
     if not ok.all():
         j = int(np.flatnonzero(~ok)[0])
         where = f"chord {grid[j, 0]:g}" + ("" if box.dim == 2 else f", span {grid[j, 1]:g}")
+        edge = "the leading edge" if grid[j, 0] < 0.5 else "the trailing edge"
         raise error(f"the grid point at {where} misses the surface: the line through it along the thickness "
-                    "axis does not cross an upper and a lower surface (is it beyond the tip or the trailing "
-                    "edge?)", key)
+                    f"axis does not cross an upper and a lower surface (is it too close to {edge}"
+                    f"{'' if box.dim == 2 else ' or beyond a rounded tip'}?)", key)
     G = len(Q)
     pairs = PointSet.embed(f"k{index}.{kind}", box, np.vstack([U, L]), progress=progress)
     chords = None

@@ -17,7 +17,7 @@ from collections.abc import Callable
 from ffdcli.settings import ROOT_CHOICES, SECTION_CHOICES, WarpSettings
 
 #: Objects whose known keys ``--set`` may add when the file does not have them.
-ADDABLE = ("output", "volume", "box")
+ADDABLE = ("output", "volume", "box", "optimize")
 
 
 # --------------------------------------------------------------------------------------------------
@@ -96,6 +96,34 @@ def chord_schema() -> dict:
             "anyOf": [positive(), positive_list(), root_tip(positive())]}
 
 
+def _device_schema(kind: str, part: str, down: str) -> dict:
+    fraction = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    return {"description": f"a {part} device that turns about its hinge line (morphing: the surface stays "
+                           f"one piece): {{span: [inner, outer], hinge: h | [h_inner, h_outer], angle: A, "
+                           f"blend: w, transition: c}}; angle in degrees, positive: {down} down; hinge: "
+                           "chord fraction of the local chord at each end (a list of two: design "
+                           "variables); blend: span width over which the rotation fades at each end "
+                           "(default 0.2); transition: chord width behind the hinge where the surface "
+                           "bends (default 0.1); in 2D no span and no blend",
+            "type": "object", "additionalProperties": False, "required": ["hinge", "angle"],
+            "properties": {
+                "span": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1},
+                         "minItems": 2, "maxItems": 2},
+                "hinge": {"anyOf": [fraction, {"type": "array", "items": fraction, "minItems": 1,
+                                               "maxItems": 2}]},
+                "angle": number(),
+                "blend": {"type": "number", "minimum": 0},
+                "transition": {"type": "number", "exclusiveMinimum": 0}}}
+
+
+def flap_schema() -> dict:
+    return _device_schema("flap", "trailing-edge", "trailing edge")
+
+
+def slat_schema() -> dict:
+    return _device_schema("slat", "leading-edge", "leading edge")
+
+
 def shape_schema() -> dict:
     return {"description": "{upper: [one per chordwise point], lower: [...], sections: all | [j, ...]}"
                            " or {random: A, seed: S}",
@@ -120,7 +148,7 @@ def shape_schema() -> dict:
 #: :mod:`ffdcli.parameterization.changes` with the same ``kind``.
 CHANGE_SCHEMAS: dict[str, Callable[[], dict]] = {
     "twist": twist_schema, "span": span_schema, "sweep": sweep_schema, "dihedral": dihedral_schema,
-    "chord": chord_schema, "shape": shape_schema,
+    "chord": chord_schema, "shape": shape_schema, "flap": flap_schema, "slat": slat_schema,
 }
 CHANGE_KINDS = tuple(CHANGE_SCHEMAS)
 
@@ -157,7 +185,24 @@ def box_schema() -> dict:
                      "description": "a Plot3D lattice to use instead of the automatic box"},
             "block": {"type": "integer", "minimum": 0,
                       "description": "which block of a multi-block Plot3D file (0-based)"},
+            "refine": refine_schema(),
         }}
+
+
+def refine_schema() -> dict:
+    pair = {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1}, "minItems": 2,
+            "maxItems": 2}
+    count = {"type": "integer", "minimum": 1, "maximum": 32}
+    return {"description": "more control points where they are needed, by exact knot insertion (the "
+                           "surface does not move): {span: [a, b], sections: N} adds N sections between "
+                           "span fractions a and b; {chord: [a, b], points: N} N chordwise points between "
+                           "chord fractions a and b",
+            "type": "array", "minItems": 1,
+            "items": {"anyOf": [
+                {"type": "object", "properties": {"span": pair, "sections": count},
+                 "required": ["span", "sections"], "additionalProperties": False},
+                {"type": "object", "properties": {"chord": pair, "points": count},
+                 "required": ["chord", "points"], "additionalProperties": False}]}}
 
 
 def volume_schema() -> dict:
@@ -202,7 +247,12 @@ def constraints_schema() -> dict:
             body["required"] = list(required)
         return {"description": desc, "anyOf": [{"type": "null"}, body]}
 
-    grid = {"chord": {**fracs, "description": "chord fractions of the local section, 0 = leading edge"},
+    # chord stations strictly inside: at the leading edge (and a sharp trailing edge) the thickness
+    # is zero and a ratio to it has no meaning; span stations 0 and 1 are read just inside the ends
+    inner = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    grid = {"chord": {"type": "array", "items": inner, "minItems": 1,
+                      "description": "chord fractions of the local section strictly between 0 (leading "
+                                     "edge) and 1 (trailing edge): the thickness is zero at the edges"},
             "span": {**fracs, "description": "span fractions, 0 = root, 1 = tip (3D only)"}}
     kinds = {
         "thickness": obj("thickness between the upper and lower surface along the thickness axis at a "
@@ -217,6 +267,12 @@ def constraints_schema() -> dict:
                          "the baseline (> 0: the box does not fold)",
                          {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
                                       "description": "samples per knot span and direction (default 4)"}}),
+        "mesh_quality": obj("smooth (KS) minimum over the volume cells of the scaled Jacobian after the design "
+                            "over the cell's input value (1: no cell got worse, < 0: a cell inverted); lower "
+                            "defaults to 0.3",
+                            {"gap": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                     "description": "the smooth minimum is at most this below the worst "
+                                                    "cell's ratio (default 0.05)"}}),
     }
     return {"type": "array",
             "description": "geometric constraints for optimisation; named k<index>.<kind>[<j>]",
@@ -233,6 +289,54 @@ def bounds_schema() -> dict:
             "additionalProperties": {"anyOf": [
                 {"type": "array", "items": bound, "minItems": 2, "maxItems": 2},
                 {"type": "object", "properties": {"lower": bound, "upper": bound}, "additionalProperties": False}]}}
+
+
+def optimize_schema() -> dict:
+    """``optimize:``: the optimisation with a flow solver (``ffd optimize``; :mod:`ffdcli.design.optimize`
+    turns it into :class:`~ffdcli.design.optimize.OptimizeSettings`)."""
+    bound = {"type": ["number", "null"]}
+    name = {"type": "string", "minLength": 1, "pattern": "^[A-Za-z_][A-Za-z0-9_]*$"}
+    function = {"type": "object", "additionalProperties": False, "required": ["name"],
+                "properties": {"name": {**name, "description": "a function the solver reports (LIFT, MOMENT_Z)"},
+                               "lower": {**bound, "description": "smallest allowed value (null: none)"},
+                               "upper": {**bound, "description": "largest allowed value (null: none)"},
+                               "scale": {**positive(), "description": "the optimiser sees scale * value "
+                                                                     "(default 1 / max(|bound|, |baseline|))"}}}
+    return {
+        "type": "object", "additionalProperties": False, "required": ["config"],
+        "description": "gradient-based optimisation of the design variables with a flow solver and its adjoint",
+        "properties": {
+            "solver": {"enum": ["su2", "analytic"], "description": "the flow solver (default su2; analytic: "
+                                                                   "ffd's stand-in solver for tests)"},
+            "config": {"type": "string", "minLength": 1,
+                       "description": "the solver's own configuration, relative to this file"},
+            "launch": {"type": "string", "description": "a prefix of the solver's commands (mpirun -n 8)"},
+            "objective": {**name, "description": "the function to minimise (default DRAG)"},
+            "scale": {**positive(), "description": "the optimiser sees scale * objective (default 1 / |baseline|)"},
+            "functions": {"type": "array", "items": function,
+                          "description": "aerodynamic constraints, each with its own adjoint"},
+            "variables": {"type": "array", "items": {"type": "string", "minLength": 1}, "minItems": 1,
+                          "description": "names or name prefixes of the variables to optimise; default all"},
+            "method": {"enum": ["SLSQP", "trust-constr"], "description": "the optimiser (default SLSQP)"},
+            "iterations": {"type": "integer", "minimum": 0, "description": "optimiser iterations at most"},
+            "tolerance": {**positive(), "description": "the optimiser's tolerance (default 1e-6)"},
+            "folder": {"type": "string", "minLength": 1,
+                       "description": "the run's folder, relative to this file (default opt/)"},
+            "adjoint": {"enum": ["discrete", "continuous"],
+                        "description": "discrete (SU2_CFD_AD, the default where found) | continuous (SU2_CFD)"},
+            "max_failures": {"type": "integer", "minimum": 0,
+                             "description": "solver or gate failures allowed before the run stops (exit 1)"},
+            "feasibility": {**positive(), "description": "a constraint counts as met within this (default 1e-4)"},
+            "step": {**positive(), "description": "the first step of the optimiser as a fraction of each "
+                                                  "variable's bound range (default 0.1)"},
+            "warm_start": {"type": "boolean", "description": "start each solve from the nearest finished "
+                                                             "evaluation's solution (default true)"},
+            "screen": {"type": ["number", "null"], "minimum": 0,
+                       "description": "a constraint function farther than this (scaled) from its bounds reuses its "
+                                      "latest adjoint gradient (default 0.3; null: every adjoint at every iterate)"},
+            "line_search": {"type": "integer", "minimum": 1,
+                            "description": "evaluations of one line search before the run ends (default 4)"},
+        }}
 
 
 #: The keys of one component (``components:`` items), besides ``name``; ``constraints`` joins them
@@ -257,7 +361,7 @@ def components_schema() -> dict:
 SECTIONS: dict[str, Callable[[], dict]] = {
     "mesh": mesh_schema, "surface": surface_schema, "box": box_schema, "volume": volume_schema,
     "changes": changes_schema, "constraints": constraints_schema, "bounds": bounds_schema,
-    "output": output_schema, "components": components_schema,
+    "output": output_schema, "components": components_schema, "optimize": optimize_schema,
 }
 #: Top-level keys a design file must have.
 REQUIRED = ("mesh",)

@@ -64,6 +64,10 @@ def _describe(error) -> tuple[tuple, str]:
                        f"got {len(inst)}: {keys}")
     if v == "exclusiveMinimum":
         return parts, f"must be greater than {error.validator_value}, got {_shown(inst)}"
+    if v == "exclusiveMaximum":
+        return parts, f"must be less than {error.validator_value}, got {_shown(inst)}"
+    if v == "maximum":
+        return parts, f"must be at most {error.validator_value}, got {_shown(inst)}"
     if v == "minimum":
         return parts, f"must be at least {error.validator_value}, got {_shown(inst)}"
     if v in ("enum", "const"):
@@ -145,11 +149,11 @@ def _check_part(data: dict, at: tuple, fail) -> None:
         if isinstance(tw, dict):
             forms = [k for k in ("tip", "values", "angle") if k in tw]
             if not forms:
-                fail(("changes", i, "twist"), "missing key 'tip' (or values: [one per section], or in 2D "
+                fail(at + ("changes", i, "twist"), "missing key 'tip' (or values: [one per section], or in 2D "
                                               "angle: A), e.g. {tip: 5, axis: 0.25}")
             if len(forms) > 1 or ("root" in tw and "tip" not in tw):
                 other = forms[1] if len(forms) > 1 else "root"
-                fail(("changes", i, "twist", other), f"{forms[0]} and {other} are two forms of twist; "
+                fail(at + ("changes", i, "twist", other), f"{forms[0]} and {other} are two forms of twist; "
                                                      "give one: {root, tip}, {values} or (2D) {angle}")
         spec = item.get("shape")
         here = at + ("changes", i, "shape")
@@ -165,3 +169,15 @@ def _check_part(data: dict, at: tuple, fail) -> None:
             if clash:
                 fail(here + (clash[0],), "rows gives every thickness row; write upper/lower "
                                          "or random as another change")
+
+
+def validate_section(value, schema: dict, at: tuple) -> None:
+    """Raise :class:`InputError` for the first problem of ``value``, a section of a design file given
+    outside a file (the API's ``set_constraints``), against its ``schema``: the same words and key
+    path (``at`` + the path inside) as a design file's check, without a file or line."""
+    for parts, v in _walk_nonfinite(value, tuple(at)):
+        raise InputError(f"must be a finite number, got {_shown(v)}", key=key_path(parts) or None)
+    problems = [_describe(e) for e in jsonschema.Draft202012Validator(schema).iter_errors(value)]
+    if problems:
+        parts, message = max(problems, key=lambda p: len(p[0]))
+        raise InputError(message, key=key_path(tuple(at) + tuple(parts)) or None)

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ffdcli.errors import InputError
 from ffdcli.lattice.embedding import embed
+from ffdcli.mesh.numbers import as_numbers
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,11 +44,7 @@ class PointSet:
         Raises :class:`InputError` if ``X`` is not (k, 3) finite numbers; points outside the lattice
         are kept (``inside`` False) and never move."""
 
-        X = np.asarray(X, dtype=float)
-        if X.ndim != 2 or X.shape[1] != 3:
-            raise InputError(f"point set {name!r}: expected points of shape (k, 3), got {X.shape}")
-        if not np.all(np.isfinite(X)):
-            raise InputError(f"point set {name!r}: the points contain NaN or infinite coordinates")
+        X = as_numbers(X, (None, 3), f"point set {name!r}: points")      # finite (k, 3)
         emb = embed(box.lattice(), box.core_points(X), progress=progress)
         B = emb.basis_matrix().tocsr()
         if len(X) and (~emb.inside).any():
@@ -80,22 +76,17 @@ class PointSet:
     def jacobian(self, D: np.ndarray) -> np.ndarray:
         """(k, 3, n_vars) dX/dv for the lattice Jacobian ``D`` (n_ctrl*3, n_vars)."""
         nv = D.shape[1]
-        by_point = D.reshape(-1, 3 * nv)
+        by_point = D.reshape(D.shape[0] // 3, 3 * nv)     # not -1: zero variables are a design too
         return np.asarray(self.basis @ by_point).reshape(self.n_points, 3, nv)
 
     def jvp(self, D: np.ndarray, dv) -> np.ndarray:
         """(k, 3) motion of the points for a change ``dv`` (n_vars,) of the design variables."""
-        dv = np.asarray(dv, dtype=float).reshape(-1)
-        if dv.shape != (D.shape[1],):
-            raise InputError(f"point set {self.name!r}: dv must have {D.shape[1]} values (one per design "
-                             f"variable), got {dv.size}")
+        dv = as_numbers(dv, (D.shape[1],), f"point set {self.name!r}: dv", hint="one value per design variable")
         return np.asarray(self.basis @ (D @ dv).reshape(-1, 3))
 
     def vjp(self, D: np.ndarray, g) -> np.ndarray:
         """(n_vars,) sum over points of ``g . dX/dv`` for ``g`` (k, 3)."""
-        g = np.asarray(g, dtype=float)
-        if g.shape != (self.n_points, 3):
-            raise InputError(f"point set {self.name!r}: g must have shape ({self.n_points}, 3), got {g.shape}")
+        g = as_numbers(g, (self.n_points, 3), f"point set {self.name!r}: g")
         # B.T @ g by the embedding's compiled kernel (a few times SciPy's CSR product; same sums to
         # rounding): ``basis`` is the embedding's basis matrix, outside rows zero, which rmatvec skips
         return self.embedding.rmatvec(g).reshape(-1) @ D

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.mesh.numbers import as_numbers
 
 
 @dataclass(frozen=True, eq=False)
@@ -48,7 +49,7 @@ class Bounds:
     def check(self, values) -> np.ndarray:
         """``values`` (n,) as float64 if finite and within bounds; else :class:`InputError` naming the
         first variable that is not (and the interval it must lie in)."""
-        v = np.asarray(values, dtype=float).reshape(-1)
+        v = as_numbers(values, None, "design values", finite=False).reshape(-1)
         if v.shape != (len(self.names),):
             raise InputError(f"expected {len(self.names)} design-variable values (one per name of "
                              f"DesignModel.names), got {v.size}")

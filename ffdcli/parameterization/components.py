@@ -7,7 +7,7 @@ prepared box (axes and root detected on its own surface), its changes. The run
 and their lattices for the derivatives: the basis matrix of the run is block diagonal (each surface
 point belongs to one component), so ``dX/dv = B @ dP'/dv`` holds for the whole design unchanged.
 
-Rules where SPEC is silent (README, docs/design-file.md):
+Rules where SPEC is silent (docs/design-choices.md, docs/design-file.md):
 
 - **Axes of a component.** The chord axis of every lifting surface is the flow direction, so when a
   component after the first has no ``box.sections``, its chord axis is the first component's and its
@@ -38,7 +38,8 @@ from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.spline import basis_derivs
 from ffdcli.mesh.idsets import unique_ids
 from ffdcli.parallel.distributed import global_ids
-from ffdcli.parameterization.changes import Chord, Shape, Twist
+from ffdcli.parameterization.bounds import Bounds, make_bounds
+from ffdcli.parameterization.changes import Chord, Shape, Twist, apply_changes
 from ffdcli.parameterization.changes import design_variables as change_variables
 from ffdcli.parameterization.changes import set_design_variables as set_change_values
 from ffdcli.parameterization.derivatives import lattice_jacobian
@@ -86,6 +87,7 @@ class Junction:
     marker: str
     nodes: np.ndarray          # mesh ids of the surface nodes shared with the body
     frozen: int
+    at_tip: bool = False       # the body meets the lattice's far end (span parameter past the middle): root reversed
 
     def summary(self) -> dict:
         return {"marker": self.marker, "nodes": int(len(self.nodes)), "frozen_sections": int(self.frozen)}
@@ -136,7 +138,7 @@ class Component:
         f = self.frozen
         if f:
             n, m, l, _ = self.P0.shape
-            Jr = J.reshape(n, m, l, 3, -1)
+            Jr = J.reshape(n, m, l, 3, J.shape[1])
             Jr[:, :f] = 0.0
         return J
 
@@ -247,7 +249,9 @@ def find_junction(mesh, prep, own_markers, other_component_markers=()) -> Juncti
     v = emb.params[rows[emb.inside[rows]], 1]
     if not len(v):
         return Junction(name, shared, 0)
-    return Junction(name, shared, frozen_sections(box.knots[1], box.degree[1], v, box.shape[1]))
+    knots = box.knots[1]
+    at_tip = bool(np.median(v) > 0.5 * (knots[0] + knots[-1]))
+    return Junction(name, shared, frozen_sections(knots, box.degree[1], v, box.shape[1]), at_tip)
 
 
 def frozen_sections(knots, degree: int, v: np.ndarray, m: int) -> int:
@@ -290,6 +294,29 @@ def check_body_changes(spec: ComponentSpec, changes, junction: Junction, error) 
                 raise error(f"moves section {bad[0]} of a wing on a body: {where}", key + ".sections")
         out.append(change)
     return out
+
+
+def check_frozen_motion(comp: Component, error) -> None:
+    """The rule that a change which moves the lattice moves the wing: a change whose motion lies only on
+    the frozen sections of a wing on a body (all of them when the junction reaches every section, or
+    when the root is at the wrong end) would be a design that silently moves nothing.
+    ``error(message, key) -> Exception``; the key is the change's, or ``box.root`` for a reversed root."""
+    j = comp.junction
+    if j is None or not j.frozen:
+        return
+    m = comp.P0.shape[1]
+    for index, (change, item) in enumerate(zip(comp.changes, comp.spec.changes_spec, strict=True)):
+        P = apply_changes(comp.P0, comp.box.frame, [change])
+        if np.array_equal(P, comp.P0) or not np.array_equal(comp.freeze(P), comp.P0):
+            continue
+        kind = next(iter(item))
+        what = (f"moves only sections of the lattice that stay fixed: the root meets {j.marker!r}, and the "
+                f"junction holds sections 0..{j.frozen - 1} of {m}")
+        if j.at_tip:
+            raise error(f"changes[{index}].{kind} {what}; the body is at the far end of the box's span, so the "
+                        "root is on the wrong side: give box.root the other end (or leave it out)", "box.root")
+        raise error(f"{what}, so nothing is free to move; give the lattice more spanwise sections (box.points[1] "
+                    f"> {m}) or move sections beyond the junction", f"changes[{index}].{kind}")
 
 
 def rebase_law(law, first: int):
@@ -373,6 +400,28 @@ def design_variables(components: list[Component]) -> tuple[list[str], np.ndarray
         names += [comp.spec.prefix + x for x in n]
         values.append(v)
     return names, (np.concatenate(values) if values else np.zeros(0))
+
+
+def variable_bounds(components: list[Component], design) -> Bounds:
+    """The :class:`~ffdcli.parameterization.bounds.Bounds` of every variable: natural ones from the changes,
+    the design file's ``bounds:`` checked against the names and values (an unknown name, lower above
+    upper, a value outside its bounds: :class:`InputError` naming ``bounds.<key>`` and its line). The one
+    validation of ``bounds:``: ``load_run`` calls it for every command, ``DesignModel`` keeps its result."""
+    names, values = design_variables(components)
+    natural = [np.zeros((0, 2))]
+    for comp in components:          # design_bounds, each change's refusal named by its key and line
+        P = np.array(comp.P0, dtype=float, copy=True)
+        for index, (change, item) in enumerate(zip(comp.changes, comp.spec.changes_spec, strict=True)):
+            try:
+                natural.append(change.bounds(P, comp.box.frame))
+                P = change.apply(P, comp.box.frame)
+            except InputError as e:
+                if e.path is not None or not hasattr(design, "error"):
+                    raise
+                raise design.error(e.message, comp.spec.subkey(f"changes[{index}].{next(iter(item))}")) from None
+    natural = np.concatenate(natural, axis=0)
+    spec = (getattr(design, "data", None) or {}).get("bounds")
+    return make_bounds(names, natural, spec, values=values, error=getattr(design, "error", None))
 
 
 def set_design_variables(components: list[Component], values) -> list[Component]:

@@ -35,7 +35,7 @@ def lattice_jacobian(P0: np.ndarray, frame: LatticeFrame, changes: Sequence[Chan
             J = change.jvp_P(P, frame, J)
         J = np.concatenate([J, own], axis=0)
         P = change.apply(P, frame)
-    return J.reshape(J.shape[0], -1).T.copy()
+    return J.reshape(J.shape[0], P.size).T.copy()     # P.size: zero variables give (n_ctrl*3, 0)
 
 
 def surface_jacobian(B: sp.spmatrix | np.ndarray, lattice_jac: np.ndarray) -> np.ndarray:

@@ -1,34 +1,41 @@
-"""Volume meshes of wings with variety, for the tests and the robustness benchmark (needs gmsh).
+"""The one gmsh generator of tetrahedral wing meshes: the bundled samples, the tests, the robustness benchmark.
 
-Every mesh is a half wing whose root lies in a symmetry plane and whose TIP IS INSIDE THE DOMAIN
-(the far-field box extends beyond it), as in a real external-aerodynamics mesh:
+Two levels:
 
-- the wing is lofted (OpenCASCADE, straight between consecutive sections) through NACA sections of
-  a :class:`ffdcli.testing.wings.Planform` — any span axis (x, y or z), left or right (``span_sign``),
-  sweep, dihedral, taper, twist, a trailing-edge kink, sharp or blunt trailing edge;
-- the tip is ``flat`` (a blunt cap: the tip section closed by a plane) or ``round`` (the thickness
-  shrinks as ``cos(phi)`` over half a tip thickness beyond the tip, a faceted half-round cap);
-- the far field is a box at ``farfield`` root chords from the wing on every side but the root plane;
-- the fluid is meshed with gmsh tetrahedra, fine on the wing and finer at its edges;
-- ``layers`` > 0 adds thin boundary-layer PRISMS on the wing: the tetrahedral mesh's wing nodes
-  are pushed off the wall along the vertex normals by the layer height (in the symmetry plane the
-  normal is projected into the plane), and ``layers`` wedges per wall triangle fill the gap
-  between the wall (the original wing nodes) and the pushed nodes. The symmetry marker gets the
-  quads the layers cut in the plane. First layer ``first_layer`` root chords, growth ``growth``;
-  the height is limited locally to 0.3 of the shortest tetrahedron edge at the node, so no cell
-  inverts.
+- :func:`fluid_tets` meshes the fluid between one or more solids and a box with gmsh tetrahedra
+  (OpenCASCADE kernel, one thread). The solids are lofts through wing sections (:func:`loft`,
+  straight between consecutive sections, sharp or blunt trailing edge, flat end caps) or any
+  OpenCASCADE solid (a fuselage); several solids may be fused first (a wing through a fuselage).
+  Markers: the box face at ``symmetry_at`` on the ``symmetry_axis`` is ``symmetry``, the other box
+  faces ``farfield``, every other face belongs to the solid whose bounding box holds it (marker named
+  after the solid). Sizes: ``h_solid`` on the solids, ``h_edge`` near their edges (leading and
+  trailing edges, tips, junctions), growing to ``h_far`` at the box. ``samples/make_samples.py``
+  makes the bundled meshes with it.
+- :class:`WingCase` and :func:`wing_volume_mesh`: a half wing of a :class:`~ffdcli.testing.planform.Planform`
+  whose root lies in the symmetry plane and whose TIP IS INSIDE THE DOMAIN (the far-field box extends
+  beyond it), as in a real external-aerodynamics mesh: any span axis (x, y or z), left or right
+  (``span_sign``), sweep, dihedral, taper, twist, a trailing-edge kink, sharp or blunt trailing edge;
+  the tip ``flat`` (the tip section closed by a plane) or ``round`` (the thickness shrinks as
+  ``cos(phi)`` over half a tip thickness beyond the tip, a faceted half-round cap); the far field at
+  ``farfield`` root chords from the wing on every side but the root plane; ``layers`` > 0 adds thin
+  boundary-layer prisms on the wing (:func:`ffdcli.testing.prisms.add_prism_layers`). Markers
+  ``wing``, ``symmetry``, ``farfield``. :data:`CASES` names a set with variety (the robustness
+  benchmark, ``benchmarks/bench_robustness.py``, deforms every one); :func:`write_case` writes one
+  as SU2, cached by the hash of its parameters.
 
-Markers: ``wing``, ``symmetry``, ``farfield``. The cells are in VTK order with positive volume
-(checked with :func:`ffdcli.quality.metrics.cell_quality`: a generated mesh with a cell of quality <= 0 is an
-error). :data:`CASES` names a set with variety; :func:`write_case` writes one as SU2, cached by the
-hash of its parameters.
+The cells are in VTK order with positive volume and the boundary triangles face out of the fluid. A
+generated mesh with a cell of quality <= 0 (:func:`ffdcli.quality.metrics.cell_quality`) is an error.
+gmsh (the ``[test]`` or ``[samples]`` extra) is imported only inside :func:`fluid_tets`, so this module
+and its cases import without it.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -37,11 +44,255 @@ from ffdcli.io.formats import write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
 from ffdcli.quality.metrics import cell_quality
-from ffdcli.testing.wings import Planform, crm_planform
+from ffdcli.testing.cells import tet_volumes
+from ffdcli.testing.planform import Planform, crm_planform
+from ffdcli.testing.prisms import add_prism_layers
 
 #: Bump when the generator changes what it writes (part of the cache key).
 GENERATOR_VERSION = 2
 
+#: A solid of :func:`fluid_tets`: ``build(occ) -> volume tag`` with ``occ`` = ``gmsh.model.occ``.
+SolidBuilder = Callable[[object], int]
+
+
+# ----------------------------------------------------------------------------------------------
+# The generator (gmsh)
+# ----------------------------------------------------------------------------------------------
+
+def planform_sections(planform: Planform, etas, n_chord: int) -> list[np.ndarray]:
+    """Mesh coordinates (2 n_chord - 1, 3) of the planform's sections at stations ``etas``, root -> tip."""
+    etas = np.asarray(etas, dtype=float)
+    coords = planform.airfoil_coords(etas, 2 * n_chord - 1)
+    return [planform.section_points(np.array([e]), coords[j])[0] for j, e in enumerate(etas)]
+
+
+def loft(occ, sections: list[np.ndarray]) -> int:
+    """An OpenCASCADE solid lofted straight through ``sections`` (flat end caps); its volume tag.
+
+    Each section is (2 n_chord - 1, 3) points in Selig order (trailing edge, upper side, leading edge
+    at point n_chord - 1, lower side); a sharp trailing edge repeats its first point last, a blunt
+    one is closed by a straight line. Each side is one cubic spline.
+    """
+    wires = []
+    for xyz in sections:
+        le = (len(xyz) - 1) // 2
+        scale = float(np.max(np.ptp(xyz, axis=0)))
+        closed = np.allclose(xyz[0], xyz[-1], rtol=0.0, atol=1e-12 * scale)
+        tags = [occ.addPoint(*p) for p in (xyz[:-1] if closed else xyz)]
+        if closed:
+            tags.append(tags[0])
+        curves = [occ.addSpline(tags[: le + 1]), occ.addSpline(tags[le:])]
+        if not closed:
+            curves.append(occ.addLine(tags[-1], tags[0]))
+        wires.append(occ.addWire(curves))
+    out = occ.addThruSections(wires, makeSolid=True, makeRuled=True)
+    if len(out) != 1:
+        raise RuntimeError(f"the loft made {len(out)} entities, expected one solid")
+    return out[0][1]
+
+
+def fluid_tets(solids: dict[str, SolidBuilder], lo, hi, *, symmetry_axis: int, symmetry_at: float = 0.0,
+               h_solid: float, h_edge: float, h_far: float, grow: float | None = None, fuse: bool = False,
+               name: str = "fluid") -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """Tetrahedral mesh of the fluid between ``solids`` and the box ``lo``..``hi`` (module docstring).
+
+    Parameters
+    ----------
+    solids
+        Marker name -> builder of the solid (:data:`SolidBuilder`, e.g. ``partial(loft, sections=...)``).
+    lo, hi
+        (3,) corners of the far-field box.
+    symmetry_axis, symmetry_at
+        The box face at coordinate ``symmetry_at`` along this axis is the marker ``symmetry``; its
+        nodes are put exactly in the plane.
+    h_solid, h_edge, h_far
+        Element sizes on the solids, near their edges, at the far field (mesh units).
+    grow
+        Distance from the solids over which the size grows from ``h_solid`` to ``h_far``
+        (default 0.6 of the box's smallest extent).
+    fuse
+        The solids intersect (a wing through a fuselage) and are fused first, sharing the junction.
+
+    Returns
+    -------
+    points : (N, 3) float64
+        Only the nodes the tetrahedra use, numbered compactly.
+    tets : (T, 4) int64
+        VTK order, positive volume.
+    markers : dict
+        Name -> triangles (F, 3) int64 with their normals out of the fluid: the solids in the order
+        given, then ``symmetry`` and ``farfield``.
+    """
+    import gmsh  # noqa: PLC0415 (the [test] or [samples] extra)
+
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    gmsh.initialize(["-nt", "1"], readConfigFiles=False)
+    try:
+        gmsh.option.setNumber("General.Terminal", 0)
+        gmsh.option.setNumber("General.NumThreads", 1)
+        gmsh.model.add(name)
+        vols, boxes = _fluid(gmsh, solids, lo, hi, fuse)
+        groups = _classify(gmsh, vols, boxes, list(solids), lo, hi, symmetry_axis, symmetry_at)
+        faces = [t for n in solids for t in groups[n]]
+        _size_fields(gmsh, faces, h_solid, h_edge, h_far, 0.6 * float(np.min(hi - lo)) if grow is None else grow)
+        gmsh.model.mesh.generate(3)
+        node_tags, xyz = gmsh.model.mesh.getNodes()[:2]
+        etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
+        if list(etypes) != [4]:
+            raise RuntimeError(f"{name}: gmsh made elements {list(etypes)}, expected linear tetrahedra")
+        marker_tags = {g: _triangles(gmsh, tags, g) for g, tags in groups.items()}
+    finally:
+        gmsh.finalize()
+    points, tets, markers = _compact(node_tags, xyz.reshape(-1, 3), enodes[0].reshape(-1, 4), marker_tags)
+    points[unique_ids(markers["symmetry"]), symmetry_axis] = symmetry_at    # gmsh returns them to rounding
+    return points, tets, orient_out_of_fluid(points, tets, markers)
+
+
+def _fluid(gmsh, solids: dict[str, SolidBuilder], lo, hi, fuse: bool):
+    """Build the solids, cut them (fused if asked) from the box: the fluid's volume and the solids'
+    bounding boxes (2, 3) (measured only when there are several solids to tell apart)."""
+    occ = gmsh.model.occ
+    tags = {n: build(occ) for n, build in solids.items()}
+    boxes = {}
+    if len(tags) > 1:
+        occ.synchronize()
+        boxes = {n: np.array(gmsh.model.getBoundingBox(3, t)).reshape(2, 3) for n, t in tags.items()}
+    tools = [(3, t) for t in tags.values()]
+    if fuse:
+        tools, _ = occ.fuse(tools[:1], tools[1:])
+    box = occ.addBox(*lo, *(hi - lo))
+    occ.cut([(3, box)], tools)
+    occ.synchronize()
+    vols = gmsh.model.getEntities(3)
+    if len(vols) != 1:
+        raise RuntimeError(f"the fluid is {len(vols)} volumes, expected one")
+    return vols, boxes
+
+
+def _classify(gmsh, vols, boxes, names: list[str], lo, hi, axis: int, at: float) -> dict[str, list[int]]:
+    """The fluid's boundary surfaces by marker: symmetry plane, other box faces, else the solid whose
+    bounding box holds the face (the smallest such box)."""
+    groups = {n: [] for n in names}
+    groups.update(symmetry=[], farfield=[])
+    tol = 1e-6 * float(np.max(hi - lo))
+    for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
+        bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
+        flat = np.abs(bb[0] - bb[1]) < tol
+        on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
+        on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
+        if on_box and on_box[0] == axis and abs(bb[0, axis] - at) < tol:
+            groups["symmetry"].append(tag)
+        elif on_box:
+            groups["farfield"].append(tag)
+        elif len(names) == 1:
+            groups[names[0]].append(tag)
+        else:
+            holders = [n for n, b in boxes.items() if np.all(bb[0] >= b[0] - 1e-3) and np.all(bb[1] <= b[1] + 1e-3)]
+            if not holders:
+                raise RuntimeError(f"face {tag} {bb.tolist()} is in no solid's bounding box")
+            groups[min(holders, key=lambda n: float(np.prod(np.ptp(boxes[n], axis=0))))].append(tag)
+    for n, tags in groups.items():
+        if not tags:
+            raise RuntimeError(f"no surface classified as {n}")
+    return groups
+
+
+def _size_fields(gmsh, faces: list[int], h_solid: float, h_edge: float, h_far: float, grow: float) -> None:
+    """Background size: ``h_solid`` on ``faces`` growing to ``h_far`` over ``grow``, ``h_edge`` near
+    their curves growing over 20 ``h_solid``; sizes from the boundary, points and curvature off."""
+    curves = sorted({abs(c[1]) for s in faces for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
+    f = gmsh.model.mesh.field
+    d_s = f.add("Distance")
+    f.setNumbers(d_s, "SurfacesList", faces)
+    f.setNumber(d_s, "Sampling", 60)
+    t_s = f.add("Threshold")
+    f.setNumber(t_s, "InField", d_s)
+    f.setNumber(t_s, "SizeMin", h_solid)
+    f.setNumber(t_s, "SizeMax", h_far)
+    f.setNumber(t_s, "DistMin", 0.5 * h_solid)
+    f.setNumber(t_s, "DistMax", grow)
+    d_c = f.add("Distance")
+    f.setNumbers(d_c, "CurvesList", curves)
+    f.setNumber(d_c, "Sampling", 200)
+    t_c = f.add("Threshold")
+    f.setNumber(t_c, "InField", d_c)
+    f.setNumber(t_c, "SizeMin", h_edge)
+    f.setNumber(t_c, "SizeMax", h_far)
+    f.setNumber(t_c, "DistMin", 0.5 * h_edge)
+    f.setNumber(t_c, "DistMax", 20 * h_solid)
+    m = f.add("Min")
+    f.setNumbers(m, "FieldsList", [t_s, t_c])
+    f.setAsBackgroundMesh(m)
+    gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
+    gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
+    gmsh.option.setNumber("Mesh.Algorithm", 6)
+    gmsh.option.setNumber("Mesh.Algorithm3D", 1)
+    gmsh.option.setNumber("Mesh.Optimize", 1)
+
+
+def _triangles(gmsh, surfaces: list[int], name: str) -> np.ndarray:
+    """gmsh node tags (F, 3) of the triangles of ``surfaces``."""
+    tris = []
+    for s in surfaces:
+        et, _, en = gmsh.model.mesh.getElements(2, s)
+        if list(et) != [2]:
+            raise RuntimeError(f"marker {name}: gmsh made surface elements {list(et)}, expected triangles")
+        tris.append(en[0].reshape(-1, 3).astype(np.int64))
+    return np.concatenate(tris)
+
+
+def _compact(node_tags, xyz, tets_tags, marker_tags):
+    """Points, tets (positive volume) and markers in a compact 0-based numbering of the nodes the
+    tetrahedra use (gmsh tags are 1-based and may have gaps)."""
+    tets_tags = tets_tags.astype(np.int64)
+    used = unique_ids(tets_tags)
+    lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
+    lookup[used] = np.arange(len(used))
+    pos = np.full(len(lookup), -1, dtype=np.int64)
+    pos[node_tags.astype(np.int64)] = np.arange(len(node_tags))
+    points = xyz[pos[used]]
+    tets = lookup[tets_tags]
+    vol = tet_volumes(points, tets)
+    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]              # VTK/SU2 orientation: all positive
+    markers = {name: lookup[t] for name, t in marker_tags.items()}
+    for name, t in markers.items():
+        if np.any(t < 0):
+            raise RuntimeError(f"marker {name} references a node that no tetrahedron uses")
+    return points, tets, markers
+
+
+def orient_out_of_fluid(points: np.ndarray, tets: np.ndarray, markers: dict[str, np.ndarray]
+                        ) -> dict[str, np.ndarray]:
+    """Each boundary triangle (F, 3) reordered where needed so that its normal points out of the
+    fluid (away from the one tetrahedron it is a face of)."""
+    n = len(points)
+    faces = np.sort(np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]],
+                                    tets[:, [1, 2, 3]]]), axis=1)
+    opposite = np.concatenate([tets[:, 3], tets[:, 2], tets[:, 1], tets[:, 0]])
+    key = (faces[:, 0] * n + faces[:, 1]) * n + faces[:, 2]
+    order = np.argsort(key)
+    key_sorted = key[order]
+    out = {}
+    for name, tris in markers.items():
+        s = np.sort(tris, axis=1)
+        k = (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
+        i = np.searchsorted(key_sorted, k)
+        if np.any(i >= len(key_sorted)) or np.any(key_sorted[np.minimum(i, len(key_sorted) - 1)] != k):
+            raise RuntimeError(f"marker {name} has a triangle that is not a tetrahedron face")
+        opp = points[opposite[order[i]]]
+        p = points[tris]
+        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        inward = np.einsum("ij,ij->i", nrm, opp - p[:, 0]) > 0
+        t = tris.copy()
+        t[inward] = t[inward][:, [0, 2, 1]]
+        out[name] = t
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# Half wings with the tip inside the domain (the tests and the robustness benchmark)
+# ----------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
 class WingCase:
@@ -128,17 +379,12 @@ def _cases() -> dict[str, WingCase]:
 CASES: dict[str, WingCase] = _cases()
 
 
-# ----------------------------------------------------------------------------------------------
-# Geometry and tetrahedra (gmsh)
-# ----------------------------------------------------------------------------------------------
-
 def _sections(case: WingCase) -> list[np.ndarray]:
     """Mesh coordinates of the lofted sections root -> tip (each (n, 3), closed or open TE)."""
     pf = case.planform
     etas = [0.0, 1.0] if pf.kink_eta is None else [0.0, pf.kink_eta, 1.0]
-    n = 2 * case.n_chord - 1
-    coords = pf.airfoil_coords(np.array(etas), n)
-    out = [pf.section_points(np.array([e]), coords[j])[0] for j, e in enumerate(etas)]
+    out = planform_sections(pf, etas, case.n_chord)
+    coords = pf.airfoil_coords(np.array(etas), 2 * case.n_chord - 1)
     if case.tip == "round":
         tip_coords = coords[-1]
         tip_chord = float(pf.chord(1.0))
@@ -154,6 +400,7 @@ def _sections(case: WingCase) -> list[np.ndarray]:
 
 
 def _domain(case: WingCase, sections: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """The far-field box: ``farfield`` root chords round the wing, cut at the root plane."""
     pts = np.concatenate(sections)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     d = case.farfield * case.planform.root_chord
@@ -167,279 +414,19 @@ def _domain(case: WingCase, sections: list[np.ndarray]) -> tuple[np.ndarray, np.
     return lo, hi
 
 
-def _gmsh_tets(case: WingCase):
-    """gmsh: loft the wing, cut it from the box, mesh with tetrahedra. Returns points, tets, markers."""
-    import gmsh  # noqa: PLC0415 (the [test] extra)
-
-    sections = _sections(case)
-    lo, hi = _domain(case, sections)
-    c = case.planform.root_chord
-    gmsh.initialize(["-nt", "1"], readConfigFiles=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.option.setNumber("General.NumThreads", 1)
-        gmsh.model.add(case.name)
-        occ = gmsh.model.occ
-        le = case.n_chord - 1
-        wires = []
-        for xyz in sections:
-            closed = np.allclose(xyz[0], xyz[-1], atol=1e-12 * c)
-            tags = [occ.addPoint(*p) for p in (xyz[:-1] if closed else xyz)]
-            if closed:
-                tags.append(tags[0])
-            curves = [occ.addSpline(tags[: le + 1]), occ.addSpline(tags[le:])]
-            if not closed:
-                curves.append(occ.addLine(tags[-1], tags[0]))
-            wires.append(occ.addWire(curves))
-        wing = occ.addThruSections(wires, makeSolid=True, makeRuled=True)
-        box = occ.addBox(*lo, *(hi - lo))
-        occ.cut([(3, box)], wing)
-        occ.synchronize()
-        vols = gmsh.model.getEntities(3)
-        if len(vols) != 1:
-            raise RuntimeError(f"{case.name}: the fluid is {len(vols)} volumes")
-        s = case.planform.axes[2]
-        root = case.planform.root_offset[s]
-        groups = {"wing": [], "symmetry": [], "farfield": []}
-        tol = 1e-6 * float(np.max(hi - lo))
-        for dim, tag in gmsh.model.getBoundary(vols, oriented=False):
-            bb = np.array(gmsh.model.getBoundingBox(dim, tag)).reshape(2, 3)
-            flat = np.abs(bb[0] - bb[1]) < tol
-            on_face = (np.abs(bb[0] - lo) < tol) | (np.abs(bb[0] - hi) < tol)
-            on_box = [ax for ax in range(3) if flat[ax] and on_face[ax]]
-            if on_box and on_box[0] == s and abs(bb[0, s] - root) < tol:
-                groups["symmetry"].append(tag)
-            elif on_box:
-                groups["farfield"].append(tag)
-            else:
-                groups["wing"].append(tag)
-        for name, tags in groups.items():
-            if not tags:
-                raise RuntimeError(f"{case.name}: no surface classified as {name}")
-        wing_curves = sorted({abs(cv[1]) for sf in groups["wing"]
-                              for cv in gmsh.model.getBoundary([(2, sf)], oriented=False)})
-        f = gmsh.model.mesh.field
-        h_wing, h_edge, h_far = case.h_wing * c, case.h_edge * c, case.h_far * c
-        d_s = f.add("Distance")
-        f.setNumbers(d_s, "SurfacesList", groups["wing"])
-        f.setNumber(d_s, "Sampling", 60)
-        t_s = f.add("Threshold")
-        f.setNumber(t_s, "InField", d_s)
-        f.setNumber(t_s, "SizeMin", h_wing)
-        f.setNumber(t_s, "SizeMax", h_far)
-        f.setNumber(t_s, "DistMin", 0.5 * h_wing)
-        f.setNumber(t_s, "DistMax", 4 * h_far)                # size grows by h_far / 4 per length unit
-        d_c = f.add("Distance")
-        f.setNumbers(d_c, "CurvesList", wing_curves)
-        f.setNumber(d_c, "Sampling", 200)
-        t_c = f.add("Threshold")
-        f.setNumber(t_c, "InField", d_c)
-        f.setNumber(t_c, "SizeMin", h_edge)
-        f.setNumber(t_c, "SizeMax", h_far)
-        f.setNumber(t_c, "DistMin", 0.5 * h_edge)
-        f.setNumber(t_c, "DistMax", 20 * h_wing)
-        m = f.add("Min")
-        f.setNumbers(m, "FieldsList", [t_s, t_c])
-        f.setAsBackgroundMesh(m)
-        gmsh.option.setNumber("Mesh.MeshSizeExtendFromBoundary", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromPoints", 0)
-        gmsh.option.setNumber("Mesh.MeshSizeFromCurvature", 0)
-        gmsh.option.setNumber("Mesh.Algorithm", 6)
-        gmsh.option.setNumber("Mesh.Algorithm3D", 1)
-        gmsh.option.setNumber("Mesh.Optimize", 1)
-        gmsh.model.mesh.generate(3)
-
-        node_tags, xyz, _ = gmsh.model.mesh.getNodes()
-        xyz = xyz.reshape(-1, 3)
-        etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
-        if list(etypes) != [4]:
-            raise RuntimeError(f"{case.name}: gmsh made elements {list(etypes)}, expected tetrahedra")
-        tets_tags = enodes[0].reshape(-1, 4).astype(np.int64)
-        marker_tags = {}
-        for name, tags in groups.items():
-            tris = []
-            for sf in tags:
-                et, _, en = gmsh.model.mesh.getElements(2, sf)
-                tris.append(en[0].reshape(-1, 3).astype(np.int64))
-            marker_tags[name] = np.concatenate(tris)
-    finally:
-        gmsh.finalize()
-
-    used = unique_ids(tets_tags)
-    lookup = np.full(int(max(node_tags.max(), used.max())) + 1, -1, dtype=np.int64)
-    lookup[used] = np.arange(len(used))
-    pos = np.full(len(lookup), -1, dtype=np.int64)
-    pos[node_tags.astype(np.int64)] = np.arange(len(node_tags))
-    points = xyz[pos[used]]
-    tets = lookup[tets_tags]
-    vol = _tet_volumes(points, tets)
-    tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
-    markers = {name: lookup[t] for name, t in marker_tags.items()}
-    if any(np.any(t < 0) for t in markers.values()):
-        raise RuntimeError(f"{case.name}: a marker references a node no tetrahedron uses")
-    # exact root plane for the symmetry nodes (gmsh returns them to rounding)
-    sym = unique_ids(markers["symmetry"])
-    points[sym, case.planform.axes[2]] = case.planform.root_offset[case.planform.axes[2]]
-    return points, tets, _orient_out_of_fluid(points, tets, markers)
-
-
-def _tet_volumes(points: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    p = points[tets]
-    return np.einsum("ij,ij->i", np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), p[:, 3] - p[:, 0]) / 6.0
-
-
-def _orient_out_of_fluid(points, tets, markers):
-    """Each boundary triangle with its normal out of the fluid (away from its tetrahedron)."""
-    n = len(points)
-    faces = np.sort(np.concatenate([tets[:, [0, 1, 2]], tets[:, [0, 1, 3]], tets[:, [0, 2, 3]],
-                                    tets[:, [1, 2, 3]]]), axis=1)
-    opposite = np.concatenate([tets[:, 3], tets[:, 2], tets[:, 1], tets[:, 0]])
-    key = (faces[:, 0] * n + faces[:, 1]) * n + faces[:, 2]
-    order = np.argsort(key)
-    key_sorted = key[order]
-    out = {}
-    for name, tris in markers.items():
-        s = np.sort(tris, axis=1)
-        k = (s[:, 0] * n + s[:, 1]) * n + s[:, 2]
-        i = np.searchsorted(key_sorted, k)
-        if np.any(i >= len(key_sorted)) or np.any(key_sorted[np.minimum(i, len(key_sorted) - 1)] != k):
-            raise RuntimeError(f"marker {name} has a triangle that is not a tetrahedron face")
-        opp = points[opposite[order[i]]]
-        p = points[tris]
-        nrm = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-        inward = np.einsum("ij,ij->i", nrm, opp - p[:, 0]) > 0
-        t = tris.copy()
-        t[inward] = t[inward][:, [0, 2, 1]]
-        out[name] = t
-    return out
-
-
-# ----------------------------------------------------------------------------------------------
-# Boundary-layer prisms (NumPy)
-# ----------------------------------------------------------------------------------------------
-
-def add_prism_layers(points: np.ndarray, tets: np.ndarray, markers: dict[str, np.ndarray], *,
-                     span_axis: int, root: float, layers: int, first: float, growth: float) -> Mesh:
-    """Insert ``layers`` wedge layers between the wing wall and the tetrahedra (module docstring).
-
-    ``markers`` hold triangles oriented out of the fluid (``wing``, ``symmetry``, ``farfield``).
-    Returns the Mesh (tetra + wedge blocks; symmetry gets triangle + quad blocks).
-    """
-    wing = markers["wing"]
-    wall = unique_ids(wing)
-    n0 = len(points)
-    p = points[wing]
-    fn = -np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])           # into the fluid, |.| = 2 area
-    on_sym = np.zeros(n0, dtype=bool)
-    on_sym[unique_ids(markers["symmetry"])] = True
-    vn = _wall_normals(n0, wing, fn / np.linalg.norm(fn, axis=1)[:, None], on_sym, span_axis)
-    # local limit: 0.3 of the shortest tetrahedron edge at each wall node
-    shortest = np.full(n0, np.inf)
-    for a, b in ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)):
-        ln = np.linalg.norm(points[tets[:, a]] - points[tets[:, b]], axis=1)
-        np.minimum.at(shortest, tets[:, a], ln)
-        np.minimum.at(shortest, tets[:, b], ln)
-    heights = first * np.cumsum(growth ** np.arange(layers))           # top of each layer (layers,)
-    scale = np.minimum(1.0, 0.3 * shortest[wall] / heights[-1])        # (W,)
-    # node ids: layer 0 (the wall) .. layers-1 are new; the top is the original node, pushed off
-    nw = len(wall)
-    ids = np.full((layers + 1, n0), -1, dtype=np.int64)
-    ids[layers, wall] = wall
-    ids[:layers, wall] = n0 + np.arange(layers)[:, None] * nw + np.arange(nw)[None, :]
-    # wedges: bottom triangle with its normal into the fluid (towards the top), VTK order
-    tri = wing[:, [0, 2, 1]]
-    wedges = np.concatenate([np.concatenate([ids[k][tri], ids[k + 1][tri]], axis=1) for k in range(layers)])
-    base = points[wall]
-    offs = np.concatenate([[0.0], heights[:-1]])                     # bottom of layers 0..layers-1
-    sym_wall = on_sym[wall]
-    pos = np.full(n0, -1)
-    pos[wall] = np.arange(nw)
-    for _ in range(8):      # halve the layers locally where a cell would not be valid
-        pts = np.concatenate([points, np.empty((layers * nw, 3))])
-        for k in range(layers):
-            pts[ids[k, wall]] = base + (offs[k] * scale)[:, None] * vn[wall]
-        pts[wall] = base + (heights[-1] * scale)[:, None] * vn[wall]
-        pts[np.flatnonzero(on_sym), span_axis] = root                 # exactly in the plane
-        for k in range(layers):
-            pts[ids[k, wall[sym_wall]], span_axis] = root
-        bad_nodes = [c[_quality(pts, c, t) <= 0].ravel() for c, t in ((tets, "tetra"), (wedges, "wedge"))]
-        bad = unique_ids(*bad_nodes)
-        bad = bad[bad < n0]
-        bad = bad[pos[bad] >= 0]
-        if len(bad) == 0 and all(len(b) == 0 for b in bad_nodes):
-            break
-        if len(bad) == 0:        # a bad cell without a wall node of its own: shrink its wedges' walls
-            wn = unique_ids(*bad_nodes)
-            bad = wall[np.isin(ids[:, wall], wn).any(axis=0)]
-        scale[pos[bad]] *= 0.5
-    # symmetry quads: wing-triangle edges with both nodes in the plane
-    edges = np.concatenate([wing[:, [0, 1]], wing[:, [1, 2]], wing[:, [2, 0]]])
-    owner = np.tile(np.arange(len(wing)), 3)
-    root_edge = on_sym[edges[:, 0]] & on_sym[edges[:, 1]]
-    e, own = edges[root_edge], owner[root_edge]
-    quads, qcells = [], []
-    for k in range(layers):
-        quads.append(np.stack([ids[k][e[:, 0]], ids[k][e[:, 1]], ids[k + 1][e[:, 1]], ids[k + 1][e[:, 0]]], axis=1))
-        qcells.append(k * len(wing) + own)
-    quads = np.concatenate(quads)
-    qcells = np.concatenate(qcells)
-    qp = pts[quads]
-    qn = np.cross(qp[:, 2] - qp[:, 0], qp[:, 3] - qp[:, 1])
-    out = np.einsum("ij,ij->i", qn, qp.mean(axis=1) - pts[wedges[qcells]].mean(axis=1)) > 0
-    quads = np.where(out[:, None], quads, quads[:, ::-1])
-    new_wing = ids[0][wing]
-    mk = {"wing": [CellBlock("triangle", new_wing)],
-          "symmetry": [CellBlock("triangle", markers["symmetry"]), CellBlock("quad", quads)],
-          "farfield": [CellBlock("triangle", markers["farfield"])]}
-    return Mesh(points=pts, dim=3, cells=[CellBlock("tetra", tets), CellBlock("wedge", wedges)], markers=mk)
-
-
-def _quality(points, cells, ctype):
-
-    return cell_quality(points, [CellBlock(ctype, cells)]) if len(cells) else np.zeros(0)
-
-
-def _wall_normals(n0: int, wing: np.ndarray, fu: np.ndarray, on_sym: np.ndarray, span_axis: int,
-                  iterations: int = 60) -> np.ndarray:
-    """Vertex directions that see every adjacent face from its fluid side: start from the sum of the
-    unit face normals, then pull each node's direction towards the adjacent face it sees worst (at a
-    sharp trailing edge the result tends to the bisector). Nodes in the symmetry plane stay in it."""
-    node = wing.ravel()                                              # (3F,) pairs node -> face
-    face = np.repeat(np.arange(len(wing)), 3)
-    vn = np.zeros((n0, 3))
-    np.add.at(vn, node, fu[face])
-
-    def norm(v):
-        v[on_sym, span_axis] = 0.0
-        ln = np.linalg.norm(v, axis=1)
-        v[ln > 0] /= ln[ln > 0][:, None]
-        return v
-
-    vn = norm(vn)
-    for it in range(iterations):
-        dots = np.einsum("ij,ij->i", vn[node], fu[face])
-        worst = np.full(n0, np.inf)
-        np.minimum.at(worst, node, dots)
-        pick = dots <= worst[node]
-        step = np.zeros((n0, 3))
-        np.add.at(step, node[pick], fu[face[pick]])
-        vn = norm(vn + 0.3 * 0.9 ** it * step)
-    return vn
-
-
-# ----------------------------------------------------------------------------------------------
-# Public entry points
-# ----------------------------------------------------------------------------------------------
-
 def wing_volume_mesh(case: WingCase) -> Mesh:
     """The mesh of ``case`` (see the module docstring). Raises RuntimeError if a cell is not valid."""
-
-    points, tets, markers = _gmsh_tets(case)
-    s = case.planform.axes[2]
+    sections = _sections(case)
+    lo, hi = _domain(case, sections)
+    pf = case.planform
+    c, s = pf.root_chord, pf.axes[2]
+    points, tets, markers = fluid_tets({"wing": partial(loft, sections=sections)}, lo, hi, symmetry_axis=s,
+                                       symmetry_at=pf.root_offset[s], h_solid=case.h_wing * c,
+                                       h_edge=case.h_edge * c, h_far=case.h_far * c, grow=4 * case.h_far * c,
+                                       name=case.name)
     if case.layers:
-        c = case.planform.root_chord
-        mesh = add_prism_layers(points, tets, markers, span_axis=s, root=case.planform.root_offset[s],
-                                layers=case.layers, first=case.first_layer * c, growth=case.growth)
+        mesh = add_prism_layers(points, tets, markers, span_axis=s, root=pf.root_offset[s], layers=case.layers,
+                                first=case.first_layer * c, growth=case.growth)
     else:
         mesh = Mesh(points=points, dim=3, cells=[CellBlock("tetra", tets)],
                     markers={k: [CellBlock("triangle", v)] for k, v in markers.items()})
@@ -451,7 +438,6 @@ def wing_volume_mesh(case: WingCase) -> Mesh:
 
 def write_case(case: WingCase | str, folder: str | Path) -> Path:
     """Write the case's mesh as ``<folder>/<name>-<key>.su2`` unless it is already there; its path."""
-
     case = CASES[case] if isinstance(case, str) else case
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)

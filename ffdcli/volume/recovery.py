@@ -70,14 +70,16 @@ def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *,
 
     progress = progress or no_progress
     mesh = run.prep.mesh
-    names = list(run.prep.surface.names)
-    sid = run.prep.surface.ids
-    P0 = run.P0
+    # every component's surface (a multi-component run moves them all, one lattice each)
+    names = [n for comp in run.components for n in comp.prep.surface.names]
+    sid = run.surface_ids
+    P0s = [comp.P0 for comp in run.components]
+    P1s = run._per_component(P1)
     pts = mesh.points.copy()
     b_prev = np.zeros((len(sid), 3))
     R_prev = None
     for k in range(1, steps + 1):
-        Pk = P1 if k == steps else P0 + (k / steps) * (P1 - P0)
+        Pk = P1s if k == steps else [P0 + (k / steps) * (Q - P0) for P0, Q in zip(P0s, P1s, strict=True)]
         bk = run.surface_displacement(Pk)
         Rk = run.surface_frames(Pk, settings.carry)
         dR = Rk if R_prev is None else Rk @ np.linalg.inv(R_prev)

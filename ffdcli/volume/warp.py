@@ -35,7 +35,7 @@ bounding box of the surface nodes.
 Area weights are vertex areas: each boundary face (a line in 2D) gives an equal share of its area
 (length) to each of its nodes (:func:`vertex_areas`).
 
-**Marker rules**: :mod:`ffdcli.volume.roles` (which markers are fixed, which slide; the README
+**Marker rules**: :mod:`ffdcli.volume.roles` (which markers are fixed, which slide; docs/design-choices.md
 copies its list). **The source tree**: :mod:`ffdcli.volume.tree`.
 
 **Tree approximation.** The exact sum costs O(N_targets x N_sources). Sources are held in a k-d

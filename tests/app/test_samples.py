@@ -12,6 +12,7 @@ import pytest
 from conftest import SAMPLES, shared_file
 
 from ffdcli.testing import wings
+from ffdcli.testing.cells import tet_volumes
 
 NODES = {3: 2, 5: 3, 9: 4, 10: 4, 12: 8, 13: 6, 14: 5}
 
@@ -54,11 +55,6 @@ def read_su2(name: str) -> dict:
             i += n + 1
         i += 1
     return out
-
-
-def tet_volumes(p, t):
-    q = p[t]
-    return np.einsum("ij,ij->i", np.cross(q[:, 1] - q[:, 0], q[:, 2] - q[:, 0]), q[:, 3] - q[:, 0]) / 6
 
 
 WINGS = {"rect_wing.su2": (wings.rect_wing_planform(), (15_000, 40_000)),

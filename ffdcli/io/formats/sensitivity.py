@@ -16,7 +16,6 @@ Two layouts are read (see SPEC.md, "Derivatives"):
 from __future__ import annotations
 
 import io
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
+from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
 from ffdcli.io.inputs import check_input_file, existing_kind
 from ffdcli.mesh import diagonal
 from ffdcli.mesh.idsets import setdiff_ids
@@ -56,7 +56,13 @@ class Sensitivity:
 
 
 def _split(line: str) -> list[str]:
-    return [t.strip().strip('"').strip("'") for t in re.split(r"[,\s]+", line.strip()) if t.strip()]
+    """The fields of a line: comma separated (an empty field stays, as ``''``; one trailing comma is
+    allowed) or, without commas, whitespace separated; quotes stripped."""
+    line = line.strip()
+    if "," in line:
+        fields = line[:-1].split(",") if line.endswith(",") else line.split(",")
+        return [t.strip().strip('"').strip("'").strip() for t in fields]
+    return [t.strip('"').strip("'") for t in line.split()]
 
 
 def _is_number(tok: str) -> bool:
@@ -82,33 +88,21 @@ def _parse_rows(text: str, p: Path):
     """(data (K, C), rows) of the file's text: one C-level parse (numpy), the line-by-line checks only
     to name the line of a problem. Blank and ``%`` lines are skipped; a non-numeric first line is the
     header (names lower-cased, quotes stripped)."""
-    raw = text.splitlines()
+    raw = text.removeprefix("\ufeff").splitlines()      # a UTF-8 byte-order mark is no header name
     keep = [i for i, ln in enumerate(raw) if ln.strip() and not ln.lstrip().startswith("%")]
     if not keep:
         raise InputError("the sensitivity file is empty", path=p)
     first = _split(raw[keep[0]])
     header = None
     if not all(_is_number(t) for t in first):
-        header = [t.lower() for t in first]
+        header = _header_names(first, p, keep[0] + 1)
         keep = keep[1:]
     if not keep:
         raise InputError("the sensitivity file has a header but no rows", path=p)
-    ncol = len(_split(raw[keep[0]]))
-    body = "\n".join(raw[i] for i in keep).replace(",", " ").replace('"', " ").replace("'", " ")
-    data = None
-    try:
-        data = np.loadtxt(io.StringIO(body), dtype=np.float64, ndmin=2)
-    except ValueError:
-        pass
+    data = _read_numbers(raw, keep)
+    ncol = len(header) if header is not None else len(_split(raw[keep[0]]))
     if data is None or data.shape != (len(keep), ncol):
-        for i in keep:                      # only to say which line is wrong
-            toks = _split(raw[i])
-            if len(toks) != ncol:
-                raise InputError(f"expected {ncol} values in this row, found {len(toks)}", path=p, line=i + 1)
-            bad = [t for t in toks if not _is_number(t)]
-            if bad:
-                raise InputError(f"not a number: {bad[0]!r}", path=p, line=i + 1)
-        raise InputError("could not read the rows as numbers", path=p)
+        _name_the_bad_row(raw, keep, ncol, header is not None, p)
     linenos = np.asarray(keep) + 1
     if not np.all(np.isfinite(data)):
         r = int(np.flatnonzero(~np.isfinite(data).all(1))[0])
@@ -116,14 +110,87 @@ def _parse_rows(text: str, p: Path):
     return data, _Rows(linenos, header)
 
 
-def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None) -> Sensitivity:
-    """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3)."""
+def _header_names(fields: list[str], p: Path, line: int) -> list[str]:
+    """The header's column names (lower-cased); a column named twice is an error (which one counts?)."""
+    names = [t.lower() for t in fields]
+    seen: dict[str, int] = {}
+    for i, name in enumerate(names):
+        if name in seen:
+            raise InputError(f"the header names column {fields[i]!r} twice (columns {seen[name] + 1} and {i + 1}); "
+                             "each column must appear once", path=p, line=line)
+        seen[name] = i
+    return names
+
+
+def _read_numbers(raw: list[str], keep: list[int]) -> np.ndarray | None:
+    """The rows ``keep`` of ``raw`` as one (K, C) array by a C-level parse; None when they are not a
+    table of numbers (ragged, empty fields, words)."""
+    body = "\n".join(raw[i] for i in keep)
+    if ",," in body.replace(" ", "").replace("\t", ""):
+        return None                            # an empty field: the line-by-line pass names it
+    body = body.replace('"', " ").replace("'", " ")
+    body = "\n".join(ln.strip().rstrip(",").replace(",", " ") for ln in body.splitlines())
+    try:
+        with np.errstate(over="ignore"):
+            return np.loadtxt(io.StringIO(body), dtype=np.float64, ndmin=2)
+    except ValueError:
+        return None
+
+
+def _name_the_bad_row(raw: list[str], keep: list[int], ncol: int, has_header: bool, p: Path):
+    """Raise the :class:`InputError` of the first row that is not ``ncol`` numbers (the count the
+    header gives, else the first row's), naming its line."""
+    expected = f"the header has {ncol} columns" if has_header else f"the first row has {ncol} values"
+    for i in keep:
+        toks = _split(raw[i])
+        if len(toks) != ncol:
+            raise InputError(f"{expected}, this row has {len(toks)}", path=p, line=i + 1)
+        if "" in toks:
+            raise InputError(f"empty field in column {toks.index('') + 1}", path=p, line=i + 1)
+        bad = [t for t in toks if not _is_number(t)]
+        if bad:
+            raise InputError(f"not a number: {bad[0]!r}", path=p, line=i + 1)
+    raise InputError("could not read the rows as numbers", path=p)
+
+
+def _check_distance(d: np.ndarray, tol: float, lines: _Rows, p: Path, how: str) -> None:
+    """The rule that a sensitivity file belongs to the mesh: every row's coordinates within ``tol`` of
+    its node (``d`` (K,) the distances). Otherwise it is another design's or another mesh's file."""
+    far = np.flatnonzero(~(d <= tol))
+    if len(far):
+        worst = int(far[np.argmax(d[far])])
+        raise InputError(f"{len(far)} of {len(d)} rows stand farther than the tolerance {tol:.3g} from "
+                         f"{how} (worst {d[worst]:.3g}, at line {lines.lineno(worst)}); the coordinates must be "
+                         "those of this mesh as deformed by this design (a file of another design or mesh?); "
+                         "--tolerance widens the match", path=p, line=lines.lineno(int(far[0])))
+
+
+def _check_unique(ids: np.ndarray, lines: _Rows, p: Path) -> None:
+    """Each mesh node at most once: two rows on one node name both lines."""
+    order = np.argsort(ids, kind="stable")
+    same = np.flatnonzero(ids[order][1:] == ids[order][:-1])
+    if len(same):
+        a, b = int(order[same[0]]), int(order[same[0] + 1])
+        raise InputError(f"lines {lines.lineno(a)} and {lines.lineno(b)} both give mesh node {int(ids[a])} "
+                         f"({len(same)} repeated rows in all); each node must appear once", path=p,
+                         line=lines.lineno(b))
+
+
+def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | None = None,
+                     mesh=None) -> Sensitivity:
+    """Read a sensitivity file and match its rows to the mesh nodes ``points`` (N, 3).
+
+    ``mesh`` (:class:`ffdcli.mesh.Mesh`, optional): needed for SU2's continuous-adjoint file, whose
+    gradient is −S n̂ from its ``Surface_Sensitivity`` column (:func:`surface_sensitivity_rows`).
+
+    ``tol`` (mesh units, default 1e-6 of the diagonal of ``points``): how far a row's coordinates may
+    stand from its node, in both forms; farther, the file is refused (:func:`_check_distance`)."""
     p = Path(path)
     if existing_kind(p) is None:
         raise InputError("no such sensitivity file", path=p)
     check_input_file(p, "sensitivity file")
     try:
-        text = p.read_text()
+        text = p.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read the sensitivity file: {e}", path=p) from None
     data, lines = _parse_rows(text, p)
@@ -138,7 +205,7 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
         idc = next(col[h] for h in ID_COLUMNS if h in col)
         names = ["sensitivity_x", "sensitivity_y", "sensitivity_z"][:gd]
         missing = [n for n in names if n not in col]
-        if missing:
+        if missing and "surface_sensitivity" not in col:
             raise InputError(f"missing column(s) {', '.join(missing)}; expected {', '.join(names)}",
                              path=p, line=1)
         ids = data[:, idc]
@@ -148,12 +215,15 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
                              path=p, line=lines.lineno(bad))
         ids = ids.astype(np.int64)
         values = np.zeros((len(ids), 3))
-        values[:, :gd] = data[:, [col[n] for n in names]]
+        if not missing:
+            values[:, :gd] = data[:, [col[n] for n in names]]
+        values = surface_sensitivity_rows(values, data, col, ids, points, mesh, p)
         worst = float("nan")
         cc = [c for c in ("x", "y", "z")[:gd] if c in col]
         if len(cc) == gd:
             d = np.linalg.norm(data[:, [col[c] for c in cc]] - points[ids, :gd], axis=1)
             worst = float(d.max())
+            _check_distance(d, tol, lines, p, "the mesh nodes their ids name")
         how = "id"
     else:
         if ncol != 2 * gd:
@@ -161,18 +231,28 @@ def read_sensitivity(path, points: np.ndarray, dim: int = 3, *, tol: float | Non
                              f"a PointID column; found {ncol} columns", path=p)
 
         dist, ids = cKDTree(points[:, :gd]).query(data[:, :gd], workers=-1)
-        far = np.flatnonzero(dist > tol)
-        if len(far):
-            raise InputError(f"{len(far)} rows match no mesh node within {tol:.3g} (worst {dist.max():.3g}); "
-                             "the coordinates must be those of the deformed mesh", path=p,
-                             line=lines.lineno(int(far[0])))
+        _check_distance(dist, tol, lines, p, "every mesh node")
         ids = ids.astype(np.int64)
         values = np.zeros((len(ids), 3))
         values[:, :gd] = data[:, gd:]
         worst = float(dist.max())
         how = "coordinates"
-    uniq, counts = np.unique(ids, return_counts=True)
-    if np.any(counts > 1):
-        node = int(uniq[counts > 1][0])
-        raise InputError(f"two rows give mesh node {node}", path=p)
+    _check_unique(ids, lines, p)
     return Sensitivity(ids=ids, values=values, matched_by=how, worst_distance=worst)
+
+
+def surface_sensitivity_rows(values: np.ndarray, data: np.ndarray, col: dict, ids: np.ndarray, points: np.ndarray,
+                             mesh, p: Path) -> np.ndarray:
+    """The rule that an all-zero sensitivity is never a gradient: ``values`` (K, 3) as read, unless every
+    ``Sensitivity_*`` column is zero. Then SU2's continuous-adjoint file (a ``Surface_Sensitivity``
+    column S) gives dJ/dX = −S n̂ (:func:`ffdcli.io.formats.wall_normals.surface_sensitivity_gradient`,
+    which needs ``mesh``); any other all-zero file is an :class:`InputError`."""
+    if np.any(values):
+        return values
+    if "surface_sensitivity" not in col:
+        raise InputError("every Sensitivity_x/y/z value is zero: that is no gradient (a continuous adjoint "
+                         "writes its sensitivity in a Surface_Sensitivity column, which this file lacks)", path=p)
+    if mesh is None:
+        raise InputError("this is a continuous-adjoint file (Sensitivity_x/y/z all zero, Surface_Sensitivity "
+                         "given): reading it as dJ/dX = -S n needs the mesh", path=p)
+    return surface_sensitivity_gradient(mesh, points, ids, data[:, col["surface_sensitivity"]])

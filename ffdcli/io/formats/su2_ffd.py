@@ -145,118 +145,114 @@ def find_section(tail: bytes) -> int | None:
     return None if m is None else m.start()
 
 
+class _SectionReader:
+    """The lines of an FFD section read in order: ``KEY= value`` lines, counts, rows of numbers, and the
+    error naming the file and the line."""
+
+    def __init__(self, text: str, path, first_line: int):
+        self.lines, self.pos, self.path, self.first_line = text.splitlines(), 0, path, first_line
+
+    def fail(self, msg, k=None):
+        line = self.first_line + (self.pos if k is None else k)
+        raise InputError(f"SU2 FFD section: {msg}", path=self.path, line=line,
+                         hint="ffd must update or drop this section; fix it or remove the FFD_ lines")
+
+    def key_line(self, expect=None, optional=False):
+        lines = self.lines
+        while self.pos < len(lines) and not lines[self.pos].strip():
+            self.pos += 1
+        if self.pos >= len(lines):
+            if optional:
+                return None, None
+            self.fail(f"the file ends where {expect or 'a KEY= line'} was expected")
+        m = _KEY.match(lines[self.pos])
+        if m is None:
+            if optional:
+                return None, None
+            self.fail(f"expected {expect or 'a KEY= line'}, got {lines[self.pos][:40]!r}")
+        key, value = m.group(1), m.group(2)
+        if expect is not None and key != expect:
+            if optional:
+                return None, None
+            self.fail(f"expected {expect}=, got {key}=")
+        self.pos += 1
+        return key, value
+
+    def integer(self, value, what):
+        try:
+            return int(value.split()[0])
+        except (ValueError, IndexError):
+            self.fail(f"{what}: expected a whole number, got {value[:40]!r}", self.pos - 1)
+
+    def count(self, key):
+        """The whole number of the ``key=`` line that comes next."""
+        return self.integer(self.key_line(key)[1], key)
+
+    def rows(self, n, what):
+        out = self.lines[self.pos:self.pos + n]
+        if len(out) < n:
+            self.fail(f"{what}: {n} rows announced, the file ends after {len(out)}")
+        self.pos += n
+        return out
+
+    def numbers(self, key, ncols):
+        """The rows announced by the ``key=`` line that comes next, as an (n, ncols) array."""
+        n = self.count(key)
+        start = self.pos
+        block = self.rows(n, key)
+        try:
+            arr = np.array([r.split()[:ncols] for r in block], dtype=np.float64)
+        except ValueError:
+            self.fail(f"{key}: expected {ncols} numbers per row", start)
+        if arr.shape != (len(block), ncols):
+            self.fail(f"{key}: expected {ncols} numbers per row", start)
+        return arr
+
+
 def parse_section(text: str, ndim: int, *, path=None, first_line: int = 1) -> Su2FfdSection:
     """Parse an FFD section (from its ``FFD_NBOX=`` line to the end of the file).
 
     Raises :class:`InputError` naming the file and line when the section is not in SU2's form.
     """
-    lines = text.splitlines()
-    pos = [0]
+    r = _SectionReader(text, path, first_line)
+    nbox = r.count("FFD_NBOX")
+    nlevel = r.count("FFD_NLEVEL")
+    boxes = [_read_box(r, ndim) for _ in range(nbox)]
+    return Su2FfdSection(nlevel=nlevel, boxes=tuple(b for b, _ in boxes), legacy=any(old for _, old in boxes))
 
-    def fail(msg, k=None):
-        line = first_line + (pos[0] if k is None else k)
-        raise InputError(f"SU2 FFD section: {msg}", path=path, line=line,
-                         hint="ffd must update or drop this section; fix it or remove the FFD_ lines")
 
-    def key_line(expect=None, optional=False):
-        while pos[0] < len(lines) and not lines[pos[0]].strip():
-            pos[0] += 1
-        if pos[0] >= len(lines):
-            if optional:
-                return None, None
-            fail(f"the file ends where {expect or 'a KEY= line'} was expected")
-        m = _KEY.match(lines[pos[0]])
-        if m is None:
-            if optional:
-                return None, None
-            fail(f"expected {expect or 'a KEY= line'}, got {lines[pos[0]][:40]!r}")
-        key, value = m.group(1), m.group(2)
-        if expect is not None and key != expect:
-            if optional:
-                return None, None
-            fail(f"expected {expect}=, got {key}=")
-        pos[0] += 1
-        return key, value
-
-    def integer(value, what):
-        try:
-            return int(value.split()[0])
-        except (ValueError, IndexError):
-            fail(f"{what}: expected a whole number, got {value[:40]!r}", pos[0] - 1)
-
-    def rows(n, what):
-        out = lines[pos[0]:pos[0] + n]
-        if len(out) < n:
-            fail(f"{what}: {n} rows announced, the file ends after {len(out)}")
-        pos[0] += n
-        return out
-
-    def numbers(block, ncols, what, start):
-        try:
-            arr = np.array([r.split()[:ncols] for r in block], dtype=np.float64)
-        except ValueError:
-            fail(f"{what}: expected {ncols} numbers per row", start)
-        if arr.shape != (len(block), ncols):
-            fail(f"{what}: expected {ncols} numbers per row", start)
-        return arr
-
-    _, v = key_line("FFD_NBOX")
-    nbox = integer(v, "FFD_NBOX")
-    _, v = key_line("FFD_NLEVEL")
-    nlevel = integer(v, "FFD_NLEVEL")
-    boxes = []
-    legacy = False
-    for _ in range(nbox):
-        _, tag = key_line("FFD_TAG")
-        _, v = key_line("FFD_LEVEL")
-        level = integer(v, "FFD_LEVEL")
-        degree = []
-        for axis in "IJK"[:ndim]:
-            _, v = key_line(f"FFD_DEGREE_{axis}")
-            degree.append(integer(v, f"FFD_DEGREE_{axis}"))
-        k, v = key_line("FFD_BLENDING", optional=True)
-        blending, order = "BEZIER", None
-        if k is None:
-            legacy = True
-        else:
-            blending = v.split()[0].upper() if v.split() else ""
-            if blending not in ("BEZIER", "BSPLINE_UNIFORM"):
-                fail(f"FFD_BLENDING must be BEZIER or BSPLINE_UNIFORM, got {v!r}", pos[0] - 1)
-            if blending == "BSPLINE_UNIFORM":
-                order = []
-                for axis in "IJK"[:ndim]:
-                    _, v = key_line(f"BSPLINE_ORDER_{axis}")
-                    order.append(integer(v, f"BSPLINE_ORDER_{axis}"))
-                order = tuple(order)
-        _, v = key_line("FFD_PARENTS")
-        parents = tuple(r.strip() for r in rows(integer(v, "FFD_PARENTS"), "FFD_PARENTS"))
-        _, v = key_line("FFD_CHILDREN")
-        children = tuple(r.strip() for r in rows(integer(v, "FFD_CHILDREN"), "FFD_CHILDREN"))
-        _, v = key_line("FFD_CORNER_POINTS")
-        start = pos[0]
-        corners = numbers(rows(integer(v, "FFD_CORNER_POINTS"), "FFD_CORNER_POINTS"), ndim,
-                          "FFD_CORNER_POINTS", start)
-        _, v = key_line("FFD_CONTROL_POINTS")
-        start = pos[0]
-        cp = numbers(rows(integer(v, "FFD_CONTROL_POINTS"), "FFD_CONTROL_POINTS"), 6,
-                     "FFD_CONTROL_POINTS", start)
-        _, v = key_line("FFD_SURFACE_POINTS")
-        start = pos[0]
-        block = rows(integer(v, "FFD_SURFACE_POINTS"), "FFD_SURFACE_POINTS")
-        parts = [r.split() for r in block]
-        if any(len(p) < 5 for p in parts):
-            fail("FFD_SURFACE_POINTS: expected 'MARKER point u v w' per row", start)
-        try:
-            ids = np.array([p[1] for p in parts], dtype=np.int64)
-            params = np.array([p[2:5] for p in parts], dtype=np.float64).reshape(-1, 3)
-        except ValueError:
-            fail("FFD_SURFACE_POINTS: expected 'MARKER point u v w' per row", start)
-        boxes.append(Su2FfdBox(
-            tag=tag.strip(), level=level, degree=tuple(degree), blending=blending, bspline_order=order,
-            parents=parents, children=children, corners=corners,
-            control_index=cp[:, :3].astype(np.int64), control_points=cp[:, 3:6],
-            surface_tags=tuple(p[0] for p in parts), surface_ids=ids, surface_params=params))
-    return Su2FfdSection(nlevel=nlevel, boxes=tuple(boxes), legacy=legacy)
+def _read_box(r: _SectionReader, ndim: int) -> tuple[Su2FfdBox, bool]:
+    """One box of the section, and whether it is in the pre-4.3 form (no ``FFD_BLENDING``)."""
+    _, tag = r.key_line("FFD_TAG")
+    level = r.count("FFD_LEVEL")
+    degree = tuple(r.count(f"FFD_DEGREE_{axis}") for axis in "IJK"[:ndim])
+    k, v = r.key_line("FFD_BLENDING", optional=True)
+    blending, order = "BEZIER", None
+    if k is not None:
+        blending = v.split()[0].upper() if v.split() else ""
+        if blending not in ("BEZIER", "BSPLINE_UNIFORM"):
+            r.fail(f"FFD_BLENDING must be BEZIER or BSPLINE_UNIFORM, got {v!r}", r.pos - 1)
+        if blending == "BSPLINE_UNIFORM":
+            order = tuple(r.count(f"BSPLINE_ORDER_{axis}") for axis in "IJK"[:ndim])
+    parents = tuple(x.strip() for x in r.rows(r.count("FFD_PARENTS"), "FFD_PARENTS"))
+    children = tuple(x.strip() for x in r.rows(r.count("FFD_CHILDREN"), "FFD_CHILDREN"))
+    corners = r.numbers("FFD_CORNER_POINTS", ndim)
+    cp = r.numbers("FFD_CONTROL_POINTS", 6)
+    n = r.count("FFD_SURFACE_POINTS")
+    start = r.pos
+    parts = [x.split() for x in r.rows(n, "FFD_SURFACE_POINTS")]
+    if any(len(p) < 5 for p in parts):
+        r.fail("FFD_SURFACE_POINTS: expected 'MARKER point u v w' per row", start)
+    try:
+        ids = np.array([p[1] for p in parts], dtype=np.int64)
+        params = np.array([p[2:5] for p in parts], dtype=np.float64).reshape(-1, 3)
+    except ValueError:
+        r.fail("FFD_SURFACE_POINTS: expected 'MARKER point u v w' per row", start)
+    box = Su2FfdBox(tag=tag.strip(), level=level, degree=degree, blending=blending, bspline_order=order,
+                    parents=parents, children=children, corners=corners,
+                    control_index=cp[:, :3].astype(np.int64), control_points=cp[:, 3:6],
+                    surface_tags=tuple(p[0] for p in parts), surface_ids=ids, surface_params=params)
+    return box, k is None
 
 
 def format_section(section: Su2FfdSection, ndim: int) -> str:

@@ -1,0 +1,164 @@
+"""ffd's own share of an ``ffd optimize`` iteration on SU2's NACA0012 case (issue 28: <= 5 %).
+
+ffd's part of an iteration is what :class:`ffdcli.optimize.problem.OptimizationProblem` times as
+``ffd`` seconds: set the values, deform the surface, move the volume, run the quality gate, write the
+mesh, evaluate the geometric constraints (one flow's worth), then chain one all-node dJ/dX per function
+through the volume motion's transpose (``mesh_vjp``; three functions: DRAG, LIFT, MOMENT_Z). It is
+measured here with a stub solver that returns a random dJ/dX of every mesh node (no SU2 needed), on
+``configs/naca0012_optimize.yaml`` (5,233 points, 19 variables), at random designs within the bounds;
+median of 5 evaluations after one warm-up (numba compiled, box cached).
+
+The iteration's solver seconds (one flow and three adjoints) come from a finished run's
+``history.csv`` when one is given (``--run FOLDER``; default ``out/naca0012_optimize``): the median, over
+the accepted iterates, of their solver seconds. Without a run the row says so.
+
+    python -m benchmarks.bench_optimize_ffd [--run out/naca0012_optimize]
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli.api import DesignModel
+from ffdcli.io.formats import read_mesh
+from ffdcli.optimize.problem import OptimizationProblem
+from ffdcli.optimize.solvers.base import FlowResult, Sensitivity, Solver, SolverInfo
+from ffdcli.optimize.store import EvaluationStore
+
+TITLE = "ffd optimize: ffd's own share of an iteration on SU2's NACA0012 (issue 28)"
+REPO = Path(__file__).resolve().parents[1]
+DESIGN = REPO / "configs" / "naca0012_optimize.yaml"
+RUN = REPO / "out" / "naca0012_optimize"
+FUNCTIONS = ["DRAG", "LIFT", "MOMENT_Z"]
+
+
+class StubSolver(Solver):
+    """No flow: constant functions and a random dJ/dX at every mesh node (what a discrete adjoint gives)."""
+
+    def __init__(self, n_points: int):
+        self.n = n_points
+        self.rng = np.random.default_rng(0)
+
+    def check(self) -> SolverInfo:
+        return SolverInfo(name="stub", adjoint="discrete")
+
+    def flow(self, folder, mesh, start=None) -> FlowResult:
+        return FlowResult(functions=dict.fromkeys(FUNCTIONS, 0.1), seconds=0.0)
+
+    def adjoint(self, folder, mesh, function, start=None) -> Sensitivity:
+        g = np.zeros((self.n, 3))
+        g[:, :2] = self.rng.normal(size=(self.n, 2))
+        return Sensitivity(ids=np.arange(self.n), values=g, seconds=0.0)
+
+
+def ffd_seconds(repeats: int = 5) -> dict:
+    """Median ffd seconds of one evaluation with its three gradient chains, and of its parts."""
+    model = DesignModel.from_file(DESIGN)
+    rng = np.random.default_rng(1)
+    lo, hi = model.lower, model.upper
+    with tempfile.TemporaryDirectory() as tmp:
+        store = EvaluationStore(Path(tmp), "bench", resume=False)
+        problem = OptimizationProblem(model, StubSolver(model.run.prep.mesh.n_points), store, FUNCTIONS,
+                                      warm_start=False)
+        times = []
+        for k in range(repeats + 1):
+            v = lo + (hi - lo) * (0.5 + 0.1 * (rng.random(model.n_vars) - 0.5))   # +-5 % of the range
+            t0 = time.perf_counter()
+            ev = problem.evaluate(v, gradient=True)
+            wall = time.perf_counter() - t0
+            problem.geometric(v)                       # the constraints' Jacobian SLSQP asks for
+            if k:
+                times.append((ev.seconds["ffd"], wall))
+    ffd = float(np.median([t[0] for t in times]))
+    return {"ffd": ffd, "wall": float(np.median([t[1] for t in times])), "points": int(model.run.prep.mesh.n_points),
+            "variables": model.n_vars}
+
+
+def solver_seconds(run: Path) -> float | None:
+    """Median solver seconds of the accepted iterates of a finished run (one flow and the adjoints)."""
+    path = Path(run) / "history.csv"
+    if not path.is_file():
+        return None
+    with open(path) as fh:
+        rows = [r for r in csv.DictReader(fh) if not r["failed"] and int(r["adjoint_solves"]) == len(FUNCTIONS)]
+    return float(np.median([float(r["solver_seconds"]) for r in rows])) if rows else None
+
+
+def max_thickness_to_chord(mesh_path: Path, marker: str = "airfoil") -> float:
+    """The largest thickness over chord of a 2D airfoil mesh's wall (the chord line from the trailing
+    edge, the wall point farthest aft, to the wall point farthest from it; thickness normal to it,
+    upper minus lower at 2001 stations)."""
+    mesh = read_mesh(mesh_path)
+    p = mesh.points[mesh.marker_point_ids(marker), :2]
+    te = p[np.argmax(p[:, 0])]
+    le = p[np.argmax(np.linalg.norm(p - te, axis=1))]
+    chord = float(np.linalg.norm(te - le))
+    t = (te - le) / chord
+    n = np.array([-t[1], t[0]])
+    xi, eta = (p - le) @ t / chord, (p - le) @ n / chord
+    stations = np.linspace(0.0, 1.0, 2001)
+    up, lo = eta >= 0, eta < 0
+    order_u, order_l = np.argsort(xi[up]), np.argsort(xi[lo])
+    yu = np.interp(stations, xi[up][order_u], eta[up][order_u])
+    yl = np.interp(stations, xi[lo][order_l], eta[lo][order_l])
+    return float((yu - yl).max())
+
+
+def best_row(run_folder: Path) -> dict | None:
+    """The best design of a finished run: its functions and max t/c, from ``history.csv`` and the mesh."""
+    hist = Path(run_folder) / "history.csv"
+    best = Path(run_folder) / "best.su2"
+    if not (hist.is_file() and best.is_file()):
+        return None
+    with open(hist) as fh:
+        rows = list(csv.DictReader(fh))
+    ok = [r for r in rows if not r["failed"]]
+    flows = sum(int(r["flow_solves"]) for r in rows)
+    adjoints = sum(int(r["adjoint_solves"]) for r in rows)
+    feasible = [r for r in ok if float(r["violation"]) <= 1e-4]
+    r = min(feasible or ok, key=lambda r: float(r["objective"]))
+    return {"CD": float(r["objective"]), "CL": float(r["LIFT"]), "CMz": float(r.get("MOMENT_Z", "nan")),
+            "t/c": max_thickness_to_chord(best), "violation": float(r["violation"]), "feasible": bool(feasible),
+            "flows": flows, "adjoints": adjoints, "iterations": max(int(x["iteration"]) for x in rows),
+            "solver_s": sum(float(x["solver_seconds"]) for x in rows),
+            "ffd_s": sum(float(x["ffd_seconds"]) for x in rows)}
+
+
+def run(quick: bool = False, run_folder: Path = RUN) -> list[dict]:
+    r = ffd_seconds(3 if quick else 5)
+    solver = solver_seconds(run_folder)
+    rows = [{"case": f"ffd per iteration: deform + volume + gate + mesh write + constraints + 3 chains "
+                     f"({r['points']} points, {r['variables']} variables)", "measured": f"{r['ffd']:.3f} s",
+             "target": "", "pyGeo reference": ""}]
+    if solver is None:
+        rows.append({"case": f"solver per iteration: no finished run in {run_folder}", "measured": "",
+                     "target": "", "pyGeo reference": ""})
+    else:
+        share = r["ffd"] / (r["ffd"] + solver)
+        rows.append({"case": "solver per iteration (1 flow + 3 adjoints, median of the run's iterates)",
+                     "measured": f"{solver:.1f} s", "target": "", "pyGeo reference": ""})
+        rows.append({"case": "ffd's share of an iteration", "measured": f"{100 * share:.2f} %", "target": "<= 5 %",
+                     "pyGeo reference": "", "met": share <= 0.05})
+    best = best_row(run_folder)
+    if best is not None:
+        kind = "feasible " if best["feasible"] else "(infeasible) "
+        case = (f"the run's best {kind}design: CD, CL, CMz, max t/c; {best['flows']} flows + "
+                f"{best['adjoints']} adjoints, {best['iterations']} iterations")
+        measured = f"{best['CD']:.6f}, {best['CL']:.6f}, {best['CMz']:.6f}, {best['t/c']:.5f}"
+        rows.append({"case": case, "measured": measured, "target": "feasible, CD <= 0.003018, <= 43 solves",
+                     "pyGeo reference": "",
+                     "met": best["feasible"] and best["CD"] <= 0.003018 and best["flows"] + best["adjoints"] <= 43})
+    return rows
+
+
+if __name__ == "__main__":
+    folder = Path(sys.argv[sys.argv.index("--run") + 1]) if "--run" in sys.argv else RUN
+    for row in run("--quick" in sys.argv, folder):
+        print(json.dumps(row))

@@ -1,0 +1,73 @@
+"""``ffd optimize``: the design file's ``optimize:`` section run with a flow solver and its adjoint."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from ffdcli.cli import cli, common_options
+
+
+@cli.command("optimize")
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.argument("names", nargs=-1, metavar="[NAME...]")
+@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
+@click.option("--resume", is_flag=True, help="Continue the run in optimize.folder, reusing every finished evaluation.")
+@click.option("--check-gradient", "check", is_flag=True,
+              help="Print the adjoint gradient of each function beside central differences of the solver for "
+                   "the NAMEs given (variables or prefixes; default every optimised variable).")
+@click.option("--step", type=float, default=1e-3, show_default=True,
+              help="--check-gradient: the step as a fraction of each variable's bound range (or itself if unbounded).")
+@common_options
+def optimize_cmd(design_file, names, overrides, resume, check, step, console):
+    """Minimise the design file's optimize.objective with the flow solver (SU2) and its adjoint.
+
+    \b
+    The geometry is ffd's: the box built once, the design variables (optimize.variables, default all)
+    within bounds:, the constraints: with their exact Jacobians; the solver gives the functions and,
+    per function, the adjoint dJ/dX, chained through ffd's exact derivatives. Each evaluation runs in
+    its own folder under optimize.folder (default opt/): history.csv, history.png, best.yaml (the best
+    feasible design's values written in) and its mesh are written there. A line per evaluation on
+    stderr. Exit 1 when the solver failed more than optimize.max_failures times (best design written).
+
+    \b
+    Examples:
+      ffd optimize configs/naca0012_optimize.yaml
+      ffd optimize design.yaml --resume --json
+      ffd optimize design.yaml --check-gradient c0.twist c1.shape.upper[3]
+      ffd optimize design.yaml --set optimize.iterations=2
+    """
+    from ffdcli.optimize.workflow import run_optimize
+
+    if names and not check:
+        raise click.UsageError(f"unexpected argument {names[0]!r}; variable names go with --check-gradient")
+
+    def line(text):
+        if not console.quiet:
+            print(text, file=sys.stderr, flush=True)
+
+    summary = run_optimize(design_file, overrides, resume=resume, check=list(names) if check else None, step=step,
+                           report=line, warn=console.warn, progress=console.progress)
+    if check:
+        rows = summary["gradient_check"]
+        width = max([len(r["variable"]) for r in rows] + [8])
+        text = [f"{'function':<10} {'variable':<{width}} {'adjoint':>14} {'finite diff.':>14} {'relative':>10}"]
+        text += [f"{r['function']:<10} {r['variable']:<{width}} {r['adjoint']:>14.6e} {r['finite_difference']:>14.6e} "
+                 f"{r['relative']:>10.2e}" for r in rows]
+        console.result({"gradient_check": rows, "seconds": summary["seconds"]}, "\n".join(text))
+        return
+    exit_code = summary.pop("exit_code")
+    obj = summary["objective"]
+    text = [f"ffd optimize: {summary['status']} ({summary['message']}) after {summary['iterations']} iterations, "
+            f"{summary['evaluations']} evaluations ({summary['flow_solves']} flow + "
+            f"{summary['adjoint_solves']} adjoint solves)",
+            f"  objective {obj['initial']} -> {obj['best']}"
+            + ("" if summary["constraints_satisfied"] else "  (NO FEASIBLE DESIGN)"),
+            "  " + "  ".join(f"{k} {v:.6g}" for k, v in summary["functions"].items()),
+            f"  best: {summary['best']}  (mesh {summary['best_mesh']})",
+            f"  seconds: solver {summary['seconds']['solver']:.1f}, ffd {summary['seconds']['ffd']:.2f}, "
+            f"wall {summary['seconds']['wall']:.1f}"]
+    console.result(summary, "\n".join(text))
+    if exit_code:
+        sys.exit(exit_code)          # the summary is printed; exit 1: the solver failed too often

@@ -1,0 +1,189 @@
+"""One design evaluated: ffd's geometry (deform, volume, quality gate, mesh written), the solver's flow
+and adjoints, and the chain rule back to the design variables, each result kept on disk.
+
+:class:`OptimizationProblem` holds the :class:`~ffdcli.api.DesignModel` (the box built and embedded
+once for the whole run), the solver and the :class:`~ffdcli.optimize.store.EvaluationStore`.
+:meth:`OptimizationProblem.evaluate` returns the cached :class:`Evaluation` of a design vector when
+it exists, runs only what is missing otherwise (a flow; the adjoints when gradients are asked), and
+never raises for a failure of the design: a mesh refused by the quality gate, a design the bounds
+refuse, or a solver failure comes back as an evaluation with ``failed`` set and the log's path.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli.app.pipeline import deform, write_outputs
+from ffdcli.errors import InputError, QualityError
+from ffdcli.io.outputs import plan_outputs
+from ffdcli.optimize.solvers.base import Solver, SolverFailure
+from ffdcli.optimize.store import Evaluation, EvaluationStore
+from ffdcli.quality import enforce
+
+
+class OptimizationProblem:
+    """The design model, the solver and the store of one run (see the module docstring).
+
+    Parameters
+    ----------
+    model : ffdcli.api.DesignModel
+        Loaded once; its values are set per evaluation.
+    solver : Solver
+        Checked (:meth:`Solver.check`) before.
+    store : EvaluationStore
+        Where evaluations are kept.
+    functions : list of str
+        The solver's functions that the run needs (objective first); each gets an adjoint.
+    report : callable, optional
+        Called with each evaluation once it is finished (a flow, or its adjoints): the progress line.
+    warm_start : bool
+        Offer the solver the nearest finished evaluation's folder to start from.
+    """
+
+    def __init__(self, model, solver: Solver, store: EvaluationStore, functions: list[str],
+                 report: Callable[[Evaluation, str], None] | None = None, warm_start: bool = True):
+        self.model = model
+        self.solver = solver
+        self.store = store
+        self.functions = list(functions)
+        self.report = report or (lambda ev, stage: None)
+        self.warm_start = warm_start
+        self.iteration = 0
+        self.counts = {"flow": 0, "adjoint": 0, "evaluations": 0, "reused": 0}
+        self.seconds = {"solver": 0.0, "ffd": 0.0}
+        self.mesh_name = "mesh" + Path(model.run.design.mesh).suffix
+        self._seen: set[str] = set()        # keys of the evaluations this process has handed out
+
+    # -- the public entry ---------------------------------------------------------------------
+    def evaluate(self, values: np.ndarray, gradient: bool = False, functions: list[str] | None = None) -> Evaluation:
+        """The evaluation of the design vector ``values`` (n_vars,), with gradients when ``gradient``: of
+        every function of the run, or of ``functions`` only."""
+        values = np.asarray(values, dtype=float)
+        ev = self.store.find(values)
+        if ev is None:
+            ev = self._flow(values)
+        elif ev.key not in self._seen:
+            self.counts["reused"] += 1          # finished by an earlier run (--resume)
+        self._seen.add(ev.key)
+        want = self.functions if functions is None else [f for f in self.functions if f in functions]
+        if gradient and ev.failed is None and set(want) - set(ev.gradients):
+            ev = self._adjoints(ev, want)
+        return ev
+
+    # -- the stages ------------------------------------------------------------------------------
+    def _geometry(self, ev: Evaluation) -> tuple[Evaluation, float]:
+        """Set the values, deform, gate, write the mesh: (evaluation, seconds); failed on refusal."""
+        t0 = time.perf_counter()
+        model = self.model
+        try:
+            model.set_values(ev.values)
+        except InputError as e:
+            return ev.with_(failed=f"design refused: {e.message}"), time.perf_counter() - t0
+        result = deform(model.run, P=model.lattice(), recover=False)
+        try:
+            enforce(result.quality, mesh_path=model.run.design.mesh, design_path=model.run.design.path)
+        except QualityError as e:
+            return ev.with_(failed=f"mesh refused by the quality gate: {e.message}"), time.perf_counter() - t0
+        plan = plan_outputs([("mesh", ev.folder / self.mesh_name, False, "mesh")], inputs=(model.run.design.mesh,))
+        write_outputs(model.run, result, plan=plan)
+        cons = model.constraint_values() if model.constraints else np.zeros(0)
+        return ev.with_(constraints=np.asarray(cons, dtype=float)), time.perf_counter() - t0
+
+    def _flow(self, values: np.ndarray) -> Evaluation:
+        ev = self.store.new(values, self.iteration)
+        self.counts["evaluations"] += 1
+        ev, t_ffd = self._geometry(ev)
+        t_solver, ran = 0.0, False
+        if ev.failed is None:
+            ran = True
+            t0 = time.perf_counter()
+            try:
+                flow = self.solver.flow(ev.folder, ev.folder / self.mesh_name, start=self._nearest(ev.values))
+                t_solver = flow.seconds
+                missing = [f for f in self.functions if f not in flow.functions]
+                if missing:
+                    raise InputError(f"the solver reported no {missing[0]} (it reported: "
+                                     f"{', '.join(flow.functions) or 'nothing'}); check the function's name",
+                                     key="optimize.objective")
+                ev = ev.with_(functions=dict(flow.functions), log=str(flow.log) if flow.log else None)
+            except SolverFailure as e:
+                t_solver = time.perf_counter() - t0          # a failed run's time counts too
+                ev = ev.with_(failed=e.reason, log=None if e.log is None else str(e.log))
+            self.counts["flow"] += 1
+        ev = ev.with_(seconds={"solver": t_solver, "ffd": t_ffd}, solves={"flow": int(ran), "adjoint": 0})
+        self.seconds["solver"] += t_solver
+        self.seconds["ffd"] += t_ffd
+        ev = self.store.save(ev)
+        self.report(ev, "flow")
+        return ev
+
+    def _adjoints(self, ev: Evaluation, functions: list[str]) -> Evaluation:
+        """Run the adjoint of each of ``functions`` still missing and chain each to dJ/dv (n_vars,)."""
+        grads = dict(ev.gradients)
+        t_solver = t_ffd = 0.0
+        mesh_path = ev.folder / self.mesh_name
+        for name in functions:
+            if name in grads:
+                continue
+            try:
+                sens = self.solver.adjoint(ev.folder, mesh_path, name, start=self._nearest(ev.values, name))
+            except SolverFailure as e:
+                self.counts["adjoint"] += 1
+                ev = ev.with_(failed=f"adjoint of {name}: {e.reason}", log=None if e.log is None else str(e.log))
+                break
+            self.counts["adjoint"] += 1
+            t_solver += sens.seconds
+            t0 = time.perf_counter()
+            grads[name] = self.chain(ev.values, sens)
+            t_ffd += time.perf_counter() - t0
+            ev = ev.with_(solves={**ev.solves, "adjoint": ev.solves["adjoint"] + 1}, gradients=dict(grads),
+                          seconds={"solver": ev.seconds["solver"] + sens.seconds,
+                                   "ffd": ev.seconds["ffd"] + time.perf_counter() - t0})
+            ev = self.store.save(ev)             # each finished adjoint kept (Ctrl-C loses none)
+        self.seconds["solver"] += t_solver
+        self.seconds["ffd"] += t_ffd
+        ev = self.store.save(ev)
+        self.report(ev, "adjoint")
+        return ev
+
+    def _nearest(self, values: np.ndarray, adjoint_of: str | None = None) -> Path | None:
+        """The folder of the finished evaluation nearest to ``values`` (with the adjoint of ``adjoint_of``
+        when given): where the solver may start from. None when warm starts are off or none exists."""
+        if not self.warm_start:
+            return None
+        done = [e for e in self.store.all() if e.failed is None and e.functions
+                and (adjoint_of is None or adjoint_of in e.gradients) and not np.array_equal(e.values, values)]
+        if not done:
+            return None
+        return min(done, key=lambda e: float(np.linalg.norm(e.values - values))).folder
+
+    def chain(self, values: np.ndarray, sens) -> np.ndarray:
+        """dJ/dv (n_vars,) of a solver's dJ/dX (:class:`~ffdcli.optimize.solvers.base.Sensitivity`) at the
+        design ``values``: through the volume motion's exact transpose when the file covers volume
+        nodes, else through the surface alone."""
+        model = self.model
+        if not np.array_equal(model.values, values):
+            model.set_values(values)
+        n = model.run.prep.mesh.n_points
+        surface = model.surface_ids
+        volume_rows = np.setdiff1d(sens.ids, surface, assume_unique=False).size > 0
+        g = sens.dense(n)
+        if volume_rows and model.uses_volume():
+            return np.asarray(model.mesh_vjp(g), dtype=float)
+        return np.asarray(model.surface_vjp(g[surface]), dtype=float)
+
+    def geometric(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(values (C,), Jacobian (C, n_vars)) of the design file's ``constraints:`` at ``values``: exact."""
+        model = self.model
+        if not model.constraints:
+            return np.zeros(0), np.zeros((0, model.n_vars))
+        if not np.array_equal(model.values, values):
+            model.set_values(values)
+        t0 = time.perf_counter()
+        out = np.asarray(model.constraint_values(), float), np.asarray(model.constraint_jacobian(), float)
+        self.seconds["ffd"] += time.perf_counter() - t0
+        return out

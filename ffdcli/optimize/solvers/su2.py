@@ -1,0 +1,307 @@
+"""SU2 behind the solver interface (:mod:`ffdcli.optimize.solvers.base`).
+
+ffd writes SU2's own configuration into each evaluation's folder with only these keys changed (the rest,
+the physics and numerics, is the user's file as written):
+
+* every run: ``MESH_FILENAME`` (the deformed mesh ffd wrote), ``MESH_FORMAT= SU2``, ``TABULAR_FORMAT= CSV``,
+  ``SOLUTION_FILENAME= solution_flow.dat``, ``RESTART_FILENAME= restart_flow.dat``,
+  ``SOLUTION_ADJ_FILENAME= solution_adj.dat``, ``RESTART_ADJ_FILENAME= restart_adj.dat``, ``RESTART_SOL``:
+  ``YES`` when the run starts from the solution of the nearest earlier evaluation (a warm start: its
+  ``restart_flow.dat``, or ``restart_adj_<suffix>.dat`` for an adjoint, copied in), else ``NO``;
+* the flow: ``MATH_PROBLEM= DIRECT``, ``CONV_FILENAME= history``, ``OUTPUT_FILES= (RESTART, SURFACE_CSV)``,
+  ``HISTORY_OUTPUT`` the config's list plus ``AERO_COEFF`` (SU2's default has no function columns);
+* each adjoint (one per function with a gradient, after the flow, whose ``restart_flow.dat`` is copied to
+  ``solution_flow.dat``): ``MATH_PROBLEM= DISCRETE_ADJOINT`` (``SU2_CFD_AD``) or ``CONTINUOUS_ADJOINT``
+  (``SU2_CFD``), ``OBJECTIVE_FUNCTION= <name>``, ``OBJECTIVE_WEIGHT= 1.0``, ``CONV_FILENAME=
+  history_adj_<suffix>``, ``SURFACE_ADJ_FILENAME= surface_adjoint_<suffix>``, ``OUTPUT_FILES= (RESTART,
+  RESTART_ASCII, SURFACE_CSV)`` (suffix: SU2's own, ``cd`` for DRAG, ``cl`` for LIFT).
+
+Functions are read from the final row of ``history.csv`` under SU2's column names (DRAG -> ``CD``,
+LIFT -> ``CL``, MOMENT_Z -> ``CMz``: :data:`HISTORY_COLUMNS`). A run fails (:class:`SolverFailure`,
+with its log) when SU2 exits non-zero, a function is NaN, or the run stopped without SU2's "All
+convergence criteria satisfied." and its residual above ``CONV_RESIDUAL_MINVAL``.
+
+The discrete adjoint's ``restart_adj_<suffix>.csv`` gives ``Sensitivity_x/y(/z)`` at every mesh node
+(dJ/dX, volume included); the continuous adjoint's ``surface_adjoint_<suffix>.csv`` a scalar S per wall
+node, read as dJ/dX = −S n̂ (:mod:`ffdcli.formats.wall_normals`); its gradients are approximate.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli.errors import InputError
+from ffdcli.io.formats import read_mesh
+from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
+from ffdcli.optimize.solvers.base import (
+    FlowResult,
+    Sensitivity,
+    Solver,
+    SolverFailure,
+    SolverInfo,
+    find_program,
+    run_logged,
+)
+
+#: SU2's history columns of its functions (``SU2/io/historyMap.py``), the optimisation's name first.
+HISTORY_COLUMNS = {
+    "DRAG": "CD", "LIFT": "CL", "SIDEFORCE": "CSF", "MOMENT_X": "CMx", "MOMENT_Y": "CMy", "MOMENT_Z": "CMz",
+    "FORCE_X": "CFx", "FORCE_Y": "CFy", "FORCE_Z": "CFz", "EFFICIENCY": "CEff", "BUFFET": "Buffet",
+    "EQUIVALENT_AREA": "CEquiv_Area", "TOTAL_HEATFLUX": "HF", "MAXIMUM_HEATFLUX": "MaxHF",
+    "SURFACE_TOTAL_PRESSURE": "Avg_TotalPress", "SURFACE_STATIC_PRESSURE": "Avg_Press",
+    "SURFACE_MASSFLOW": "Avg_Massflow", "SURFACE_MACH": "Avg_Mach", "SURFACE_UNIFORMITY": "Uniformity",
+    "SURFACE_PRESSURE_DROP": "Pressure_Drop", "THRUST": "CT", "TORQUE": "CQ", "FIGURE_OF_MERIT": "CMerit",
+}
+
+#: SU2's file suffix of each function's adjoint (``SU2/io/tools.py``, ``get_adjointSuffix``).
+ADJOINT_SUFFIX = {
+    "DRAG": "cd", "LIFT": "cl", "SIDEFORCE": "csf", "MOMENT_X": "cmx", "MOMENT_Y": "cmy", "MOMENT_Z": "cmz",
+    "FORCE_X": "cfx", "FORCE_Y": "cfy", "FORCE_Z": "cfz", "EFFICIENCY": "eff", "BUFFET": "buffet",
+    "EQUIVALENT_AREA": "ea", "TOTAL_HEATFLUX": "totheat", "MAXIMUM_HEATFLUX": "maxheat",
+    "SURFACE_TOTAL_PRESSURE": "pt", "SURFACE_STATIC_PRESSURE": "pe", "SURFACE_MASSFLOW": "mfr",
+    "SURFACE_MACH": "mach", "SURFACE_UNIFORMITY": "uniform", "SURFACE_PRESSURE_DROP": "dp",
+    "THRUST": "ct", "TORQUE": "cq", "FIGURE_OF_MERIT": "merit",
+}
+
+_KEY = re.compile(r"^\s*([A-Za-z_][A-Za-z0-9_]*)\s*=")
+
+
+def read_config(path: Path) -> list[str]:
+    """The lines of an SU2 configuration (comments kept)."""
+    try:
+        return Path(path).read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError as e:
+        raise InputError(f"cannot read the SU2 configuration: {e.strerror}", path=path) from None
+
+
+def config_value(lines: list[str], key: str) -> str | None:
+    """The value of ``key`` in SU2 configuration ``lines`` (the last one written), None if absent."""
+    value = None
+    for line in lines:
+        m = _KEY.match(line)
+        if m and m.group(1).upper() == key:
+            value = line.split("=", 1)[1].split("%")[0].strip()
+    return value
+
+
+def with_keys(lines: list[str], changes: dict[str, str]) -> str:
+    """The configuration text with ``changes`` {KEY: value} set: each key's lines replaced by one
+    ``KEY= value`` where it first stood (or appended), every other line as the user wrote it."""
+    out, done = [], set()
+    for line in lines:
+        m = _KEY.match(line)
+        key = m.group(1).upper() if m else None
+        if key in changes:
+            if key not in done:
+                out.append(f"{key}= {changes[key]}")
+                done.add(key)
+            continue
+        out.append(line)
+    out += [f"{k}= {v}" for k, v in changes.items() if k not in done]
+    return "\n".join(out) + "\n"
+
+
+def read_history(path: Path) -> dict[str, list[float]]:
+    """SU2's ``history.csv``: {column header: values by row} (headers stripped of quotes and spaces)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    if len(rows) < 2:
+        return {}
+    head = [h.strip().strip('"').strip() for h in rows[0]]
+    cols: dict[str, list[float]] = {h: [] for h in head}
+    for row in rows[1:]:
+        if len(row) != len(head):
+            continue
+        for h, v in zip(head, row, strict=True):
+            try:
+                cols[h].append(float(v))
+            except ValueError:
+                cols[h].append(float("nan"))
+    return cols
+
+
+def _error_line(log: Path) -> str:
+    """The line of SU2's log that says what went wrong (its ``Error`` line), else its last line."""
+    try:
+        text = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    hits = [ln.strip() for ln in text if "error" in ln.lower() and ln.strip()]
+    last = [ln.strip() for ln in text if ln.strip()]
+    return (hits or last or [""])[-1][:200]
+
+
+class SU2(Solver):
+    """SU2 as ``ffd optimize``'s solver (see the module docstring for what it changes in the config).
+
+    Parameters
+    ----------
+    config : Path
+        The user's SU2 configuration.
+    launch : tuple of str
+        A prefix for each command (``("mpirun", "-n", "8")``).
+    adjoint : {"discrete", "continuous", None}
+        None: discrete where ``SU2_CFD_AD`` is found, else continuous (with a warning).
+    search : tuple of Path
+        More folders to look for SU2's programs in after ``$SU2_RUN`` and ``PATH``.
+    """
+
+    def __init__(self, config: Path, launch: tuple[str, ...] = (), adjoint: str | None = None,
+                 search: tuple[Path, ...] = ()):
+        self.config = Path(config)
+        self.launch = tuple(launch)
+        self.requested = adjoint
+        self.search = tuple(Path(s) for s in search)
+        self.programs: dict[str, Path] = {}
+        self.lines: list[str] = []
+        self.adjoint_kind = adjoint or "discrete"
+
+    def check(self) -> SolverInfo:
+        """Find SU2_CFD (and SU2_CFD_AD) and read the configuration; InputError (exit 2) when missing."""
+        self.lines = read_config(self.config)
+        cfd = find_program("SU2_CFD", "SU2_RUN", self.search)
+        if cfd is None:
+            raise InputError("SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
+                             key="optimize.solver")
+        self.programs["SU2_CFD"] = cfd
+        ad = find_program("SU2_CFD_AD", "SU2_RUN", (cfd.parent, *self.search))
+        warnings = []
+        if self.requested == "discrete" and ad is None:
+            raise InputError("adjoint: discrete needs SU2_CFD_AD (SU2 built with -Denable-autodiff=true), which "
+                             f"is not beside {cfd} nor on PATH", key="optimize.adjoint")
+        if self.requested is None:
+            self.adjoint_kind = "discrete" if ad is not None else "continuous"
+        if ad is not None:
+            self.programs["SU2_CFD_AD"] = ad
+        if self.adjoint_kind == "continuous":
+            warnings.append("the continuous adjoint's gradients are approximate (0.4-2.75x off on SU2's NACA0012, "
+                            "wrong where the trailing edge moves): keep the trailing-edge control points fixed")
+        if config_value(self.lines, "SOLVER") is None:
+            raise InputError("the SU2 configuration has no SOLVER= key; is it an SU2 config?", path=self.config)
+        return SolverInfo(name="su2", adjoint=self.adjoint_kind,
+                          programs={k: str(v) for k, v in self.programs.items()}, warnings=tuple(warnings))
+
+    def state(self) -> str:
+        return "\n".join(self.lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
+
+    # -- runs ---------------------------------------------------------------------------------
+    def _common(self, mesh: Path, warm: bool) -> dict[str, str]:
+        return {"MESH_FILENAME": mesh.name, "MESH_FORMAT": "SU2", "TABULAR_FORMAT": "CSV",
+                "SOLUTION_FILENAME": "solution_flow.dat", "RESTART_FILENAME": "restart_flow.dat",
+                "SOLUTION_ADJ_FILENAME": "solution_adj.dat", "RESTART_ADJ_FILENAME": "restart_adj.dat",
+                "RESTART_SOL": "YES" if warm else "NO"}
+
+    def _run(self, program: str, folder: Path, name: str, changes: dict[str, str]) -> tuple[Path, float]:
+        cfg = folder / f"{name}.cfg"
+        cfg.write_text(with_keys(self.lines, changes))
+        log = folder / f"{name}.log"
+        rc, seconds = run_logged([*self.launch, str(self.programs[program]), cfg.name], folder, log)
+        if rc != 0:
+            raise SolverFailure(f"{program} exited with status {rc}: {_error_line(log)}", log)
+        return log, seconds
+
+    def _converged(self, log: Path, history: dict, what: str) -> None:
+        try:
+            if "All convergence criteria satisfied" in log.read_text(errors="replace"):
+                return
+        except OSError:
+            pass
+        res = [h for h in history if h.startswith("rms[")]
+        minval = config_value(self.lines, "CONV_RESIDUAL_MINVAL")
+        if res and minval is not None:
+            final = history[res[0]][-1]
+            if final <= float(minval):
+                return
+            raise SolverFailure(f"the {what} did not converge: {res[0]} reached {final:.3g}, the config asks for "
+                                f"CONV_RESIDUAL_MINVAL {minval}", log)
+        raise SolverFailure(f"the {what} stopped without SU2's 'All convergence criteria satisfied'", log)
+
+    def _history_output(self) -> str:
+        """``HISTORY_OUTPUT`` with SU2's function columns: the config's list plus ``AERO_COEFF``."""
+        given = config_value(self.lines, "HISTORY_OUTPUT")
+        items = [t for t in re.split(r"[\s,()]+", given or "") if t] or ["ITER", "RMS_RES"]
+        if "AERO_COEFF" not in [t.upper() for t in items]:
+            items.append("AERO_COEFF")
+        return "(" + ", ".join(items) + ")"
+
+    def flow(self, folder: Path, mesh: Path, start: Path | None = None) -> FlowResult:
+        warm = start is not None and (Path(start) / "restart_flow.dat").is_file()
+        if warm:                      # SU2 starts from a nearby design's solution (same mesh topology)
+            shutil.copyfile(Path(start) / "restart_flow.dat", folder / "solution_flow.dat")
+        log, seconds = self._run("SU2_CFD", folder, "flow", {
+            **self._common(mesh, warm), "MATH_PROBLEM": "DIRECT", "CONV_FILENAME": "history",
+            "OUTPUT_FILES": "(RESTART, SURFACE_CSV)", "HISTORY_OUTPUT": self._history_output()})
+        hist_path = folder / "history.csv"
+        if not hist_path.is_file():
+            raise SolverFailure("SU2_CFD wrote no history.csv", log)
+        history = read_history(hist_path)
+        functions = {}
+        for name, col in HISTORY_COLUMNS.items():
+            if col in history and history[col]:
+                functions[name] = history[col][-1]
+        bad = [n for n, v in functions.items() if not math.isfinite(v)]
+        if bad:
+            raise SolverFailure(f"SU2_CFD gave {bad[0]} = {functions[bad[0]]}", log)
+        self._converged(log, history, "flow")
+        if not (folder / "restart_flow.dat").is_file():
+            raise SolverFailure("SU2_CFD wrote no restart_flow.dat", log)
+        return FlowResult(functions=functions, seconds=seconds, log=log)
+
+    def adjoint(self, folder: Path, mesh: Path, function: str, start: Path | None = None) -> Sensitivity:
+        sfx = ADJOINT_SUFFIX.get(function, function.lower())
+        shutil.copyfile(folder / "restart_flow.dat", folder / "solution_flow.dat")
+        warm = start is not None and (Path(start) / f"restart_adj_{sfx}.dat").is_file()
+        if warm:                      # the adjoint starts from a nearby design's adjoint solution
+            shutil.copyfile(Path(start) / f"restart_adj_{sfx}.dat", folder / f"solution_adj_{sfx}.dat")
+        discrete = self.adjoint_kind == "discrete"
+        log, seconds = self._run("SU2_CFD_AD" if discrete else "SU2_CFD", folder, f"adjoint_{sfx}", {
+            **self._common(mesh, warm), "MATH_PROBLEM": "DISCRETE_ADJOINT" if discrete else "CONTINUOUS_ADJOINT",
+            "OBJECTIVE_FUNCTION": function, "OBJECTIVE_WEIGHT": "1.0", "CONV_FILENAME": f"history_adj_{sfx}",
+            "SURFACE_ADJ_FILENAME": f"surface_adjoint_{sfx}", "OUTPUT_FILES": "(RESTART, RESTART_ASCII, SURFACE_CSV)"})
+        hist = folder / f"history_adj_{sfx}.csv"
+        self._converged(log, read_history(hist) if hist.is_file() else {}, f"adjoint of {function}")
+        if discrete:
+            path = folder / f"restart_adj_{sfx}.csv"
+            ids, values = _read_volume_sensitivity(path, log)
+            return Sensitivity(ids=ids, values=values, seconds=seconds, log=log)
+        path = folder / f"surface_adjoint_{sfx}.csv"
+        ids, values = _read_surface_sensitivity(path, mesh, log)
+        return Sensitivity(ids=ids, values=values, seconds=seconds, log=log, approximate=True)
+
+
+def _columns(path: Path, log: Path) -> tuple[list[str], np.ndarray]:
+    if not path.is_file():
+        raise SolverFailure(f"the adjoint wrote no {path.name}", log)
+    with open(path) as fh:
+        head = [h.strip().strip('"').lower() for h in fh.readline().split(",")]
+    data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+    if not np.all(np.isfinite(data)):
+        raise SolverFailure(f"{path.name} has NaN or infinite values", log)
+    return head, data
+
+
+def _read_volume_sensitivity(path: Path, log: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(ids, dJ/dX (K, 3)) of a discrete adjoint's ``restart_adj_<sfx>.csv``."""
+    head, data = _columns(path, log)
+    ids = data[:, head.index("pointid")].astype(np.int64)
+    values = np.zeros((len(ids), 3))
+    for c, name in enumerate(("sensitivity_x", "sensitivity_y", "sensitivity_z")):
+        if name in head:
+            values[:, c] = data[:, head.index(name)]
+    if not np.any(values):
+        raise SolverFailure(f"{path.name}: every Sensitivity value is zero, which is no gradient", log)
+    return ids, values
+
+
+def _read_surface_sensitivity(path: Path, mesh: Path, log: Path) -> tuple[np.ndarray, np.ndarray]:
+    """(ids, dJ/dX = −S n̂ (K, 3)) of a continuous adjoint's ``surface_adjoint_<sfx>.csv``."""
+    head, data = _columns(path, log)
+    ids = data[:, head.index("pointid")].astype(np.int64)
+    m = read_mesh(mesh)
+    return ids, surface_sensitivity_gradient(m, m.points, ids, data[:, head.index("surface_sensitivity")])

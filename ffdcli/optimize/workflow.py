@@ -1,0 +1,165 @@
+"""``ffd optimize`` as one call: :func:`run_optimize` (the command line only parses and prints).
+
+Order: the design file and its ``optimize:`` section (exit 2 on a bad key), the solver's programs and
+configuration (exit 2 when missing, before any work), the design model (the box built and embedded
+once), the run folder (``--resume`` reads its finished evaluations), then the optimiser or the
+gradient check; at the end (also on a stop, Ctrl-C or SIGTERM) ``history.csv``, ``history.png``,
+``best.yaml`` and the best mesh.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli.api import DesignModel
+from ffdcli.app.pipeline import load_run
+from ffdcli.design import load_design
+from ffdcli.design.optimize import OptimizeSettings, optimize_settings, select_variables
+from ffdcli.errors import FfdError
+from ffdcli.io.atomic import Terminated, atomic_path, signals_raise
+from ffdcli.optimize.best import best_design_data, write_best
+from ffdcli.optimize.check import gradient_check
+from ffdcli.optimize.driver import Driver, Outcome, StopRun, violation
+from ffdcli.optimize.history import best_evaluation, history_rows, write_history, write_picture
+from ffdcli.optimize.problem import OptimizationProblem
+from ffdcli.optimize.solvers.analytic import AnalyticSolver
+from ffdcli.optimize.solvers.base import Solver
+from ffdcli.optimize.solvers.su2 import SU2
+from ffdcli.optimize.store import EvaluationStore, inputs_hash
+
+#: The solvers ``optimize.solver`` names.
+SOLVERS: dict[str, type[Solver]] = {"su2": SU2, "analytic": AnalyticSolver}
+
+
+class Interrupted(FfdError):
+    """Ctrl-C or SIGTERM during a run: every finished evaluation is kept (exit 130 / 143)."""
+
+
+def make_solver(settings: OptimizeSettings, search: tuple[Path, ...] = ()) -> Solver:
+    """The solver of ``optimize.solver`` for ``settings`` (not yet checked)."""
+    return SOLVERS[settings.solver](settings.config, settings.launch, settings.adjoint, search)
+
+
+def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list[str] | None = None,
+                 step: float = 1e-3, report: Callable[[str], None] | None = None,
+                 warn: Callable[[str], None] | None = None, search: tuple[Path, ...] = (), progress=None,
+                 solver: Solver | None = None) -> dict:
+    """Run the ``optimize:`` section of a design file; returns the summary (SPEC's ``--json`` object).
+
+    ``check``: None for the optimisation, else the variable names or prefixes of ``--check-gradient``
+    (an empty list: every optimised variable); ``report``: a callable taking each progress line;
+    ``solver``: an already made solver (tests count its runs). Raises InputError (exit 2) before any
+    work for a bad design file, a missing solver or configuration, or a folder of another run."""
+    t_start = time.perf_counter()
+    report = report or (lambda line: None)
+    warn = warn or (lambda line: None)
+    design = load_design(design_path, overrides=overrides)
+    settings = optimize_settings(design)
+    solver = solver or make_solver(settings, search)
+    info = solver.check()
+    for w in info.warnings:
+        warn(w)
+    model = DesignModel(load_run(design, progress=progress))
+    chosen = select_variables(model.names, settings.variables, error=design.error)
+    folder = settings.folder / "check" if check is not None else settings.folder
+    store = EvaluationStore(folder, inputs_hash(design.mesh, solver.state(), design.data, model.names), resume=resume)
+    if store.reused:
+        report(f"resuming: {store.reused} finished evaluations in {folder}")
+    problem = OptimizationProblem(model, solver, store, settings.function_names,
+                                  report=lambda ev, stage: report(progress_line(ev, stage, settings, folder)),
+                                  warm_start=settings.warm_start)
+    head = {"solver": info.name, "adjoint": info.adjoint, "variables": [model.names[i] for i in chosen]}
+    if check is not None:
+        which = chosen if not check else select_variables(model.names, check)
+        with signals_raise():
+            try:
+                rows = gradient_check(problem, which, step)
+            except StopRun as e:
+                raise FfdError(e.reason) from None
+        return {**head, "gradient_check": rows, "seconds": _seconds(problem, t_start)}
+    driver = Driver(problem, settings, chosen)
+    outcome, stop = None, None
+    try:
+        with signals_raise():
+            if settings.iterations > 0:
+                outcome = driver.run()
+            else:
+                driver.start()
+    except StopRun as e:
+        stop = e
+    except (KeyboardInterrupt, Terminated) as e:
+        finish(problem, driver, settings, design, folder)
+        code = 130 if isinstance(e, KeyboardInterrupt) else 128 + e.signum
+        err = Interrupted(f"interrupted; {len(store.all())} finished evaluations are kept in {folder} "
+                          f"(continue with --resume)")
+        err.exit_code = code
+        raise err from None
+    summary = finish(problem, driver, settings, design, folder)
+    if outcome is None and stop is None:
+        outcome = Outcome("iterations", "iterations: 0 (the baseline only)", 0)
+    status = stop.status if stop else outcome.status
+    return {**head, "status": status, "message": stop.reason if stop else outcome.message,
+            "iterations": driver.iterations, **summary, "seconds": _seconds(problem, t_start),
+            "exit_code": 1 if status in ("failures", "baseline") else 0}
+
+
+def _seconds(problem: OptimizationProblem, t_start: float) -> dict:
+    return {"solver": round(problem.seconds["solver"], 3), "ffd": round(problem.seconds["ffd"], 3),
+            "wall": round(time.perf_counter() - t_start, 3)}
+
+
+def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSettings, design, folder: Path) -> dict:
+    """Write ``history.csv``, ``history.png``, ``best.yaml`` and the best mesh; the summary's figures."""
+    evaluations = problem.store.all()
+    model = problem.model
+    names = model.constraint_names if model.constraints else []
+    sides = driver.sides
+    worst = {ev.index: violation(ev, sides) for ev in evaluations}
+    rows = history_rows(evaluations, objective=settings.objective, functions=settings.function_names,
+                        constraint_names=names, violations=[worst[e.index] for e in evaluations],
+                        chosen=driver.chosen, r=driver.r, folder=folder)
+    write_history(folder / "history.csv", rows)
+    if evaluations and any(e.gradients for e in evaluations):
+        write_picture(folder / "history.png", evaluations, worst, settings.objective, settings.feasibility)
+    best, feasible = best_evaluation(evaluations, worst, settings.objective, settings.feasibility)
+    base = next((e for e in evaluations if np.array_equal(e.values, driver.v0)), None)
+    out = {"evaluations": len(evaluations),
+           "flow_solves": sum(e.solves["flow"] for e in evaluations),
+           "adjoint_solves": sum(e.solves["adjoint"] for e in evaluations),
+           "reused": problem.counts["reused"],
+           "objective": {"initial": None if base is None or base.failed else base.functions[settings.objective],
+                         "best": None if best is None else best.functions[settings.objective]},
+           "functions": {} if best is None else dict(best.functions),
+           "constraints": {} if best is None or not names else
+           {n: float(c) for n, c in zip(names, best.constraints, strict=True)},
+           "violation": None if best is None else worst[best.index],
+           "constraints_satisfied": bool(feasible), "best": None, "best_mesh": None,
+           "history": str(folder / "history.csv"), "folder": str(folder)}
+    if best is not None:
+        mesh_src = best.folder / problem.mesh_name
+        mesh_dst = folder / ("best" + Path(design.mesh).suffix)
+        with atomic_path(mesh_dst) as tmp:
+            shutil.copyfile(mesh_src, tmp)
+        data = best_design_data(design, settings, model.names, best.values, folder / "best.yaml", mesh_dst)
+        note = (f"the best {'feasible ' if feasible else '(INFEASIBLE: no feasible) '}design of ffd optimize: "
+                f"evaluation {best.index}, {settings.objective} {best.functions[settings.objective]:.6g}")
+        write_best(folder / "best.yaml", data, note)
+        out.update(best=str(folder / "best.yaml"), best_mesh=str(mesh_dst), best_evaluation=best.index)
+    return out
+
+
+def progress_line(ev, stage: str, settings: OptimizeSettings, folder: Path) -> str:
+    """The line printed per evaluation (after its flow, and after its adjoints)."""
+    where = ev.folder.relative_to(folder) if ev.folder.is_relative_to(folder) else ev.folder
+    if ev.failed is not None:
+        return (f"eval {ev.index:3d} it {ev.iteration:2d}  FAILED: {ev.failed}"
+                + (f" (log: {ev.log})" if ev.log else "") + f"  [{where}]")
+    funcs = "  ".join(f"{k} {ev.functions[k]:.6g}" for k in settings.function_names)
+    what = "flow" if stage == "flow" else f"+{ev.solves['adjoint']} adjoints"
+    return (f"eval {ev.index:3d} it {ev.iteration:2d}  {funcs}  | {what}, solver {ev.seconds['solver']:.1f} s, "
+            f"ffd {ev.seconds['ffd']:.2f} s  [{where}]")

@@ -1,0 +1,236 @@
+"""``ffd optimize`` through the solver interface with the ANALYTIC STAND-IN solver
+(:mod:`ffdcli.optimize.solvers.analytic`: smooth functions of the wall points with exact dJ/dX, no
+flow solver): convergence, resume, failures, max_failures, the gradient check, the design file's
+``optimize:`` section and the command line's exit codes. The real SU2 loop: tests/test_optimize_su2.py."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from ffdcli.api import DesignModel
+from ffdcli.cli import main
+from ffdcli.design import load_design
+from ffdcli.design.optimize import optimize_settings, select_variables
+from ffdcli.errors import InputError
+from ffdcli.optimize.solvers.analytic import AnalyticSolver
+from ffdcli.optimize.workflow import run_optimize
+
+ROOT = Path(__file__).resolve().parents[2]
+MESH = ROOT / "samples" / "naca0012_2d.su2"
+VARIABLES = ["c0", "c1.shape.upper[1]", "c1.shape.upper[2]", "c1.shape.upper[3]", "c1.shape.upper[4]",
+             "c1.shape.lower[1]", "c1.shape.lower[2]", "c1.shape.lower[3]", "c1.shape.lower[4]"]
+
+
+def write_case(tmp_path: Path, analytic: dict | None = None, **optimize) -> Path:
+    """A 2D design (6 x 2 box: twist + 8 shape variables, t/c >= baseline at 30 % chord) solved by the
+    analytic stand-in: minimise DRAG = mean(y^2) with LIFT = 10 mean(y) >= 0.1."""
+    (tmp_path / "analytic.yaml").write_text(yaml.safe_dump({"marker": "airfoil", **(analytic or {})}))
+    opt = {"solver": "analytic", "config": "analytic.yaml", "objective": "DRAG",
+           "functions": [{"name": "LIFT", "lower": 0.1}], "variables": VARIABLES, "iterations": 12,
+           "folder": "opt", **optimize}
+    design = {"mesh": str(MESH), "surface": "airfoil", "box": {"points": [6, 2]},
+              "changes": [{"twist": 0}, {"shape": {"upper": [0] * 6, "lower": [0] * 6}}],
+              "bounds": {"c0.twist": [-3, 3], "c1.shape": [-0.03, 0.03]},
+              "constraints": [{"thickness_to_chord": {"chord": [0.3], "lower": 1.0}}], "optimize": opt}
+    path = tmp_path / "design.yaml"
+    path.write_text(yaml.safe_dump(design, sort_keys=False))
+    return path
+
+
+def solver_for(path: Path) -> AnalyticSolver:
+    return AnalyticSolver(Path(path).parent / "analytic.yaml")
+
+
+def history(path: Path) -> list[dict]:
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+def test_converges_feasible_with_outputs(tmp_path):
+    path = write_case(tmp_path, iterations=40)
+    solver = solver_for(path)
+    out = run_optimize(path, solver=solver)
+    assert out["status"] == "converged", out["message"]
+    assert out["constraints_satisfied"]
+    assert out["objective"]["best"] < out["objective"]["initial"] - 5e-5
+    assert out["functions"]["LIFT"] >= 0.1 - 1e-6
+    assert out["iterations"] >= 3
+    # one flow per evaluation, the adjoints (DRAG, LIFT) only at the accepted iterates
+    assert out["flow_solves"] == solver.flows == out["evaluations"]
+    assert out["adjoint_solves"] == solver.adjoints <= 2 * (out["iterations"] + 1)
+    assert solver.adjoints >= 2 * out["iterations"]
+    folder = tmp_path / "opt"
+    rows = history(folder / "history.csv")
+    assert len(rows) == out["evaluations"]
+    assert {"evaluation", "iteration", "norm", "objective", "LIFT", "k0.thickness_to_chord[0]", "violation", "step",
+            "solver_seconds", "ffd_seconds", "folder", "failed"} <= set(rows[0])
+    assert (folder / "history.png").stat().st_size > 10_000
+    for row in rows:
+        assert (folder / row["folder"] / "mesh.su2").is_file()
+    # best.yaml: the design file with the best values; loading it gives those values
+    best = load_design(folder / "best.yaml")
+    model = DesignModel.from_file(folder / "best.yaml")
+    assert model.names[0] == "c0.twist"
+    ev = json.loads((folder / "evals" / f"{out['best_evaluation']:04d}" / "result.json").read_text())
+    assert np.array_equal(model.values, np.array(ev["values"]))
+    assert best.mesh == MESH.resolve()
+    assert (folder / "best.su2").read_bytes() == (folder / "evals" / f"{out['best_evaluation']:04d}" /
+                                                  "mesh.su2").read_bytes()
+
+
+def test_screening_skips_the_adjoint_of_a_far_constraint(tmp_path):
+    far = [{"name": "LIFT", "lower": 0.1}, {"name": "MOMENT_Z", "lower": -10.0}]
+    path = write_case(tmp_path, functions=far, iterations=4)
+    solver = solver_for(path)
+    out = run_optimize(path, solver=solver)
+    rows = history(tmp_path / "opt" / "history.csv")
+    grads = [json.loads((tmp_path / "opt" / r["folder"] / "result.json").read_text())["gradients"] for r in rows]
+    with_grad = [g for g in grads if g]
+    assert set(with_grad[0]) == {"DRAG", "LIFT", "MOMENT_Z"}          # the baseline: every adjoint
+    assert all(set(g) == {"DRAG", "LIFT"} for g in with_grad[1:])      # then MOMENT_Z (margin 1.0) screened
+    assert out["adjoint_solves"] == solver.adjoints == 2 * len(with_grad) + 1
+    # screen: null runs every adjoint at every iterate
+    (tmp_path / "b").mkdir()
+    path = write_case(tmp_path / "b", functions=far, iterations=4, screen=None)
+    out = run_optimize(path, solver=solver_for(path))
+    assert out["adjoint_solves"] == 3 * sum(1 for r in history(tmp_path / "b" / "opt" / "history.csv")
+                                            if int(r["adjoint_solves"]))
+
+
+def test_resume_reuses_every_finished_evaluation(tmp_path):
+    path = write_case(tmp_path, iterations=3)
+    first = solver_for(path)
+    a = run_optimize(path, solver=first)
+    again = solver_for(path)
+    b = run_optimize(path, resume=True, solver=again)
+    assert again.flows == 0 and again.adjoints == 0            # nothing run twice
+    assert b["reused"] == a["evaluations"] and b["objective"] == a["objective"]
+    # a longer run continues where the first stopped: the first evaluations are the same designs
+    more = solver_for(path)
+    c = run_optimize(path, ["optimize.iterations=6"], resume=True, solver=more)
+    assert c["evaluations"] > a["evaluations"]
+    assert more.flows == c["evaluations"] - a["evaluations"]
+    assert c["reused"] == a["evaluations"]
+
+
+def test_folder_of_another_run_needs_resume(tmp_path):
+    path = write_case(tmp_path, iterations=1)
+    run_optimize(path, solver=solver_for(path))
+    with pytest.raises(InputError, match="--resume"):
+        run_optimize(path, solver=solver_for(path))
+
+
+def test_failure_recorded_and_stepped_back(tmp_path):
+    path = write_case(tmp_path, analytic={"fail_calls": [3]})
+    out = run_optimize(path, solver=solver_for(path))
+    rows = history(tmp_path / "opt" / "history.csv")
+    failed = [r for r in rows if r["failed"]]
+    assert len(failed) == 1 and "failure injected" in failed[0]["failed"] and "flow.log" in failed[0]["failed"]
+    assert out["constraints_satisfied"] and out["status"] in ("converged", "iterations")
+    # the next design lies between the last accepted design and the failed one (a shorter step back)
+    evs = {int(r["evaluation"]): json.loads((tmp_path / "opt" / r["folder"] / "result.json").read_text())
+           for r in rows}
+    k = int(failed[0]["evaluation"])
+    anchor = max((i for i, e in evs.items() if i < k and e["gradients"]), key=int)
+    x0, xf, xn = (np.array(evs[i]["values"]) for i in (anchor, k, k + 1))
+    t = np.dot(xn - x0, xf - x0) / np.dot(xf - x0, xf - x0)
+    assert 0.05 < t < 0.95
+    assert np.linalg.norm(xn - x0 - t * (xf - x0)) < 1e-9 * max(1.0, np.linalg.norm(xf - x0))
+
+
+def test_max_failures_exit_1_with_best_written(tmp_path):
+    # every flow after the baseline's fails
+    path = write_case(tmp_path, analytic={"fail_calls": list(range(2, 30))}, max_failures=2)
+    out = run_optimize(path, solver=solver_for(path))
+    assert out["status"] == "failures" and out["exit_code"] == 1
+    rows = history(tmp_path / "opt" / "history.csv")
+    assert sum(bool(r["failed"]) for r in rows) == 3
+    assert (tmp_path / "opt" / "best.yaml").is_file() and (tmp_path / "opt" / "best.su2").is_file()
+    code = run_cli([str(path), "--resume", "--json", "-q"])
+    assert code == 1
+
+
+def test_check_gradient_agrees(tmp_path):
+    path = write_case(tmp_path)
+    out = run_optimize(path, check=["c0.twist", "c1.shape.upper[2]", "c1.shape.lower[3]"], solver=solver_for(path))
+    rows = out["gradient_check"]
+    assert {r["function"] for r in rows} == {"DRAG", "LIFT"} and len(rows) == 6
+    for r in rows:
+        assert r["relative"] < 1e-5 or abs(r["finite_difference"]) < 1e-10, r
+        assert r["step"] == pytest.approx(6e-3 if r["variable"] == "c0.twist" else 6e-5)
+
+
+def run_cli(argv) -> int:
+    with pytest.raises(SystemExit) as e:
+        main(["optimize", *argv])
+    return e.value.code
+
+
+def test_cli_json_and_exit_codes(tmp_path, capsys, monkeypatch):
+    path = write_case(tmp_path, iterations=2)
+    assert run_cli([str(path), "--json", "-q"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    for key in ("status", "iterations", "evaluations", "flow_solves", "adjoint_solves", "objective", "functions",
+                "constraints_satisfied", "best", "seconds"):
+        assert key in out
+    assert set(out["objective"]) == {"initial", "best"} and set(out["seconds"]) >= {"solver", "ffd"}
+    assert run_cli([str(path), "--check-gradient", "c0.twist", "--json", "-q", "--set", "optimize.folder=chk"]) == 0
+    rows = json.loads(capsys.readouterr().out.strip().splitlines()[-1])["gradient_check"]
+    assert set(rows[0]) >= {"function", "variable", "adjoint", "finite_difference", "relative"}
+    # a missing solver configuration: exit 2 before any work
+    sub = tmp_path / "b"
+    sub.mkdir()
+    bad = write_case(sub, config="nope.cfg")
+    assert run_cli([str(bad)]) == 2
+    assert "optimize.config" in capsys.readouterr().err
+    assert not (bad.parent / "opt").exists()
+    # SU2 nowhere: exit 2 naming SU2_RUN, before any work
+    (bad.parent / "su2.cfg").write_text("SOLVER= EULER\n")
+    su2 = write_case(bad.parent, solver="su2", config="su2.cfg", folder="su2run")
+    monkeypatch.setenv("PATH", "/nonexistent")
+    monkeypatch.delenv("SU2_RUN", raising=False)
+    assert run_cli([str(su2)]) == 2
+    assert "SU2_RUN" in capsys.readouterr().err
+    assert not (bad.parent / "su2run").exists()
+
+
+@pytest.mark.parametrize("change, key, words", [
+    ({"objective": "LIFT"}, "optimize.functions[0].name", "also optimize.objective"),
+    ({"functions": [{"name": "LIFT"}]}, "optimize.functions[0]", "neither lower nor upper"),
+    ({"functions": [{"name": "LIFT", "lower": 2, "upper": 1}]}, "optimize.functions[0].lower", "above upper"),
+    ({"method": "BFGS"}, "optimize.method", "SLSQP"),
+    ({"launch": "mpirun -n 'x"}, "optimize.launch", "quotes"),
+    ({"iterations": -1}, "optimize.iterations", "at least 0"),
+    ({"colour": 1}, "optimize.colour", "unknown key"),
+    ({"variables": ["c7"]}, "optimize.variables[0]", "names no design variable"),
+])
+def test_optimize_section_errors_name_the_key(tmp_path, change, key, words):
+    path = write_case(tmp_path, **change)
+    with pytest.raises(InputError) as e:
+        design = load_design(path)
+        settings = optimize_settings(design)
+        names = ["c0.twist", "c1.shape.upper[0]"]
+        select_variables(names, settings.variables, error=design.error)
+    assert e.value.key == key and words in str(e.value)
+
+
+def test_optimize_settings_paths_and_launch(tmp_path):
+    path = write_case(tmp_path, launch="mpirun -n 8 --bind-to 'core x'")
+    s = optimize_settings(load_design(path))
+    assert s.launch == ("mpirun", "-n", "8", "--bind-to", "core x")
+    assert s.config == (tmp_path / "analytic.yaml").resolve() and s.folder == (tmp_path / "opt").resolve()
+    assert s.function_names == ["DRAG", "LIFT"] and s.method == "SLSQP" and s.max_failures == 3
+    assert select_variables(["c0.twist", "c1.shape.upper[1]", "c10.span"], ["c1"]) == [1]
+
+
+def test_trust_constr_runs_feasible(tmp_path):
+    path = write_case(tmp_path, method="trust-constr", iterations=15)
+    out = run_optimize(path, solver=solver_for(path))
+    assert out["status"] in ("converged", "iterations")
+    assert out["constraints_satisfied"] and out["objective"]["best"] < out["objective"]["initial"]

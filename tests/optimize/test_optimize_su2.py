@@ -1,0 +1,82 @@
+"""A REAL two-iteration ``ffd optimize`` loop with SU2 on SU2's NACA0012 case (samples/naca0012_inv.su2,
+Euler, M 0.8, alpha 1.25 deg), discrete adjoint, loosely converged (residual 1e-8) so that it takes
+about a minute on a quiet machine. Skipped, with the reason, when SU2 is absent: SU2 is found through
+SU2_RUN, PATH or ../shared/su2/bin beside the repository."""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+from pathlib import Path
+
+import pytest
+import yaml
+
+from ffdcli.optimize.solvers.base import find_program
+from ffdcli.optimize.solvers.su2 import config_value, read_config, with_keys
+from ffdcli.optimize.workflow import run_optimize
+
+ROOT = Path(__file__).resolve().parents[2]
+SHARED_SU2 = ROOT.parent / "shared" / "su2" / "bin"
+SEARCH = (SHARED_SU2,)
+
+
+def su2_missing() -> str | None:
+    for name in ("SU2_CFD", "SU2_CFD_AD"):
+        if find_program(name, "SU2_RUN", SEARCH) is None:
+            return f"{name} not found (SU2_RUN, PATH, {SHARED_SU2})"
+    return None
+
+
+@pytest.mark.skipif(su2_missing() is not None, reason=str(su2_missing()))
+def test_two_iterations_with_su2(tmp_path):
+    shutil.copyfile(ROOT / "samples" / "naca0012_inv.su2", tmp_path / "naca0012_inv.su2")
+    lines = read_config(ROOT / "samples" / "naca0012_inv.cfg")
+    (tmp_path / "flow.cfg").write_text(with_keys(lines, {"CONV_RESIDUAL_MINVAL": "-8"}))
+    design = yaml.safe_load((ROOT / "configs" / "naca0012_optimize.yaml").read_text())
+    design.update(mesh="naca0012_inv.su2", output={"mesh": "out/best.su2"})
+    design["optimize"].update(config="flow.cfg", folder="opt", iterations=2,
+                              functions=[{"name": "LIFT", "lower": 0.328486}])
+    path = tmp_path / "design.yaml"
+    path.write_text(yaml.safe_dump(design, sort_keys=False))
+    out = run_optimize(path, search=SEARCH)
+    assert out["adjoint"] == "discrete"
+    assert out["status"] in ("iterations", "converged"), out["message"]
+    assert out["iterations"] >= 1
+    assert out["objective"]["best"] < out["objective"]["initial"]
+    assert out["adjoint_solves"] >= 2 * 2                      # DRAG and LIFT, at two designs at least
+    with open(tmp_path / "opt" / "history.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == out["evaluations"] and not any(r["failed"] for r in rows)
+    first = tmp_path / "opt" / rows[0]["folder"]
+    cfg = read_config(first / "flow.cfg")
+    assert config_value(cfg, "MESH_FILENAME") == "mesh.su2"
+    assert config_value(cfg, "MACH_NUMBER") == "0.8"              # the user's physics untouched
+    assert (first / "restart_adj_cd.csv").is_file() and (first / "restart_adj_cl.csv").is_file()
+    assert (tmp_path / "opt" / "best.yaml").is_file() and (tmp_path / "opt" / "best.su2").is_file()
+
+
+def test_with_keys_changes_only_the_named_keys():
+    lines = ["% comment", "SOLVER= EULER", "MESH_FILENAME= a.su2 % the mesh", "OUTPUT_FILES= (RESTART)",
+             "MESH_FILENAME= b.su2"]
+    text = with_keys(lines, {"MESH_FILENAME": "mesh.su2", "MATH_PROBLEM": "DIRECT"})
+    assert text.splitlines() == ["% comment", "SOLVER= EULER", "MESH_FILENAME= mesh.su2", "OUTPUT_FILES= (RESTART)",
+                                 "MATH_PROBLEM= DIRECT"]
+    assert config_value(lines, "MESH_FILENAME") == "b.su2"
+
+
+def test_find_program_order(tmp_path, monkeypatch):
+    a, b = tmp_path / "a", tmp_path / "b"
+    for d in (a, b):
+        d.mkdir()
+        (d / "SU2_CFD").write_text("#!/bin/sh\n")
+        (d / "SU2_CFD").chmod(0o755)
+    monkeypatch.setenv("SU2_RUN", str(a))
+    monkeypatch.setenv("PATH", str(b) + os.pathsep + os.environ.get("PATH", ""))
+    assert find_program("SU2_CFD", "SU2_RUN") == a / "SU2_CFD"
+    monkeypatch.delenv("SU2_RUN")
+    assert find_program("SU2_CFD", "SU2_RUN") == b / "SU2_CFD"
+    monkeypatch.setenv("PATH", "/nonexistent")
+    assert find_program("SU2_CFD", "SU2_RUN", (a,)) == a / "SU2_CFD"
+    assert find_program("SU2_CFD", "SU2_RUN") is None
