@@ -65,13 +65,20 @@ import numpy as np
 from ffdcli.io.formats import su2
 op, src, out = sys.argv[1:4]
 t = time.perf_counter()
-mesh = su2.read(src)
+if op.startswith("foam"):
+    from ffdcli.io.formats import openfoam  # noqa: I001 (the child script)
+    mesh = openfoam.read(src)
+else:
+    mesh = su2.read(src)
 t_read = time.perf_counter() - t
 res = {"read": t_read, "points": mesh.n_points, "cells": mesh.n_cells}
-if op == "write_patch":
+if op in ("write_patch", "foam_write"):
     pts = mesh.points + 1e-3 * np.sin(mesh.points[:, [1, 2, 0]] * 7.0)
     t = time.perf_counter()
-    su2.write(mesh, out, pts)
+    if op == "foam_write":
+        openfoam.write(mesh, out, pts)
+    else:
+        su2.write(mesh, out, pts)
     res["write_patch"] = time.perf_counter() - t
 elif op == "write_new":
     mesh.source, mesh.format = None, ""
@@ -92,12 +99,50 @@ def _child(op: str, src: Path, out: Path) -> dict:
 
 
 def run(quick: bool = False) -> list[dict]:
-    """Benchmark rows for ``python -m benchmarks``: 100k points when ``quick``, else 1M points.
+    """Benchmark rows for ``python -m benchmarks``: 100k points when ``quick``, else 1M points;
+    and an OpenFOAM polyMesh of 100k (quick) or 1M cells against the same mesh as SU2.
 
     Each row: ``name``, ``points``, ``cells``, ``file_mb``, ``read_s``, ``read_peak_mb``,
-    ``write_patch_s``, ``write_patch_peak_mb``, ``write_new_s``, ``write_new_peak_mb``.
+    ``write_patch_s``, ``write_patch_peak_mb``, ``write_new_s``, ``write_new_peak_mb``; the
+    OpenFOAM rows (``format`` openfoam-ascii, openfoam-binary-gz, su2 of the same mesh) have read
+    and write (the points of a copy) only, and ``ratio_read``/``ratio_write`` to SU2.
     """
-    return run_sizes((100_000,) if quick else (1_000_000,))
+    return run_sizes((100_000,) if quick else (1_000_000,)) + run_foam(100_000 if quick else 1_000_000)
+
+
+def run_foam(cells: int = 1_000_000) -> list[dict]:
+    """Read and write (moved points) of the tet mesh of about ``cells`` cells as an OpenFOAM case
+    (ASCII, and binary gzip-compressed) and as SU2, each in a fresh process."""
+    from ffdcli.io.formats import su2
+    from ffdcli.io.formats.openfoam_case import polymesh_of, write_case
+
+    rows = []
+    with tempfile.TemporaryDirectory(prefix="ffd-bench-foam-") as tmp:
+        mesh = structured_tet_mesh(max(8, cells // 6))
+        src = Path(tmp) / "mesh.su2"
+        su2.write(mesh, src, mesh.points)
+        poly, patches = polymesh_of(mesh, wall=("wing",))
+        cases = {"su2": src,
+                 "openfoam-ascii": write_case(Path(tmp) / "ascii", mesh.points, poly, patches),
+                 "openfoam-binary-gz": write_case(Path(tmp) / "bingz", mesh.points, poly, patches, binary=True,
+                                                  compress=True)}
+        del mesh, poly
+        ref = None
+        for fmt, path in cases.items():
+            foam = fmt != "su2"
+            size = sum(f.stat().st_size for f in Path(path).rglob("*") if f.is_file()) if foam else src.stat().st_size
+            out = Path(tmp) / ("out_" + fmt + ("" if foam else ".su2"))
+            got = _child("foam_write" if foam else "write_patch", path, out)
+            row = {"name": f"foam_io_{cells}", "format": fmt, "points": got["points"], "cells": got["cells"],
+                   "file_mb": size / 2**20, "read_s": got["read"], "write_patch_s": got["write_patch"],
+                   "peak_mb": got["peak_mb"]}
+            if ref is None:
+                ref = row
+            else:
+                row["ratio_read"] = row["read_s"] / ref["read_s"]
+                row["ratio_write"] = row["write_patch_s"] / ref["write_patch_s"]
+            rows.append(row)
+    return rows
 
 
 def run_sizes(sizes=(100_000, 1_000_000)) -> list[dict]:
@@ -127,6 +172,12 @@ def summary(rows: list[dict]) -> list[dict]:
     """The rows in the runner's columns: case / measured / target / pyGeo reference."""
     out = []
     for r in rows:
+        if "format" in r:              # the OpenFOAM rows: against SU2 of the same mesh (target 1.5x)
+            what = f"{r['format']} read + write, {r['cells'] / 1e6:.2f}M cells, {r['file_mb']:.0f} MB"
+            ratio = "" if "ratio_read" not in r else f"; {r['ratio_read']:.2f}x / {r['ratio_write']:.2f}x SU2"
+            out.append({"case": what, "measured": f"{r['read_s']:.2f} s + {r['write_patch_s']:.2f} s{ratio}",
+                        "target": "" if "ratio_read" not in r else "<= 1.5x SU2", "pyGeo reference": ""})
+            continue
         size = f"{r['points'] / 1e6:.2f}M points, {r['cells'] / 1e6:.1f}M tets, {r['file_mb']:.0f} MB"
         for key, what in (("read", "read"), ("write_patch", "write (patch the point block)"),
                           ("write_new", "write (from scratch)")):

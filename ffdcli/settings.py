@@ -92,6 +92,10 @@ class BoxSettings:
     block
         Which block of a multi-block Plot3D ``file`` (0-based; one component per block, e.g. the
         wing and the tail of the DPW4 lattice); ``None`` for a single-block file.
+    refine
+        Regions with more control points, by exact knot insertion (:mod:`ffdcli.box.refine`): a
+        tuple of ``("span", a, b, N)`` (N more sections between span fractions a and b) and
+        ``("chord", a, b, N)`` (N more chordwise points between chord fractions a and b).
     """
 
     points: tuple[int, ...] | None = None
@@ -101,6 +105,7 @@ class BoxSettings:
     root: str | None = None
     file: str | None = None
     block: int | None = None
+    refine: tuple[tuple, ...] = ()
 
     def degrees(self, dim: int | None = None) -> tuple[int, ...]:
         """The degree per direction: as given, else :func:`default_degree` of the points (those of
@@ -136,6 +141,14 @@ class BoxSettings:
         if not math.isfinite(self.margin) or not 0 <= self.margin <= 1:
             raise InputError(f"margin is a fraction of the local chord in [0, 1], got {self.margin}",
                              path=path, key=f"{key}.margin")
+        for q, (what, a, b, count) in enumerate(self.refine):
+            if what not in ("span", "chord") or not 0.0 <= a < b <= 1.0 or not 1 <= count <= 32:
+                raise InputError(f"a refine region is {{span: [a, b], sections: N}} or {{chord: [a, b], points: N}} "
+                                 f"with 0 <= a < b <= 1 and 1 <= N <= 32, got {what} [{a:g}, {b:g}] {count}",
+                                 path=path, key=f"{key}.refine[{q}]")
+            if what == "span" and dim != 3:
+                raise InputError("a 2D box has no span to refine; use {chord: [a, b], points: N}",
+                                 path=path, key=f"{key}.refine[{q}]")
         return replace(self, points=pts, degree=deg)
 
     def with_options(self, **options) -> BoxSettings:
@@ -156,6 +169,9 @@ class BoxSettings:
         d["points"] = None if self.points is None else [int(p) for p in self.points]
         d["degree"] = None if self.degree is None else [int(q) for q in self.degree]
         d["margin"] = float(self.margin)
+        del d["refine"]
+        if self.refine:            # only when given: the cache keys of unrefined boxes stay as they were
+            d["refine"] = [[str(r[0]), float(r[1]), float(r[2]), int(r[3])] for r in self.refine]
         return d
 
     @classmethod
@@ -164,7 +180,8 @@ class BoxSettings:
         return cls(points=None if d.get("points") is None else tuple(d["points"]),
                    degree=None if d.get("degree") is None else tuple(d["degree"]),
                    sections=d.get("sections"), margin=float(d.get("margin", DEFAULT_MARGIN)),
-                   root=d.get("root"), file=d.get("file"), block=d.get("block"))
+                   root=d.get("root"), file=d.get("file"), block=d.get("block"),
+                   refine=tuple(tuple(r) for r in d.get("refine", ())))
 
     def get_cache_key(self) -> str:
         """A short digest of these settings: equal settings, equal key (part of the box cache key)."""

@@ -168,12 +168,14 @@ def make_airfoils() -> list[dict]:
 def make_volume_sens(out: Path) -> dict:
     """dJ/dX of J = the enclosed volume of ``rect_wing.su2``'s wing, in SU2's ``surface_sens.csv`` layout.
 
-    Not an adjoint solution (SU2 is not available where the samples are made): a real sensitivity of
-    a functional known in closed form, so that ``ffd grad`` has a file to read and its answer can be
-    checked (README, docs/su2.md). The volume and its exact gradient are those of ffd's ``volume``
-    constraint (:class:`ffdcli.constraints.Volume`: the half wing closed by its symmetry plane z = 0).
-    The marker's triangles face into the wing (out of the fluid), hence the sign.
+    Not an adjoint solution: a sensitivity of a functional known in closed form, the oracle of
+    ``ffd grad``'s test (``configs/rect_grad.yaml``; written to ``out/``, not shipped: the bundled
+    sensitivity is SU2's real drag adjoint, :func:`make_su2_drag_sens`). The volume and its exact
+    gradient are those of ffd's ``volume`` constraint (:class:`ffdcli.constraints.Volume`: the half
+    wing closed by its symmetry plane z = 0). The marker's triangles face into the wing (out of the
+    fluid), hence the sign.
     """
+    out.parent.mkdir(parents=True, exist_ok=True)
     m = read_mesh(HERE / "rect_wing.su2")
     surf = extract_surface(m, ["wing"])
     vol = Volume(index=0, lower=None, upper=None, cells=surface_triangles(surf.faces),
@@ -188,6 +190,62 @@ def make_volume_sens(out: Path) -> dict:
     return {"file": out.name, "rows": len(surf.ids), "volume": abs(volume)}
 
 
+def su2_programs() -> Path | None:
+    """The folder of SU2's programs: ``SU2_RUN``, the ``PATH``, then ``../shared/su2/bin`` beside the
+    repository; None when SU2 is not installed."""
+    import os
+    import shutil
+
+    cands = [Path(os.environ["SU2_RUN"])] if os.environ.get("SU2_RUN") else []
+    if shutil.which("SU2_CFD"):
+        cands.append(Path(shutil.which("SU2_CFD")).resolve().parent)
+    cands.append(HERE.parent.parent / "shared" / "su2" / "bin")
+    return next((c for c in cands if (c / "SU2_CFD").is_file()), None)
+
+
+def make_su2_drag_sens(out: Path) -> dict:
+    """dJ/dX of the drag of ``naca0012_2d.su2`` at every node, by SU2's discrete adjoint.
+
+    Flow: SU2_CFD with ``naca0012_2d_euler.cfg`` (Euler, M 0.8, alpha 1.25 deg, residuals to 1e-12);
+    adjoint: SU2_CFD_AD with ``MATH_PROBLEM= DISCRETE_ADJOINT``, ``OBJECTIVE_FUNCTION= DRAG`` on that
+    flow (its ``restart_flow.dat`` copied to ``solution_flow.dat``). Of SU2's ``restart_adj_cd.csv``
+    (every node: adjoint variables and ``Sensitivity_x/y``) the file keeps the point id, coordinates
+    and sensitivities, 13 significant digits. Needs SU2 (``SU2_RUN``, ``PATH`` or ``../shared/su2/bin``).
+    """
+    import shutil
+    import subprocess
+    import tempfile
+
+    bindir = su2_programs()
+    if bindir is None or not (bindir / "SU2_CFD_AD").is_file():
+        raise SystemExit("SU2_CFD and SU2_CFD_AD are needed (SU2_RUN, PATH or ../shared/su2/bin)")
+    cfg = (HERE / "naca0012_2d_euler.cfg").read_text()
+    with tempfile.TemporaryDirectory() as tmp:
+        t = Path(tmp)
+        shutil.copyfile(HERE / "naca0012_2d.su2", t / "naca0012_2d.su2")
+        (t / "flow.cfg").write_text(cfg)
+        (t / "adj.cfg").write_text(cfg.replace("MATH_PROBLEM= DIRECT", "MATH_PROBLEM= DISCRETE_ADJOINT"))
+        for prog, conf in (("SU2_CFD", "flow.cfg"), ("SU2_CFD_AD", "adj.cfg")):
+            with open(t / f"{prog}.log", "w") as log:
+                rc = subprocess.run([str(bindir / prog), conf], cwd=t, stdout=log, stderr=subprocess.STDOUT).returncode
+            if rc != 0:
+                raise SystemExit(f"{prog} failed ({rc}): {(t / f'{prog}.log').read_text()[-2000:]}")
+            if prog == "SU2_CFD":
+                shutil.copyfile(t / "restart_flow.dat", t / "solution_flow.dat")
+                flow = (t / "history.csv").read_text().splitlines()
+        head = [h.strip().strip('"') for h in (t / "restart_adj_cd.csv").open().readline().split(",")]
+        data = np.loadtxt(t / "restart_adj_cd.csv", delimiter=",", skiprows=1, ndmin=2)
+    cols = [head.index(c) for c in ("PointID", "x", "y", "Sensitivity_x", "Sensitivity_y")]
+    rows = data[:, cols]
+    with atomic_write(out, "w") as fh:
+        fh.write('"PointID","x","y","Sensitivity_x","Sensitivity_y"\n')
+        np.savetxt(fh, rows, fmt=["%d"] + ["%.12e"] * 4, delimiter=",")
+    hh = [h.strip().strip('"') for h in flow[0].split(",")]
+    last = dict(zip(hh, flow[-1].split(",")))
+    return {"file": out.name, "rows": len(rows), "CD": float(last["CD"]), "CL": float(last["CL"]),
+            "iterations": int(float(last["Inner_Iter"])), "rms[Rho]": float(last["rms[Rho]"])}
+
+
 def make_mesh(name: str) -> dict:
     out = HERE / f"{name}.su2"
     mesh = MESHES[name]()
@@ -198,8 +256,10 @@ def make_mesh(name: str) -> dict:
 MAKERS = {
     **{name: partial(make_mesh, name) for name in MESHES},
     "airfoils": make_airfoils,
-    "surface_sens": lambda: make_volume_sens(HERE / "rect_wing_surface_sens.csv"),
+    "surface_sens": lambda: make_volume_sens(HERE.parent / "out" / "rect_wing_volume_sens.csv"),
+    "naca0012_2d_sens": lambda: make_su2_drag_sens(HERE / "naca0012_2d_cd_sens.csv"),
 }
+NEEDS_SU2 = ("naca0012_2d_sens",)
 
 
 def main(argv: list[str]) -> int:
@@ -216,6 +276,8 @@ def main(argv: list[str]) -> int:
             status |= bool(diff)
             print(f"{name}.su2: " + ("; ".join(diff) if diff else "the same mesh") + "".join(f" ({n})" for n in notes),
                   flush=True)
+        elif name in NEEDS_SU2 and su2_programs() is None:
+            print(name, "skipped: SU2 is not installed (SU2_RUN, PATH or ../shared/su2/bin)", flush=True)
         else:
             print(name, MAKERS[name](), flush=True)
     return status

@@ -69,7 +69,8 @@ class ConstraintsMixin:
         comp = self.run.components[c]
         design_error = getattr(self.run.design, "error", None)
         error = None if design_error is None else (lambda message, key: design_error(message, comp.spec.subkey(key)))
-        return build_constraints(specs, comp.box, comp.prep.surface, list(comp.changes), error=error)
+        return build_constraints(specs, comp.box, comp.prep.surface, list(comp.changes), error=error,
+                                 mesh=self.run.prep.mesh)
 
     @property
     def constraint_names(self) -> list[str]:
@@ -90,22 +91,30 @@ class ConstraintsMixin:
 
         return constraint_bounds(self.constraints)[1]
 
+    def _mesh_points_cached(self) -> np.ndarray:
+        """:meth:`mesh_points` once per design values (what ``mesh_quality`` reads)."""
+        if "mesh" not in self._cache:
+            self._cache["mesh"] = self.mesh_points()
+        return self._cache["mesh"]
+
     def _constraint_inputs(self, c: int = 0):
         """What component ``c``'s constraints read: its lattice, its rows of dP'/dv (every variable's
-        column), its surface points and basis."""
+        column), its surface points and basis, and the whole mesh's motion (``mesh_quality``)."""
 
+        mesh = {"mesh_points": self._mesh_points_cached, "mesh_vjp": self.mesh_vjp}
         if self.run.single:
             emb = self.run.prep.embedding
             rmatvec = emb.rmatvec if self.run.box.dim == 3 else None       # 3D: core = mesh coordinates
             return ConstraintInputs(self.lattice(), self.run.P0, self.values, self.lattice_jacobian,
-                                    self.surface_points, lambda: self.basis, rmatvec)
+                                    self.surface_points, lambda: self.basis, rmatvec, **mesh)
         comp, lay = self.run.components[c], self.run.layout
         o0, o1, rows = lay.ctrl_offsets[c], lay.ctrl_offsets[c + 1], lay.rows[c]
         emb = comp.prep.embedding
         return ConstraintInputs(self.lattices()[c], comp.P0, self.values,
                                 lambda: self.lattice_jacobian()[3 * o0:3 * o1],
                                 lambda: self.surface_points()[rows],
-                                lambda: emb.basis_matrix().tocsr(), emb.rmatvec if comp.box.dim == 3 else None)
+                                lambda: emb.basis_matrix().tocsr(), emb.rmatvec if comp.box.dim == 3 else None,
+                                **mesh)
 
     def _evaluate_constraints(self, jacobian: bool):
 

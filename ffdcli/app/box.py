@@ -15,7 +15,7 @@ from ffdcli.errors import InputError
 from ffdcli.io.formats import format_of
 from ffdcli.io.formats.lattice_vtk import write_lattice_vtk
 from ffdcli.io.formats.plot3d import write_plot3d
-from ffdcli.io.inputs import check_input_file
+from ffdcli.io.inputs import check_mesh_path
 from ffdcli.io.outputs import component_lattice_path, lattice_kind, plan_outputs
 from ffdcli.parallel.comm import SerialComm
 from ffdcli.parameterization.components import find_junction
@@ -66,7 +66,7 @@ def box_of(mesh, *, surfaces=(), options: dict | None = None, lattice_out=None, 
         return _components_box(design, lattice_out, export_plot3d, cache_dir, rebuild, progress, comm)
     mpath = Path(mesh_path)
     format_of(mpath)
-    check_input_file(mpath, "mesh file")
+    check_mesh_path(mpath)
     out = lattice_out if lattice_out is not None else mpath.with_name(mpath.stem + "_lattice.vtk")
     inputs = (mpath, mesh if design is not None else None, options.get("file"), settings.file)
     plan = plan_outputs([("lattice", out, False, "--lattice"), ("plot3d", export_plot3d, False, "--export-plot3d")],

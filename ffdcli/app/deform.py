@@ -49,7 +49,7 @@ def _size(shape) -> str:
 def deform_design(design, *, output=None, lattice=None, surface_file=None, plot: bool = False,
                   force: bool = False, cache_dir=None, use_cache: bool = True, progress=None, comm=None,
                   run: DesignRun | None = None, P=None,
-                  constraints_table: Callable[[DesignRun], list[dict]] | None = None,
+                  constraints_table: Callable[[DesignRun, object], list[dict]] | None = None,
                   warn: Callable[[str], None] | None = None, remedies: Remedies = Remedies()) -> DeformReport:
     """Deform a loaded design and write its outputs together: what ``ffd deform`` does.
 
@@ -69,8 +69,9 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
         A run already loaded (the API's) and its deformed lattice(s); default: loaded here, the
         design's own changes.
     constraints_table : callable, optional
-        ``f(run) -> rows`` of the constraints table, evaluated before anything is written when the
-        design has ``constraints:`` (a bad item is an input error, nothing written).
+        ``f(run, points) -> rows`` of the constraints table (``points`` (N, 3): the deformed mesh,
+        which ``mesh_quality`` reads), evaluated before anything is written when the design has
+        ``constraints:`` (a bad item is an input error, nothing written).
     remedies : ffdcli.quality.gate.Remedies
         The caller's words for how to override the gate (the command line names ``--force``).
     warn : callable, optional
@@ -103,7 +104,8 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
                      recovery=result.recovery, remedies=remedies):
         note(w)
-    constraints = constraints_table(run) if constraints_table and design.data.get("constraints") else None
+    constraints = (constraints_table(run, result.points) if constraints_table and design.data.get("constraints")
+                   else None)
     # every output once, together: rank 0 of an MPI run (every node's coordinates gathered there)
     written = write_outputs(run, result, plan=plan, progress=progress, comm=comm)
     su2_ffd = written.pop("su2_ffd", None)
@@ -130,6 +132,8 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
         "plot_3d": written.get("plot_3d"),
         "surface_file": written.get("surface_file"),
         "changes": [next(iter(c)) for c in design.changes_spec],
+        "devices": {f"c{i}": ch.describe() for comp in run.components for i, ch in enumerate(comp.changes)
+                    if hasattr(ch, "describe")},
         "lattice": list(run.box.lattice_shape),
         "surface_points": int(len(run.surface_ids)),
         "max_displacement": result.max_displacement,
@@ -150,6 +154,15 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
     return summary
 
 
+def device_line(name: str, d: dict) -> str:
+    """One flap or slat as ``ffd deform`` prints it, with the chord width of its transition."""
+    where = "behind" if d["kind"] == "flap" else "ahead of"
+    span = f", span {d['span'][0]:g}-{d['span'][1]:g} (blend {d['blend']:g})" if d["span"] else ""
+    return (f"  {d['kind']:<9} {name}: {d['angle']:g} deg{span}, hinge {'/'.join(f'{h:g}' for h in d['hinge'])} "
+            f"of the local chord; turns rigidly beyond a transition of {d['transition']:.3f} local chords "
+            f"{where} the hinge")
+
+
 def _text(s: dict, run: DesignRun, result: Deformation, written: dict) -> str:
     """The summary as ``ffd deform`` prints it."""
     comps = s.get("components")
@@ -165,6 +178,7 @@ def _text(s: dict, run: DesignRun, result: Deformation, written: dict) -> str:
         junction = run.components[0].junction
         if junction is not None:
             lines.append(f"  root      on the body {junction.marker!r} (its nodes and the junction do not move)")
+    lines += [device_line(name, d) for name, d in s["devices"].items()]
     lines.append(f"  moved     max surface displacement {s['max_displacement']:.4g}; volume: {s['volume']}"
                  + (f" (recovered: {s['recovered_with']}, after the design's settings failed the gate)"
                     if s["recovered_with"] else ""))

@@ -129,6 +129,8 @@ def inspect_mesh(mesh: Mesh | str | Path, surfaces=(), progress=None) -> MeshInf
     cells: dict[str, int] = {}
     for b in mesh.cells:
         cells[b.type] = cells.get(b.type, 0) + len(b)
+    if mesh.polyhedra is not None:         # polyhedral cells by shape, as checkMesh's table
+        cells.update({k: v for k, v in mesh.polyhedra.shape_counts().items() if v})
     markers = {}
     for name, blocks in mesh.markers.items():
         ids = [b.data.ravel() for b in blocks]

@@ -16,6 +16,7 @@ import numpy as np
 from ffdcli.box import cache as cache_mod
 from ffdcli.box.box import Box, fit_box
 from ffdcli.box.imported import import_box
+from ffdcli.box.refine import apply_refine
 from ffdcli.errors import InputError
 from ffdcli.geometry.surface import Surface, default_surface, extract_surface
 from ffdcli.io import formats
@@ -195,6 +196,7 @@ def _prepare_box(mesh, surface, settings, *, cache_dir, use_cache, rebuild, prog
     else:
         box, emb, report = fit_box(surf.points, surf.faces, settings, dim=dim, path=mesh.path,
                                    progress=progress, comm=comm)
+    box, emb = apply_refine(box, emb, settings.refine)     # box.refine: exact knot insertion
     warnings = notes + list(report.get("warnings", []))
     if path is not None and use_cache and comm.is_root:
         try:

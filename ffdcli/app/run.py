@@ -21,6 +21,7 @@ from ffdcli.parallel.distributed import diagonal as global_diagonal
 from ffdcli.parallel.partition import localize, node_owners, rank_part
 from ffdcli.parameterization import components as comp_mod
 from ffdcli.parameterization.changes import apply_changes
+from ffdcli.parameterization.changes.control_surfaces import refine_for_devices
 from ffdcli.parameterization.components import design_variables, layout, set_design_variables
 from ffdcli.progress import no_progress
 from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
@@ -312,12 +313,17 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
                                  key=spec.subkey("surface"), line=design.line_of(spec.subkey("surface")),
                                  hint=e.hint) from None
             raise
-        n, m, l = prep.box.shape
 
         def error(message, key, spec=spec):
             return design.error(message, spec.subkey(key))
 
-        changes = changes_from_spec(list(spec.changes_spec), n, m, l, prep.box.dim, error=error)
+        # a flap or slat: the knots at its hinge and ends, by exact knot insertion (the surface stays)
+        box, emb = refine_for_devices(prep.box, prep.embedding, prep.surface.points, list(spec.changes_spec),
+                                      error=error)
+        prep = replace(prep, box=box, embedding=emb)
+        n, m, l = prep.box.shape
+        changes = changes_from_spec(list(spec.changes_spec), n, m, l, prep.box.dim, error=error, box=prep.box,
+                                    surface=prep.surface.points)
         others = [x for s in specs if s is not spec for x in (s.surface or ())]
         junction = comp_mod.find_junction(mesh, prep, prep.surface.names, others)
         if junction is not None and junction.frozen:

@@ -82,6 +82,10 @@ class Box:
         The (checked) :class:`BoxSettings` the box was made with.
     imported
         True for a lattice read from a file (:mod:`ffdcli.box.imported`).
+    base_sections
+        (m0, 7) the stations, leading- and trailing-edge points of the sections the box was fitted
+        with, when knots added sections since (:mod:`ffdcli.box.refine`): the baseline chord at a span
+        fraction is read off these, so it does not depend on the refinement. None: the box's own.
 
     A box is a value: nothing changes it after :func:`assemble_box` made it. :meth:`to_arrays` and
     :meth:`from_arrays` are how it is stored (the cache).
@@ -101,6 +105,13 @@ class Box:
     le_rows: np.ndarray | None
     settings: BoxSettings
     imported: bool = False
+    base_sections: np.ndarray | None = None
+
+    def sections_table(self) -> np.ndarray:
+        """(m0, 7) stations, leading-edge and trailing-edge points of the fitted sections."""
+        if self.base_sections is not None:
+            return self.base_sections
+        return np.column_stack([self.stations, self.le_points, self.te_points])
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -190,6 +201,8 @@ class Box:
             "settings": np.frombuffer(json.dumps(self.settings.as_dict()).encode(), dtype=np.uint8),
             "imported": np.int64(self.imported),
         }
+        if self.base_sections is not None:
+            arrays["base_sections"] = self.base_sections
         for i, k in enumerate(self.knots):
             arrays[f"knots{i}"] = k
         return arrays
@@ -210,7 +223,8 @@ class Box:
                   knots=knots, axes=axes, dim=dim, chord_sign=float(arrays["chord_sign"]),
                   stations=arrays["stations"], le_points=arrays["le_points"], te_points=arrays["te_points"],
                   margins=arrays["margins"], ref_weights=arrays["ref_weights"], le_rows=le_rows,
-                  settings=settings, imported=bool(arrays["imported"]))
+                  settings=settings, imported=bool(arrays["imported"]),
+                  base_sections=arrays["base_sections"] if "base_sections" in arrays else None)
         n, m, l = box.shape
         if len(box.degree) != len(knots) or box.ref_weights.shape != (m, n, l) \
                 or box.le_points.shape != (m, 3) or box.te_points.shape != (m, 3) \

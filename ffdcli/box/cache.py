@@ -22,6 +22,7 @@ from ffdcli import __version__
 from ffdcli.box.box import Box
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.inputs import polymesh_folder_of
 from ffdcli.lattice.embedding import Embedding
 from ffdcli.settings import BoxSettings
 
@@ -30,14 +31,20 @@ CACHE_FORMAT = 2
 
 
 def file_hash(path: str | Path, chunk: int = 1 << 22) -> str:
-    """SHA-256 of a file's bytes (hex)."""
+    """SHA-256 of a file's bytes (hex). Of an OpenFOAM case folder: of its polyMesh's files (each
+    name, then its bytes, in name order)."""
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        while True:
-            b = fh.read(chunk)
-            if not b:
-                break
-            h.update(b)
+    folder = polymesh_folder_of(path) if Path(path).is_dir() else None
+    files = [Path(path)] if folder is None else sorted(p for p in folder.iterdir() if p.is_file())
+    for f in files:
+        if folder is not None:
+            h.update(f.name.encode() + b"\0")
+        with open(f, "rb") as fh:
+            while True:
+                b = fh.read(chunk)
+                if not b:
+                    break
+                h.update(b)
     return h.hexdigest()
 
 

@@ -22,7 +22,7 @@ def int_list(ctx, param, value):
 
 
 @cli.command("box")
-@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.argument("mesh", type=click.Path())
 @click.option("--surface", "surfaces", multiple=True, metavar="NAME",
               help="Marker of the wing (repeat for several). Default: the only marker, or the one "
                    "named like wing/airfoil.")

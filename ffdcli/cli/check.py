@@ -8,7 +8,7 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("check")
-@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.argument("mesh", type=click.Path())
 @click.option("--threshold", type=float, default=None, metavar="Q",
               help="Also fail when a cell's scaled Jacobian is below Q (default: only inverted or "
                    "degenerate cells fail; cells below 0.05 are counted).")

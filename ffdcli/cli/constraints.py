@@ -1,4 +1,5 @@
-"""``ffd constraints``: the geometric constraints of a design file, and their exact Jacobian."""
+"""``ffd constraints``: the constraints of a design file (geometric, and the volume mesh's quality), and
+their exact Jacobian."""
 
 from __future__ import annotations
 
@@ -27,6 +28,7 @@ def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
         - volume: {lower: 1.0}       # a half wing is closed by its symmetry plane
         - le_te: {}                  # shape moves at the LE/TE: upper + lower = 0
         - fold_free: {lower: 0.2}    # smallest det of the lattice map / baseline (> 0: no fold)
+        - mesh_quality: {lower: 0.3} # smooth min over the volume cells of quality after / before
     Items are named k<index>.<kind>[<j>] (a grid runs over chord fastest). Exit 0 whether or not
     they are satisfied (see the satisfied column, or --json).
 

@@ -35,7 +35,7 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
 
     \b
     The box (lattice and embedding) is loaded from its cache, or built and cached. The changes
-    (twist, span, sweep, dihedral, chord, shape) are applied in file order to the lattice; the wing
+    (twist, span, sweep, dihedral, chord, shape, flap, slat) are applied in file order to the lattice; the wing
     surface follows exactly (X = X0 + B (P' - P0)), the rest of the mesh by inverse-distance
     warping (volume.method: idw) or not at all (none). Every cell and node is checked (the gate of
     `ffd check`, same words): if the design inverts a cell, makes one markedly worse (below 0.05,

@@ -10,7 +10,7 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("init")
-@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.argument("mesh", type=click.Path())
 @click.option("--surface", "surfaces", multiple=True, metavar="NAME",
               help="Marker of the wing (repeat for several). Default: the only marker, or the one "
                    "that does not look like a domain boundary.")

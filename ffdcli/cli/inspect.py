@@ -8,7 +8,7 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("inspect")
-@click.argument("mesh", type=click.Path(dir_okay=False))
+@click.argument("mesh", type=click.Path())
 @click.option("--surface", "surfaces", multiple=True, metavar="NAME",
               help="Marker(s) of the wing used to detect the axes (default: guessed, see below).")
 @common_options

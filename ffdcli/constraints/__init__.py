@@ -3,7 +3,7 @@
 :mod:`~ffdcli.constraints.base` (the protocol, what a constraint reads, the evaluation of a list),
 :mod:`~ffdcli.constraints.build` (from the design file's ``constraints:``) and the kinds:
 :mod:`~ffdcli.constraints.thickness` (thickness, thickness_to_chord), :mod:`~ffdcli.constraints.volume`,
-:mod:`~ffdcli.constraints.le_te`, :mod:`~ffdcli.constraints.fold_free`.
+:mod:`~ffdcli.constraints.le_te`, :mod:`~ffdcli.constraints.fold_free`, :mod:`~ffdcli.constraints.mesh_quality`.
 """
 
 from ffdcli.constraints.base import (
@@ -21,6 +21,7 @@ from ffdcli.constraints.base import (
 from ffdcli.constraints.build import build_constraints
 from ffdcli.constraints.fold_free import FOLD_SAMPLES, FoldFree
 from ffdcli.constraints.le_te import LeTe
+from ffdcli.constraints.mesh_quality import KS_GAP, MESH_QUALITY_LOWER, MeshQuality, ks_min
 from ffdcli.constraints.thickness import END_INSET, Thickness, chord_lines, project_thickness
 from ffdcli.constraints.volume import Volume, enclosed_volume
 
@@ -28,11 +29,14 @@ __all__ = [
     "CONSTRAINT_KINDS",
     "END_INSET",
     "FOLD_SAMPLES",
+    "KS_GAP",
+    "MESH_QUALITY_LOWER",
     "SATISFIED_TOL",
     "Constraint",
     "ConstraintInputs",
     "FoldFree",
     "LeTe",
+    "MeshQuality",
     "Thickness",
     "Volume",
     "build_constraints",
@@ -41,6 +45,7 @@ __all__ = [
     "constraint_names",
     "enclosed_volume",
     "evaluate",
+    "ks_min",
     "project_thickness",
     "satisfied",
     "surface_segments",

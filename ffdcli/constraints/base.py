@@ -22,8 +22,10 @@ from functools import cached_property
 
 import numpy as np
 
+from ffdcli.errors import InputError
+
 #: The kinds of ``constraints:`` items, in the order of the docs.
-CONSTRAINT_KINDS = ("thickness", "thickness_to_chord", "volume", "le_te", "fold_free")
+CONSTRAINT_KINDS = ("thickness", "thickness_to_chord", "volume", "le_te", "fold_free", "mesh_quality")
 #: A constraint value within this of a bound is satisfied (the values are ratios near 1).
 SATISFIED_TOL = 1e-9
 
@@ -47,14 +49,37 @@ class ConstraintInputs:
         The surface basis ``B``.
     rmatvec : callable (G (S, 3)) -> (n_ctrl, 3), optional
         ``B.T @ G`` by a faster route than ``basis`` (e.g. :meth:`ffdcli.lattice.embedding.Embedding.rmatvec`).
+    mesh_points : callable () -> ndarray (N, 3), optional
+        Every mesh node as the design places it, volume motion included (``mesh_quality``;
+        :meth:`ffdcli.api.DesignModel.mesh_points`).
+    mesh_vjp : callable (G (N, 3)) -> ndarray (n_vars,), optional
+        ``dJ/dv`` for ``G = dJ/dX`` at every mesh node, through the volume motion
+        (:meth:`ffdcli.api.DesignModel.mesh_vjp`).
     """
 
     def __init__(self, P, P0, values, lattice_jacobian: Callable, surface_points: Callable, basis: Callable,
-                 rmatvec: Callable | None = None):
+                 rmatvec: Callable | None = None, *, mesh_points: Callable | None = None,
+                 mesh_vjp: Callable | None = None):
         self.P = np.asarray(P, dtype=float)
         self.P0 = np.asarray(P0, dtype=float)
         self.values = np.asarray(values, dtype=float)
         self._D, self._X, self._B, self._rmatvec = lattice_jacobian, surface_points, basis, rmatvec
+        self._mesh_points, self._mesh_vjp = mesh_points, mesh_vjp
+
+    def _needs_mesh(self, what):
+        if what is None:
+            raise InputError("mesh_quality needs the motion of the volume mesh: evaluate it through a design "
+                             "model (ffdcli.api.DesignModel, ffd constraints), which gives mesh_points and mesh_vjp")
+        return what
+
+    @cached_property
+    def mesh_X(self) -> np.ndarray:
+        """(N, 3) every mesh node after the design."""
+        return np.asarray(self._needs_mesh(self._mesh_points)(), dtype=float)
+
+    def mesh_vjp(self, G: np.ndarray) -> np.ndarray:
+        """(n_vars,) ``dJ/dv`` for ``G`` (N, 3) ``= dJ/dX`` at every mesh node."""
+        return self._needs_mesh(self._mesh_vjp)(G)
 
     def rmatvec(self, G: np.ndarray) -> np.ndarray:
         """(n_ctrl, 3) ``B.T @ G`` for ``G`` (S, 3) (a compiled product when one was given)."""
@@ -145,9 +170,9 @@ class Constraint:
 
 
 
-def read_bounds(spec: dict, default) -> tuple[float, float]:
-    """(lower, upper) of an item's settings (``None``/absent: ``default``; ``None`` default: no bound)."""
-    return _bound(spec, "lower", default), _bound(spec, "upper", default)
+def read_bounds(spec: dict, lower=None, upper=None) -> tuple[float, float]:
+    """(lower, upper) of an item's settings (absent: the defaults given; ``None``: no bound)."""
+    return _bound(spec, "lower", lower), _bound(spec, "upper", upper)
 
 
 def _bound(spec: dict, key: str, default):

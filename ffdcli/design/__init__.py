@@ -14,7 +14,7 @@ The parts, each readable alone:
 
 Every problem is an :class:`~ffdcli.errors.InputError` naming the file, the key path and the line.
 
-Defaults where SPEC.md is silent (documented in the README):
+Defaults where SPEC.md is silent (documented in docs/design-file.md):
 
 - ``output.mesh``: ``out/<design stem><mesh suffix>`` beside the design file, so that two designs
   of one mesh never overwrite each other; ``output.lattice``: ``out/<design stem>_lattice.vtk``;
@@ -49,7 +49,7 @@ from ffdcli.design.yamlmap import (
 )
 from ffdcli.errors import InputError
 from ffdcli.io.formats import FORMATS
-from ffdcli.io.inputs import check_input_file, existing_kind
+from ffdcli.io.inputs import check_input_file, check_mesh_path, existing_kind
 from ffdcli.lattice.limits import check_lattice_size
 from ffdcli.parameterization.changes import Change, changes_from_spec
 from ffdcli.parameterization.components import ComponentSpec
@@ -125,7 +125,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
 
     mesh = resolve(data["mesh"])
     if check_files:
-        check_input_file(mesh, "mesh file", design=path, key="mesh", line=line_at(lines, ("mesh",)))
+        check_mesh_path(mesh, design=path, key="mesh", line=line_at(lines, ("mesh",)))
     surface = data.get("surface")
     if isinstance(surface, str):
         surface = [surface]
@@ -146,7 +146,7 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
                            degree=tuple(b["degree"]) if "degree" in b else None,
                            sections=b.get("sections"), margin=float(b.get("margin", defaults.margin)),
                            root=b.get("root"), file=None if box_file is None else str(box_file),
-                           block=b.get("block"))
+                           block=b.get("block"), refine=refine_regions(b.get("refine") or ()))
 
     box = box_settings(data.get("box"))
     components = None
@@ -198,6 +198,18 @@ def _not_a_mesh(path: Path) -> None:
         raise InputError(f"is a mesh ({fmt.upper() if fmt in FORMATS.values() else fmt}), not a design file",
                          path=path, hint=f"start a design file for it with: ffd init {path.name} -o design.yaml; "
                                          "then ffd deform design.yaml")
+
+
+def refine_regions(items) -> tuple[tuple, ...]:
+    """``box.refine`` as :attr:`BoxSettings.refine` tuples: ``{span: [a, b], sections: N}`` ->
+    ``("span", a, b, N)``, ``{chord: [a, b], points: N}`` -> ``("chord", a, b, N)`` (the schema
+    has checked the forms; the settings check the numbers)."""
+    out = []
+    for item in items:
+        what = "span" if "span" in item else "chord"
+        a, b = item[what]
+        out.append((what, float(a), float(b), int(item["sections" if what == "span" else "points"])))
+    return tuple(out)
 
 
 def build_changes(design: Design, n: int, m: int, l: int, dim: int) -> list[Change]:

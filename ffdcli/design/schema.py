@@ -96,6 +96,34 @@ def chord_schema() -> dict:
             "anyOf": [positive(), positive_list(), root_tip(positive())]}
 
 
+def _device_schema(kind: str, part: str, down: str) -> dict:
+    fraction = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    return {"description": f"a {part} device that turns about its hinge line (morphing: the surface stays "
+                           f"one piece): {{span: [inner, outer], hinge: h | [h_inner, h_outer], angle: A, "
+                           f"blend: w, transition: c}}; angle in degrees, positive: {down} down; hinge: "
+                           "chord fraction of the local chord at each end (a list of two: design "
+                           "variables); blend: span width over which the rotation fades at each end "
+                           "(default 0.2); transition: chord width behind the hinge where the surface "
+                           "bends (default 0.1); in 2D no span and no blend",
+            "type": "object", "additionalProperties": False, "required": ["hinge", "angle"],
+            "properties": {
+                "span": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1},
+                         "minItems": 2, "maxItems": 2},
+                "hinge": {"anyOf": [fraction, {"type": "array", "items": fraction, "minItems": 1,
+                                               "maxItems": 2}]},
+                "angle": number(),
+                "blend": {"type": "number", "minimum": 0},
+                "transition": {"type": "number", "exclusiveMinimum": 0}}}
+
+
+def flap_schema() -> dict:
+    return _device_schema("flap", "trailing-edge", "trailing edge")
+
+
+def slat_schema() -> dict:
+    return _device_schema("slat", "leading-edge", "leading edge")
+
+
 def shape_schema() -> dict:
     return {"description": "{upper: [one per chordwise point], lower: [...], sections: all | [j, ...]}"
                            " or {random: A, seed: S}",
@@ -120,7 +148,7 @@ def shape_schema() -> dict:
 #: :mod:`ffdcli.parameterization.changes` with the same ``kind``.
 CHANGE_SCHEMAS: dict[str, Callable[[], dict]] = {
     "twist": twist_schema, "span": span_schema, "sweep": sweep_schema, "dihedral": dihedral_schema,
-    "chord": chord_schema, "shape": shape_schema,
+    "chord": chord_schema, "shape": shape_schema, "flap": flap_schema, "slat": slat_schema,
 }
 CHANGE_KINDS = tuple(CHANGE_SCHEMAS)
 
@@ -157,7 +185,24 @@ def box_schema() -> dict:
                      "description": "a Plot3D lattice to use instead of the automatic box"},
             "block": {"type": "integer", "minimum": 0,
                       "description": "which block of a multi-block Plot3D file (0-based)"},
+            "refine": refine_schema(),
         }}
+
+
+def refine_schema() -> dict:
+    pair = {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1}, "minItems": 2,
+            "maxItems": 2}
+    count = {"type": "integer", "minimum": 1, "maximum": 32}
+    return {"description": "more control points where they are needed, by exact knot insertion (the "
+                           "surface does not move): {span: [a, b], sections: N} adds N sections between "
+                           "span fractions a and b; {chord: [a, b], points: N} N chordwise points between "
+                           "chord fractions a and b",
+            "type": "array", "minItems": 1,
+            "items": {"anyOf": [
+                {"type": "object", "properties": {"span": pair, "sections": count},
+                 "required": ["span", "sections"], "additionalProperties": False},
+                {"type": "object", "properties": {"chord": pair, "points": count},
+                 "required": ["chord", "points"], "additionalProperties": False}]}}
 
 
 def volume_schema() -> dict:
@@ -222,6 +267,12 @@ def constraints_schema() -> dict:
                          "the baseline (> 0: the box does not fold)",
                          {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
                                       "description": "samples per knot span and direction (default 4)"}}),
+        "mesh_quality": obj("smooth (KS) minimum over the volume cells of the scaled Jacobian after the design "
+                            "over the cell's input value (1: no cell got worse, < 0: a cell inverted); lower "
+                            "defaults to 0.3",
+                            {"gap": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                     "description": "the smooth minimum is at most this below the worst "
+                                                    "cell's ratio (default 0.05)"}}),
     }
     return {"type": "array",
             "description": "geometric constraints for optimisation; named k<index>.<kind>[<j>]",

@@ -184,8 +184,9 @@ def default_surface(mesh: Mesh) -> list[str]:
     """The marker(s) taken as the wing when the user names none.
 
     The only marker; else the only marker left after leaving out names that look like domain
-    boundaries (:data:`NOT_WING`, case-insensitive). Otherwise InputError listing the markers and
-    asking for ``--surface NAME`` (or ``surface:`` in the design file).
+    boundaries (:data:`NOT_WING`, case-insensitive); of an OpenFOAM case, the only patch of type
+    ``wall`` when that rule finds none. Otherwise InputError listing the markers and asking for
+    ``--surface NAME`` (or ``surface:`` in the design file).
     """
     names = list(mesh.markers)
     if len(names) == 1:
@@ -194,6 +195,9 @@ def default_surface(mesh: Mesh) -> list[str]:
         raise InputError("the mesh has no boundary markers, so there is no wing surface to deform",
                          path=mesh.path)
     left = [n for n in names if not looks_like_domain_boundary(n)]
+    walls = [p.name for p in getattr(mesh.source, "patches", ()) if p.type == "wall" and p.name in mesh.markers]
+    if len(left) != 1 and len(walls) == 1:
+        return walls
     if len(left) == 1:
         return left
     listed = ", ".join(names)

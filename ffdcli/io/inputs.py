@@ -70,3 +70,35 @@ def check_input_file(path: str | Path, what: str = "file", *, key: str | None = 
             text = f"{what} {p} not found"
         raise InputError(text, path=design, key=key, line=line)
     raise InputError(text, path=p)
+
+
+def polymesh_folder_of(path: str | Path) -> Path | None:
+    """The polyMesh folder of an OpenFOAM case folder (its ``constant/polyMesh``) or of a polyMesh
+    folder itself (one holding ``points``, ``faces`` or ``owner``, plain or ``.gz``); None when
+    ``path`` is neither."""
+    p = Path(path)
+    if (p / "constant" / "polyMesh").is_dir():
+        return p / "constant" / "polyMesh"
+    if any((p / f"{name}{gz}").is_file() for name in ("points", "faces", "owner") for gz in ("", ".gz")):
+        return p
+    return None
+
+
+def check_mesh_path(path: str | Path, *, key: str | None = None, design: str | Path | None = None,
+                    line: int | None = None) -> Path:
+    """:func:`check_input_file` of a mesh, which may also be an OpenFOAM case folder (or its
+    ``constant/polyMesh``): a folder is accepted when it holds a polyMesh."""
+    p = Path(path)
+    if existing_kind(p) != "folder":
+        if existing_kind(p) is None and not p.suffix:
+            text = f"no such mesh file or OpenFOAM case folder: {p}" if design is not None else \
+                "no such mesh file or OpenFOAM case folder"
+            raise InputError(text, path=design if design is not None else p, key=key, line=line)
+        return check_input_file(p, "mesh file", key=key, design=design, line=line)
+    if polymesh_folder_of(p) is None:
+        text = "is a folder without an OpenFOAM mesh (no constant/polyMesh, nor polyMesh files)"
+        if design is not None:
+            raise InputError(f"mesh {p} {text}", path=design, key=key, line=line,
+                             hint="give a mesh file or an OpenFOAM case folder")
+        raise InputError(text, path=p, hint="give a mesh file or an OpenFOAM case folder")
+    return p

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -37,10 +38,12 @@ from ffdcli.io.atomic import (
     keep_mode,
     make_temp,
     output_error,
+    replace_folder,
     signals_deferred,
     signals_raise,
 )
-from ffdcli.io.formats import FORMATS, format_of
+from ffdcli.io.formats import FOLDER_FORMAT, FORMATS, format_of, mismatch_message
+from ffdcli.io.inputs import polymesh_folder_of
 
 
 @dataclass(frozen=True)
@@ -154,8 +157,11 @@ class OutputPlan:
                 with signals_deferred():
                     for out, tmp in temps:
                         current = out
-                        keep_mode(out.path, tmp)
-                        os.replace(tmp, out.path)
+                        if tmp.is_dir():          # a folder output (an OpenFOAM case)
+                            replace_folder(tmp, out.path)
+                        else:
+                            keep_mode(out.path, tmp)
+                            os.replace(tmp, out.path)
                         written[out.kind] = str(out.path)
         except OSError as e:
             _remove(temps)
@@ -170,10 +176,16 @@ class OutputPlan:
 def _remove(temps) -> None:
     for _, tmp in temps:
         with contextlib.suppress(OSError):
-            tmp.unlink()
+            if tmp.is_dir() and not tmp.is_symlink():
+                shutil.rmtree(tmp)
+            else:
+                tmp.unlink()
 
 
 def _check_still_regular(out: Output) -> None:
+    if out.kind == "mesh" and format_of(out.path) == FOLDER_FORMAT:
+        check_folder_output(out.path)
+        return
     kind = existing_kind(out.path)
     if kind not in (None, "regular file"):
         raise InputError(f"the output path exists and is {kind}; outputs are written only as regular files",
@@ -198,7 +210,15 @@ def check_output(kind: str, path: str | Path, *, inputs: Iterable[str | Path | N
             raise InputError(f"{spec.what} would overwrite {other.what} of this run; give them different "
                              "names", path=p)
     if kind == "mesh":
-        format_of(p, key=option)
+        fmt = format_of(p, key=option)
+        try:
+            src = format_of(inputs[0]) if inputs and inputs[0] is not None else None   # the mesh: first input
+        except InputError:
+            src = None
+        if src is not None and FOLDER_FORMAT in (fmt, src) and fmt != src:
+            raise InputError(mismatch_message(src, fmt), path=p, key=option)
+        if fmt == FOLDER_FORMAT:
+            return check_folder_output(p, inputs=inputs, create_folder=create_folder)
     elif spec.suffixes is not None and p.suffix.lower() not in spec.suffixes:
         raise InputError(spec.wrong_suffix or f"{spec.what} needs one of the suffixes {', '.join(spec.suffixes)}",
                          path=p)
@@ -208,6 +228,43 @@ def check_output(kind: str, path: str | Path, *, inputs: Iterable[str | Path | N
         except OSError as e:
             raise output_error(e, p.parent, "the output folder") from None
     return check_writable(p, inputs=tuple(inputs))
+
+
+def check_folder_output(p: Path, *, inputs: tuple = (), create_folder: bool = False) -> Path:
+    """Check an output that is a folder (an OpenFOAM case): not an input, not a folder holding the
+    input, its parent writable; an existing folder there must be an OpenFOAM case (it is replaced
+    whole, so anything else is refused)."""
+    check_not_input(p, inputs)
+    for src in inputs[:1]:
+        if src is not None and _inside(Path(src), p):
+            raise InputError("the output folder holds the input mesh; choose another output path", path=p)
+    if create_folder and not p.parent.exists():
+        try:
+            p.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            raise output_error(e, p.parent, "the output folder") from None
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"the output folder {str(parent)!r} does not exist", path=p, hint="create it first")
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"the output folder {str(parent)!r} is not writable", path=p)
+    kind = existing_kind(p)
+    if kind == "folder" and polymesh_folder_of(p) is None:
+        raise InputError("the output path is a folder that is not an OpenFOAM case; ffd replaces only a case "
+                         "folder (with constant/polyMesh) at an output path", path=p, hint="choose another output path")
+    if kind not in (None, "folder"):
+        raise InputError(f"the output path exists and is {kind}; an OpenFOAM case is written as a folder",
+                         path=p, hint="choose another output path")
+    return p
+
+
+def _inside(inner: Path, outer: Path) -> bool:
+    """True when ``inner`` is ``outer`` or lies inside it (resolved paths)."""
+    try:
+        a, b = inner.resolve(), outer.resolve()
+    except (OSError, RuntimeError):
+        return False
+    return a == b or b in a.parents
 
 
 def _same(a: Path, b: Path) -> bool:

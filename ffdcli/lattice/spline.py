@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
-from numba.cpython.unsafe.tuple import tuple_setitem
+
+from ffdcli.jit import tuple_setitem
 
 
 def clamped_knots(n_ctrl: int, degree: int) -> np.ndarray:
@@ -382,3 +383,62 @@ def basis_compiled(knots, degree: int, t) -> tuple[np.ndarray, np.ndarray]:
     if t.size:
         _basis_batch_nb(knots, p, t, first, values)
     return first, values
+
+
+# ----------------------------------------------------------------------------------------------
+# Knot insertion (Boehm): a refined spline that is the same curve
+# ----------------------------------------------------------------------------------------------
+
+def insertion_matrix(knots, degree: int, u: float) -> tuple[np.ndarray, np.ndarray]:
+    """Insert the knot ``u`` once (Boehm's algorithm, NURBS Book A5.1): the new knot vector and the
+    (n + 1, n) matrix ``A`` with ``Q = A @ P`` the new control points of the same spline.
+
+    Parameters
+    ----------
+    knots : array_like, shape (n + p + 1,)
+        Clamped knot vector.
+    degree : int
+        Degree ``p``.
+    u : float
+        The new knot, strictly inside (0, 1); it may equal an existing knot of multiplicity < ``p``.
+
+    Returns
+    -------
+    knots : ndarray, shape (n + p + 2,)
+    A : ndarray, shape (n + 1, n)
+        Rows ``i <= s - p``: ``e_i``; ``s - p < i <= s``: ``a_i e_i + (1 - a_i) e_{i-1}`` with
+        ``a_i = (u - t_i) / (t_{i+p} - t_i)``; ``i > s``: ``e_{i-1}`` (``s`` the span of ``u``).
+        Every row is a convex combination, so the new points lie in the hull of the old ones.
+    """
+    t = np.asarray(knots, dtype=np.float64)
+    p = int(degree)
+    n = t.size - p - 1
+    u = float(u)
+    if not 0.0 < u < 1.0:
+        raise ValueError(f"a knot is inserted strictly inside (0, 1), got {u!r}")
+    if p >= 1 and np.count_nonzero(t == u) >= p:
+        raise ValueError(f"the knot {u!r} already has multiplicity {p} (the degree)")
+    s = int(np.searchsorted(t, u, side="right") - 1)
+    A = np.zeros((n + 1, n))
+    i = np.arange(n + 1)
+    low = i <= s - p
+    A[i[low], i[low]] = 1.0
+    high = i > s
+    A[i[high], i[high] - 1] = 1.0
+    mid = i[~low & ~high]
+    a = (u - t[mid]) / (t[mid + p] - t[mid])
+    A[mid, mid] = a
+    A[mid, mid - 1] = 1.0 - a
+    return np.insert(t, s + 1, u), A
+
+
+def refinement_matrix(knots, degree: int, new) -> tuple[np.ndarray, np.ndarray]:
+    """Insert every knot of ``new`` (each once, any order): the refined knot vector and the (n', n)
+    matrix ``A`` with ``Q = A @ P`` (the product of the single insertions of :func:`insertion_matrix`)."""
+    t = np.asarray(knots, dtype=np.float64)
+    n = t.size - int(degree) - 1
+    A = np.eye(n)
+    for u in np.sort(np.asarray(new, dtype=np.float64).reshape(-1)):
+        t, Ai = insertion_matrix(t, degree, u)
+        A = Ai @ A
+    return t, A

@@ -84,6 +84,7 @@ class Mesh:
     partial: bool = False
     global_ids: np.ndarray | None = None
     n_global: int | None = None
+    polyhedra: Any = None
 
     def __post_init__(self):
         self.points = np.asarray(self.points, dtype=np.float64)
@@ -106,7 +107,7 @@ class Mesh:
 
     @property
     def n_cells(self) -> int:
-        return sum(len(b) for b in self.cells)
+        return sum(len(b) for b in self.cells) + (0 if self.polyhedra is None else self.polyhedra.n_cells)
 
     def marker_point_ids(self, names: str | list[str] | tuple[str, ...]) -> np.ndarray:
         """Sorted unique point ids of one or more markers. Unknown names raise InputError."""
@@ -135,7 +136,7 @@ class Mesh:
         return Mesh(points=np.asarray(points, dtype=np.float64).reshape(self.points.shape),
                     dim=self.dim, cells=self.cells, markers=self.markers, path=self.path,
                     format=self.format, source=self.source, partial=self.partial,
-                    global_ids=self.global_ids, n_global=self.n_global)
+                    global_ids=self.global_ids, n_global=self.n_global, polyhedra=self.polyhedra)
 
 
 def check_markers(markers, names, *, path=None, key: str | None = None) -> None:

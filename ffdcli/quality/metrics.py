@@ -129,6 +129,13 @@ def _raw_quality_nb(points, data, corners, scale, plane, out):
         out[c] = best * scale
 
 
+def corner_table(ctype: str) -> tuple[np.ndarray, float]:
+    """The corners of a cell type, ``(k, 4)`` rows (corner node, edge ends a, b, c) in 3D or ``(k, 3)``
+    (node, a, b) in 2D, local node numbers in VTK order, and the factor ``c`` that scales the ideal
+    cell to 1 (see the module docstring)."""
+    return _CORNERS[ctype], float(_SCALE[ctype])
+
+
 def check_types(cells: list[CellBlock], dim: int):
     """ValueError unless every block is a cell type with a quality measure, of dimension ``dim``."""
     for blk in cells:

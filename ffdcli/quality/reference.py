@@ -18,6 +18,7 @@ from ffdcli.parallel.comm import SerialComm
 from ffdcli.parallel.partition import whole_part
 from ffdcli.quality.metrics import CHUNK, Orientation, check_types, plane_normal, raw_quality
 from ffdcli.quality.orthogonality import EdgeTopology, edge_topology, node_orthogonality
+from ffdcli.quality.polyhedral import poly_reference
 
 
 @dataclass(frozen=True)
@@ -118,5 +119,8 @@ def quality_reference(mesh: Mesh, points: np.ndarray | None = None, *, orthogona
                       ) -> QualityReference:
     """The :class:`QualityReference` of a whole ``mesh`` at ``points`` (default its own): the one-part
     case of :func:`part_reference`. Pass it to :func:`ffdcli.quality.gate.check_quality` as
-    ``reference`` with the same ``points_before``."""
+    ``reference`` with the same ``points_before``. Of a mesh of polyhedral cells: its
+    :class:`~ffdcli.quality.polyhedral.PolyFigures` (:func:`~ffdcli.quality.polyhedral.poly_reference`)."""
+    if mesh.polyhedra is not None:
+        return poly_reference(mesh, points)
     return part_reference(whole_part(mesh), SerialComm(), points, orthogonality=orthogonality)

@@ -53,6 +53,8 @@ class Part:
     P0: np.ndarray
     P1: np.ndarray
     box: object
+    #: ((kind, (E, 3) hinge points), ...) of the flaps and slats, on the original lattice.
+    hinges: tuple = ()
 
 
 def run_parts(run, result) -> list[Part]:
@@ -62,8 +64,9 @@ def run_parts(run, result) -> list[Part]:
     out = []
     for comp, P1 in zip(run.components, Ps, strict=True):
         surf = comp.prep.surface
+        hinges = tuple((ch.kind, ch.hinge_line(comp.P0)) for ch in comp.changes if hasattr(ch, "hinge_line"))
         out.append(Part(name=comp.name or ", ".join(surf.names), X0=surf.points, X1=result.points[surf.ids],
-                        edges=surface_edges(surf.faces), P0=comp.P0, P1=P1, box=comp.box))
+                        edges=surface_edges(surf.faces), P0=comp.P0, P1=P1, box=comp.box, hinges=hinges))
     return out
 
 
@@ -235,6 +238,15 @@ def _draw_outlines(ax, part: Part, along: int, across: int, *, swap: bool, latti
             ax.plot(*xy(Q.reshape(-1, 2)).T, "o", ms=2, color=color, alpha=0.6, zorder=1)
 
 
+def _draw_hinges(ax, part: Part, along: int, across: int, *, swap: bool):
+    """The hinge lines of the part's flaps and slats (violet dash-dot; a cross in 2D)."""
+    for kind, H in part.hinges:
+        q = H[:, [along, across]]
+        q = q[:, ::-1] if swap else q
+        ax.plot(*q.T, "-." if len(q) > 1 else "x", color=VIOLET, lw=1.6, ms=9, zorder=5,
+                label=f"{kind} hinge")
+
+
 def _deformed_stations(part: Part) -> np.ndarray:
     """Span coordinate of each deformed lattice section (mean of its control points)."""
     s = part.box.axes.span
@@ -296,7 +308,9 @@ def _section_panel(ax, part: Part, label: str, value: float, j: int, q0, q1, nam
                                              colors=color, linewidths=lw, zorder=z))
             ax.autoscale_view()
         else:
-            o = _order_loop(q2)
+            # the cut points are material points: the deformed section in the original's order (a
+            # drooped flap is not star-shaped about its centroid)
+            o = _order_loop(q0) if len(q0) == len(q2) else _order_loop(q2)
             ax.plot(np.r_[q2[o, 0], q2[o[:1], 0]], np.r_[q2[o, 1], q2[o[:1], 1]], "-", lw=lw,
                     color=color, zorder=z)
     for P, color in ((part.P0, GREY), (part.P1, RED)):
@@ -392,6 +406,7 @@ def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=No
         if target is not None:
             tq = _target_curve(box, target)
             ax.plot(tq[:, 0], tq[:, 1], "--", color=VIOLET, lw=1.4, label="target", zorder=4)
+        _draw_hinges(ax, part, c, t, swap=False)
         ax.plot([], [], "-", color=BLACK, label="original")
         ax.plot([], [], "-", color=RED, label="deformed")
         ax.legend(fontsize=8, loc="upper right")
@@ -403,6 +418,9 @@ def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=No
         ax_plan = fig.add_subplot(grid[0:2, 0])
         for other in parts:              # every component in the planform and front views
             _draw_outlines(ax_plan, other, s, c, swap=True)
+            _draw_hinges(ax_plan, other, s, c, swap=True)
+        if part.hinges:
+            ax_plan.legend(fontsize=8, loc="best")
         ax_plan.set_xlabel(names[0] + ", streamwise \u2192")
         ax_plan.set_ylabel(names[2] + ", root to tip")
         ax_plan.set_aspect("equal", adjustable="datalim")

@@ -2,9 +2,9 @@
 
 Such a mesh has every node on a boundary marker: the airfoil, the far field and the side planes.
 The automatic axes then take the span along the chord or thickness (the extrusion is as long as
-the chord), and when both side planes are one marker, that marker is not planar, so the volume
-motion keeps it fixed: every volume node is held and every design inverts cells. This module finds
-the case so that ``ffd inspect``, ``ffd box`` and ``ffd deform`` can say what to set.
+the chord). (Both side planes in one marker slide, each node in its own plane: see
+:mod:`ffdcli.volume.roles`.) This module finds the case so that ``ffd inspect``, ``ffd box`` and
+``ffd deform`` can say what to set.
 """
 
 from __future__ import annotations
@@ -40,7 +40,8 @@ class Extrusion:
         names = ", ".join(self.markers)
         text = (f"the mesh is one cell thick along {ax} (an extruded 2D airfoil?): "
                 f"{100 * self.fraction:.0f} % of its volume nodes lie on {names}; the span is then "
-                f"{ax}: set box.sections: {self.sections} (ffd box --sections {self.sections})")
+                f"{ax}: set box.sections: {self.sections} (ffd box --sections {self.sections}), and "
+                f"volume.tolerance: 0 so that both side planes move alike (the exact sums are symmetric)")
         if self.fixed:
             text += (f"; {', '.join(self.fixed)} holds both side planes, so the volume motion keeps "
                      "it fixed and every change inverts cells: give ffd the 2D mesh of the airfoil, "

@@ -4,13 +4,16 @@ The volume warp (:mod:`ffdcli.volume.warp`) moves every mesh node that is neithe
 nor on a fixed marker; this module decides those roles from the mesh's markers and ``volume.fixed``
 / ``volume.sliding``, fits the planes of sliding markers and builds their projectors.
 
-**Marker rules** (the README copies this list):
+**Marker rules** (docs/design-choices.md copies this list):
 
 - The deforming surface: its nodes get exactly the FFD displacement, bit for bit.
 - ``fixed`` markers: their nodes do not move, and they are sources of zero motion.
 - ``sliding`` markers: their nodes get the IDW displacement with its component normal to the
   marker's plane removed, so they stay on the plane (exactly, when the plane is normal to a mesh
   axis). They are targets, not sources.
+- A marker whose nodes lie on two parallel planes normal to a mesh axis (the front and back of a
+  one-cell-thick mesh, OpenFOAM's ``empty`` patch of a 2D case) counts as planar: each node slides
+  in its own plane.
 - Default rule, for every marker other than the surface that ``volume.fixed`` / ``volume.sliding``
   do not name: the marker is *sliding* when all its nodes lie in one plane (within
   :data:`PLANE_TOLERANCE` x the diagonal of the mesh's bounding box; in 2D: on one straight line
@@ -116,6 +119,8 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
             continue
         ids = ids_of(name)
         plane = _fit_plane(pts[ids], size, mesh_normal)
+        if plane is None and mesh_normal is None:
+            plane = _two_planes(pts[ids], size)
         if settings.sliding is not None and name in settings.sliding:
             if plane is None:
                 raise InputError(f"marker {name!r} is not planar, so its nodes cannot slide in a "
@@ -134,12 +139,43 @@ def marker_roles(points: np.ndarray, markers: dict[str, list[CellBlock]], surfac
     fixed_ids = np.setdiff1d(fixed_ids, surface_ids, assume_unique=True)
     taken = union_ids(surface_ids, fixed_ids)
     sliding = []
-    for name, (normal, point) in planes.items():
+    for name, plane in planes.items():
         ids = np.setdiff1d(ids_of(name), taken, assume_unique=True)
+        if isinstance(plane, list):              # two parallel planes: each node slides in its own
+            axis = int(np.argmax(np.abs(plane[0][0])))
+            for normal, point in plane:
+                on = np.abs(pts[ids, axis] - point[axis]) <= PLANE_TOLERANCE * max(size, np.finfo(float).tiny)
+                sliding.append(SlidingPlane(ids[on], normal, point))
+            continue
+        normal, point = plane
         sliding.append(SlidingPlane(ids, normal, point))
     faces = [b for n, r in roles.items() if r in ("surface", "fixed") for b in markers[n]
              if b.type != "vertex"]
     return MarkerRoles(roles, surface_ids, fixed_ids, sliding, faces)
+
+
+def _two_planes(pts: np.ndarray, size: float):
+    """The two planes normal to a mesh axis that hold every point (the front and back of a
+    one-cell-thick mesh, OpenFOAM's ``empty`` patch of a 2D case), as a list of two (normal, point);
+    None when the points are not so."""
+    tol = PLANE_TOLERANCE * max(size, np.finfo(float).tiny)
+    if len(pts) < 6:
+        return None
+    for axis in range(3):
+        v = pts[:, axis]
+        lo, hi = v.min(), v.max()
+        if hi - lo <= tol or not np.all((np.abs(v - lo) <= tol) | (np.abs(v - hi) <= tol)):
+            continue
+        e = np.zeros(3)
+        e[axis] = 1.0
+        got = []
+        for level in (lo, hi):
+            sel = pts[np.abs(v - level) <= tol]
+            if len(sel) < 3 or np.linalg.svd(sel - sel.mean(axis=0), compute_uv=False)[1] <= tol:
+                return None
+            got.append((e, np.where(np.arange(3) == axis, level, sel.mean(axis=0))))
+        return got
+    return None
 
 
 def _snap_axis(n: np.ndarray) -> np.ndarray:

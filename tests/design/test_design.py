@@ -62,7 +62,11 @@ def test_every_config_validates_loads_and_builds(config):
     for spec in specs_of(design):            # a design with components: each one's box and changes
         pts = spec.box.points
         n, m, l, dim = (pts[0], pts[1], pts[2], 3) if len(pts) == 3 else (pts[0], 1, pts[1], 2)
-        changes = changes_from_spec(list(spec.changes_spec), n, m, l, dim)
+        # flaps and slats read the box (their hinge, the knots they add): built by the flap tests
+        items = [c for c in spec.changes_spec if next(iter(c)) not in ("flap", "slat")]
+        if not items:
+            continue
+        changes = changes_from_spec(items, n, m, l, dim)
         names, values = design_variables(changes)
         assert len(names) == len(values) > 0 and np.all(np.isfinite(values))
 

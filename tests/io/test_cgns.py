@@ -12,7 +12,7 @@ import pytest
 from conftest import shared_file
 
 from ffdcli.errors import InputError
-from ffdcli.io.formats import cgns, read_mesh, write_mesh
+from ffdcli.io.formats import cgns, cgns_nodes, read_mesh, write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 
 REAL_HDF5 = [
@@ -187,18 +187,21 @@ def test_mixed_offsets_matches_reference():
             cgns.mixed_offsets_reference(bad, table)
 
 
-def test_ngon_sections_are_skipped_with_a_warning(tmp_path):
+def test_ngon_sections_without_cells_are_refused_naming_them(tmp_path):
+    """Cells ffd cannot read are never skipped (issue 29): an NGON_n section without the NFACE_n
+    that makes its faces cells is an input error naming the section, and no Python warning."""
     src = tmp_path / "box.cgns"
     write_mesh(_box_mesh(), src)
     with h5py.File(src, "r+") as h5:
         zone = h5["Base/Zone"]
         sec = cgns._node(zone, "Polygons", "Elements_t", "I4", np.array([cgns.NGON_N, 0], np.int32))
         cgns._node(sec, "ElementRange", "IndexRange_t", "I4", np.array([1000, 1000], np.int32))
-        cgns._node(sec, "ElementConnectivity", "DataArray_t", "I4", np.array([1, 2, 3], np.int32))
-    with pytest.warns(UserWarning, match="NGON_n"):
-        mesh = read_mesh(src)
-    assert any("Polygons" in s for s in mesh.source.skipped)
-    assert mesh.n_cells == 8
+        cgns._node(sec, "ElementConnectivity", "DataArray_t", "I4", np.array([3, 1, 2, 3], np.int32))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(InputError, match="NGON_n faces without an NFACE_n") as e:
+            read_mesh(src)
+    assert "Polygons" in str(e.value)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -298,7 +301,7 @@ def _fake_adf(tmp_path):
 def test_adf_without_adf2hdf_says_what_to_do(tmp_path, monkeypatch):
     p = _fake_adf(tmp_path)
     assert cgns.container_of(p) == "adf"
-    monkeypatch.setattr(cgns.shutil, "which", lambda name: None)
+    monkeypatch.setattr(cgns_nodes.shutil, "which", lambda name: None)
     with pytest.raises(InputError) as exc:
         read_mesh(p)
     msg = str(exc.value)

@@ -74,9 +74,10 @@ def test_fit_cli_writes_a_design_that_deforms_into_the_target(tmp_path):
     assert data["box"]["points"] == [12, 5] and "rows" in data["changes"][-1]["shape"]
     mesh_out = tmp_path / "s1223.su2"
     proc = run_ffd("deform", str(out), "-o", str(mesh_out), "--lattice", str(tmp_path / "l.vtk"), "--json")
-    # Known limit (README): the S1223's trailing edge is a cusp turned 39 degrees down; the one wall
-    # cell behind the sharp trailing edge of the O-grid folds. The gate must say so and write nothing;
-    # every other cell is valid (checked with --force).
+    # The S1223's trailing edge is a cusp turned 39 degrees down, which squeezes the wall cell behind
+    # the sharp trailing edge of the O-grid (docs/design-choices.md, "Airfoil fit"; the gate passes it
+    # today). Should it fold, the gate must say so and write nothing, and every other cell must be
+    # valid (checked with --force).
     if proc.returncode == 3:
         assert "inverted" in proc.stderr and not mesh_out.exists()
         proc = run_ffd("deform", str(out), "-o", str(mesh_out), "--lattice", str(tmp_path / "l.vtk"),

@@ -1,6 +1,7 @@
 """Mesh input and output: one reader/writer API, one module per format.
 
-``read_mesh(path)`` picks the reader from the extension; ``write_mesh(mesh, path, points)`` writes a
+``read_mesh(path)`` picks the reader from the extension (a folder, or a path without one, is an
+OpenFOAM case: :mod:`ffdcli.io.formats.openfoam`); ``write_mesh(mesh, path, points)`` writes a
 mesh with new point coordinates. When ``path`` has the format the mesh was read from, the writer
 patches a copy of the input file (only coordinates change, everything else byte for byte);
 otherwise it writes the mesh from scratch in the new format, markers included.
@@ -12,15 +13,23 @@ from pathlib import Path
 
 import numpy as np
 
+from ffdcli.errors import InputError
 from ffdcli.io.atomic import check_writable
-from ffdcli.io.formats import cgns, su2, vtk
-from ffdcli.io.formats.common import FORMATS, check_finite_points, check_finite_rows, format_of  # noqa: F401
-from ffdcli.io.inputs import check_input_file
+from ffdcli.io.formats import cgns, openfoam, su2, vtk
+from ffdcli.io.formats.common import (  # noqa: F401
+    FOLDER_FORMAT,
+    FORMATS,
+    check_finite_points,
+    check_finite_rows,
+    format_of,
+    mismatch_message,
+)
+from ffdcli.io.inputs import check_mesh_path
 from ffdcli.mesh import Mesh
 from ffdcli.parallel.partition import localize, node_owners
 
 #: format name -> the module that reads and writes it
-MODULES = {"su2": su2, "cgns": cgns, "vtu": vtk, "vtk": vtk}
+MODULES = {"su2": su2, "cgns": cgns, "vtu": vtk, "vtk": vtk, FOLDER_FORMAT: openfoam}
 
 
 def _module(fmt: str):
@@ -28,10 +37,11 @@ def _module(fmt: str):
 
 
 def read_mesh(path: str | Path, *, progress=None) -> Mesh:
-    """Read a mesh (.su2, .cgns, .vtu, .vtk). Raises InputError naming the file on any problem."""
+    """Read a mesh (.su2, .cgns, .vtu, .vtk, an OpenFOAM case folder). Raises InputError naming the
+    file on any problem."""
     p = Path(path)
     fmt = format_of(p)
-    check_input_file(p, "mesh file")          # a FIFO or a device would block or never end in open()
+    check_mesh_path(p)                         # a FIFO or a device would block or never end in open()
     mesh = _module(fmt).read(p, progress=progress)
     check_finite_points(mesh)
     return mesh
@@ -54,13 +64,20 @@ def read_part(path: str | Path, comm, *, progress=None):
     """
     p = Path(path)
     fmt = comm.run(format_of, p)
-    comm.run(check_input_file, p, "mesh file")
+    comm.run(check_mesh_path, p)
+    if fmt == FOLDER_FORMAT:
+        comm.run(_no_polyhedra_mpi, p)
     if fmt in READ_BY_PARTS:
         mesh, part = _module(fmt).read_part(p, comm, progress=progress)
         comm.run(check_finite_points, mesh)
         return mesh, part
     mesh = comm.root_then_bcast(read_mesh, p, progress=progress)      # transiently whole on every rank
     return localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
+
+
+def _no_polyhedra_mpi(path) -> None:
+    raise InputError("MPI runs on OpenFOAM cases (polyhedral cells) are not supported yet; run without "
+                     "mpiexec (a serial run reads a 1M-cell polyMesh in seconds)", path=path)
 
 
 def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *,
@@ -70,11 +87,16 @@ def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *
     Never overwrites the file the mesh was read from. Returns notes of the writer for the run's
     summary (``{}`` for most; the SU2 writer reports what it did to SU2's own FFD section).
     """
-    p = check_writable(path, inputs=(mesh.path,) if mesh.path else ())
+    p = Path(path)
     fmt = format_of(p)
+    if (fmt == FOLDER_FORMAT) != (mesh.format == FOLDER_FORMAT) or (mesh.polyhedra is not None and fmt != mesh.format):
+        raise InputError(mismatch_message(mesh.format, fmt), path=p)
+    if fmt != FOLDER_FORMAT:
+        p = check_writable(p, inputs=(mesh.path,) if mesh.path else ())
     if mesh.partial and fmt != mesh.format:      # written from scratch: every cell, read again here
         mesh = read_mesh(mesh.path, progress=progress)
     pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
     if pts.shape != mesh.points.shape:
         raise ValueError(f"points {pts.shape} do not match the mesh {mesh.points.shape}")
     return _module(fmt).write(mesh, p, pts, progress=progress) or {}
+

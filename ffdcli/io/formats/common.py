@@ -11,15 +11,35 @@ from ffdcli.mesh import Mesh
 
 #: extension -> format name
 FORMATS = {".su2": "su2", ".cgns": "cgns", ".vtu": "vtu", ".vtk": "vtk"}
+#: The format of a folder (an OpenFOAM case or its constant/polyMesh), and of a path without extension.
+FOLDER_FORMAT = "openfoam"
 
 
 def format_of(path: str | Path, *, key: str | None = None) -> str:
-    """The format name of a mesh path, from its extension; InputError if unsupported."""
-    ext = Path(path).suffix.lower()
-    if ext not in FORMATS:
-        raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
-                         f"{', '.join(FORMATS)}", path=path, key=key)
-    return FORMATS[ext]
+    """The format name of a mesh path: from its extension; ``openfoam`` for a folder or a path
+    without extension (an OpenFOAM case folder, or one to be written); InputError if unsupported."""
+    p = Path(path)
+    ext = p.suffix.lower()
+    if ext in FORMATS:
+        return FORMATS[ext]
+    if str(path) and (ext in ("", ".part") or p.is_dir()):     # .part: the output plan's temporary folder
+        return FOLDER_FORMAT
+    raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
+                     f"{', '.join(FORMATS)}, or an OpenFOAM case folder", path=path, key=key)
+
+
+def mismatch_message(read: str, written: str) -> str:
+    """Why a mesh read in format ``read`` cannot be written as ``written`` (OpenFOAM cases are
+    written only as a copy of an OpenFOAM case with new points; polyhedral cells have no other
+    writer)."""
+    if read == FOLDER_FORMAT:
+        return ("the input is an OpenFOAM case: the deformed mesh is written as a copy of the case (an "
+                "output folder name without extension, e.g. out/wing_case)")
+    if written == FOLDER_FORMAT:
+        return (f"an output without extension is an OpenFOAM case folder, written only from an OpenFOAM input; "
+                f"the input is {read or 'not from a file'}: give the output an extension ({', '.join(FORMATS)})")
+    return (f"a mesh of polyhedral cells (NGON_n/NFACE_n) read from {read} can only be written as {read} (a copy of "
+            f"the input with new coordinates): give the output the .{read} extension")
 
 
 

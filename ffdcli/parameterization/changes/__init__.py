@@ -1,8 +1,9 @@
-"""The design changes: twist, span, sweep, dihedral, chord and shape as maps of lattice sections.
+"""The design changes: twist, span, sweep, dihedral, chord, shape, flap and slat as maps of lattice sections.
 
 One module per concept: :mod:`.base` (the :class:`Change` protocol, homogeneous coordinates, section
-laws), :mod:`.twist`, :mod:`.chord`, :mod:`.span`, :mod:`.sweep_dihedral` (the shears), :mod:`.shape`
-and :mod:`.pipeline` (a list of changes, built from the design file).
+laws), :mod:`.twist`, :mod:`.chord`, :mod:`.span`, :mod:`.sweep_dihedral` (the shears), :mod:`.shape`,
+:mod:`.control_surfaces` (flap and slat; where they sit in the lattice: :mod:`.devices`) and
+:mod:`.pipeline` (a list of changes, built from the design file).
 
 A lattice ``P`` has shape ``(n, m, l, 3)``: ``i`` chordwise (0 = leading-edge side), ``j`` spanwise
 (0 = root section), ``k`` thickness (0 = lower side), in mesh coordinates. A 2D lattice has
@@ -50,6 +51,7 @@ from ffdcli.parameterization.changes.base import (
     translation,
 )
 from ffdcli.parameterization.changes.chord import Chord
+from ffdcli.parameterization.changes.control_surfaces import ControlSurface, Flap, Slat
 from ffdcli.parameterization.changes.pipeline import (
     CHANGE_CLASSES,
     apply_changes,
@@ -65,8 +67,9 @@ from ffdcli.parameterization.changes.sweep_dihedral import Dihedral, Shear, Swee
 from ffdcli.parameterization.changes.twist import Twist
 
 __all__ = [
-    "CHANGE_CLASSES", "DEG", "MAX_SHEAR_ANGLE", "Change", "Chord", "Dihedral", "LatticeFrame", "SectionLaw",
-    "SectionMap", "Shape", "Shear", "Span", "SpecContext", "Sweep", "Twist", "about", "apply_changes",
-    "apply_homogeneous", "changes_from_spec", "design_bounds", "design_units", "design_variables",
-    "homogeneous", "not_in_2d", "rotation", "rotation_derivative", "set_design_variables", "translation",
+    "CHANGE_CLASSES", "DEG", "MAX_SHEAR_ANGLE", "Change", "Chord", "ControlSurface", "Dihedral", "Flap",
+    "LatticeFrame", "SectionLaw", "SectionMap", "Shape", "Shear", "Slat", "Span", "SpecContext", "Sweep",
+    "Twist", "about", "apply_changes", "apply_homogeneous", "changes_from_spec", "design_bounds",
+    "design_units", "design_variables", "homogeneous", "not_in_2d", "rotation", "rotation_derivative",
+    "set_design_variables", "translation",
 ]

@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -110,9 +111,11 @@ class SectionLaw:
 
     @classmethod
     def root_tip(cls, m: int, tip: float, root: float | None = None,
-                 default_root: float = 0.0) -> SectionLaw:
-        """Linear in the section index from ``root`` (or ``default_root``) at j = 0 to ``tip``."""
-        s = np.arange(m) / max(m - 1, 1)
+                 default_root: float = 0.0, fractions=None) -> SectionLaw:
+        """Linear in the section index from ``root`` (or ``default_root``) at j = 0 to ``tip``; with
+        ``fractions`` (m,) (the sections' span fractions, for a box refined spanwise, whose sections
+        are not evenly spaced) linear in those."""
+        s = np.arange(m) / max(m - 1, 1) if fractions is None else np.asarray(fractions, dtype=float)
         if root is None:
             return cls((".tip",), np.array([float(tip)]), default_root * (1.0 - s), s[:, None].copy())
         return cls((".root", ".tip"), np.array([float(root), float(tip)]), np.zeros(m),
@@ -155,6 +158,9 @@ class SpecContext:
         The change's key path in the design file (``changes[2].twist``).
     error
         ``error(message, key) -> Exception``: the error to raise (the design file's, with its line).
+    box, surface
+        The :class:`ffdcli.box.box.Box` and the wing's surface points (N, 3), for the changes that
+        read the geometry (the control surfaces); None where no change needs them.
     """
 
     n: int
@@ -163,6 +169,17 @@ class SpecContext:
     dim: int
     key: str = "changes"
     error: Callable[[str, str], Exception] | None = None
+    box: Any = None
+    surface: np.ndarray | None = None
+
+    @property
+    def fractions(self) -> np.ndarray | None:
+        """(m,) span fractions of the sections of a box refined spanwise (its sections are not evenly
+        spaced); None for evenly spaced sections (the section index is the span fraction)."""
+        if self.box is None or self.box.dim != 3 or self.box.base_sections is None:
+            return None
+        st = self.box.stations
+        return (st - st[0]) / (st[-1] - st[0])
 
     def fail(self, message: str, key: str | None = None) -> Exception:
         """The exception for ``message`` at ``key`` (default: the change's own key)."""
@@ -261,7 +278,7 @@ class SectionMap(Change):
             return cls(SectionLaw.listed(spec))
         if isinstance(spec, dict):
             return cls(SectionLaw.root_tip(m, tip=spec["tip"], root=spec.get("root"),
-                                           default_root=cls.default_root))
+                                           default_root=cls.default_root, fractions=ctx.fractions))
         raise ctx.fail(f"in 3D {kind} takes a list of {m} values (one per section, root first) or "
                        "{tip: value} / {root: value, tip: value}")
 

@@ -10,6 +10,7 @@ import numpy as np
 from ffdcli.box.frame import LatticeFrame
 from ffdcli.parameterization.changes.base import Change, SpecContext
 from ffdcli.parameterization.changes.chord import Chord
+from ffdcli.parameterization.changes.control_surfaces import Flap, Slat
 from ffdcli.parameterization.changes.shape import Shape
 from ffdcli.parameterization.changes.span import Span
 from ffdcli.parameterization.changes.sweep_dihedral import Dihedral, Sweep
@@ -66,20 +67,24 @@ def set_design_variables(changes: Sequence[Change], values) -> list[Change]:
 
 
 #: The change class of each kind of the design file (``changes: - twist: ...``).
-CHANGE_CLASSES: dict[str, type[Change]] = {c.kind: c for c in (Twist, Span, Sweep, Dihedral, Chord, Shape)}
+CHANGE_CLASSES: dict[str, type[Change]] = {c.kind: c for c in (Twist, Span, Sweep, Dihedral, Chord, Shape, Flap,
+                                                                  Slat)}
 
 
-def changes_from_spec(specs, n: int, m: int, l: int, dim: int, error=None) -> list[Change]:
+def changes_from_spec(specs, n: int, m: int, l: int, dim: int, error=None, *, box=None,
+                      surface=None) -> list[Change]:
     """The change objects of a ``changes`` list (as written in a design file) for a lattice of
     n x m x l points (2D: m = 1).
 
     ``error(message, key) -> Exception`` makes the error of a change the lattice refuses (default: an
     :class:`InputError` naming the key, ``changes[2].twist``). Each item has one key, its kind.
+    ``box`` and ``surface`` (the wing's points) are what a flap or slat reads its hinge from.
     """
     out = []
     for index, item in enumerate(specs):
         (kind, spec), = item.items()
-        ctx = SpecContext(n=n, m=m, l=l, dim=dim, key=f"changes[{index}].{kind}", error=error)
+        ctx = SpecContext(n=n, m=m, l=l, dim=dim, key=f"changes[{index}].{kind}", error=error,
+                          box=box, surface=surface)
         cls = CHANGE_CLASSES.get(kind)
         if cls is None:                         # pragma: no cover (the schema rejects it)
             raise ctx.fail(f"unknown change '{kind}'")

@@ -15,7 +15,16 @@ from ffdcli.parameterization.changes.base import (
 
 @dataclass(frozen=True, eq=False)
 class Shape(Change):
-    """Move control points along the thickness axis (mesh units).
+    """Move control points along each section's own thickness direction (mesh units).
+
+    The direction of section ``j`` is read off the input lattice (:func:`section_normals`): the sum
+    of its thickness edges ``P[i, j, l-1] - P[i, j, 0]`` over ``i``, normalised and oriented along
+    the frame's thickness axis. A section turned by a twist before the shape moves along its turned
+    thickness axis (a twisted section's shape change is the untwisted one turned by the twist), and
+    a shape does not turn the direction it moves along (it adds to every edge along it). A box
+    fitted to a twisted wing has sections aligned with the local chord: there too a shape moves
+    normal to the local chord line. (Before issue 31 every section moved along the box's one
+    thickness axis, pyGeo's convention.)
 
     upper, lower
         (n,) one value per chordwise index for the upper (k = l-1) / lower (k = 0) row of every
@@ -122,7 +131,7 @@ class Shape(Change):
         return a
 
     def apply(self, P, frame):
-        return P + self.amounts(P)[..., None] * frame.thickness_dir
+        return P + self.amounts(P)[..., None] * per_point(section_normals(P, frame))
 
     def variables(self):
         out = []
@@ -154,19 +163,66 @@ class Shape(Change):
         self._check(P)
         n, m, l, _ = P.shape
         J = np.zeros((self.size, n, m, l, 3))
+        t = section_normals(P, frame)
         q = 0
         for _, k, v in self._sides():
             if v.ndim == 2:
                 for i in range(v.shape[0]):
                     for j in range(v.shape[1]):
-                        J[q, i, j, k] = frame.thickness_dir
+                        J[q, i, j, k] = t[j]
                         q += 1
             else:
                 cols = self._cols(m)
                 for i in range(v.shape[0]):
-                    J[q, i, cols, k] = frame.thickness_dir
+                    J[q, i, cols, k] = t[cols]
                     q += 1
         return J
 
     def jvp_P(self, P, frame, dP):
-        return np.array(dP, dtype=float, copy=True)
+        """dP + a dt_j: the sections' directions turn with the lattice."""
+        dP = np.asarray(dP, dtype=float)
+        dt = section_normals_jvp(P, frame, dP)
+        return dP + self.amounts(P)[..., None] * dt[..., None, :, None, :]
+
+
+#: A section direction within this of the frame's thickness axis is that axis (so that an untwisted
+#: box's shapes move exactly along it, bit for bit as before the directions were per section).
+SAME_DIRECTION = 1e-13
+
+
+def _edges(P: np.ndarray) -> np.ndarray:
+    """(..., m, 3) the sum over i of the thickness edges ``P[i, j, l-1] - P[i, j, 0]``."""
+    return (P[..., :, :, -1, :] - P[..., :, :, 0, :]).sum(axis=-3)
+
+
+def section_normals(P: np.ndarray, frame) -> np.ndarray:
+    """(m, 3) each section's own unit thickness direction in the lattice ``P`` (n, m, l, 3): its
+    summed thickness edges, normalised, on the side of ``frame.thickness_dir``; a lattice of one
+    thickness row (l = 1) has the frame's."""
+    m = P.shape[1]
+    t0 = frame.thickness_dir
+    if P.shape[2] < 2:
+        return np.broadcast_to(t0, (m, 3)).copy()
+    v = _edges(P)
+    v = v * np.sign(v @ t0)[:, None]
+    t = v / np.linalg.norm(v, axis=1)[:, None]
+    same = np.abs(t - t0).max(axis=1) < SAME_DIRECTION
+    t[same] = t0
+    return t
+
+
+def section_normals_jvp(P: np.ndarray, frame, dP: np.ndarray) -> np.ndarray:
+    """(..., m, 3) the change of :func:`section_normals` for a change ``dP`` (..., n, m, l, 3)."""
+    if P.shape[2] < 2:
+        return np.zeros(dP.shape[:-4] + (P.shape[1], 3))
+    v = _edges(P)
+    sgn = np.sign(v @ frame.thickness_dir)
+    norm = np.linalg.norm(v, axis=1)
+    t = v * sgn[:, None] / norm[:, None]
+    dv = _edges(dP) * sgn[:, None]
+    return (dv - np.einsum("...j,jd->...jd", np.einsum("...jd,jd->...j", dv, t), t)) / norm[:, None]
+
+
+def per_point(t: np.ndarray) -> np.ndarray:
+    """(1, m, 1, 3): per-section vectors (m, 3) broadcast over a lattice."""
+    return t[None, :, None, :]

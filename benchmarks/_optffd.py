@@ -1,0 +1,125 @@
+"""``ffd optimize`` on SU2's NACA0012 case: the ``--ffd`` rows (c) of ``bench_optimize``.
+
+The design: SU2's mesh and flow (``inv_NACA0012_basic.cfg``, Euler, M 0.8, alpha 1.25 deg), ffd's
+automatic box (10 x 2 control points), twist (about the trailing edge) and 2 x 9 shape variables (the
+trailing-edge column left out); the constrained version bounds LIFT >= 0.328486 and MOMENT_Z >= 0 (each
+with its own adjoint) and keeps t/c at 30 % chord at least the baseline's (the NACA0012's maximum
+thickness station); 8 SLSQP iterations. ``ffd optimize`` runs in a cached
+folder like the peers, in the benchmark's solver slot (one SU2 process at a time). ``ffd_path`` points
+to the tree that has the command (``--ffd-path``; default this repository).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import sys
+from pathlib import Path
+
+from benchmarks import _optpeers, _su2
+
+SHAPE_BOUND = 0.05        # chord lengths, each shape variable
+TWIST_BOUND = 3.0         # degrees
+POINTS = 10               # chordwise control points of the automatic box (x 2 rows)
+
+
+def design_text(adjoint: str, constrained: bool, iterations: int = _optpeers.ITERATIONS) -> str:
+    """The design file of a (c) run: ``configs/naca0012_optimize.yaml`` of the ``optimize`` branch (box
+    10 x 2, twist and every shape move but the trailing-edge column's, bounds +-3 deg and +-0.05
+    chord, t/c at 30 % chord >= the baseline's) with the mesh and config copied beside it."""
+    zeros = ", ".join(["0"] * POINTS)
+    shape = [f'"c1.shape.{side}[{i}]"' for side in ("upper", "lower") for i in range(POINTS - 1)]
+    lines = [
+        "mesh: mesh.su2", "surface: airfoil", f"box: {{points: [{POINTS}, 2]}}", "changes:", "  - twist: 0",
+        f"  - shape: {{upper: [{zeros}], lower: [{zeros}]}}",
+        "bounds:", f"  c0.twist: [{-TWIST_BOUND}, {TWIST_BOUND}]",
+        f"  c1.shape: [{-SHAPE_BOUND}, {SHAPE_BOUND}]",
+    ]
+    if constrained:
+        lines += ["constraints:", "  - thickness_to_chord: {chord: [0.3], lower: 1.0}"]
+    lines += ["optimize:", "  solver: su2", "  config: flow.cfg", "  objective: DRAG"]
+    if constrained:
+        lines += ["  functions:", f"    - {{name: LIFT, lower: {_optpeers.BOUNDS['LIFT']}}}",
+                  "    - {name: MOMENT_Z, lower: 0.0}"]
+    lines += [f"  variables: [c0.twist, {', '.join(shape)}]", "  method: SLSQP", f"  iterations: {iterations}",
+              "  folder: opt/", f"  adjoint: {adjoint}", "  max_failures: 3", "output: {mesh: out/naca.su2}"]
+    return "\n".join(lines) + "\n"
+
+
+def flow_config() -> str:
+    """SU2's basic config as the user would give it (ffd changes only mesh and output names)."""
+    return _su2.cfg_set(_su2.NACA_CFG.read_text(), MESH_FILENAME="mesh.su2")
+
+
+def has_optimize(ffd_path: Path) -> bool:
+    """Whether the ffd tree at ``ffd_path`` has the ``optimize`` command."""
+    return (Path(ffd_path) / "ffdcli" / "cli" / "optimize.py").exists()
+
+
+def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None = None,
+             force: bool = False, only_cached: bool = False) -> dict | None:
+    """Run (or reuse) ``ffd optimize`` for one row; returns the result dict with its JSON summary."""
+    root = Path(root or _su2.SCRATCH / "ffd")
+    label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
+    design = design_text(adjoint, constrained)
+    cfg = flow_config()
+    cmd = [sys.executable, "-m", "ffdcli", "optimize", "design.yaml", "--json"]
+    src = sorted(Path(ffd_path).joinpath("ffdcli").rglob("*.py"))
+
+    def body(folder: Path) -> dict:
+        shutil.copyfile(_su2.NACA_MESH, folder / "mesh.su2")
+        (folder / "flow.cfg").write_text(cfg)
+        (folder / "design.yaml").write_text(design)
+        env = _su2.su2_env()
+        env["PYTHONPATH"] = f"{ffd_path}:{env['PYTHONPATH']}"
+        rc, wall = _su2.run(cmd, folder, "optimize.log", env=env)
+        summary = None
+        for line in reversed((folder / "optimize.log").read_text().splitlines()):
+            if line.startswith("{"):
+                try:
+                    summary = json.loads(line)
+                    break
+                except json.JSONDecodeError:
+                    continue
+        return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path)}
+
+    return _su2.cached_run(root, label, design + cfg, [_su2.NACA_MESH, *src], cmd[2:], body, force=force,
+                           only_cached=only_cached)
+
+
+def _best_mesh(folder: Path, summary: dict) -> Path | None:
+    named = [Path(summary["best_mesh"])] if summary.get("best_mesh") else []
+    for cand in (*named, *sorted((folder / "opt").glob("best*.su2")), folder / "out" / "naca.su2"):
+        if cand.exists():
+            return cand
+    return None
+
+
+def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
+    """The table row of a finished (c) run, read from its JSON summary and its ``history.csv``."""
+    folder = Path(result["folder"])
+    s = result.get("summary") or {}
+    fn = s.get("functions") or {}
+    values = {"CD": fn.get("DRAG", float("nan")), "CL": fn.get("LIFT", float("nan")),
+              "CMz": fn.get("MOMENT_Z", float("nan"))}
+    hist = folder / "opt" / "history.csv"
+    if hist.exists() and any(math.isnan(v) for v in values.values()):
+        rows = _su2.read_history(hist)
+        best = min((r for r in rows if not r.get("failed")), key=lambda r: r.get("DRAG", math.inf))
+        values.update(CD=best.get("DRAG", values["CD"]), CL=best.get("LIFT", values["CL"]),
+                      CMz=best.get("MOMENT_Z", values["CMz"]))
+    mesh = _best_mesh(folder, s)
+    geo = folder / "final_geometry"
+    if (geo / "of_eval.csv").exists():
+        values["tc"] = _su2.last_history(geo / "of_eval.csv")["AIRFOIL_THICKNESS"]
+    elif mesh is not None:
+        values["tc"] = _optpeers.airfoil_thickness(mesh, geo)
+    else:
+        values["tc"] = float("nan")
+    viol = _optpeers.worst_violation(values)
+    return {"run": "(c) ffd optimize, automatic box (19)", "adjoint": adjoint, "constrained": constrained,
+            **values, "worst_violation": viol, "feasible": viol <= 1e-4,
+            "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
+            "wall_s": result["wall_s"], "designs": s.get("evaluations"), "status": s.get("status"),
+            "rc": result["rc"], "folder": str(folder)}

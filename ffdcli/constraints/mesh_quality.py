@@ -1,0 +1,354 @@
+"""``mesh_quality``: a smooth lower bound on the volume cells' quality after the design.
+
+The measure is the quality gate's (:mod:`ffdcli.quality.metrics`): the scaled Jacobian of a cell is
+the smallest of its corners' values ``s = c det[e1, e2, e3] / (|e1| |e2| |e3|)`` (2D: ``c n . (e1 x
+e2) / (|e1| |e2|)``), in the mesh's own orientation convention. Each corner's value after the
+design is divided by its cell's value ``q0`` on the input mesh, so ``min over corners of s / q0`` is
+the smallest ratio ``q_after / q_before`` of any cell (1: no cell got worse; 0: a cell collapsed;
+< 0: a cell inverted). Cells already inverted or degenerate in the input (``q0 <= 0``) are the
+mesh's problem, not the design's (the gate says so), and are left out.
+
+The minimum is replaced by the Kreisselmeier-Steinhauser (KS) minimum over every corner ``i``::
+
+    KS(r) = m - ln( sum_i exp(-rho (r_i - m)) ) / rho,        m = min_i r_i
+
+a smooth function of the mesh points (the corners' values are smooth wherever no edge has zero
+length) that is never above the true minimum and at most ``ln(n) / rho`` below it (``n`` corners).
+``rho = ln(n) / gap`` with ``gap`` 0.05 by default: the value is within 0.05 below the worst cell's
+ratio, on any mesh size, so the baseline reads between 0.95 and 1 and a bound ``lower: 0.3`` holds
+the worst cell at 0.3 x its input quality or better. Why KS and not a p-norm: it is defined for
+ratios <= 0 (an inverted cell, exactly what the optimiser must see coming and be pushed back
+from), it bounds the minimum from below (a satisfied constraint is a satisfied minimum), and its
+error is bounded by a number that does not depend on the values.
+
+Derivative: ``dKS/dX = sum_i w_i dr_i/dX`` with the soft-min weights ``w_i = exp(-rho (r_i - m)) /
+sum``; it reaches the design variables through the volume motion's exact transpose
+(:meth:`ffdcli.api.DesignModel.mesh_vjp`: the IDW warp's transpose and the surface's chain rule).
+Both passes are compiled loops over the cells (:func:`corner_values`, :func:`corner_vjp`), each
+with its NumPy reference beside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit, prange
+
+from ffdcli.constraints.base import Constraint
+from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_table
+
+#: The lower bound when the item gives none: no cell below 0.3 x its input quality.
+MESH_QUALITY_LOWER = 0.3
+#: The KS minimum is at most this below the smallest ratio (``rho = ln(corners) / gap``).
+KS_GAP = 0.05
+
+
+# --------------------------------------------------------------------------------------------------
+# The corners' scaled Jacobians and their reverse product (compiled, NumPy references beside)
+# --------------------------------------------------------------------------------------------------
+
+@njit(cache=True, parallel=True)
+def _corner_values_nb(points, data, corners, scale, plane, out):
+    """Compiled :func:`_corner_values_np`: ``out`` (n, k) the corners' scaled Jacobians."""
+    n_corners, width = corners.shape
+    for c in prange(data.shape[0]):
+        for k in range(n_corners):
+            p = data[c, corners[k, 0]]
+            a = data[c, corners[k, 1]]
+            b = data[c, corners[k, 2]]
+            e10 = points[a, 0] - points[p, 0]
+            e11 = points[a, 1] - points[p, 1]
+            e12 = points[a, 2] - points[p, 2]
+            e20 = points[b, 0] - points[p, 0]
+            e21 = points[b, 1] - points[p, 1]
+            e22 = points[b, 2] - points[p, 2]
+            x0 = e11 * e22 - e12 * e21
+            x1 = e12 * e20 - e10 * e22
+            x2 = e10 * e21 - e11 * e20
+            length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
+            if width == 4:
+                d = data[c, corners[k, 3]]
+                e30 = points[d, 0] - points[p, 0]
+                e31 = points[d, 1] - points[p, 1]
+                e32 = points[d, 2] - points[p, 2]
+                det = x0 * e30 + x1 * e31 + x2 * e32
+                length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
+            else:
+                det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+            out[c, k] = scale * det / length if length > 0 else 0.0
+
+
+def _edges(points, data, corners):
+    """The corner node (n, k, 3) and its edge vectors [(n, k, 3)] of cells ``data`` (NumPy reference)."""
+    p = points[data[:, corners[:, 0]]]
+    return p, [points[data[:, corners[:, j]]] - p for j in range(1, corners.shape[1])]
+
+
+def _corner_values_np(points, data, corners, scale, plane):
+    """(n, k) scaled Jacobian of every corner of cells ``data`` (n, nodes) (NumPy reference)."""
+    _, e = _edges(points, data, corners)
+    lengths = np.prod([np.linalg.norm(v, axis=-1) for v in e], axis=0)
+    det = np.einsum("nkd,nkd->nk", np.cross(e[0], e[1]), e[2]) if len(e) == 3 else np.cross(e[0], e[1]) @ plane
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(lengths > 0, scale * det / np.where(lengths > 0, lengths, 1.0), 0.0)
+
+
+def _corner_grads_np(points, data, corners, scale, plane):
+    """(ds/de_j for each edge j) [(n, k, 3)] of every corner (NumPy reference; the corner node gets
+    minus their sum)."""
+    _, e = _edges(points, data, corners)
+    L2 = [np.einsum("nkd,nkd->nk", v, v) for v in e]
+    L = np.sqrt(np.prod(L2, axis=0))
+    s = _corner_values_np(points, data, corners, scale, plane)
+    if len(e) == 3:
+        cof = [np.cross(e[1], e[2]), np.cross(e[2], e[0]), np.cross(e[0], e[1])]
+    else:
+        cof = [np.cross(e[1], plane), np.cross(plane, e[0])]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return [np.where((L > 0)[..., None], scale * cf / L[..., None] - (s / L2[j])[..., None] * e[j], 0.0)
+                for j, cf in enumerate(cof)]
+
+
+@njit(cache=True)
+def _corner_vjp_nb(points, data, corners, scale, plane, coef, G):
+    """Compiled :func:`_corner_vjp_np`: ``G`` (N, 3) += sum over corners of coef * ds/dx."""
+    n_corners, width = corners.shape
+    ge = np.zeros((3, 3))
+    e = np.zeros((3, 3))
+    L2 = np.zeros(3)
+    for c in range(data.shape[0]):
+        for k in range(n_corners):
+            w = coef[c, k]
+            if w == 0.0:
+                continue
+            p = data[c, corners[k, 0]]
+            m = width - 1
+            for j in range(m):
+                q = data[c, corners[k, j + 1]]
+                for d in range(3):
+                    e[j, d] = points[q, d] - points[p, d]
+                L2[j] = e[j, 0] * e[j, 0] + e[j, 1] * e[j, 1] + e[j, 2] * e[j, 2]
+            if m == 3:
+                L = np.sqrt(L2[0] * L2[1] * L2[2])
+                for j in range(3):
+                    a, b = (j + 1) % 3, (j + 2) % 3
+                    ge[j, 0] = e[a, 1] * e[b, 2] - e[a, 2] * e[b, 1]
+                    ge[j, 1] = e[a, 2] * e[b, 0] - e[a, 0] * e[b, 2]
+                    ge[j, 2] = e[a, 0] * e[b, 1] - e[a, 1] * e[b, 0]
+                det = ge[0, 0] * e[0, 0] + ge[0, 1] * e[0, 1] + ge[0, 2] * e[0, 2]
+            else:
+                L = np.sqrt(L2[0] * L2[1])
+                # n . (e1 x e2) = e1 . (e2 x n) = e2 . (n x e1)
+                ge[0, 0] = e[1, 1] * plane[2] - e[1, 2] * plane[1]
+                ge[0, 1] = e[1, 2] * plane[0] - e[1, 0] * plane[2]
+                ge[0, 2] = e[1, 0] * plane[1] - e[1, 1] * plane[0]
+                ge[1, 0] = plane[1] * e[0, 2] - plane[2] * e[0, 1]
+                ge[1, 1] = plane[2] * e[0, 0] - plane[0] * e[0, 2]
+                ge[1, 2] = plane[0] * e[0, 1] - plane[1] * e[0, 0]
+                det = ge[0, 0] * e[0, 0] + ge[0, 1] * e[0, 1] + ge[0, 2] * e[0, 2]
+            if not L > 0:
+                continue
+            s = scale * det / L
+            for j in range(m):
+                q = data[c, corners[k, j + 1]]
+                for d in range(3):
+                    g = w * (scale * ge[j, d] / L - s / L2[j] * e[j, d])
+                    G[q, d] += g
+                    G[p, d] -= g
+
+
+def _corner_vjp_np(points, data, corners, scale, plane, coef, G):
+    """NumPy reference of :func:`corner_vjp`: ``G`` (N, 3) += sum over corners of coef * ds/dx."""
+    grads = _corner_grads_np(points, data, corners, scale, plane)
+    n = len(G)
+    for j, g in enumerate(grads):
+        g = g * coef[..., None]
+        end, corner = data[:, corners[:, j + 1]].ravel(), data[:, corners[:, 0]].ravel()
+        for d in range(3):
+            G[:, d] += np.bincount(end, g[..., d].ravel(), n) - np.bincount(corner, g[..., d].ravel(), n)
+
+
+def corner_values(points: np.ndarray, data: np.ndarray, ctype: str, plane: np.ndarray, *,
+                  use_numba: bool = True) -> np.ndarray:
+    """(n, k) scaled Jacobian of every corner of cells ``data`` (n, nodes) of type ``ctype`` at
+    ``points`` (N, 3), VTK order, unflipped and unclipped; ``plane`` (3,) the 2D mesh-plane normal
+    (unused in 3D). ``use_numba=False``: the NumPy reference, in chunks of cells."""
+    corners, scale = corner_table(ctype)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    plane = np.asarray(plane, dtype=np.float64)
+    if use_numba:
+        out = np.empty((len(data), len(corners)))
+        _corner_values_nb(pts, np.ascontiguousarray(data, dtype=np.int64), corners, scale, plane, out)
+        return out
+    return np.concatenate([_corner_values_np(pts, data[lo:lo + CHUNK], corners, scale, plane)
+                           for lo in range(0, len(data), CHUNK)] or [np.zeros((0, len(corners)))])
+
+
+def corner_vjp(points: np.ndarray, data: np.ndarray, ctype: str, plane: np.ndarray, coef: np.ndarray,
+               G: np.ndarray, *, use_numba: bool = True) -> None:
+    """Add ``sum over corners of coef * d(corner value)/d(points)`` into ``G`` (N, 3): the reverse
+    product of :func:`corner_values` with ``coef`` (n, k). ``use_numba=False``: the NumPy reference."""
+    corners, scale = corner_table(ctype)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    plane = np.asarray(plane, dtype=np.float64)
+    coef = np.ascontiguousarray(coef, dtype=np.float64)
+    if use_numba:
+        _corner_vjp_nb(pts, np.ascontiguousarray(data, dtype=np.int64), corners, scale, plane, coef, G)
+        return
+    for lo in range(0, len(data), CHUNK):
+        _corner_vjp_np(pts, data[lo:lo + CHUNK], corners, scale, plane, coef[lo:lo + CHUNK], G)
+
+
+def ks_min(r: np.ndarray, rho: float) -> tuple[float, np.ndarray]:
+    """(KS minimum of the values ``r`` (any shape), its weights dKS/dr (same shape), summing to 1):
+    the NumPy reference of :meth:`MeshQuality.measure`'s compiled passes."""
+    m = float(r.min())
+    e = np.exp(-rho * (r - m))
+    total = float(e.sum())
+    return m - np.log(total) / rho, e / total
+
+
+@njit(cache=True, parallel=True)
+def _exp_sum_nb(r, m, rho):
+    """``sum exp(-rho (r - m))`` over an (n, k) array."""
+    total = 0.0
+    for i in prange(r.shape[0]):
+        for k in range(r.shape[1]):
+            total += np.exp(-rho * (r[i, k] - m))
+    return total
+
+
+@njit(cache=True, parallel=True)
+def _weights_nb(r, m, rho, total, inv, cut, out):
+    """``out`` (n, k) = the KS weight of each corner times its cell's ``inv`` (n,), 0 below ``cut``."""
+    for i in prange(r.shape[0]):
+        for k in range(r.shape[1]):
+            w = np.exp(-rho * (r[i, k] - m)) / total
+            out[i, k] = w * inv[i] if w >= cut else 0.0
+
+
+#: Corners whose KS weight is below this fraction of the largest are left out of the reverse product:
+#: all of them together change it by less than n_corners x 1e-25 of its size (far below rounding).
+WEIGHT_CUT = 1e-25
+
+
+# --------------------------------------------------------------------------------------------------
+# The constraint
+# --------------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class MeshQuality(Constraint):
+    """KS minimum over the volume cells' corners of quality after / quality before (module docstring).
+
+    types
+        Cell type of each block.
+    cells
+        Per block: (n_b, nodes) node ids of the cells judged (those valid in the input).
+    inv_base
+        Per block: (n_b,) the block's orientation sign over the cell's input quality ``q0 > 0``.
+    plane
+        (3,) the 2D mesh-plane normal (zeros in 3D).
+    rho
+        The KS sharpness.
+    """
+
+    types: tuple = ()
+    cells: tuple = ()
+    inv_base: tuple = ()
+    plane: np.ndarray = None
+    rho: float = 1.0
+
+    kind = "mesh_quality"
+
+    @property
+    def size(self) -> int:
+        return 1
+
+    @property
+    def scalar(self) -> bool:
+        return True
+
+    @property
+    def n_corners(self) -> int:
+        """Corners aggregated (every corner of every judged cell)."""
+        return int(sum(len(d) * len(corner_table(t)[0]) for t, d in zip(self.types, self.cells, strict=True)))
+
+    def ratios(self, X: np.ndarray, *, use_numba: bool = True) -> list[np.ndarray]:
+        """Per block: (n_b, k) each corner's scaled Jacobian at ``X`` (N, 3) over its cell's input quality."""
+        out = []
+        for t, d, ib in zip(self.types, self.cells, self.inv_base, strict=True):
+            s = corner_values(X, d, t, self.plane, use_numba=use_numba)
+            s *= ib[:, None]
+            out.append(s)
+        return out
+
+    def measure(self, X: np.ndarray, grad: bool = False, *, use_numba: bool = True):
+        """(value, dvalue/dX (N, 3) or None) at mesh points ``X`` (N, 3); ``use_numba=False``: the
+        NumPy reference (:func:`ks_min` of every ratio, the reference reverse product)."""
+        r = self.ratios(X, use_numba=use_numba)
+        if not use_numba:
+            value, w = ks_min(np.concatenate([b.ravel() for b in r]), self.rho)
+            w = np.split(w, np.cumsum([b.size for b in r])[:-1])
+        else:
+            m = min(float(b.min()) for b in r if b.size)
+            total = sum(_exp_sum_nb(b, m, self.rho) for b in r if b.size)
+            value = m - np.log(total) / self.rho
+        if not grad:
+            return value, None
+        G = np.zeros((len(X), 3))
+        for j, (t, d, ib, b) in enumerate(zip(self.types, self.cells, self.inv_base, r, strict=True)):
+            if use_numba:
+                coef = np.empty_like(b)
+                _weights_nb(b, m, self.rho, total, ib, WEIGHT_CUT / total, coef)    # the largest weight is 1/total
+            else:
+                coef = w[j].reshape(b.shape) * ib[:, None]
+            corner_vjp(X, d, t, self.plane, coef, G, use_numba=use_numba)
+        return value, G
+
+    def value(self, inp):
+        return np.array([self.measure(inp.mesh_X)[0]])
+
+    def jacobian(self, inp):
+        return self.value_and_jacobian(inp)[1]
+
+    def value_and_jacobian(self, inp):
+        value, G = self.measure(inp.mesh_X, grad=True)
+        return np.array([value]), np.asarray(inp.mesh_vjp(G), dtype=float)[None, :]
+
+
+def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuality:
+    """The :class:`MeshQuality` of item ``index`` on the input ``mesh`` (its cells and points)."""
+    gap = spec.get("gap", KS_GAP)
+    if not isinstance(gap, (int, float)) or isinstance(gap, bool) or not 0 < gap <= 1:
+        raise error(f"gap must be a number in (0, 1], got {gap!r}", f"{key}.gap")
+    cells = [b for b in (mesh.cells if mesh is not None else []) if len(b)]
+    if mesh is None or not cells:
+        raise error("needs a volume mesh: the mesh has no interior cells whose quality the design could "
+                    "spoil (a surface mesh?)", key)
+    if getattr(mesh, "partial", False):
+        raise error("is evaluated on the whole mesh, not on a mesh read by parts (MPI); run ffd constraints "
+                    "(or the API) without mpirun", key)
+    try:
+        check_types(cells, mesh.dim)
+    except ValueError as e:
+        raise error(f"has no quality measure for this mesh: {e}", key) from None
+    orientation = cell_orientation(mesh.points, cells, mesh.dim)
+    q0 = cell_quality(mesh.points, cells, mesh.dim, orientation=orientation)
+    types, data, inv = [], [], []
+    at = 0
+    for blk, sign in zip(cells, orientation.signs, strict=True):
+        q = q0[at:at + len(blk)]
+        at += len(blk)
+        ok = q > 0
+        if ok.any():
+            types.append(blk.type)
+            data.append(np.ascontiguousarray(blk.data[ok], dtype=np.int64))
+            inv.append(float(sign) / q[ok])
+    if not data:
+        raise error("every cell of the input mesh is inverted or degenerate: there is no quality to keep", key)
+    plane = np.zeros(3) if orientation.normal is None else np.asarray(orientation.normal, dtype=np.float64)
+    n = sum(len(d) * len(corner_table(t)[0]) for t, d in zip(types, data, strict=True))
+    rho = max(np.log(n), 1.0) / float(gap)
+    return MeshQuality(index=index, lower=lower, upper=upper, types=tuple(types), cells=tuple(data),
+                       inv_base=tuple(inv), plane=plane, rho=float(rho))

@@ -1,0 +1,217 @@
+"""Flap and slat (issue 31): the oracles of the issue on a fitted box, and exact derivatives.
+
+- points behind the hinge's transition and inside the device's span range (clear of its blends)
+  turn rigidly about the hinge line (1e-10 of the chord);
+- points ahead of the hinge, and outside the device plus its blends, do not move (1e-12);
+- a 0 degree device is no change; flap then twist is the composition of the two maps;
+- angle, hinge fractions and the input lattice against central differences.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from test_derivatives import assert_matches_fd
+
+from ffdcli.box.box import fit_box
+from ffdcli.box.refine import edges_at, span_fractions
+from ffdcli.errors import InputError
+from ffdcli.lattice.lattice import evaluate
+from ffdcli.mesh import CellBlock
+from ffdcli.parameterization.changes import Twist, apply_changes, changes_from_spec, design_variables
+from ffdcli.parameterization.changes.control_surfaces import refine_for_devices, rodrigues
+from ffdcli.settings import BoxSettings
+from ffdcli.testing.wings import Planform, crm_planform, naca4, rect_wing_planform, wing_surface
+
+
+@pytest.fixture(scope="module")
+def rect():
+    pts, faces = wing_surface(rect_wing_planform(), n_chord=61, n_span=31)
+    box, emb, _ = fit_box(pts, [CellBlock("quad", faces)], BoxSettings(points=(6, 8, 2)))
+    return pts, box, emb
+
+
+@pytest.fixture(scope="module")
+def crm():
+    pts, faces = wing_surface(crm_planform(), n_chord=61, n_span=41)
+    box, emb, _ = fit_box(pts, [CellBlock("quad", faces)], BoxSettings(points=(6, 8, 2)))
+    return pts, box, emb
+
+
+@pytest.fixture(scope="module")
+def left():
+    pf = Planform(le_sweep_deg=25, taper=0.5, dihedral_deg=4, sections="yz", span_sign=-1.0, root_airfoil="2412")
+    pts, faces = wing_surface(pf, n_chord=61, n_span=31)
+    box, emb, _ = fit_box(pts, [CellBlock("quad", faces)], BoxSettings(points=(6, 8, 2)))
+    return pts, box, emb
+
+
+def test_left_wing_span_along_minus_x(left):
+    assert left[1].span_dir @ np.array([1.0, 0, 0]) == -1.0
+    check_oracles(left, {"flap": {"span": [0.2, 0.6], "hinge": 0.7, "angle": 20}})
+    check_oracles(left, {"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}})
+
+
+def build(case, items):
+    """(refined box, embedding, changes) of a ``changes`` list on a fitted wing."""
+    pts, box, emb = case
+    box, emb = refine_for_devices(box, emb, pts, items)
+    n, m, l = box.shape
+    return box, emb, changes_from_spec(items, n, m, l, box.dim, box=box, surface=pts)
+
+
+def surface_after(box, emb, P):
+    return emb.evaluate(box.core_control_points(P)) if box.dim == 3 else \
+        box.mesh_vectors(emb.evaluate(box.core_control_points(P)))
+
+
+def local_coords(box, X):
+    """(span fraction, chord fraction) of points X (the baseline chord at their station)."""
+    f = span_fractions(box, X)
+    edges = np.array([edges_at(box, x) for x in np.clip(f, 0, 1)])
+    le, te = edges[:, 0], edges[:, 1]
+    cf = np.einsum("ij,ij->i", X - le, te - le) / np.einsum("ij,ij->i", te - le, te - le)
+    return f, cf
+
+
+def check_oracles(case, item):
+    pts, _, _ = case
+    box, emb, (dev,) = build(case, [item])
+    X = pts
+    P0 = box.control_points
+    P = apply_changes(P0, box.frame, [dev])
+    disp = surface_after(box, emb, P) - surface_after(box, emb, P0)
+    chord = np.linalg.norm(box.te_points - box.le_points, axis=1).max()
+    f, cf = local_coords(box, X)
+    a, b = dev.spec.span
+    H = dev.hinge_line(P0)
+    # the hinge line's chord fraction at each point's station (a straight line: not linear in the
+    # fraction on a tapered wing)
+    sa, sb = span_fractions(box, H)
+    Hs = H[0] + np.clip((f - sa) / (sb - sa), -1, 2)[:, None] * (H[1] - H[0])
+    h = local_coords(box, Hs)[1]
+    omega, _, _ = dev._axis(H, box.frame)
+    R = rodrigues(omega, np.array([np.radians(dev.angle)]))[0]
+    rigid = H[0] + (X - H[0]) @ R.T - X
+    tr = dev.geometry.transition.max() + 0.01
+    if dev.kind == "flap":
+        turning = (f >= a) & (f <= b) & (cf > h + tr)
+        still = (cf < h - 0.01) | (f < a - dev.spec.blend) | (f > b + dev.spec.blend)
+    else:
+        turning = (f >= a) & (f <= b) & (cf < h - tr)
+        still = (cf > h + 0.01) | (f < a - dev.spec.blend) | (f > b + dev.spec.blend)
+    turning &= emb.inside
+    still &= emb.inside
+    assert turning.sum() > 50 and still.sum() > 500
+    assert np.abs(disp[turning] - rigid[turning]).max() < 1e-10 * chord
+    assert np.abs(disp[still]).max() < 1e-12 * chord
+    return dev, disp, box
+
+
+@pytest.mark.parametrize("angle", [10.0, 30.0, -15.0])
+def test_flap_rotates_rigidly_and_leaves_the_rest(rect, angle):
+    dev, disp, box = check_oracles(rect, {"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": angle}})
+    f, cf = local_coords(box, rect[0])
+    te = (f > 0.25) & (f < 0.55) & (cf > 0.99)
+    down = disp[te] @ box.thickness_dir
+    assert np.all(np.sign(down) == -np.sign(angle))        # positive: trailing edge down
+    assert np.allclose(down, -0.25 * np.sin(np.radians(angle)), rtol=0.05)
+
+
+def test_slat_and_tapered_hinge_on_a_swept_wing(crm):
+    check_oracles(crm, {"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}})
+    dev, disp, box = check_oracles(crm, {"flap": {"span": [0.4, 0.95], "hinge": [0.75, 0.7], "angle": 20,
+                                                  "blend": 0.03}})
+    assert dev.variables()[1][0] == "flap.hinge[0]"
+
+
+def test_slat_nose_goes_down(rect):
+    dev, disp, box = check_oracles(rect, {"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}})
+    f, cf = local_coords(box, rect[0])
+    le = (f > 0.2) & (f < 0.8) & (cf < 0.005)
+    assert np.all(disp[le] @ box.thickness_dir < 0)
+
+
+def test_knots_do_not_move_the_surface(rect, crm):
+    for case in (rect, crm):
+        pts, box, emb = case
+        item = {"flap": {"span": [0.3, 0.7], "hinge": [0.7, 0.8], "angle": 10}}
+        rbox, remb, _ = build(case, [item])
+        assert rbox.shape[0] > box.shape[0] and rbox.shape[1] > box.shape[1]
+        chord = np.linalg.norm(box.te_points - box.le_points, axis=1).max()
+        before = evaluate(box.lattice(), emb.params)
+        after = evaluate(rbox.lattice(), emb.params)
+        assert np.abs(after - before).max() < 1e-12 * chord
+        assert np.abs(surface_after(rbox, remb, rbox.control_points) - before).max() < 1e-12 * chord
+
+
+def test_zero_angle_is_no_change(rect):
+    box, _, (dev,) = build(rect, [{"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": 0}}])
+    P0 = box.control_points
+    assert np.array_equal(apply_changes(P0, box.frame, [dev]), P0)
+
+
+def test_flap_then_twist_is_the_composition(rect):
+    items = [{"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": 12}}, {"twist": {"tip": 5}}]
+    box, _, (dev, tw) = build(rect, items)
+    assert isinstance(tw, Twist)
+    P0 = box.control_points
+    both = apply_changes(P0, box.frame, [dev, tw])
+    assert np.allclose(both, tw.apply(dev.apply(P0, box.frame), box.frame), atol=1e-14, rtol=0)
+    # twist first: the hinge line follows the twisted lattice (it is read off the input lattice)
+    box2, _, (tw2, dev2) = build(rect, items[::-1])
+    P1 = tw2.apply(box2.control_points, box2.frame)
+    H = dev2.hinge_line(P1)
+    H0 = dev2.hinge_line(box2.control_points)
+    assert not np.allclose(H, H0)
+
+
+@pytest.mark.parametrize("item", [
+    {"flap": {"span": [0.2, 0.6], "hinge": [0.75, 0.7], "angle": 17}},
+    {"slat": {"span": [0.0, 0.5], "hinge": [0.12, 0.18], "angle": -8, "blend": 0.1}},
+    {"flap": {"span": [0.5, 1.0], "hinge": 0.7, "angle": 25}},
+])
+def test_derivatives_against_central_differences(crm, item):
+    box, _, changes = build(crm, [{"twist": {"tip": 3}}, item, {"dihedral": 2}])
+    names, _ = design_variables(changes)
+    assert any(".angle" in n for n in names)
+    assert_matches_fd(box.control_points, box.frame, changes)
+
+
+def test_2d_flap_turns_the_whole_aft_part():
+    xy = naca4("0012", 101)
+    pts = np.column_stack([xy, np.zeros(len(xy))])
+    box, emb, _ = fit_box(pts, (), BoxSettings(points=(6, 2)), dim=2)
+    case = (pts, box, emb)
+    for kind in ("flap", "slat"):
+        item = {kind: {"hinge": [0.7] if kind == "flap" else 0.2, "angle": 10}}
+        rbox, remb, (dev,) = build(case, [item])
+        P = apply_changes(rbox.control_points, rbox.frame, [dev])
+        disp = surface_after(rbox, remb, P) - pts
+        cf = pts[:, 0]
+        h = dev.spec.hinge[0]
+        still = cf < h - 0.01 if kind == "flap" else cf > h + 0.01
+        assert np.abs(disp[still]).max() < 1e-12
+        end = cf > 0.995 if kind == "flap" else cf < 0.002
+        assert np.all(disp[end, 1] < 0)
+        assert_matches_fd(rbox.control_points, rbox.frame, [dev])
+
+
+@pytest.mark.parametrize("item, words", [
+    ({"flap": {"hinge": 0.75, "angle": 10}}, "needs span"),
+    ({"flap": {"span": [0.6, 0.2], "hinge": 0.75, "angle": 10}}, "inner < outer"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": 0.995, "angle": 10}}, "between 0.02 and 0.98"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": [0.7, 0.7, 0.7], "angle": 10}}, "list of 2"),
+    ({"slat": {"span": [0.2, 0.6], "hinge": 0.15, "angle": 80}}, "within [-60, 60]"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": 5, "transition": 0.5}}, "transition"),
+])
+def test_bad_devices_are_input_errors(rect, item, words):
+    with pytest.raises(InputError, match=words.replace("[", r"\[")) as e:
+        build(rect, [item])
+    assert e.value.key.startswith("changes[0].")
+
+
+def test_edges_at_interpolates_the_baseline_chord(rect):
+    _, box, _ = rect
+    le, te = edges_at(box, 0.5)
+    assert np.allclose(np.linalg.norm(te - le), 1.0, atol=1e-3)
