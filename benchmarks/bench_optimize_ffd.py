@@ -8,9 +8,9 @@ measured here with a stub solver that returns a random dJ/dX of every mesh node 
 ``configs/naca0012_optimize.yaml`` (5,233 points, 19 variables), at random designs within the bounds;
 median of 5 evaluations after one warm-up (numba compiled, box cached).
 
-The iteration's solver seconds (one flow and three adjoints) come from a finished run's
-``history.csv`` when one is given (``--run FOLDER``; default ``out/naca0012_optimize``): the median, over
-the accepted iterates, of their solver seconds. Without a run the row says so.
+The share itself is measured on a finished run (``--run FOLDER``; default ``out/naca0012_optimize``): the
+ffd and solver seconds of every evaluation of its ``history.csv``, as the run timed them. Without a run
+the row says so.
 
     python -m benchmarks.bench_optimize_ffd [--run out/naca0012_optimize]
 """
@@ -81,14 +81,15 @@ def ffd_seconds(repeats: int = 5) -> dict:
             "variables": model.n_vars}
 
 
-def solver_seconds(run: Path) -> float | None:
-    """Median solver seconds of the accepted iterates of a finished run (one flow and the adjoints)."""
+def run_seconds(run: Path) -> dict | None:
+    """A finished run's totals from its ``history.csv``: solver and ffd seconds, iterations."""
     path = Path(run) / "history.csv"
     if not path.is_file():
         return None
     with open(path) as fh:
-        rows = [r for r in csv.DictReader(fh) if not r["failed"] and int(r["adjoint_solves"]) == len(FUNCTIONS)]
-    return float(np.median([float(r["solver_seconds"]) for r in rows])) if rows else None
+        rows = list(csv.DictReader(fh))
+    return {"solver": sum(float(r["solver_seconds"]) for r in rows), "ffd": sum(float(r["ffd_seconds"]) for r in rows),
+            "ffd_first": float(rows[0]["ffd_seconds"]), "iterations": max(int(r["iteration"]) for r in rows)}
 
 
 def max_thickness_to_chord(mesh_path: Path, marker: str = "airfoil") -> float:
@@ -133,19 +134,23 @@ def best_row(run_folder: Path) -> dict | None:
 
 def run(quick: bool = False, run_folder: Path = RUN) -> list[dict]:
     r = ffd_seconds(3 if quick else 5)
-    solver = solver_seconds(run_folder)
+    tot = run_seconds(run_folder)
     rows = [{"case": f"ffd per iteration: deform + volume + gate + mesh write + constraints + 3 chains "
                      f"({r['points']} points, {r['variables']} variables)", "measured": f"{r['ffd']:.3f} s",
              "target": "", "pyGeo reference": ""}]
-    if solver is None:
-        rows.append({"case": f"solver per iteration: no finished run in {run_folder}", "measured": "",
-                     "target": "", "pyGeo reference": ""})
+    if tot is None:
+        rows.append({"case": f"the run: no finished run in {run_folder}", "measured": "", "target": "",
+                     "pyGeo reference": ""})
     else:
-        share = r["ffd"] / (r["ffd"] + solver)
-        rows.append({"case": "solver per iteration (1 flow + 3 adjoints, median of the run's iterates)",
-                     "measured": f"{solver:.1f} s", "target": "", "pyGeo reference": ""})
-        rows.append({"case": "ffd's share of an iteration", "measured": f"{100 * share:.2f} %", "target": "<= 5 %",
-                     "pyGeo reference": "", "met": share <= 0.05})
+        per = tot["solver"] / max(tot["iterations"], 1)
+        share = tot["ffd"] / (tot["ffd"] + tot["solver"])
+        rest = (tot["ffd"] - tot["ffd_first"]) / (tot["ffd"] - tot["ffd_first"] + tot["solver"])
+        rows.append({"case": f"the run's solver seconds per iteration ({tot['iterations']} iterations, every "
+                             "flow and adjoint)", "measured": f"{per:.1f} s", "target": "", "pyGeo reference": ""})
+        rows.append({"case": f"ffd's share of the run (its {tot['ffd']:.1f} s of {tot['ffd'] + tot['solver']:.0f} s; "
+                             f"without the first evaluation, which compiles numba's kernels: {100 * rest:.2f} %)",
+                     "measured": f"{100 * share:.2f} %", "target": "<= 5 %", "pyGeo reference": "",
+                     "met": share <= 0.05})
     best = best_row(run_folder)
     if best is not None:
         kind = "feasible " if best["feasible"] else "(infeasible) "

@@ -79,7 +79,7 @@ def write_picture(path: Path, evaluations: list[Evaluation], violations: dict[in
     ax.set_xlabel("iteration")
     ax.set_ylabel(objective, color="C0")
     ax2 = ax.twinx()
-    worst = [max(violations[e.index], 1e-16) for e in its]
+    worst = [max(violations[e.index], 1e-2 * feasibility) for e in its]     # 0 drawn at the plot's floor
     ax2.semilogy(range(len(its)), worst, "s--", color="C3", ms=4, label="worst violation")
     ax2.axhline(feasibility, color="C3", lw=0.6, ls=":")
     ax2.set_ylabel("worst constraint violation", color="C3")
