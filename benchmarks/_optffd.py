@@ -68,19 +68,23 @@ def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None 
         (folder / "design.yaml").write_text(design)
         env = _su2.su2_env()
         env["PYTHONPATH"] = f"{ffd_path}:{env['PYTHONPATH']}"
-        rc, wall = _su2.run(cmd, folder, "optimize.log", env=env)
+        again = (folder / "opt" / "evals").is_dir()           # an unfinished run: ffd optimize --resume
+        rc, wall = _su2.run(cmd + (["--resume"] if again else []), folder,
+                            "optimize_resumed.log" if again else "optimize.log", env=env)
+        log = folder / ("optimize_resumed.log" if again else "optimize.log")
         summary = None
-        for line in reversed((folder / "optimize.log").read_text().splitlines()):
+        for line in reversed(log.read_text().splitlines()):
             if line.startswith("{"):
                 try:
                     summary = json.loads(line)
                     break
                 except json.JSONDecodeError:
                     continue
-        return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path)}
+        return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path),
+                "resumed": again}
 
     return _su2.cached_run(root, label, design + cfg, inputs, cmd[2:], body, force=force,
-                           only_cached=only_cached)
+                           only_cached=only_cached, resume=True)
 
 
 def _spec(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None):
@@ -131,7 +135,8 @@ def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
     return {"run": "(c) ffd optimize, automatic box (19)", "adjoint": adjoint, "constrained": constrained,
             **values, "worst_violation": viol, "feasible": viol <= 1e-4,
             "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
-            "wall_s": result["wall_s"], "designs": s.get("evaluations"), "status": s.get("status"),
+            "wall_s": result["wall_s"], "designs": s.get("evaluations"),
+            "status": f"{s.get('status')}" + (" (resumed: wall of the last part only)" if result.get("resumed") else ""),
             "rc": result["rc"], "folder": str(folder)}
 
 
