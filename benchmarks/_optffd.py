@@ -136,7 +136,8 @@ def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
             **values, "worst_violation": viol, "feasible": viol <= 1e-4,
             "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
             "wall_s": result["wall_s"], "designs": s.get("evaluations"),
-            "status": f"{s.get('status')}" + (" (resumed: wall of the last part only)" if result.get("resumed") else ""),
+            "status": f"{s.get('status')}" + (" (resumed: wall of the last part only)"
+                                              if result.get("resumed") else ""),
             "rc": result["rc"], "folder": str(folder)}
 
 
