@@ -7,12 +7,13 @@ BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip --disable-pip-version-check -q
 OUT    ?= out
 
-.PHONY: help venv demo test bench lint samples clean
+.PHONY: help venv warmup demo test bench lint samples clean
 
 help:
 	@echo "make demo    create .venv, install ffd (with the 3D viewer), run the paper's cases into $(OUT)/"
 	@echo "make test    create .venv, install ffd with test tools and the optional extras (mpi, openmdao, viz) and OpenFOAM (apt, as root), run the test suite"
 	@echo "make bench   print the speed/memory table (embedding, deform, I/O, volume follow, Jacobian) and the robustness matrix"
+	@echo "make warmup  compile the numba kernels once (demo, test and bench do it first; again after the sources change)"
 	@echo "make lint    ruff"
 	@echo "make samples regenerate samples/ with gmsh (needs the [samples] extra)"
 
@@ -46,15 +47,23 @@ $(VENV)/.stamp-viz: $(VENV)/.stamp-core
 	$(PIP) install -e '.[viz]' || echo "pyvista could not be installed: pictures use matplotlib only"
 	@touch $@
 
+# numba compiles each kernel at its first call (cached on disk in ffdcli/**/__pycache__): compile them
+# once here, one line per step, so that no later run pauses (again whenever the sources change)
+$(VENV)/.stamp-warm: $(VENV)/.stamp-core $(shell find ffdcli -name '*.py' 2>/dev/null)
+	$(BIN)/python -m ffdcli.app.warmup
+	@touch $@
+
+warmup: $(VENV)/.stamp-warm
+
 venv: $(VENV)/.stamp-test
 
-demo: $(VENV)/.stamp-viz
+demo: $(VENV)/.stamp-viz $(VENV)/.stamp-warm
 	$(BIN)/python -m ffdcli.app.demo --out $(OUT)
 
-test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz $(VENV)/.stamp-openfoam
+test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz $(VENV)/.stamp-openfoam $(VENV)/.stamp-warm
 	$(BIN)/python -m pytest -q
 
-bench: $(VENV)/.stamp-test
+bench: $(VENV)/.stamp-test $(VENV)/.stamp-warm
 	$(BIN)/python -m benchmarks
 
 lint: $(VENV)/.stamp-core

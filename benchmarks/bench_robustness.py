@@ -22,6 +22,13 @@ Run alone, for quick iteration on the warp settings::
     python -m benchmarks.bench_robustness --list
 
 It is also part of ``make bench`` (``python -m benchmarks``), whose ``--quick`` runs the quick form.
+
+The multi-component forms (issue 29) come after the matrix: the bundled wing + tail + fin
+(``samples/wing_tail_fin.su2``, three components) and wing on a body (``samples/wing_body.su2``, the root
+on the fuselage) under planform designs of one or every component, several of which need the
+recovery. Target: no crash; every outcome 0 (written) or 3 (refused by the gate, with its reason)::
+
+    python -m benchmarks.bench_robustness --multi
 """
 
 from __future__ import annotations
@@ -88,6 +95,9 @@ def _designs() -> dict:
         "mix4_a": [{"twist": {"tip": 8}}, {"span": 1.1}, {"sweep": 5}, {"dihedral": 3}],
         "mix4_b": [{"chord": {"tip": 0.6}}, {"sweep": -8}, {"twist": {"root": 2, "tip": -6}}, {"dihedral": -4}],
         "mix4_c": [{"span": 1.15}, {"sweep": 10}, {"twist": {"tip": -10}}, {"chord": {"tip": 0.5}}],
+        # control surfaces (issue 31), default blend and transition
+        **{f"flap{a}": [{"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": a}}] for a in (10, 20, 30)},
+        "slat15": [{"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}}],
     }
     return d
 
@@ -216,6 +226,118 @@ def run_matrix(meshes: list[str], designs: list[str], *, work: Path, overrides=(
     return rows
 
 
+# ----------------------------------------------------------------------------------------------
+# Multi-component forms: (design file, changes per component)
+# ----------------------------------------------------------------------------------------------
+
+#: name -> (the bundled design file it starts from, {design: {component index: changes}})
+MULTI = {
+    "wing_tail_fin": ("configs/wing_tail_fin.yaml", {
+        "htail_dihedral+10": {1: [{"dihedral": 10}]},
+        "htail_dihedral-10": {1: [{"dihedral": -10}]},
+        "htail_dihedral+15": {1: [{"dihedral": 15}]},
+        "htail_sweep+15": {1: [{"sweep": 15}]},
+        "htail_span1.3": {1: [{"span": 1.3}]},
+        "wing_dihedral+8": {0: [{"dihedral": 8}]},
+        "wing_sweep+10": {0: [{"sweep": 10}]},
+        "wing_span1.15": {0: [{"span": 1.15}]},
+        "wing_chord_tip0.5": {0: [{"chord": {"tip": 0.5}}]},
+        "vfin_sweep+15": {2: [{"sweep": 15}]},
+        "vfin_span1.2": {2: [{"span": 1.2}]},
+        "vfin_sweep+25": {2: [{"sweep": 25}]},
+        "all_planform": {0: [{"sweep": 8}, {"span": 1.1}], 1: [{"dihedral": 8}, {"chord": {"tip": 0.7}}],
+                         2: [{"sweep": 12}]},
+        "all_mix": {0: [{"twist": {"tip": -6}}, {"dihedral": 4}], 1: [{"sweep": -8}], 2: [{"span": 0.85}]},
+    }),
+    "wing_body": ("configs/wing_body.yaml", {
+        "twist_tip+8": {0: [{"twist": {"tip": 8}}]},
+        "dihedral+6": {0: [{"dihedral": 6}]},
+        "dihedral-6": {0: [{"dihedral": -6}]},
+        "sweep+10": {0: [{"sweep": 10}]},
+        "sweep-10": {0: [{"sweep": -10}]},
+        "sweep+20": {0: [{"sweep": 20}]},
+        "dihedral+12": {0: [{"dihedral": 12}]},
+        "span1.3": {0: [{"span": 1.3}]},
+        "chord_tip0.4": {0: [{"chord": {"tip": 0.4}}]},
+        "span1.15": {0: [{"span": 1.15}]},
+        "chord_tip0.5": {0: [{"chord": {"tip": 0.5}}]},
+        "mix": {0: [{"twist": {"tip": 6}}, {"span": 1.1}, {"sweep": 6}, {"dihedral": 4}]},
+    }),
+}
+
+
+def run_multi_one(form: str, design: str, *, work: Path) -> dict:
+    """One multi-component design as ``ffd deform`` runs it (recovery included); a row of the table.
+    Any exception other than ffd's exit-2/3 errors is a CRASH (the target is none)."""
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
+    from ffdcli.design import load_design
+    from ffdcli.errors import InputError, QualityError
+
+    base, designs = MULTI[form]
+    data = yaml.safe_load((REPO / base).read_text())
+    data["mesh"] = str((REPO / base).parent / data["mesh"])
+    comps = data.get("components")
+    for index, changes in designs[design].items():
+        if comps:
+            comps[index]["changes"] = changes
+        else:
+            data["changes"] = changes
+    data.pop("output", None)
+    folder = work / "designs" / f"multi_{form}"
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{design.replace('+', 'p')}.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    row = {"mesh": f"multi:{form}", "design": design}
+    t0 = time.perf_counter()
+    try:
+        result = deform(load_run(load_design(path), cache_dir=work / "cache"))
+    except (InputError, QualityError) as e:
+        row.update(status="INPUT" if isinstance(e, InputError) else "ERROR", error=str(e).splitlines()[0][:160])
+    except Exception as e:  # noqa: BLE001 - what the table counts
+        row.update(status="CRASH", error=f"{type(e).__name__}: {e}"[:160])
+    else:
+        q = result.quality
+        row["status"] = "ok" if q is None or q.ok else "REFUSED"
+        if q is not None:
+            row.update(inverted=q.n_inverted, failed=q.n_failed, worse=q.n_worse, ortho_failed=q.n_ortho_failed,
+                       q_before=q.min_before, q_after=q.min_after, by_design=q.n_design_cells + q.n_design_nodes)
+            if not q.ok:
+                row["reason"] = f"{q.n_failed} cells or nodes fail the gate ({q.n_inverted} inverted)"
+        row["recovered_with"] = result.recovered_with
+        if result.recovery:
+            row["recovery"] = "; ".join(f"{a['attempt']}: {'ok' if a['ok'] else a['failed']}"
+                                        for a in result.recovery)
+        row["max_disp"] = result.max_displacement
+    row["seconds"] = round(time.perf_counter() - t0, 2)
+    return row
+
+
+def run_multi(*, work: Path, forms=None, echo=None) -> list[dict]:
+    """Every design of every multi-component form (:data:`MULTI`)."""
+    rows = []
+    for form in forms or list(MULTI):
+        for design in MULTI[form][1]:
+            row = run_multi_one(form, design, work=work)
+            rows.append(row)
+            if echo:
+                echo(_line(row))
+    return rows
+
+
+def multi_summary(rows: list[dict]) -> str:
+    """The exit statuses ``ffd deform`` would give: 0 written, 3 refused by the gate, 2 bad input,
+    CRASH (target: none)."""
+    code = {"ok": 0, "REFUSED": 3, "INPUT": 2, "ERROR": 3}
+    counts: dict = {}
+    for r in rows:
+        k = code.get(r["status"], "CRASH")
+        counts[k] = counts.get(k, 0) + 1
+    recovered = sum(bool(r.get("recovered_with")) for r in rows)
+    return (f"{len(rows)} multi-component deformations: exit 0 x {counts.get(0, 0)}, exit 3 x {counts.get(3, 0)}, "
+            f"exit 2 x {counts.get(2, 0)}, crashes {counts.get('CRASH', 0)}; {recovered} passed after a recovery")
+
+
 def _fmt(v, spec=".3g"):
     return "-" if v is None else format(v, spec)
 
@@ -287,7 +409,9 @@ def run(quick: bool = False) -> list[dict]:
     designs = QUICK_DESIGNS if quick else list(DESIGNS)
     rows = run_matrix(meshes, designs, work=work)
     print(matrix_table(rows) + "\n", flush=True)
-    return rows
+    multi = run_multi(work=work)
+    print(matrix_table(multi) + "\n" + multi_summary(multi) + "\n", flush=True)
+    return rows + multi
 
 
 def summary(rows: list[dict]) -> list[dict]:
@@ -320,6 +444,8 @@ def main(argv=None) -> int:
                     help="folder for generated meshes, design files and box caches")
     ap.add_argument("--json", metavar="FILE", type=Path, help="also write the rows as JSON")
     ap.add_argument("--list", action="store_true", help="print the mesh and design names and exit")
+    ap.add_argument("--multi", action="store_true", help="only the multi-component forms (wing + tail + fin, "
+                                                         "wing on a body) under planform designs")
     args = ap.parse_args(argv)
     if args.list:
         print("meshes: " + " ".join(MESHES))
@@ -332,14 +458,21 @@ def main(argv=None) -> int:
     meshes = args.mesh or (QUICK_MESHES if args.quick else list(MESHES))
     designs = args.design or (QUICK_DESIGNS if args.quick else list(DESIGNS))
     t0 = time.perf_counter()
-    rows = run_matrix(meshes, designs, work=args.work, overrides=args.overrides,
-                      echo=lambda s: print(s, flush=True))
+    rows = [] if args.multi else run_matrix(meshes, designs, work=args.work, overrides=args.overrides,
+                                            echo=lambda s: print(s, flush=True))
+    multi = [] if (args.mesh or args.design) else run_multi(work=args.work, echo=lambda s: print(s, flush=True))
     print()
-    print(matrix_table(rows))
+    if rows:
+        print(matrix_table(rows))
+    if multi:
+        print(matrix_table(multi))
+        print(multi_summary(multi))
+    rows = rows + multi
     print(f"({time.perf_counter() - t0:.0f} s; overrides: {' '.join(args.overrides) or 'none'})")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1, default=str))
-    refused = sum(r["status"] != "ok" for r in rows)
+    refused = sum(r["status"] not in ("ok", "REFUSED") if r["mesh"].startswith("multi:") else r["status"] != "ok"
+                  for r in rows)
     return 1 if refused else 0
 
 

@@ -6,6 +6,11 @@ import sys
 def run() -> None:
     """Load the command line and run it. Ctrl-C while the modules load (numpy, numba: about a second)
     ends like one during the work: one line, status 130, no traceback."""
+    from ffdcli.errors import SignalRecorder  # noqa: PLC0415  (light, stdlib only)
+
+    # under mpiexec, SIGTERM/SIGHUP recorded from here (before numpy loads) to the process's end: a signal
+    # during the interpreter's exit (MPI_Finalize) is recorded, not fatal
+    SignalRecorder().__enter__()
     try:
         from ffdcli.cli import main  # noqa: PLC0415  (imported here: an interrupt during the import is caught)
 

@@ -22,7 +22,7 @@ MOVED = {
     "atomic": "io.atomic", "inputs": "io.inputs", "outputs": "io.outputs",
     "formats": "io.formats",
     "surface": "geometry.surface", "axes": "geometry.axes", "sections": "geometry.sections",
-    "spline": "lattice.spline", "embedding": "lattice.embedding", "simd": "lattice.simd",
+    "spline": "lattice.spline", "embedding": "lattice.embedding", "simd": "jit",
     "pointset": "lattice.pointset", "limits": "lattice.limits",
     "box_import": "box.imported", "cache": "box.cache",
     "changes": "parameterization.changes", "bounds": "parameterization.bounds",

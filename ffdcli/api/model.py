@@ -138,7 +138,7 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         self._cache.clear()
 
     def _check_dv(self, dv, what: str) -> np.ndarray:
-        return as_numbers(dv, (self.n_vars,), f"{what}: dv (one value per design variable, in names order)")
+        return as_numbers(dv, (self.n_vars,), f"{what}: dv", hint="one value per design variable, in names order")
 
     # -- evaluation --------------------------------------------------------------------------
     @property
@@ -216,7 +216,8 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
     def surface_vjp(self, g) -> np.ndarray:
         """(n_vars,) dJ/dv for g = dJ/dX at the surface points (S, 3)."""
 
-        g = as_numbers(g, (len(self.surface_ids), 3), "surface_vjp: g (one row per surface point, surface_ids order)")
+        g = as_numbers(g, (len(self.surface_ids), 3), "surface_vjp: g",
+                       hint="one row per surface point, surface_ids order")
         # one component: the embedding's compiled B.T @ g (its rows are the surface points)
         B = self.run.components[0].prep.embedding if self.run.single else self.basis
         return vjp(B, g, self.lattice_jacobian())

@@ -82,7 +82,7 @@ class VolumeMixin:
 
         dJ/dv = (dX_s/dv)^T [g_s + (dX_v/db)^T g_v] + sum_s <(dX_v/dM_s)^T g_v, dR_s/dv>."""
         mesh = self.run.prep.mesh
-        g = as_numbers(g, (mesh.n_points, 3), "mesh_vjp: g (one row per mesh node)")
+        g = as_numbers(g, (mesh.n_points, 3), "mesh_vjp: g", hint="one row per mesh node")
         ids = self.surface_ids
         if not self.uses_volume():
             return self.surface_vjp(g[ids])

@@ -18,8 +18,7 @@ import click
 
 from ffdcli import __version__
 from ffdcli.cli.console import Console, StdoutError
-from ffdcli.errors import FfdError
-from ffdcli.io.atomic import Terminated, interrupts_outside_compilers
+from ffdcli.errors import FfdError, SignalRecorder, Terminated
 from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -74,6 +73,22 @@ def _register():
     from ffdcli.cli import commands  # noqa: F401  (each module adds its command to ``cli``)
 
 
+def _compiled_code_guards(argv: list[str], notice: bool):
+    """Ctrl-C held while numba loads or compiles kernels (an interrupt there crashes the interpreter
+    later) and, when ``notice``, a line on stderr before the first compile of a kernel
+    (:mod:`ffdcli.jit`). Nothing for ``--help``/``--version``, which run no kernel: importing numba
+    would double the time of ``ffd --help``."""
+    if not argv or any(a in ("-h", "--help", "-V", "--version") for a in argv):
+        return contextlib.nullcontext()
+    from ffdcli.jit import compile_notice, interrupts_outside_compilers
+
+    stack = contextlib.ExitStack()
+    stack.enter_context(interrupts_outside_compilers())
+    if notice:
+        stack.enter_context(compile_notice())
+    return stack
+
+
 def main(argv=None):
     """Entry point of the ``ffd`` console script.
 
@@ -84,6 +99,14 @@ def main(argv=None):
     argv = list(sys.argv[1:] if argv is None else argv)
     as_json = "--json" in argv
     verbose = "-v" in argv or "--verbose" in argv
+    # under mpiexec, SIGTERM/SIGHUP are held from before MPI starts (``ffd``'s entry point holds
+    # them from before the imports): every rank stops together
+    with SignalRecorder() as signals:
+        _run(argv, as_json, verbose, signals)
+
+
+def _run(argv, as_json, verbose, signals):
+    """The command, its errors agreed on over the MPI ranks and reported once; exits."""
     from ffdcli.parallel.comm import SerialComm, world
 
     try:
@@ -91,15 +114,18 @@ def main(argv=None):
     except FfdError as e:
         comm = SerialComm()
         _fail(str(e), e.exit_code, as_json)
+    if comm.size > 1:
+        comm.signals = signals
     try:
         try:
-            with interrupts_outside_compilers():       # Ctrl-C inside numba's kernel loading crashes
+            quiet = "-q" in argv or "--quiet" in argv
+            with _compiled_code_guards(argv, comm.is_root and not quiet):
                 cli.main(args=argv, prog_name="ffd", standalone_mode=False, obj={"comm": comm})
             error = None
         except BaseException as e:   # noqa: BLE001 - agreed on below, then reported as before
             error = e
         if comm.size > 1 and not getattr(error, "ffd_agreed", False):
-            comm.agree(error)        # the last agreement: every rank learns how every other ended
+            comm.agree(error, signals=False)   # the last agreement: every rank learns how every other ended
         if error is not None:
             raise error
     except click.exceptions.Exit as e:
@@ -111,7 +137,7 @@ def main(argv=None):
     except (click.Abort, KeyboardInterrupt):
         _fail("interrupted; nothing was written", 130, as_json)
     except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
-        _fail(f"{e}; nothing was written", 128 + e.signum, as_json)
+        _fail(f"{e}; nothing was written", 128 + e.signum, as_json, show=comm.is_root)
     except StdoutError as e:          # stdout full or closed: the outputs are complete; say it on stderr
         _quiet_stdout()
         _fail(str(e), 1, False)

@@ -4,11 +4,14 @@ Every output goes to a temporary file in the destination folder and is renamed o
 destination only when complete, so an error, a full disk, Ctrl-C, SIGTERM or SIGHUP never leaves a
 half-written file, and two processes writing the same file never interleave.
 
-Temporary files are named ``.<name>.<host>-<pid>-<random>.part<suffix>``. A run that is killed
-outright (SIGKILL, the OOM killer, a power cut) cannot remove its own: the next write of the same
-output removes those that are stale, i.e. written by a process of this host that no longer runs,
-or (any other name of this form, e.g. from another host of a shared file system) not modified for
-:data:`STALE_AGE` seconds. A live process's temporary file is never touched.
+Temporary files are named ``.<name>.<host>-<pid>-<random>.part<suffix>``, one per output: a writer
+handed such a path (the output plan gives each writer its temporary file) writes it in place instead
+of nesting a temporary file of its own (:func:`is_temp`). A run that is killed outright (SIGKILL, the
+OOM killer, a power cut) cannot remove its own: the next write into the same folder removes those that
+are stale, i.e. written by a process of this host that no longer runs, or (any other name of this
+form, e.g. from another host of a shared file system) not modified for :data:`STALE_AGE` seconds;
+nested ones of older versions (``..<name>.….part<suffix>.….part<suffix>``) too. A live process's
+temporary file is never touched.
 
 :func:`output_error` turns an ``OSError`` of a write into the one-line error the user sees.
 """
@@ -30,7 +33,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from ffdcli.errors import FfdError, InputError
+from ffdcli.errors import FfdError, InputError, Terminated
 from ffdcli.io.inputs import existing_kind
 
 #: A temporary file of another host (or of the old naming) untouched this long is stale (seconds).
@@ -40,13 +43,6 @@ STALE_AGE = 3600.0
 HANDLED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 
 
-class Terminated(BaseException):
-    """SIGTERM or SIGHUP arrived during a write (a BaseException, like KeyboardInterrupt, so that no
-    ``except Exception`` swallows it). The command line reports it and exits with 128 + signum."""
-
-    def __init__(self, signum: int):
-        self.signum = signum
-        super().__init__(f"terminated by {signal.Signals(signum).name}")
 
 
 def check_writable(path: str | Path, *, inputs: tuple[str | Path, ...] = ()) -> Path:
@@ -124,10 +120,18 @@ def _temp_prefix(p: Path) -> str:
     return f".{name}."
 
 
+def is_temp(path: str | Path) -> bool:
+    """Whether ``path`` is named as a temporary file of ours (``.<name>.<host>-<pid>-<random>.part<suffix>``):
+    a writer given one writes it in place (whoever made it renames it), so an output has one temporary file."""
+    name = Path(path).name
+    m = _TEMP_NAME.search(name)
+    return name.startswith(".") and m is not None and m["pid"] is not None
+
+
 def make_temp(path: str | Path) -> Path:
     """Create an empty temporary file beside ``path`` (named as the module says) and return it.
 
-    Stale temporary files of the same output are removed first (:func:`sweep_stale`)."""
+    Stale temporary files in that folder are removed first (:func:`sweep_stale`)."""
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
     sweep_stale(p)
@@ -147,18 +151,20 @@ def make_temp(path: str | Path) -> Path:
 
 
 def sweep_stale(path: str | Path, *, now: float | None = None) -> list[Path]:
-    """Remove the stale temporary files of output ``path``; returns those removed.
+    """Remove the stale temporary files in the folder of output ``path``; returns those removed.
 
-    Ours (``.<name>.<host>-<pid>-...part...``): stale when written on this host by a process that no
-    longer exists, or untouched for :data:`STALE_AGE` seconds. A live writer's file stays."""
+    Ours (``.<name>.<host>-<pid>-...part...``, of any output, nested or not): stale when written on this
+    host by a process that no longer exists; those of the output ``path`` (or nested ones, which no
+    version writes any more) also when untouched for :data:`STALE_AGE` seconds. A live writer's file
+    stays."""
     p = Path(path)
     folder = p.parent if str(p.parent) else Path(".")
     now = time.time() if now is None else now
     removed = []
-    pattern = os.path.join(glob.escape(str(folder)), glob.escape(_temp_prefix(p)) + "*.part*")
-    for name in glob.glob(pattern, include_hidden=True):
+    own = _temp_prefix(p)
+    for name in glob.glob(os.path.join(glob.escape(str(folder)), ".*.part*"), include_hidden=True):
         q = Path(name)
-        if not _is_stale(q, len(_temp_prefix(p)), now):
+        if not _is_stale(q, q.name.startswith(own) or q.name.count(".part") > 1, now):
             continue
         with contextlib.suppress(OSError):
             st = os.lstat(q)
@@ -190,12 +196,16 @@ def replace_folder(tmp: Path, dest: Path) -> None:
     shutil.rmtree(aside, ignore_errors=True)
 
 
-_TEMP_TAIL = re.compile(r"(?:(?P<host>[A-Za-z0-9_]+)-(?P<pid>[0-9]+)-)?[a-z0-9_]+\.part(?:\.[^.]*)?")
+#: The end of a temporary file's name: ``.<host>-<pid>-<random>.part<suffix>`` (host and pid absent
+#: in the oldest naming); a nested name ends with the inner writer's.
+_TEMP_NAME = re.compile(r"\.(?:(?P<host>[A-Za-z0-9_]+)-(?P<pid>[0-9]+)-)?[a-z0-9_]+\.part(?:\.[^.]*)?$")
 
 
-def _is_stale(q: Path, prefix_len: int, now: float) -> bool:
-    m = _TEMP_TAIL.fullmatch(q.name[prefix_len:])
-    if m is None:                    # not a temporary file of this output: never touched
+def _is_stale(q: Path, by_age: bool, now: float) -> bool:
+    """``q`` is a temporary file of ours whose writer is gone: a process of this host that no longer
+    runs, or (``by_age``: a file of this output, or a nested one) untouched for :data:`STALE_AGE` s."""
+    m = _TEMP_NAME.search(q.name)
+    if m is None:                    # not a temporary file of ours: never touched
         return False
     if m["host"] == _HOST:
         pid = int(m["pid"])
@@ -203,6 +213,8 @@ def _is_stale(q: Path, prefix_len: int, now: float) -> bool:
             return False
         if not _pid_alive(pid):
             return True
+    if not by_age:
+        return False
     try:
         return now - os.lstat(q).st_mtime > STALE_AGE
     except OSError:
@@ -229,7 +241,8 @@ def _handlers(signals, handler, old: dict, *, keep_user: bool) -> Iterator[None]
     ``keep_user``: leave a signal alone whose handler is not the default (the user program's own)."""
     for s in signals:
         try:
-            if not keep_user or signal.getsignal(s) == signal.SIG_DFL:
+            current = signal.getsignal(s)       # ffd's own recorder (MPI runs) gives way too
+            if not keep_user or current == signal.SIG_DFL or getattr(current, "ffd_replaceable", False):
                 old[s] = signal.signal(s, handler)
         except (ValueError, OSError):
             pass
@@ -284,66 +297,6 @@ def signals_deferred() -> Iterator[None]:
                 raise Terminated(s)
 
 
-#: Code inside which Ctrl-C must not raise: numba loads cached kernels and compiles through LLVM
-#: callbacks (ctypes), and a KeyboardInterrupt raised in one is dropped by ctypes and leaves LLVM's
-#: state half-made, so the interpreter crashes later (SIGSEGV: 2 to 3 interrupts in 60 of a cached
-#: ``ffd deform`` on a 100k-node mesh, 2026-12-02).
-UNSAFE_CODE = (f"{os.sep}numba{os.sep}", f"{os.sep}llvmlite{os.sep}")
-#: Seconds between two looks at the stack while an interrupt is held.
-HOLD_POLL = 0.02
-
-
-def _in_unsafe_code(frame) -> bool:
-    while frame is not None:
-        name = frame.f_code.co_filename
-        if any(part in name for part in UNSAFE_CODE):
-            return True
-        frame = frame.f_back
-    return False
-
-
-@contextlib.contextmanager
-def interrupts_outside_compilers() -> Iterator[None]:
-    """Ctrl-C (SIGINT) raises KeyboardInterrupt as usual, except while numba or llvmlite code is on
-    the stack (:data:`UNSAFE_CODE`): then it is held and raised as soon as that code has returned
-    (the stack is looked at again every :data:`HOLD_POLL` seconds, by SIGALRM). For the command
-    line's whole run. Outside the main thread, or when the program has its own SIGINT or SIGALRM
-    handler: a no-op."""
-    if (threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer")
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
-            or signal.getsignal(signal.SIGALRM) not in (signal.SIG_DFL, None)):
-        yield
-        return
-    held = False
-
-    def on_interrupt(signum, frame):
-        nonlocal held
-        if _in_unsafe_code(frame):
-            held = True
-            signal.setitimer(signal.ITIMER_REAL, HOLD_POLL)
-            return
-        raise KeyboardInterrupt
-
-    def on_alarm(signum, frame):
-        nonlocal held
-        if held:
-            if _in_unsafe_code(frame):
-                signal.setitimer(signal.ITIMER_REAL, HOLD_POLL)
-                return
-            held = False
-            raise KeyboardInterrupt
-
-    old = {signal.SIGINT: signal.signal(signal.SIGINT, on_interrupt),
-           signal.SIGALRM: signal.signal(signal.SIGALRM, on_alarm)}
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        for s, h in old.items():
-            with contextlib.suppress(ValueError, OSError):
-                signal.signal(s, h)
-
-
 # ----------------------------------------------------------------------------------------------
 # One file, whole or nothing
 # ----------------------------------------------------------------------------------------------
@@ -357,6 +310,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     was. Several outputs that must appear together: :class:`ffdcli.io.outputs.OutputPlan`.
     """
     p = Path(path)
+    if is_temp(p):                   # already a temporary file (the output plan's): one per output
+        yield p
+        return
     tmp_path = None
     try:
         with signals_raise():

@@ -9,9 +9,10 @@ parallelepiped (it follows a swept, tapered, twisted wing), so the map is invert
    kernel's own pass); the table is made once per call from a grid of samples (a few per knot span
    and direction) in a k-d tree, with about one cell per sample whatever the number of points;
 2. a projected Gauss-Newton iteration with backtracking line search runs per point inside a
-   parallel compiled loop (numba ``prange``; no Python loop over points), compiled per lattice
-   degrees (:func:`ffdcli.lattice.lattice.eval_point_fixed_nb`: the lattice map unrolled, in vector
-   operations, equal bit for bit to the generic evaluation). Parameters are clipped
+   parallel compiled loop (numba ``prange``; no Python loop over points; :mod:`ffdcli.lattice._newton_kernels`),
+   compiled for the usual lattice degrees (:func:`ffdcli.lattice.lattice.eval_point_fixed_nb`: the
+   lattice map unrolled, in vector operations) and generic for the others (equal bit for bit).
+   Parameters are clipped
    to [0, 1] at every step and the variables held at a bound by the gradient are frozen, so the
    iteration converges to the nearest point of the lattice also for points outside it (which stop
    once their residual is normal to the lattice, :data:`STATIONARY`);
@@ -29,8 +30,8 @@ basis values of each point: the tensor-product form of the sparse basis matrix `
 control points) with ``X = B @ P``; :meth:`Embedding.from_params` computes it in one compiled pass.
 :meth:`Embedding.displace` (``B @ dP``) and :meth:`Embedding.rmatvec` (``B.T @ g``) are parallel
 compiled loops over that form (about a third of the bytes of the CSR matrix), on control points
-padded to 4-wide rows, with explicit vector fused multiply-adds (:mod:`ffdcli.lattice.simd`: ``B @ P``
-contracts each point's support by :func:`ffdcli.lattice.simd.tensor_v`, unrolled for the lattice's
+padded to 4-wide rows, with explicit vector fused multiply-adds (:mod:`ffdcli.jit`: ``B @ P``
+contracts each point's support by :func:`ffdcli.jit.tensor_v`, unrolled for the lattice's
 degrees; ``B.T @ g`` adds into the rows);
 :meth:`Embedding.basis_matrix` builds the explicit CSR matrix. The ``*_reference`` functions are
 NumPy versions the tests compare the kernels with.
@@ -42,32 +43,22 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from numba import njit, prange
-from numba.cpython.unsafe.tuple import tuple_setitem
 from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
-from ffdcli.lattice.lattice import (
-    Lattice,
-    derivatives,
-    eval_point_fixed_nb,
-    evaluate,
-    fixed_widths,
-    kernel_args,
-    padded_rows,
-)
-from ffdcli.lattice.simd import axpy4, axpy8, axpy8x3, tensor_v
-from ffdcli.lattice.spline import basis, basis_d1_tuple, find_span_nb
+from ffdcli.lattice._embedding_kernels import _basis_rows_nb, apply, basis_axes, rmatvec
+from ffdcli.lattice._newton_kernels import STATIONARY, _pinv_nb, _start_nb, run_newton  # noqa: F401  (STATIONARY:
+
+#   the Newton kernel's stopping rule for points outside, part of this module's documented behaviour)
+from ffdcli.lattice.lattice import Lattice, derivatives, evaluate, kernel_args
+from ffdcli.lattice.spline import basis
 from ffdcli.progress import chunks, no_progress
 
 #: Default inside tolerance, relative to the lattice size (bounding-box diagonal of the control points).
 DEFAULT_TOL = 1e-10
 #: Parameters closer than this to 0 or 1 are snapped onto the bound (when the residual allows it).
 SNAP = 1e-10
-#: A point outside the lattice has reached its nearest lattice point when the cosine between its
-#: residual and the lattice's tangent directions is below this (first-order optimality).
-STATIONARY = 1e-10
 #: Points per Python-level chunk of :func:`embed` (paces progress).
 CHUNK = 1 << 18
 
@@ -128,15 +119,11 @@ class Embedding:
                              f"and {residual.shape}")
         first = tuple(np.empty(npts, dtype=np.int32) for _ in range(lattice.pdim))
         values = tuple(np.empty((npts, p + 1)) for p in lattice.degree)
-        k, deg = lattice.knots, lattice.degree
-        if lattice.pdim == 3:
-            args = (k[0], k[1], k[2], params, first[0], values[0], first[1], values[1], first[2], values[2])
-        else:
-            args = (k[0], k[1], _DUMMY_KNOTS, params, first[0], values[0], first[1], values[1], _DUMMY_FIRST,
-                    _DUMMY_VALUES)
-        widths = fixed_widths((*deg, 0) if lattice.pdim == 2 else deg)
-        nchunk = min(npts, 16 * numba.get_num_threads())
-        if npts and not _basis_axes_nb(*args, nchunk, *widths):
+        knots = (*lattice.knots, _DUMMY_KNOTS)[:3]
+        first3 = (*first, _DUMMY_FIRST)[:3]
+        values3 = (*values, _DUMMY_VALUES)[:3]
+        degrees = (*lattice.degree, 0)[:3]
+        if npts and not basis_axes(knots, params, first3, values3, degrees):
             raise ValueError("params must lie in [0, 1]")
         if tolerance is None:
             tolerance = DEFAULT_TOL * lattice.size
@@ -207,7 +194,7 @@ class Embedding:
         cp, gdim = self._control_array(control_points, "control_points")
         out = self._out_array(out, gdim)
         if self.n_points:
-            _apply(self._kernel_axes(), cp, self.inside, False, out)
+            apply(self._kernel_axes(), cp, self.inside, False, out)
         return out
 
     def displace(self, delta_control_points, out: np.ndarray | None = None) -> np.ndarray:
@@ -229,7 +216,7 @@ class Embedding:
         cp, gdim = self._control_array(delta_control_points, "delta_control_points")
         out = self._out_array(out, gdim)
         if self.n_points:
-            _apply(self._kernel_axes(), cp, self.inside, True, out)
+            apply(self._kernel_axes(), cp, self.inside, True, out)
         return out
 
     def rmatvec(self, g) -> np.ndarray:
@@ -252,7 +239,7 @@ class Embedding:
             return np.zeros((self.n_ctrl, g.shape[1]))
         nchunk = min(self.n_points, 4 * numba.get_num_threads())
         out = np.empty((self.n_ctrl, g.shape[1]))
-        _rmatvec(self._kernel_axes(), g, self.inside, nchunk, out)
+        rmatvec(self._kernel_axes(), g, self.inside, nchunk, out)
         return out
 
     def basis_matrix(self) -> sparse.csr_matrix:
@@ -294,288 +281,6 @@ _DUMMY_VALUES = np.ones((1, 1))
 _DUMMY_KNOTS = np.array([0.0, 1.0])
 
 
-@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _basis_axes_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, w0, w1, w2):
-    """:func:`_basis_axes_nb` for the points ``lo:hi``; returns the number of parameters not in [0, 1].
-
-    Compiled per basis widths (``w0, w1, w2``: :func:`ffdcli.lattice.lattice.fixed_widths`) with the basis
-    of :func:`ffdcli.lattice.spline.basis_d1_tuple` in registers; without reference counting and zero-division
-    checks per point, as :func:`_newton_chunk_nb`."""
-    pdim = params.shape[1]
-    p0 = len(w0) - 1
-    p1 = len(w1) - 1
-    p2 = len(w2) - 1
-    bad = 0
-    for i in range(lo, hi):
-        t = params[i, 0]
-        if not (0.0 <= t <= 1.0):
-            bad += 1
-            t = 0.0
-        span = find_span_nb(k0, p0, t)
-        N, _ = basis_d1_tuple(k0, span, t, w0)
-        f0[i] = span - p0
-        for a in range(p0 + 1):
-            V0[i, a] = N[a]
-        t = params[i, 1]
-        if not (0.0 <= t <= 1.0):
-            bad += 1
-            t = 0.0
-        span = find_span_nb(k1, p1, t)
-        N, _ = basis_d1_tuple(k1, span, t, w1)
-        f1[i] = span - p1
-        for a in range(p1 + 1):
-            V1[i, a] = N[a]
-        if pdim == 3:
-            t = params[i, 2]
-            if not (0.0 <= t <= 1.0):
-                bad += 1
-                t = 0.0
-            span = find_span_nb(k2, p2, t)
-            N, _ = basis_d1_tuple(k2, span, t, w2)
-            f2[i] = span - p2
-            for a in range(p2 + 1):
-                V2[i, a] = N[a]
-    return bad
-
-
-@njit(cache=True, parallel=True)
-def _basis_axes_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, nchunk, w0, w1, w2):
-    """Per-axis first index and basis values of every point, in one pass over ``params`` (N, pdim)
-    in ``nchunk`` chunks (:func:`_basis_axes_chunk_nb`); the third axis is skipped when ``params``
-    has two columns. The values are :func:`ffdcli.lattice.spline.basis_compiled`'s, bit for bit (the
-    operations of :func:`ffdcli.lattice.spline.basis_row_nb`, unrolled for the widths ``w0, w1, w2``).
-    Returns False if a parameter is not in [0, 1] (NaN included)."""
-    npts = params.shape[0]
-    bad = 0
-    for ch in prange(nchunk):
-        lo = ch * npts // nchunk
-        hi = (ch + 1) * npts // nchunk
-        bad += _basis_axes_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, w0, w1, w2)
-    return bad == 0
-
-
-# ----------------------------------------------------------------------------------------------
-# B @ P and B.T @ g over the tensor-product form (compiled) and their NumPy references
-# ----------------------------------------------------------------------------------------------
-
-# Control points as 4-wide rows (x, y, z, 0): each multiply-add of the tensor product is one explicit
-# vector fused multiply-add over the coordinates (ffdcli.lattice.simd.tensor_v; numba does not vectorise
-# straight-line code), unrolled for the basis widths (tuples of the lattice's p + 1 per axis, so one
-# compiled version per lattice degrees). Results move by ulps from a sum of separate products; a
-# zero dP still gives 0.
-@njit(cache=True, nogil=True, inline="always")
-def _row_tuple(V, i, proto):
-    """``V[i, :len(proto)]`` as a tuple (of the length of ``proto``, known when compiling)."""
-    out = proto
-    for a in range(len(proto)):
-        out = tuple_setitem(out, a, V[i, a])
-    return out
-
-
-@njit(cache=True, nogil=True, _nrt=False)
-def _apply_chunk_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, lo, hi, w0, w1, w2):
-    """Rows ``lo:hi`` of :func:`_apply_nb`; compiled without reference counting (no per-point
-    reference-count updates of the arrays handed to the inlined functions)."""
-    gdim = out.shape[1]
-    for i in range(lo, hi):
-        if use_mask and not inside[i]:
-            for d in range(gdim):
-                out[i, d] = 0.0
-            continue
-        i2 = i if has_w else 0                       # 2D: the dummy axis, one value 1 at index 0
-        N0 = _row_tuple(V0, i, w0)
-        N1 = _row_tuple(V1, i, w1)
-        N2 = _row_tuple(V2, i2, w2)
-        k = (f0[i] * n1 + f1[i]) * n2 + f2[i2]
-        x = tensor_v(R, k, n1 * n2, n2, N0, N1, N2)
-        for d in range(gdim):
-            out[i, d] = x[d]
-
-
-@njit(cache=True, parallel=True)
-def _apply_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, nchunk, w0, w1, w2):
-    """``out = B @ P`` over the tensor-product form; ``R`` the control points as flat 4-wide rows
-    (4 n_ctrl,), ``out`` (N, gdim); ``w0, w1, w2`` the basis widths
-    (:func:`ffdcli.lattice.lattice.fixed_widths`, a third of width 1 in 2D); ``nchunk`` chunks of points."""
-    npts = f0.shape[0]
-    for ch in prange(nchunk):
-        lo = ch * npts // nchunk
-        hi = (ch + 1) * npts // nchunk
-        _apply_chunk_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, R, inside, use_mask, out, lo, hi, w0, w1, w2)
-
-
-def _apply(axes, P, inside, use_mask, out):
-    """``B @ P`` (``axes`` from ``Embedding._kernel_axes``, ``P`` (n_ctrl, 4))."""
-    f0, V0, f1, V1, f2, V2, has_w = axes[:7]
-    widths = tuple((0.0,) * V.shape[1] for V in (V0, V1, V2))
-    nchunk = min(f0.shape[0], 4 * numba.get_num_threads())
-    _apply_nb(*axes, P.reshape(-1), inside, use_mask, out, nchunk, *widths)
-
-
-@njit(cache=True, parallel=True)
-def _basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, data):
-    """The CSR rows of B: for each inside point, its (p+1)(q+1)(r+1) columns in increasing order
-    and the products V0[a] * V1[b] * V2[c] of its basis values (in that order of multiplication)."""
-    npts = f0.shape[0]
-    a1 = V0.shape[1]
-    b1 = V1.shape[1]
-    c1 = V2.shape[1] if has_w else 1
-    for i in prange(npts):
-        if not inside[i]:
-            continue
-        k = indptr[i]
-        i2 = f2[i] if has_w else 0
-        for a in range(a1):
-            for b in range(b1):
-                base = ((f0[i] + a) * n1 + (f1[i] + b)) * n2 + i2
-                wab = V0[i, a] * V1[i, b]
-                for c in range(c1):
-                    cols[k] = base + c
-                    data[k] = wab * V2[i, c] if has_w else wab
-                    k += 1
-
-
-# B.T @ g scatters each point's products into the rows of its (p+1)(q+1)(r+1) control points. The
-# accumulator is flat, 4 doubles per control point (x, y, z, 0), and every update is one explicit
-# vector fused multiply-add (ffdcli.lattice.simd: numba does not vectorise straight-line code): 4-wide per
-# control point in the general kernel, 8-wide over the two control points of a linear third axis in
-# the cubic-cubic-linear kernel, and 24-wide (3 doubles per control point) over the 8 adjacent
-# control points of a slice when that third axis has only its 2 control points (the default box).
-@njit(cache=True, parallel=True)
-def _rmatvec_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc, out):
-    """``out = B.T @ g``, (n_ctrl, gdim): ``acc[chunk] += B[chunk rows].T @ g`` per chunk of points
-    (one accumulator per chunk: no two threads add into one array), then the chunks summed in order
-    (:func:`_sum_chunks`); ``acc`` (nchunk, n_ctrl * 4), zero on entry, every 4th entry stays 0.
-    Any basis widths, 2D (``has_w`` False) or 3D; rows of outside points are skipped.
-
-    Per control point the update is ``fma(V0[a] V1[b] V2[c], g, acc)``: the same value, bit for bit,
-    as the scalar ``acc[k, q] += w * g[q]`` with contraction."""
-    npts = f0.shape[0]
-    gdim = g.shape[1]
-    nchunk = acc.shape[0]
-    a1 = V0.shape[1]
-    b1 = V1.shape[1]
-    c1 = V2.shape[1] if has_w else 1
-    for ch in prange(nchunk):
-        lo = ch * npts // nchunk
-        hi = (ch + 1) * npts // nchunk
-        part = acc[ch]
-        for i in range(lo, hi):
-            if not inside[i]:
-                continue
-            g0 = g[i, 0]
-            g1 = g[i, 1] if gdim > 1 else 0.0
-            g2 = g[i, 2] if gdim > 2 else 0.0
-            i0 = f0[i]
-            i1 = f1[i]
-            i2 = f2[i] if has_w else 0
-            for a in range(a1):
-                wa = V0[i, a]
-                for b in range(b1):
-                    wab = wa * V1[i, b]
-                    base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-                    for c in range(c1):
-                        w = wab * V2[i, c] if has_w else wab
-                        axpy4(part, 4 * (base + c), w, g0, g1, g2, 0.0)
-    _sum_chunks(acc, 4, out)
-
-
-@njit(cache=True, parallel=True)
-def _rmatvec_442_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc, out):
-    """:func:`_rmatvec_nb` for the default box (cubic, cubic, linear: widths 4, 4, 2; 3D only) with
-    the widths known when compiling: the two control points ``c = 0, 1`` of a column are adjacent
-    (C order), so each of the 16 ``(a, b)`` columns is one 8-wide update
-    ``acc[4 base : 4 base + 8] += V0[a] V1[b] * (V2[0] g, 0, V2[1] g, 0)``. The products are grouped
-    as ``(V0 V1) (V2 g)`` instead of ``((V0 V1) V2) g``: results differ from the general kernel's by
-    ulps."""
-    npts = f0.shape[0]
-    gdim = g.shape[1]
-    nchunk = acc.shape[0]
-    for ch in prange(nchunk):
-        lo = ch * npts // nchunk
-        hi = (ch + 1) * npts // nchunk
-        part = acc[ch]
-        for i in range(lo, hi):
-            if not inside[i]:
-                continue
-            g0 = g[i, 0]
-            g1 = g[i, 1] if gdim > 1 else 0.0
-            g2 = g[i, 2] if gdim > 2 else 0.0
-            v0 = V2[i, 0]
-            v1 = V2[i, 1]
-            t0, t1, t2 = v0 * g0, v0 * g1, v0 * g2
-            s0, s1, s2 = v1 * g0, v1 * g1, v1 * g2
-            i0 = f0[i]
-            i1 = f1[i]
-            i2 = f2[i]
-            for a in range(4):
-                wa = V0[i, a]
-                for b in range(4):
-                    base = ((i0 + a) * n1 + (i1 + b)) * n2 + i2
-                    axpy8(part, 4 * base, wa * V1[i, b], t0, t1, t2, 0.0, s0, s1, s2, 0.0)
-    _sum_chunks(acc, 4, out)
-
-
-@njit(cache=True, parallel=True)
-def _rmatvec_442c_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, g, inside, acc, out):
-    """:func:`_rmatvec_442_nb` when the third axis has its two control points only (``n2 == 2``, the
-    default 8 x 6 x 2 box): then the 4 x 2 control points ``(b, c)`` of a slice ``a`` are 8 adjacent
-    rows, and with 3 doubles per control point (no padding lane: ``acc`` (nchunk, n_ctrl * 3)) each
-    slice is one 24-wide update ``acc[3 base_a : 3 base_a + 24] += V0[a] * ((V1[b] V2[c]) g)``
-    (:func:`ffdcli.lattice.simd.axpy8x3`): 4 vector updates per point instead of 16. Products grouped as
-    ``V0 ((V1 V2) g)``: ulps from the other kernels."""
-    npts = f0.shape[0]
-    gdim = g.shape[1]
-    nchunk = acc.shape[0]
-    for ch in prange(nchunk):
-        lo = ch * npts // nchunk
-        hi = (ch + 1) * npts // nchunk
-        part = acc[ch]
-        for i in range(lo, hi):
-            if not inside[i]:
-                continue
-            g0 = g[i, 0]
-            g1 = g[i, 1] if gdim > 1 else 0.0
-            g2 = g[i, 2] if gdim > 2 else 0.0
-            v0 = V2[i, 0]
-            v1 = V2[i, 1]
-            u0 = V1[i, 0]
-            u1 = V1[i, 1]
-            u2 = V1[i, 2]
-            u3 = V1[i, 3]
-            base = (f0[i] * n1 + f1[i]) * 2                 # f2 == 0: one span along the third axis
-            for a in range(4):
-                axpy8x3(part, 3 * (base + 2 * a * n1), V0[i, a], u0 * v0, u0 * v1, u1 * v0, u1 * v1,
-                        u2 * v0, u2 * v1, u3 * v0, u3 * v1, g0, g1, g2)
-    _sum_chunks(acc, 3, out)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _sum_chunks(acc, stride, out):
-    """``out[k, d] = acc[0, stride k + d] + acc[1, stride k + d] + ...`` in chunk order (serial: a
-    few hundred sums per chunk; what ``acc.sum(axis=0)`` gives, without its temporaries)."""
-    for k in range(out.shape[0]):
-        for d in range(out.shape[1]):
-            s = acc[0, stride * k + d]
-            for ch in range(1, acc.shape[0]):
-                s += acc[ch, stride * k + d]
-            out[k, d] = s
-
-
-def _rmatvec(axes, g, inside, nchunk, out):
-    """``out = B.T @ g`` (n_ctrl, gdim) over ``nchunk`` chunks of points by the kernel that fits the
-    basis widths (``axes`` from ``Embedding._kernel_axes``)."""
-    f0, V0, f1, V1, f2, V2, has_w, n1, n2 = axes
-    n_ctrl = out.shape[0]
-    if has_w and V0.shape[1] == 4 and V1.shape[1] == 4 and V2.shape[1] == 2:
-        if n2 == 2:
-            _rmatvec_442c_nb(*axes, g, inside, np.zeros((nchunk, 3 * n_ctrl)), out)
-        else:
-            _rmatvec_442_nb(*axes, g, inside, np.zeros((nchunk, 4 * n_ctrl)), out)
-    else:
-        _rmatvec_nb(*axes, g, inside, np.zeros((nchunk, 4 * n_ctrl)), out)
-
-
 def rmatvec_reference(emb: Embedding, g) -> np.ndarray:
     """NumPy/SciPy reference of :meth:`Embedding.rmatvec`: ``B.T @ g`` with ``B`` from
     :func:`basis_matrix_reference` (outside rows empty). Returns (n_ctrl, gdim)."""
@@ -614,223 +319,6 @@ def dense_basis_reference(lattice: Lattice, params) -> np.ndarray:
         dense[rows, first[:, None] + np.arange(vals.shape[1])[None, :]] = vals
         B = (B[:, :, None] * dense[:, None, :]).reshape(npts, -1)
     return B
-
-
-# ----------------------------------------------------------------------------------------------
-# Newton point inversion (compiled)
-# ----------------------------------------------------------------------------------------------
-
-@njit(cache=True, nogil=True, inline="always")
-def _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, out, w0, w1, w2):
-    """|V(u) - X[i]|^2; ``out`` (12,) receives V and its derivatives (see
-    :func:`ffdcli.lattice.lattice.eval_point_fixed_nb`; ``w0, w1, w2``: the basis widths)."""
-    res = eval_point_fixed_nb(R, n1, n2, k0, k1, k2, u[0], u[1], u[2], w0, w1, w2)
-    for k in range(12):
-        out[k] = res[k]
-    s = 0.0
-    for d in range(gdim):
-        r = res[d] - X[i, d]
-        s += r * r
-    return s
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _solve_small(H, rhs, n, x):
-    """Solve the n x n (n <= 3) system H x = rhs by Gaussian elimination with partial pivoting.
-
-    ``H`` and ``rhs`` are overwritten. Returns False when a pivot is negligible (singular H).
-    """
-    scale = 0.0
-    for e in range(n):
-        scale = max(scale, abs(H[e, e]))
-    if scale == 0.0:
-        return False
-    for k in range(n):
-        piv = k
-        for r in range(k + 1, n):
-            if abs(H[r, k]) > abs(H[piv, k]):
-                piv = r
-        if abs(H[piv, k]) <= 1e-13 * scale:
-            return False
-        if piv != k:
-            for c in range(n):
-                t = H[k, c]
-                H[k, c] = H[piv, c]
-                H[piv, c] = t
-            t = rhs[k]
-            rhs[k] = rhs[piv]
-            rhs[piv] = t
-        for r in range(k + 1, n):
-            m = H[r, k] / H[k, k]
-            for c in range(k, n):
-                H[r, c] -= m * H[k, c]
-            rhs[r] -= m * rhs[k]
-    for k in range(n - 1, -1, -1):
-        s = rhs[k]
-        for c in range(k + 1, n):
-            s -= H[k, c] * x[c]
-        x[k] = s / H[k, k]
-    return True
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _newton_point(R, n1, n2, k0, k1, k2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
-                  cur, trial, ut, step, grad, H, rhs, fixed, w0, w1, w2):
-    """Projected Gauss-Newton for point ``X[i]``; ``u`` (3,) is the start and receives the result.
-
-    Returns the squared residual at the result.
-    """
-    f = _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, cur, w0, w1, w2)
-    for _ in range(max_iter):
-        if f <= stop2:
-            break
-        # gradient J^T r and Gauss-Newton matrix J^T J (J columns are cur[3 + 3e: 6 + 3e])
-        for e in range(pdim):
-            s = 0.0
-            for d in range(gdim):
-                s += cur[3 + 3 * e + d] * (cur[d] - X[i, d])
-            grad[e] = s
-            for e2 in range(pdim):
-                s = 0.0
-                for d in range(gdim):
-                    s += cur[3 + 3 * e + d] * cur[3 + 3 * e2 + d]
-                H[e, e2] = s
-        # variables held at a bound by the gradient stay there (active set)
-        nfree = 0
-        for e in range(pdim):
-            fixed[e] = (u[e] <= 0.0 and grad[e] > 0.0) or (u[e] >= 1.0 and grad[e] < 0.0)
-            if not fixed[e]:
-                nfree += 1
-        if nfree == 0:
-            break
-        trace = 0.0
-        for e in range(pdim):
-            if fixed[e]:
-                for e2 in range(pdim):
-                    H[e, e2] = 0.0
-                    H[e2, e] = 0.0
-                H[e, e] = 1.0
-                rhs[e] = 0.0
-            else:
-                rhs[e] = -grad[e]
-                trace += H[e, e]
-        if f > tol2:
-            # a point outside at its nearest lattice point: the residual is normal to the lattice
-            # (|J^T r| <= 1e-10 |J| |r|); stop here rather than in the line search's 40 halvings
-            # (the distance is flat there: further steps change it below rounding)
-            g2 = 0.0
-            for e in range(pdim):
-                if not fixed[e]:
-                    g2 += grad[e] * grad[e]
-            if g2 <= STATIONARY * STATIONARY * f * trace:
-                break
-        ok = _solve_small(H, rhs, pdim, step)
-        if not ok:
-            # singular Jacobian (degenerate lattice cell): scaled steepest descent
-            for e in range(pdim):
-                step[e] = 0.0 if fixed[e] else -grad[e] / max(trace, 1e-300)
-        # backtracking along the projected path u(alpha) = clip(u + alpha * step)
-        alpha = 1.0
-        accepted = False
-        max_halvings = 4 if f <= tol2 else 40
-        for _ls in range(max_halvings):
-            for e in range(pdim):
-                v = u[e] + alpha * step[e]
-                ut[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-            ft = _sqdist(R, n1, n2, k0, k1, k2, ut, X, i, gdim, trial, w0, w1, w2)
-            if ft < f:
-                accepted = True
-                break
-            alpha *= 0.5
-        if not accepted:
-            break
-        moved = 0.0
-        for e in range(pdim):
-            moved = max(moved, abs(ut[e] - u[e]))
-            u[e] = ut[e]
-        for k in range(12):
-            cur[k] = trial[k]
-        f = ft
-        if moved <= 1e-15:
-            break
-    # exact face parameters for points on (or within 1e-10 of) a face of the lattice
-    if f <= tol2:
-        for e in range(pdim):
-            target = -1.0
-            if 0.0 < u[e] <= snap:
-                target = 0.0
-            elif 1.0 - snap <= u[e] < 1.0:
-                target = 1.0
-            if target >= 0.0:
-                keep = u[e]
-                u[e] = target
-                fs = _sqdist(R, n1, n2, k0, k1, k2, u, X, i, gdim, trial, w0, w1, w2)
-                if fs <= tol2:
-                    f = fs
-                else:
-                    u[e] = keep
-    return f
-
-
-@njit(cache=True, nogil=True, error_model="numpy", _nrt=False)
-def _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_iter, residual, lo, hi,
-                     use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2, work, fixed):
-    """Newton for the points ``lo:hi`` of ``X`` (see :func:`_newton_nb`); ``work`` (48,) and ``fixed``
-    (3,) are the chunk's work arrays.
-
-    A function of its own, called once per chunk from the parallel loop, not inlined into it: numba
-    compiles it with the widths ``w0, w1, w2`` (tuples, :func:`ffdcli.lattice.lattice.fixed_widths`) as
-    constants, and the parallel loop's array analysis never sees the per-point tuples. Compiled
-    without numba's reference counting (``_nrt=False``: it allocates nothing): the arrays handed to
-    the inlined per-point functions would otherwise be counted in and out at every point (about 30
-    calls per point, atomic operations on counters shared by the threads). NumPy's error model: no
-    zero-division checks (and their exception paths) around the basis recurrence's divisions (never
-    by zero: a knot span's denominators are sums of non-empty knot intervals; the Gauss elimination
-    checks its pivots first)."""
-    gdim = X.shape[1]
-    pdim = 3 if len(w2) > 1 else 2          # a constant: a 2D lattice has the third axis of degree 0
-    cur = work[0:12]
-    trial = work[12:24]
-    u = work[24:27]
-    ut = work[27:30]
-    step = work[30:33]
-    grad = work[33:36]
-    rhs = work[36:39]
-    H = work[39:48].reshape((3, 3))
-    for i in range(lo, hi):
-        if use_table:
-            _start_point(X, i, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, u)
-        else:
-            for e in range(pdim):
-                u[e] = params[i, e]
-        f = _newton_point(R, n1, n2, k0, k1, k2, pdim, gdim, X, i, u, tol2, stop2, snap, max_iter,
-                          cur, trial, ut, step, grad, H, rhs, fixed, w0, w1, w2)
-        for e in range(pdim):
-            params[i, e] = u[e]
-        residual[i] = np.sqrt(f)
-
-
-@njit(cache=True, parallel=True)
-def _newton_nb(R, n1, n2, k0, k1, k2, X, params, tol, stop, snap, max_iter, residual, nchunk,
-               use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2):
-    """Newton for every point of ``X``, from ``params`` or (``use_table``) from the start table
-    ``t_*`` (:class:`StartTable`'s arrays), read in the same pass; writes ``params`` and ``residual``.
-    ``nchunk`` chunks of points share the threads (:func:`_newton_chunk_nb`). ``w0, w1, w2``: the
-    basis widths (:func:`ffdcli.lattice.lattice.fixed_widths`): a compiled version per lattice degrees,
-    with the lattice evaluation unrolled (the results of the generic ``eval_point_nb``, bit for
-    bit, in a third of the time)."""
-    npts = X.shape[0]
-    tol2 = tol * tol
-    stop2 = stop * stop
-    nchunk = min(npts, nchunk)
-    for ch in prange(nchunk):
-        lo = ch * npts // nchunk
-        hi = (ch + 1) * npts // nchunk
-        work = np.zeros(48)
-        fixed = np.zeros(3, dtype=np.bool_)
-        _newton_chunk_nb(R, n1, n2, k0, k1, k2, X, params, tol2, stop2, snap, max_iter, residual, lo, hi,
-                         use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, w0, w1, w2, work,
-                         fixed)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -908,7 +396,7 @@ class StartTable:
         residual = np.empty(len(centers))
         # a start needs no 1e-13 accuracy: a few iterations (points outside the lattice, about half
         # the centres of a swept and twisted box, would otherwise take most of the build's time)
-        _run_newton(kernel_args(lattice), centers, params, residual, tol_abs, tol_abs, SNAP, center_iter)
+        run_newton(kernel_args(lattice), centers, params, residual, tol_abs, tol_abs, SNAP, center_iter)
         jinv = np.zeros((len(centers), lattice.pdim, gdim))
         _pinv_nb(derivatives(lattice, params), jinv)
         lo3, inv3, dims3 = np.zeros(3), np.zeros(3), np.ones(3, dtype=np.int64)
@@ -925,58 +413,6 @@ class StartTable:
         return out
 
 
-@njit(cache=True)
-def _pinv_nb(J, out):
-    """``out[c] = (J^T J)^-1 J^T`` of each (gdim, pdim) ``J[c]`` (zero where J^T J is singular)."""
-    gdim = J.shape[1]
-    pdim = J.shape[2]
-    H = np.zeros((3, 3))
-    rhs = np.zeros(3)
-    x = np.zeros(3)
-    for c in range(J.shape[0]):
-        for d in range(gdim):
-            for e in range(pdim):
-                for e2 in range(pdim):
-                    s = 0.0
-                    for k in range(gdim):
-                        s += J[c, k, e] * J[c, k, e2]
-                    H[e, e2] = s
-                rhs[e] = J[c, d, e]
-            if not _solve_small(H, rhs, pdim, x):
-                for e in range(pdim):
-                    for d2 in range(gdim):
-                        out[c, e, d2] = 0.0
-                break
-            for e in range(pdim):
-                out[c, e, d] = x[e]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _start_point(X, i, lo, inv_h, dims, centers, params, jinv, u):
-    """The start of point ``X[i]`` into ``u``: ``clip(u_c + J_c^+ (X - C), 0, 1)`` of its cell."""
-    gdim = X.shape[1]
-    pdim = params.shape[1]
-    cell = 0
-    for a in range(3):
-        j = 0
-        if a < gdim:
-            t = (X[i, a] - lo[a]) * inv_h[a]
-            if t > 0.0:
-                j = int(t) if t < dims[a] else dims[a] - 1
-        cell = cell * dims[a] + j
-    for e in range(pdim):
-        v = params[cell, e]
-        for d in range(gdim):
-            v += jinv[cell, e, d] * (X[i, d] - centers[cell, d])
-        u[e] = 0.0 if v < 0.0 else (1.0 if v > 1.0 else v)
-
-
-@njit(cache=True, parallel=True)
-def _start_nb(X, lo, inv_h, dims, centers, params, jinv, out):
-    for i in prange(X.shape[0]):
-        _start_point(X, i, lo, inv_h, dims, centers, params, jinv, out[i])
-
-
 def start_reference(start: StartTable, points: np.ndarray) -> np.ndarray:
     """NumPy reference of :meth:`StartTable.start`."""
     points = np.asarray(points, dtype=np.float64)
@@ -990,24 +426,6 @@ def start_reference(start: StartTable, points: np.ndarray) -> np.ndarray:
         cell = cell * start.dims[a] + j
     u = start.params[cell] + np.einsum("ned,nd->ne", start.jinv[cell], points - start.centers[cell])
     return np.clip(u, 0.0, 1.0)
-
-
-_NO_TABLE = (np.zeros(3), np.zeros(3), np.ones(3, dtype=np.int64), np.zeros((1, 1)), np.zeros((1, 1)),
-             np.zeros((1, 1, 1)))
-
-
-def _run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_iter, table=None):
-    """Newton on ``points`` from ``params`` or, when ``table`` (a :class:`StartTable`) is given, from
-    its starts (``params`` is then only written)."""
-    t = _NO_TABLE if table is None else (table.lo, table.inv_h, table.dims, table.centers, table.params,
-                                         table.jinv)
-    # enough chunks per thread to balance the slower points outside the lattice; work arrays are
-    # allocated per chunk, not per point
-    nchunk = 16 * numba.get_num_threads()
-    P, k0, k1, k2, p0, p1, p2 = args
-    n1, n2 = np.int64(P.shape[1]), np.int64(P.shape[2])
-    _newton_nb(padded_rows(P), n1, n2, k0, k1, k2, points, params, float(tol_abs), float(stop_abs), float(snap),
-               int(max_iter), residual, nchunk, table is not None, *t, *fixed_widths((p0, p1, p2)))
 
 
 def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, samples_per_span: int = 4,
@@ -1070,13 +488,14 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
     sample_points = evaluate(lattice, samples)
     tree = cKDTree(sample_points)
     start = StartTable.build(lattice, samples, sample_points, tree, tol_abs)
+    table = (start.lo, start.inv_h, start.dims, start.centers, start.params, start.jinv)
     params = np.empty((npts, lattice.pdim))
     residual = np.empty(npts)
     factory = progress or no_progress
     with factory("embedding", npts) as bar:
         for lo, hi in chunks(npts, CHUNK):
-            _run_newton(args, pts[lo:hi], params[lo:hi], residual[lo:hi], tol_abs, stop_abs, snap, max_iter,
-                        table=start)
+            run_newton(args, pts[lo:hi], params[lo:hi], residual[lo:hi], tol_abs, stop_abs, snap, max_iter,
+                       table=table)
             bar.update(hi - lo)
 
     # Retry the points left outside from their next-nearest samples, keeping the best result.
@@ -1090,7 +509,7 @@ def embed(lattice: Lattice, points, *, tol: float = DEFAULT_TOL, progress=None, 
             sub_pts = np.ascontiguousarray(pts[fail])
             sub_params = np.ascontiguousarray(samples[nearest[:, kth]])
             sub_res = np.empty(fail.size)
-            _run_newton(args, sub_pts, sub_params, sub_res, tol_abs, stop_abs, snap, max_iter)
+            run_newton(args, sub_pts, sub_params, sub_res, tol_abs, stop_abs, snap, max_iter)
             better = sub_res < residual[fail]
             params[fail[better]] = sub_params[better]
             residual[fail[better]] = sub_res[better]

@@ -27,7 +27,7 @@ import numpy as np
 from numba import njit, prange
 
 from ffdcli.errors import InputError
-from ffdcli.lattice.simd import tensor_d1
+from ffdcli.jit import tensor_d1
 from ffdcli.lattice.spline import (
     basis_d1_row_nb,
     basis_d1_tuple,
@@ -248,7 +248,7 @@ def eval_point_fixed_nb(R, n1, n2, k0, k1, k2, u0, u1, u2, w0, w1, w2):
     :func:`fixed_widths` of the lattice, tuples whose lengths are the basis widths ``p + 1`` per
     axis; numba compiles a version of the caller per widths, in which the basis
     (:func:`ffdcli.lattice.spline.basis_d1_tuple`) stays in registers and the tensor product is unrolled
-    straight-line vector code (:func:`ffdcli.lattice.simd.tensor_d1`: one 4-wide operation per multiply or
+    straight-line vector code (:func:`ffdcli.jit.tensor_d1`: one 4-wide operation per multiply or
     add of the scalar kernel, the same operations in the same order). About 3x faster than
     :func:`eval_point_nb` (degrees 3, 3, 1).
     """

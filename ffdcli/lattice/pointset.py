@@ -44,7 +44,7 @@ class PointSet:
         Raises :class:`InputError` if ``X`` is not (k, 3) finite numbers; points outside the lattice
         are kept (``inside`` False) and never move."""
 
-        X = as_numbers(X, (None, 3), f"point set {name!r}: points")
+        X = as_numbers(X, (None, 3), f"point set {name!r}: points")      # finite (k, 3)
         emb = embed(box.lattice(), box.core_points(X), progress=progress)
         B = emb.basis_matrix().tocsr()
         if len(X) and (~emb.inside).any():
@@ -81,7 +81,7 @@ class PointSet:
 
     def jvp(self, D: np.ndarray, dv) -> np.ndarray:
         """(k, 3) motion of the points for a change ``dv`` (n_vars,) of the design variables."""
-        dv = as_numbers(dv, (D.shape[1],), f"point set {self.name!r}: dv (one value per design variable)")
+        dv = as_numbers(dv, (D.shape[1],), f"point set {self.name!r}: dv", hint="one value per design variable")
         return np.asarray(self.basis @ (D @ dv).reshape(-1, 3))
 
     def vjp(self, D: np.ndarray, g) -> np.ndarray:

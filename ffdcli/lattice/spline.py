@@ -16,7 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit, prange
-from numba.cpython.unsafe.tuple import tuple_setitem
+
+from ffdcli.jit import tuple_setitem
 
 
 def clamped_knots(n_ctrl: int, degree: int) -> np.ndarray:

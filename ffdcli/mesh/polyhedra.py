@@ -182,16 +182,75 @@ def next_in_face(offsets: np.ndarray) -> np.ndarray:
     return nxt
 
 
-def face_centres_areas(points: np.ndarray, poly: Polyhedra) -> tuple[np.ndarray, np.ndarray]:
+def face_centres_areas(points: np.ndarray, poly: Polyhedra, *, compiled: bool = True
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """Face centres (F, 3) and area vectors (F, 3) of ``poly`` at ``points`` (N, 3), as
-    ``primitiveMeshTools::makeFaceCentresAndAreas``."""
+    ``primitiveMeshTools::makeFaceCentresAndAreas``: one compiled pass over the faces, or
+    (``compiled=False``) its vectorised NumPy reference by chunks of faces (equal to rounding)."""
     nf = poly.n_faces
+    if compiled:
+        return _face_kernel(np.ascontiguousarray(points, dtype=np.float64), poly.face_nodes, poly.face_offsets)
     centres = np.empty((nf, 3))
     areas = np.empty((nf, 3))
     for a in range(0, nf, CHUNK):
         b = min(nf, a + CHUNK)
         off = poly.face_offsets[a:b + 1]
         centres[a:b], areas[a:b] = _face_chunk(points, poly.face_nodes[off[0]:off[-1]], off - off[0])
+    return centres, areas
+
+
+@njit(cache=True, nogil=True)
+def _face_kernel(points, nodes, offsets):  # pragma: no cover - compiled
+    nf = offsets.shape[0] - 1
+    centres = np.empty((nf, 3))
+    areas = np.empty((nf, 3))
+    for f in range(nf):
+        a, b = offsets[f], offsets[f + 1]
+        k = b - a
+        if k == 3:
+            p0, p1, p2 = points[nodes[a]], points[nodes[a + 1]], points[nodes[a + 2]]
+            for d in range(3):
+                centres[f, d] = (p0[d] + p1[d] + p2[d]) / 3.0
+            u0, u1, u2 = p1[0] - p0[0], p1[1] - p0[1], p1[2] - p0[2]
+            v0, v1, v2 = p2[0] - p0[0], p2[1] - p0[1], p2[2] - p0[2]
+            areas[f, 0] = 0.5 * (u1 * v2 - u2 * v1)
+            areas[f, 1] = 0.5 * (u2 * v0 - u0 * v2)
+            areas[f, 2] = 0.5 * (u0 * v1 - u1 * v0)
+            continue
+        m0 = m1 = m2 = 0.0
+        for i in range(a, b):
+            m0 += points[nodes[i], 0]
+            m1 += points[nodes[i], 1]
+            m2 += points[nodes[i], 2]
+        m0 /= k
+        m1 /= k
+        m2 /= k
+        sn0 = sn1 = sn2 = 0.0
+        sa = 0.0
+        sc0 = sc1 = sc2 = 0.0
+        for i in range(a, b):
+            j = i + 1 if i + 1 < b else a
+            x0, x1, x2 = points[nodes[i], 0], points[nodes[i], 1], points[nodes[i], 2]
+            y0, y1, y2 = points[nodes[j], 0], points[nodes[j], 1], points[nodes[j], 2]
+            e0, e1, e2 = y0 - x0, y1 - x1, y2 - x2
+            c0, c1, c2 = m0 - x0, m1 - x1, m2 - x2
+            n0 = e1 * c2 - e2 * c1
+            n1 = e2 * c0 - e0 * c2
+            n2 = e0 * c1 - e1 * c0
+            mag = np.sqrt(n0 * n0 + n1 * n1 + n2 * n2)
+            sn0 += n0
+            sn1 += n1
+            sn2 += n2
+            sa += mag
+            sc0 += mag * (x0 + y0 + m0)
+            sc1 += mag * (x1 + y1 + m1)
+            sc2 += mag * (x2 + y2 + m2)
+        if sa < ROOTVSMALL:
+            centres[f, 0], centres[f, 1], centres[f, 2] = m0, m1, m2
+            areas[f, 0] = areas[f, 1] = areas[f, 2] = 0.0
+        else:
+            centres[f, 0], centres[f, 1], centres[f, 2] = sc0 / (3.0 * sa), sc1 / (3.0 * sa), sc2 / (3.0 * sa)
+            areas[f, 0], areas[f, 1], areas[f, 2] = 0.5 * sn0, 0.5 * sn1, 0.5 * sn2
     return centres, areas
 
 

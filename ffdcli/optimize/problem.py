@@ -100,6 +100,7 @@ class OptimizationProblem:
         t_solver, ran = 0.0, False
         if ev.failed is None:
             ran = True
+            t0 = time.perf_counter()
             try:
                 flow = self.solver.flow(ev.folder, ev.folder / self.mesh_name, start=self._nearest(ev.values))
                 t_solver = flow.seconds
@@ -110,6 +111,7 @@ class OptimizationProblem:
                                      key="optimize.objective")
                 ev = ev.with_(functions=dict(flow.functions), log=str(flow.log) if flow.log else None)
             except SolverFailure as e:
+                t_solver = time.perf_counter() - t0          # a failed run's time counts too
                 ev = ev.with_(failed=e.reason, log=None if e.log is None else str(e.log))
             self.counts["flow"] += 1
         ev = ev.with_(seconds={"solver": t_solver, "ffd": t_ffd}, solves={"flow": int(ran), "adjoint": 0})

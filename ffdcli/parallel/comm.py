@@ -27,11 +27,7 @@ import os
 
 import numpy as np
 
-from ffdcli.errors import FfdError, InputError
-
-#: Environment variables by which MPI launchers give the number of processes (MPICH/Intel hydra,
-#: Open MPI, PMIx, Slurm's srun).
-SIZE_VARIABLES = ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "SLURM_NTASKS")
+from ffdcli.errors import SIZE_VARIABLES, FfdError, InputError, SignalRecorder, Terminated  # noqa: F401
 
 
 class RankError(FfdError):
@@ -52,6 +48,8 @@ def _describe(exc: BaseException) -> tuple[str, int, dict | None]:
         return str(exc), int(exc.exit_code), getattr(exc, "report", None)
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted; nothing was written", 130, None
+    if isinstance(exc, Terminated):
+        return f"{exc}; nothing was written", 128 + exc.signum, None
     if isinstance(exc, MemoryError):
         return "out of memory", 1, None
     return (f"internal error: {type(exc).__name__}: {exc} (this is a bug in ffd; -v shows where)", 1, None)
@@ -112,15 +110,18 @@ class SerialComm:
     def barrier(self) -> None:
         pass
 
-    def agree(self, error: BaseException | None = None) -> None:
+    def agree(self, error: BaseException | None = None, *, signals: bool = True) -> None:
         """Collective error agreement (see the module docstring): raise ``error`` if given.
 
         Over MPI: every rank calls it; if any rank gives an error, every rank raises the error of
         the lowest failing rank (that rank its own exception, the others a :class:`RankError` with its
         message and exit status), so every rank exits with the same status. Errors
-        raised here have ``ffd_agreed = True``: the command line does not agree on them again."""
+        raised here have ``ffd_agreed = True``: the command line does not agree on them again.
+        ``signals``: a SIGTERM/SIGHUP recorded by :meth:`watch_signals` counts as this rank's error
+        (:class:`~ffdcli.errors.Terminated`)."""
         if error is not None:
             raise error
+
 
     def run(self, fn, *args, **kwargs):
         """``fn(*args, **kwargs)`` on every rank, then :meth:`agree` on how it went; its result."""
@@ -133,8 +134,16 @@ class SerialComm:
         return out
 
     def root_then_bcast(self, fn, *args, **kwargs):
-        """``fn`` on rank 0 only, agreed on, and its (picklable) result broadcast to every rank."""
-        out = self.run(fn, *args, **kwargs) if self.is_root else self.run(lambda: None)
+        """``fn`` on rank 0 only, agreed on, and its (picklable) result broadcast to every rank. A
+        signal recorded meanwhile waits for the next agreement: what rank 0 did (a write) is done."""
+        out = None
+        try:
+            if self.is_root:
+                out = fn(*args, **kwargs)
+        except BaseException as e:      # noqa: BLE001 - every failure is agreed on, then re-raised
+            self.agree(e)
+            raise
+        self.agree(None, signals=False)
         return self.bcast(out)
 
 
@@ -147,6 +156,7 @@ class MPIComm(SerialComm):
         self.comm = MPI.COMM_WORLD if comm is None else comm
         self.rank = self.comm.Get_rank()
         self.size = self.comm.Get_size()
+        self.signals: SignalRecorder | None = None      # the command line's (ffd under mpiexec)
 
     def bcast(self, obj, root: int = 0):
         return self.comm.bcast(obj, root=root)
@@ -208,7 +218,11 @@ class MPIComm(SerialComm):
     def barrier(self) -> None:
         self.comm.Barrier()
 
-    def agree(self, error: BaseException | None = None) -> None:
+    def agree(self, error: BaseException | None = None, *, signals: bool = True) -> None:
+        signals_seen = getattr(self, "signals", None)
+        got = signals_seen.signum if signals_seen is not None else None
+        if error is None and signals and got is not None:
+            error = Terminated(got)                 # mpiexec forwarded SIGTERM/SIGHUP: stop together
         mine = None if error is None else _describe(error) + (self.rank,)
         failures = [f for f in self.allgather(mine) if f is not None]
         if not failures:

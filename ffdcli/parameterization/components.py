@@ -39,7 +39,7 @@ from ffdcli.lattice.spline import basis_derivs
 from ffdcli.mesh.idsets import unique_ids
 from ffdcli.parallel.distributed import global_ids
 from ffdcli.parameterization.bounds import Bounds, make_bounds
-from ffdcli.parameterization.changes import Chord, Shape, Twist, apply_changes, design_bounds
+from ffdcli.parameterization.changes import Chord, Shape, Twist, apply_changes
 from ffdcli.parameterization.changes import design_variables as change_variables
 from ffdcli.parameterization.changes import set_design_variables as set_change_values
 from ffdcli.parameterization.derivatives import lattice_jacobian
@@ -408,8 +408,18 @@ def variable_bounds(components: list[Component], design) -> Bounds:
     upper, a value outside its bounds: :class:`InputError` naming ``bounds.<key>`` and its line). The one
     validation of ``bounds:``: ``load_run`` calls it for every command, ``DesignModel`` keeps its result."""
     names, values = design_variables(components)
-    natural = np.concatenate([design_bounds(c.P0, c.box.frame, list(c.changes)) for c in components]) \
-        if components else np.zeros((0, 2))
+    natural = [np.zeros((0, 2))]
+    for comp in components:          # design_bounds, each change's refusal named by its key and line
+        P = np.array(comp.P0, dtype=float, copy=True)
+        for index, (change, item) in enumerate(zip(comp.changes, comp.spec.changes_spec, strict=True)):
+            try:
+                natural.append(change.bounds(P, comp.box.frame))
+                P = change.apply(P, comp.box.frame)
+            except InputError as e:
+                if e.path is not None or not hasattr(design, "error"):
+                    raise
+                raise design.error(e.message, comp.spec.subkey(f"changes[{index}].{next(iter(item))}")) from None
+    natural = np.concatenate(natural, axis=0)
     spec = (getattr(design, "data", None) or {}).get("bounds")
     return make_bounds(names, natural, spec, values=values, error=getattr(design, "error", None))
 

@@ -94,6 +94,30 @@ def test_compiled_parsers_match_their_references():
     assert not parse_ints(np.frombuffer(b"1 2 x 3", dtype=np.uint8))[1]
 
 
+def test_face_geometry_kernel_matches_the_numpy_reference(wing):
+    from ffdcli.mesh.polyhedra import Polyhedra
+
+    rng = np.random.default_rng(11)
+    sizes = rng.integers(3, 9, 400)                    # triangles to octagons, warped
+    pts, nodes = [], []
+    for k in sizes:
+        t = np.sort(rng.uniform(0, 2 * np.pi, k))
+        ring = np.column_stack([np.cos(t), np.sin(t), 0.05 * rng.normal(size=k)]) + rng.normal(size=3)
+        first = sum(len(p) for p in pts)
+        nodes.append(np.arange(first, first + k))
+        pts.append(ring)
+    pts = np.vstack(pts)
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    poly = Polyhedra(np.concatenate(nodes), offsets, np.zeros(len(sizes), np.int64),
+                     np.full(len(sizes), -1, np.int64), 1)
+    for got, ref in zip(face_centres_areas(pts, poly), face_centres_areas(pts, poly, compiled=False), strict=True):
+        assert np.allclose(got, ref, rtol=1e-13, atol=1e-14)
+    mesh, wpoly, _ = wing
+    for got, ref in zip(face_centres_areas(mesh.points, wpoly), face_centres_areas(mesh.points, wpoly, compiled=False),
+                        strict=True):
+        assert np.allclose(got, ref, rtol=1e-13, atol=1e-15)
+
+
 def test_volumes_are_the_cells_volumes(wing):
     mesh, poly, _ = wing
     fc, fa = face_centres_areas(mesh.points, poly)

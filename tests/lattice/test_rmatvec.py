@@ -1,5 +1,5 @@
 """B.T @ g (Embedding.rmatvec) by the vectorised kernels against the NumPy/SciPy reference, and the
-vector fused multiply-adds (ffdcli.lattice.simd) they are built on."""
+vector fused multiply-adds (ffdcli.jit) they are built on."""
 
 from __future__ import annotations
 
@@ -10,18 +10,16 @@ from lattice_cases import curved_patch, wing_lattice
 from numba import njit
 from numba.core.errors import TypingError
 
+from ffdcli.jit import axpy4, axpy8, axpy8x3
+from ffdcli.lattice._embedding_kernels import _rmatvec_442_nb, _rmatvec_442c_nb, _rmatvec_nb
 from ffdcli.lattice.embedding import (
     Embedding,
-    _rmatvec_442_nb,
-    _rmatvec_442c_nb,
-    _rmatvec_nb,
     basis_matrix_reference,
     dense_basis_reference,
     rmatvec_reference,
 )
 from ffdcli.lattice.lattice import evaluate_reference
 from ffdcli.lattice.pointset import PointSet
-from ffdcli.lattice.simd import axpy4, axpy8, axpy8x3
 from ffdcli.parameterization.derivatives import lattice_jacobian, vjp
 
 CASES = {

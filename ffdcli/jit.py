@@ -1,33 +1,95 @@
-"""Explicit short-vector fused multiply-adds for the compiled kernels: ``out[k:k+W] += w * x``.
+"""Every numba feature ffd uses that is not numba's public API, in one place, with its own tests.
 
-numba compiles with LLVM's loop vectoriser but not its SLP (straight-line) vectoriser
-(``NUMBA_SLP_VECTORIZE`` is off by default, and a process-wide setting), so the 4- or 8-wide
-read-modify-writes of a scatter kernel such as ``B.T @ g`` (:func:`ffdcli.lattice.embedding._rmatvec_nb`)
-stay scalar: ``acc[base, 0..3] += w * (g0, g1, g2, 0)`` became four scalar loads, FMAs and stores,
-and negative-index wrap-around checks on every index kept LLVM from merging them. These intrinsics
-emit the vector operations directly (``llvm.fma.v4f64`` / ``llvm.fma.v8f64`` / ``v24f64``): one
-vector load, one fused multiply-add and one vector store, lowered to AVX/AVX-512 (or to pairs of
-SSE2 operations on older x86, NEON on ARM) by LLVM. :func:`tensor_d1` is the lattice map's value
-and derivatives at a point (the Newton embedding's kernel), one 4-wide multiply or add per scalar
-one over the coordinates ``(x, y, z, 0)`` of the control points, unrolled for the basis widths.
+numba's documented API is ``njit``/``prange`` with the options of its user manual. The compiled
+kernels of ffd also rely on features that numba uses internally, tests, or documents as
+experimental; they may change in any release, so they are kept here (``tests/test_jit.py`` checks
+each one on the numba and llvmlite the project pins in ``pyproject.toml``):
 
-In :func:`axpy4` and :func:`axpy8` each lane is ``fma(w, x[j], out[k + j])``, correctly rounded
-once: the same value, bit for bit, as the scalar statement ``out[k + j] += w * x[j]`` compiled with
-``fastmath={"contract"}``; :func:`axpy8x3` adds a scaled outer product (8 x 3 lanes). There is
-no bounds check (as in numba's own indexing without ``boundscheck``): the caller guarantees
-``0 <= k`` and ``k + W <= out.size``.
+- :func:`kernel` and :func:`inlined`: ``njit`` with ``_nrt=False`` (no reference counting: a
+  kernel that allocates nothing then makes no atomic counter updates per point) and, for
+  :func:`inlined`, ``forceinline=True`` (LLVM's ``alwaysinline`` on the compiled function). numba's
+  own ``inline="always"`` copies the callee's IR into every call site and types it again there:
+  three evaluations of the lattice map in the Newton step took ~27 of the ~30 s of compiling the
+  Newton kernel. ``forceinline`` lets LLVM inline the compiled function instead: the same machine
+  code, bit for bit the same results, about a third of the compile time.
+- :data:`tuple_setitem` (``numba.cpython.unsafe.tuple``): a tuple with one element replaced, so a
+  kernel keeps a degree's basis values in registers (a tuple whose length is a compile-time
+  constant) instead of a work array.
+- LLVM intrinsics written by hand (``numba.extending.intrinsic`` with llvmlite IR): the explicit
+  short-vector fused multiply-adds of ``B @ P`` and ``B.T @ g`` (:func:`axpy4`, :func:`axpy8`,
+  :func:`axpy8x3`, :func:`tensor_v`), the vector evaluation of the lattice map (:func:`tensor_d1`)
+  and the scalar :func:`fma` of the generic ``B @ P`` (the same lanes, bit for bit).
+- The interrupt guard around compiled code (:func:`interrupts_outside_compilers`): it reads the
+  Python stack for numba's and llvmlite's own files, i.e. it depends on where numba compiles.
+- :func:`compile_notice`: numba's event API (``numba.core.event``, "numba:compile", fired on a
+  cache miss only) to say on stderr, once, that kernels are being compiled and why the run waits.
 
-They can only be called from compiled (``@njit``) code. numba's on-disk cache of a caller is keyed
-on the caller's source file only: after a change of the code generation here, touch the callers
-(``ffdcli/embedding.py``) or remove their ``__pycache__`` entries.
+Why a module of its own at the foundation (beside ``errors``/``settings``) rather than inside
+``lattice/``: the lattice, the volume warp (``volume/``), the SU2 reader (``io/formats``) and the
+command line (the guard) all compile code, and a lower stage may not import a higher one.
+
+About the explicit vector operations: numba compiles with LLVM's loop vectoriser but not its SLP
+(straight-line) vectoriser (``NUMBA_SLP_VECTORIZE`` is off by default, and a process-wide setting),
+so the 4- or 8-wide read-modify-writes of a scatter kernel such as ``B.T @ g`` stay scalar:
+``acc[base, 0..3] += w * (g0, g1, g2, 0)`` became four scalar loads, FMAs and stores. These
+intrinsics emit the vector operations directly (``llvm.fma.v4f64`` / ``llvm.fma.v8f64`` /
+``v24f64``): one vector load, one fused multiply-add and one vector store, lowered to AVX/AVX-512
+(or pairs of SSE2 operations, NEON on ARM) by LLVM. In :func:`axpy4` and :func:`axpy8` each lane is
+``fma(w, x[j], out[k + j])``, correctly rounded once: the same value, bit for bit, as the scalar
+statement ``out[k + j] += w * x[j]`` compiled with ``fastmath={"contract"}``. There is no bounds
+check (as in numba's own indexing without ``boundscheck``): the caller guarantees ``0 <= k`` and
+``k + W <= out.size``. They can only be called from compiled code.
+
+numba's on-disk cache of a caller is keyed on the caller's source file only: after a change of the
+code generation here, remove the callers' cache entries (``__pycache__/*.nbi``, ``*.nbc``).
 """
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
+import sys
+import threading
+from collections.abc import Callable, Iterator
+
 from llvmlite import ir
-from numba import types
+from numba import njit, types
 from numba.core import cgutils
+from numba.core import event as numba_event
+from numba.cpython.unsafe.tuple import tuple_setitem
 from numba.extending import intrinsic
+
+__all__ = ["axpy4", "axpy8", "axpy8x3", "compile_notice", "fma", "inlined", "interrupts_outside_compilers",
+           "kernel", "tensor_d1", "tensor_v", "tuple_setitem"]
+
+
+# ----------------------------------------------------------------------------------------------
+# Compile options
+# ----------------------------------------------------------------------------------------------
+
+def kernel(func: Callable | None = None, **options):
+    """``njit(cache=True, nogil=True, error_model="numpy", _nrt=False, **options)``.
+
+    For kernels that allocate nothing (work arrays come from the caller): without numba's
+    reference counting (``_nrt=False``) and with NumPy's error model (no zero-division checks and
+    their exception paths). Usable as ``@kernel`` or ``@kernel(parallel=False, ...)``."""
+    opts = dict(cache=True, nogil=True, error_model="numpy", _nrt=False)
+    opts.update(options)
+    return njit(**opts) if func is None else njit(**opts)(func)
+
+
+def inlined(func: Callable | None = None, **options):
+    """:func:`kernel` with ``forceinline=True``: a per-point function that LLVM inlines into every
+    compiled caller (numba compiles it once per signature; ``inline="always"`` would copy and type
+    its IR again at every call site). Its flags are its own, not the caller's: give it the
+    caller's ``error_model`` and ``fastmath`` where they matter for the results."""
+    return kernel(func, forceinline=True, **options)
+
+
+# ----------------------------------------------------------------------------------------------
+# Hand-written LLVM intrinsics
+# ----------------------------------------------------------------------------------------------
 
 _I32 = ir.IntType(32)
 
@@ -301,3 +363,149 @@ def tensor_v(typingctx, P, k, s0, s1, N0, N1, N2):
         return context.make_tuple(builder, signature.return_type, out)
 
     return sig, codegen
+
+
+@intrinsic
+def fma(typingctx, a, b, c):
+    """``a * b + c`` rounded once (``llvm.fma.f64``): one lane of :func:`tensor_v`'s vector fused
+    multiply-adds, so a loop over runtime basis widths gives its results bit for bit.
+
+    Parameters
+    ----------
+    a, b, c : float
+        Converted to float64.
+
+    Returns
+    -------
+    float
+    """
+    if not all(isinstance(t, (types.Float, types.Integer)) for t in (a, b, c)):
+        return None
+    sig = types.float64(types.float64, types.float64, types.float64)
+
+    def codegen(context, builder, signature, args):
+        dbl = ir.DoubleType()
+        fn = cgutils.get_or_insert_function(builder.module, ir.FunctionType(dbl, [dbl, dbl, dbl]), "llvm.fma.f64")
+        vals = [context.cast(builder, v, t, types.float64) for v, t in zip(args, signature.args, strict=True)]
+        return builder.call(fn, vals)
+
+    return sig, codegen
+
+
+# ----------------------------------------------------------------------------------------------
+# Ctrl-C and compiled code
+# ----------------------------------------------------------------------------------------------
+
+#: Code inside which Ctrl-C must not raise: numba loads cached kernels and compiles through LLVM
+#: callbacks (ctypes), and a KeyboardInterrupt raised in one is dropped by ctypes and leaves LLVM's
+#: state half-made, so the interpreter crashes later (SIGSEGV: 2 to 3 interrupts in 60 of a cached
+#: ``ffd deform`` on a 100k-node mesh, 2026-12-02).
+UNSAFE_CODE = (f"{os.sep}numba{os.sep}", f"{os.sep}llvmlite{os.sep}")
+#: Seconds between two looks at the stack while an interrupt is held.
+HOLD_POLL = 0.02
+
+
+def _in_unsafe_code(frame) -> bool:
+    while frame is not None:
+        name = frame.f_code.co_filename
+        if any(part in name for part in UNSAFE_CODE):
+            return True
+        frame = frame.f_back
+    return False
+
+
+@contextlib.contextmanager
+def interrupts_outside_compilers() -> Iterator[None]:
+    """Ctrl-C (SIGINT) raises KeyboardInterrupt as usual, except while numba or llvmlite code is on
+    the stack (:data:`UNSAFE_CODE`): then it is held and raised as soon as that code has returned
+    (the stack is looked at again every :data:`HOLD_POLL` seconds, by SIGALRM). For the command
+    line's whole run. Outside the main thread, or when the program has its own SIGINT or SIGALRM
+    handler: a no-op."""
+    if (threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer")
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+            or signal.getsignal(signal.SIGALRM) not in (signal.SIG_DFL, None)):
+        yield
+        return
+    held = False
+
+    def on_interrupt(signum, frame):
+        nonlocal held
+        if _in_unsafe_code(frame):
+            held = True
+            signal.setitimer(signal.ITIMER_REAL, HOLD_POLL)
+            return
+        raise KeyboardInterrupt
+
+    def on_alarm(signum, frame):
+        nonlocal held
+        if held:
+            if _in_unsafe_code(frame):
+                signal.setitimer(signal.ITIMER_REAL, HOLD_POLL)
+                return
+            held = False
+            raise KeyboardInterrupt
+
+    old = {signal.SIGINT: signal.signal(signal.SIGINT, on_interrupt),
+           signal.SIGALRM: signal.signal(signal.SIGALRM, on_alarm)}
+    try:
+        yield
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        for s, h in old.items():
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(s, h)
+
+
+# ----------------------------------------------------------------------------------------------
+# Saying why the first run waits
+# ----------------------------------------------------------------------------------------------
+
+#: The line :func:`compile_notice` writes (``{dir}``: where numba keeps the compiled kernels).
+NOTICE = ("ffd: compiling its numba kernels for this machine (once: later runs load them from {dir}; "
+          "this takes up to a minute or two; `python -m ffdcli.app.warmup` does it ahead of time)\n")
+
+
+def cache_dir() -> str:
+    """Where numba keeps ffd's compiled kernels: ``NUMBA_CACHE_DIR``, else ``__pycache__`` beside
+    the sources (numba's fallback to a user cache folder when those are read-only aside)."""
+    env = os.environ.get("NUMBA_CACHE_DIR")
+    if env:
+        return env
+    return os.path.join(os.path.dirname(os.path.abspath(__file__)), "__pycache__")
+
+
+class _Notice(numba_event.Listener):
+    """Writes :data:`NOTICE` once, at the first compile of one of ffd's own functions."""
+
+    def __init__(self, write: Callable[[str], object], package: str):
+        self.write = write
+        self.package = package
+        self.done = False
+
+    def on_start(self, event):
+        if self.done:
+            return
+        func = getattr(event.data.get("dispatcher"), "py_func", None)
+        if getattr(func, "__module__", "").startswith(self.package):
+            self.done = True
+            self.write(NOTICE.format(dir=cache_dir()))
+
+    def on_end(self, event):
+        pass
+
+
+@contextlib.contextmanager
+def compile_notice(write: Callable[[str], object] | None = None, package: str = "ffdcli") -> Iterator[None]:
+    """During the block, the first time numba compiles (rather than loads from its cache) a function
+    of ``package``, write :data:`NOTICE` with ``write`` (default: to stderr, flushed). numba fires
+    its "numba:compile" event on a cache miss only, so a run with a warm cache says nothing."""
+    if write is None:
+        def write(text):
+            sys.stderr.write(text)
+            sys.stderr.flush()
+    listener = _Notice(write, package)
+    numba_event.register("numba:compile", listener)
+    try:
+        yield
+    finally:
+        numba_event.unregister("numba:compile", listener)
