@@ -125,15 +125,15 @@ def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
                       CMz=best.get("MOMENT_Z", values["CMz"]))
     mesh = _best_mesh(folder, s)
     geo = folder / "final_geometry"
-    if (geo / "of_eval.csv").exists():
-        values["tc"] = _su2.last_history(geo / "of_eval.csv")["AIRFOIL_THICKNESS"]
+    if (geo / "of_func.csv").exists():
+        values["tc"] = _su2.last_history(geo / "of_func.csv")["AIRFOIL_THICKNESS"]
     elif mesh is not None:
         values["tc"] = _optpeers.airfoil_thickness(mesh, geo)
     else:
         values["tc"] = float("nan")
     viol = _optpeers.worst_violation(values)
-    return {"run": "(c) ffd optimize, automatic box (19)", "adjoint": adjoint, "constrained": constrained,
-            **values, "worst_violation": viol, "feasible": viol <= 1e-4,
+    return {"run": "(c) ffd optimize, automatic box (19), best feasible", "adjoint": adjoint,
+            "constrained": constrained, **values, "worst_violation": viol, "feasible": viol <= 1e-4,
             "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
             "wall_s": result["wall_s"], "designs": s.get("evaluations"),
             "status": f"{s.get('status')}" + (" (resumed: wall of the last part only)"
@@ -161,7 +161,7 @@ def partial_row(adjoint: str, constrained: bool, folder: Path) -> dict | None:
     values = {"CD": f["DRAG"], "CL": f["LIFT"], "CMz": f["MOMENT_Z"]}
     mesh = Path(folder) / "opt" / "evals" / f"{pick['index']:04d}" / "mesh.su2"
     geo = Path(folder) / f"partial_geometry_{pick['index']:04d}"
-    done_geo = geo / "of_eval.csv"
+    done_geo = geo / "of_func.csv"
     values["tc"] = (_su2.last_history(done_geo)["AIRFOIL_THICKNESS"] if done_geo.exists()
                     else _optpeers.airfoil_thickness(mesh, geo))
     viol = _optpeers.worst_violation(values)
@@ -174,3 +174,26 @@ def partial_row(adjoint: str, constrained: bool, folder: Path) -> dict | None:
             "status": f"unfinished: stopped at iteration {iters} of {_optpeers.ITERATIONS}, evaluation {len(data)} "
                       f"(shown: evaluation {pick['index']}, {'best feasible' if ok else 'last'}); wall: from the "
                       "start to the last evaluation's result", "folder": str(folder)}
+
+
+def last_iterate_row(adjoint: str, constrained: bool, result: dict) -> dict | None:
+    """The last design the optimiser evaluated (as SU2's rows show it), beside ffd's best feasible one."""
+    folder = Path(result["folder"])
+    evals = sorted((folder / "opt" / "evals").glob("*/result.json"))
+    done = [json.loads(p.read_text()) for p in evals]
+    done = [d for d in done if d.get("functions") and not d.get("failed")]
+    if not done:
+        return None
+    d = done[-1]
+    f = d["functions"]
+    values = {"CD": f["DRAG"], "CL": f["LIFT"], "CMz": f["MOMENT_Z"]}
+    geo = folder / f"last_geometry_{d['index']:04d}"
+    values["tc"] = (_su2.last_history(geo / "of_func.csv")["AIRFOIL_THICKNESS"] if (geo / "of_func.csv").exists()
+                    else _optpeers.airfoil_thickness(folder / "opt" / "evals" / f"{d['index']:04d}" / "mesh.su2", geo))
+    viol = _optpeers.worst_violation(values)
+    s = result.get("summary") or {}
+    return {"run": "(c) ffd optimize, automatic box (19), last iterate", "adjoint": adjoint,
+            "constrained": constrained, **values, "worst_violation": viol, "feasible": viol <= 1e-4,
+            "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"), "wall_s": result["wall_s"],
+            "designs": s.get("evaluations"), "status": f"evaluation {d['index']}", "rc": result["rc"],
+            "folder": str(folder)}

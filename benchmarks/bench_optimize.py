@@ -85,6 +85,9 @@ def ffd_rows(ffd_path: Path, only_constrained: bool = False, run_missing: bool =
                 continue
             print(f"  {label}: {'reused' if r.get('cached') else 'ran'} {r['folder']}", flush=True)
             rows.append(_read_row(_optffd.ffd_row, adjoint, constrained, r))
+            last = _read_row(_optffd.last_iterate_row, adjoint, constrained, r)
+            if last is not None:
+                rows.append(last)
     return rows
 
 
