@@ -60,12 +60,7 @@ def has_optimize(ffd_path: Path) -> bool:
 def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None = None,
              force: bool = False, only_cached: bool = False) -> dict | None:
     """Run (or reuse) ``ffd optimize`` for one row; returns the result dict with its JSON summary."""
-    root = Path(root or _su2.SCRATCH / "ffd")
-    label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
-    design = design_text(adjoint, constrained)
-    cfg = flow_config()
-    cmd = [sys.executable, "-m", "ffdcli", "optimize", "design.yaml", "--json"]
-    src = sorted(Path(ffd_path).joinpath("ffdcli").rglob("*.py"))
+    root, label, design, cfg, cmd, inputs = _spec(adjoint, constrained, ffd_path, root)
 
     def body(folder: Path) -> dict:
         shutil.copyfile(_su2.NACA_MESH, folder / "mesh.su2")
@@ -73,19 +68,38 @@ def run_case(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None 
         (folder / "design.yaml").write_text(design)
         env = _su2.su2_env()
         env["PYTHONPATH"] = f"{ffd_path}:{env['PYTHONPATH']}"
-        rc, wall = _su2.run(cmd, folder, "optimize.log", env=env)
+        again = (folder / "opt" / "evals").is_dir()           # an unfinished run: ffd optimize --resume
+        rc, wall = _su2.run(cmd + (["--resume"] if again else []), folder,
+                            "optimize_resumed.log" if again else "optimize.log", env=env)
+        log = folder / ("optimize_resumed.log" if again else "optimize.log")
         summary = None
-        for line in reversed((folder / "optimize.log").read_text().splitlines()):
+        for line in reversed(log.read_text().splitlines()):
             if line.startswith("{"):
                 try:
                     summary = json.loads(line)
                     break
                 except json.JSONDecodeError:
                     continue
-        return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path)}
+        return {"label": label, "rc": rc, "wall_s": wall, "summary": summary, "ffd_path": str(ffd_path),
+                "resumed": again}
 
-    return _su2.cached_run(root, label, design + cfg, [_su2.NACA_MESH, *src], cmd[2:], body, force=force,
-                           only_cached=only_cached)
+    return _su2.cached_run(root, label, design + cfg, inputs, cmd[2:], body, force=force,
+                           only_cached=only_cached, resume=True)
+
+
+def _spec(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None):
+    """(root, label, design text, config text, command, hashed inputs) of a (c) run."""
+    root = Path(root or _su2.SCRATCH / "ffd")
+    label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
+    cmd = [sys.executable, "-m", "ffdcli", "optimize", "design.yaml", "--json"]
+    inputs = [_su2.NACA_MESH, *sorted(Path(ffd_path).joinpath("ffdcli").rglob("*.py"))]
+    return root, label, design_text(adjoint, constrained), flow_config(), cmd, inputs
+
+
+def run_folder(adjoint: str, constrained: bool, ffd_path: Path, root: Path | None = None) -> Path:
+    """The folder a (c) run has (or would have), finished or not."""
+    root, label, design, cfg, cmd, inputs = _spec(adjoint, constrained, ffd_path, root)
+    return root / f"{label}-{_su2.case_hash(design + cfg, inputs, cmd[2:])}"
 
 
 def _best_mesh(folder: Path, summary: dict) -> Path | None:
@@ -111,15 +125,75 @@ def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
                       CMz=best.get("MOMENT_Z", values["CMz"]))
     mesh = _best_mesh(folder, s)
     geo = folder / "final_geometry"
-    if (geo / "of_eval.csv").exists():
-        values["tc"] = _su2.last_history(geo / "of_eval.csv")["AIRFOIL_THICKNESS"]
+    if (geo / "of_func.csv").exists():
+        values["tc"] = _su2.last_history(geo / "of_func.csv")["AIRFOIL_THICKNESS"]
     elif mesh is not None:
         values["tc"] = _optpeers.airfoil_thickness(mesh, geo)
     else:
         values["tc"] = float("nan")
     viol = _optpeers.worst_violation(values)
+    return {"run": "(c) ffd optimize, automatic box (19), best feasible", "adjoint": adjoint,
+            "constrained": constrained, **values, "worst_violation": viol, "feasible": viol <= 1e-4,
+            "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
+            "wall_s": result["wall_s"], "designs": s.get("evaluations"),
+            "status": f"{s.get('status')}" + (" (resumed: wall of the last part only)"
+                                              if result.get("resumed") else ""),
+            "rc": result["rc"], "folder": str(folder)}
+
+
+def partial_row(adjoint: str, constrained: bool, folder: Path) -> dict | None:
+    """The row of an ``ffd optimize`` run that did not finish (no ``result.json``), from its evaluations'
+    own ``opt/evals/*/result.json``: the best evaluation so far that meets every bound (else the last),
+    the solves spent, the seconds of solver and ffd summed; ``status`` says how far it got."""
+    evals = sorted((Path(folder) / "opt" / "evals").glob("*/result.json"))
+    data = [json.loads(p.read_text()) for p in evals]
+    done = [d for d in data if d.get("functions") and not d.get("failed")]
+    if not done:
+        return None
+
+    def violation(d: dict) -> float:
+        f = d["functions"]
+        return _optpeers.worst_violation({"CL": f["LIFT"], "CMz": f["MOMENT_Z"], "tc": math.inf})
+
+    ok = [d for d in done if violation(d) <= 1e-4] if constrained else done
+    pick = min(ok, key=lambda d: d["functions"]["DRAG"]) if ok else done[-1]
+    f = pick["functions"]
+    values = {"CD": f["DRAG"], "CL": f["LIFT"], "CMz": f["MOMENT_Z"]}
+    mesh = Path(folder) / "opt" / "evals" / f"{pick['index']:04d}" / "mesh.su2"
+    geo = Path(folder) / f"partial_geometry_{pick['index']:04d}"
+    done_geo = geo / "of_func.csv"
+    values["tc"] = (_su2.last_history(done_geo)["AIRFOIL_THICKNESS"] if done_geo.exists()
+                    else _optpeers.airfoil_thickness(mesh, geo))
+    viol = _optpeers.worst_violation(values)
+    seconds = max(p.stat().st_mtime for p in evals) - (Path(folder) / "design.yaml").stat().st_mtime
+    iters = max(d.get("iteration", 0) for d in data)
     return {"run": "(c) ffd optimize, automatic box (19)", "adjoint": adjoint, "constrained": constrained,
             **values, "worst_violation": viol, "feasible": viol <= 1e-4,
-            "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
-            "wall_s": result["wall_s"], "designs": s.get("evaluations"), "status": s.get("status"),
-            "rc": result["rc"], "folder": str(folder)}
+            "flow": sum(d["solves"]["flow"] for d in data), "adjoint_solves": sum(d["solves"]["adjoint"] for d in data),
+            "wall_s": seconds, "designs": len(data),
+            "status": f"unfinished: stopped at iteration {iters} of {_optpeers.ITERATIONS}, evaluation {len(data)} "
+                      f"(shown: evaluation {pick['index']}, {'best feasible' if ok else 'last'}); wall: from the "
+                      "start to the last evaluation's result", "folder": str(folder)}
+
+
+def last_iterate_row(adjoint: str, constrained: bool, result: dict) -> dict | None:
+    """The last design the optimiser evaluated (as SU2's rows show it), beside ffd's best feasible one."""
+    folder = Path(result["folder"])
+    evals = sorted((folder / "opt" / "evals").glob("*/result.json"))
+    done = [json.loads(p.read_text()) for p in evals]
+    done = [d for d in done if d.get("functions") and not d.get("failed")]
+    if not done:
+        return None
+    d = done[-1]
+    f = d["functions"]
+    values = {"CD": f["DRAG"], "CL": f["LIFT"], "CMz": f["MOMENT_Z"]}
+    geo = folder / f"last_geometry_{d['index']:04d}"
+    values["tc"] = (_su2.last_history(geo / "of_func.csv")["AIRFOIL_THICKNESS"] if (geo / "of_func.csv").exists()
+                    else _optpeers.airfoil_thickness(folder / "opt" / "evals" / f"{d['index']:04d}" / "mesh.su2", geo))
+    viol = _optpeers.worst_violation(values)
+    s = result.get("summary") or {}
+    return {"run": "(c) ffd optimize, automatic box (19), last iterate", "adjoint": adjoint,
+            "constrained": constrained, **values, "worst_violation": viol, "feasible": viol <= 1e-4,
+            "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"), "wall_s": result["wall_s"],
+            "designs": s.get("evaluations"), "status": f"evaluation {d['index']}", "rc": result["rc"],
+            "folder": str(folder)}

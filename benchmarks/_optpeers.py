@@ -160,7 +160,7 @@ def airfoil_thickness(mesh: Path, folder: Path) -> float:
     rc, _ = _su2.run(["SU2_GEO", "geo.cfg"], folder, "geo.log")
     if rc != 0:
         raise RuntimeError(f"SU2_GEO failed: {folder / 'geo.log'}")
-    return _su2.last_history(folder / "of_eval.csv")["AIRFOIL_THICKNESS"]
+    return _su2.last_history(folder / "of_func.csv")["AIRFOIL_THICKNESS"]
 
 
 def peer_row(case: PeerCase, result: dict) -> dict:
@@ -173,7 +173,7 @@ def peer_row(case: PeerCase, result: dict) -> dict:
     tc = last.get("AIRFOIL_THICKNESS", 0.0)
     if not tc:
         geo = folder / "final_geometry"
-        done = geo / "of_eval.csv"
+        done = geo / "of_func.csv"
         tc = _su2.last_history(done)["AIRFOIL_THICKNESS"] if done.exists() else \
             airfoil_thickness(design_mesh(final), geo)
     values["tc"] = tc

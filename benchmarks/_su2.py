@@ -153,12 +153,13 @@ def write_json_atomic(path: Path, data: dict) -> None:
 
 
 def cached_run(root: Path, label: str, cfg_text: str, inputs: list[Path], command: list[str],
-               body, force: bool = False, only_cached: bool = False) -> dict | None:
+               body, force: bool = False, only_cached: bool = False, resume: bool = False) -> dict | None:
     """Reuse ``<root>/<label>-<hash>/result.json`` if present, else run ``body(folder)`` -> dict and store it.
 
     ``body`` gets a fresh, empty folder; its dict gets ``folder``, ``hash``, ``load_before``,
     ``load_after`` (1-minute load averages) and ``finished`` (UTC) added. ``only_cached``: return
-    None instead of running when no finished run has this hash.
+    None instead of running when no finished run has this hash. ``resume``: an unfinished run's folder
+    is kept and handed to ``body`` as it is (a command that resumes), instead of being started afresh.
     """
     key = case_hash(cfg_text, inputs, command)
     folder = Path(root) / f"{label}-{key}"
@@ -169,9 +170,9 @@ def cached_run(root: Path, label: str, cfg_text: str, inputs: list[Path], comman
         return data
     if only_cached:
         return None
-    if folder.exists():
+    if folder.exists() and (force or not resume):
         shutil.rmtree(folder)
-    folder.mkdir(parents=True)
+    folder.mkdir(parents=True, exist_ok=True)
     load0 = os.getloadavg()[0]
     data = body(folder)
     data.update(folder=str(folder), hash=key, load_before=load0, load_after=os.getloadavg()[0],

@@ -77,9 +77,17 @@ def ffd_rows(ffd_path: Path, only_constrained: bool = False, run_missing: bool =
             label = f"ffd-{adjoint[:4]}-{'con' if constrained else 'unc'}"
             r = _optffd.run_case(adjoint, constrained, ffd_path, only_cached=not run_missing)
             if r is None:
+                folder = _optffd.run_folder(adjoint, constrained, ffd_path)
+                part = _read_row(_optffd.partial_row, adjoint, constrained, folder) if folder.exists() else None
+                if part is not None:
+                    print(f"  {label}: unfinished run {folder}", flush=True)
+                    rows.append(part)
                 continue
             print(f"  {label}: {'reused' if r.get('cached') else 'ran'} {r['folder']}", flush=True)
             rows.append(_read_row(_optffd.ffd_row, adjoint, constrained, r))
+            last = _read_row(_optffd.last_iterate_row, adjoint, constrained, r)
+            if last is not None:
+                rows.append(last)
     return rows
 
 
@@ -88,7 +96,7 @@ def _read_row(fn, *args) -> dict:
     try:
         return fn(*args)
     except Exception as exc:  # noqa: BLE001  (one unreadable run must not stop the remaining runs)
-        r = args[-1]
+        r = args[-1] if isinstance(args[-1], dict) else {"folder": str(args[-1])}
         print(f"  cannot read {r.get('folder')}: {type(exc).__name__}: {exc}", flush=True)
         return {"run": r.get("label", "?"), "adjoint": "", "constrained": "con" in r.get("label", ""),
                 "CD": float("nan"), "CL": float("nan"), "CMz": float("nan"), "tc": float("nan"),
@@ -113,14 +121,19 @@ def side_by_side_table(rows: list[dict]) -> str:
     """Markdown: one line per run, constrained runs first."""
     head = ("| run | adjoint | constrained | final CD | CL | CMz | t/c | worst violation | feasible | "
             "flow + adjoint solves | wall |\n|---|---|---|---|---|---|---|---|---|---|---|")
-    lines = [head]
+    lines, notes = [head], []
     for r in sorted(rows, key=lambda r: (not r["constrained"], r["run"], r["adjoint"])):
         feas = "yes" if r["feasible"] else "no"
-        lines.append(f"| {r['run']} | {r['adjoint']} | {'yes' if r['constrained'] else 'no'} | "
+        status = str(r.get("status") or "")
+        run = r["run"]
+        if status.startswith("unfinished"):
+            notes.append(f"{run}, {r['adjoint']}: {status}.")
+            run += f" [{len(notes)}]"
+        lines.append(f"| {run} | {r['adjoint']} | {'yes' if r['constrained'] else 'no'} | "
                      f"{_f(r['CD'])} | {_f(r['CL'], '{:.4f}')} | {_f(r['CMz'], '{:.4f}')} | "
                      f"{_f(r['tc'], '{:.4f}')} | {_f(r['worst_violation'], '{:.2e}')} | {feas} | "
                      f"{r['flow']} + {r['adjoint_solves']} | {r['wall_s']:.0f} s |")
-    return "\n".join(lines)
+    return "\n".join(lines) + "".join(f"\n\n[{i}] {n}" for i, n in enumerate(notes, 1))
 
 
 def projection_table(rows: list[dict]) -> str:
