@@ -53,8 +53,11 @@ def test_there_is_a_config_for_every_paper_case():
 @pytest.mark.parametrize("config", CONFIGS, ids=lambda p: p.stem)
 def test_every_config_validates_loads_and_builds(config):
     jsonschema.Draft202012Validator(design_schema()).validate(yaml.safe_load(config.read_text()))
-    design = load_design(config, check_files=(REPO / "samples").is_dir())
-    assert design.mesh.parent == (REPO / "samples").resolve()
+    data = yaml.safe_load(config.read_text())
+    generated = "optimize" in data and "out/" in data["mesh"]
+    # the ONERA M6 optimisation reads a mesh made by its generator into out/ (docs/optimize.md)
+    design = load_design(config, check_files=(REPO / "samples").is_dir() and not generated)
+    assert design.mesh.parent == (REPO / ("out" if generated else "samples")).resolve()
     assert design.output["mesh"].parent == (REPO / "out").resolve()
     from ffdcli.design import changes_from_spec
     from ffdcli.parameterization.components import specs_of
