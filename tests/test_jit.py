@@ -142,6 +142,16 @@ def test_an_interrupt_inside_numba_is_held_until_it_returns():
     interpreter) and raised once that code has returned; elsewhere at once."""
     if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "setitimer"):
         pytest.skip("signals are handled in the main thread of a POSIX process")
+    # The suite may run with SIGINT at SIG_DFL or ignored (a CI runner, nohup): then the guard is a
+    # no-op by design and the first kill below would end pytest itself. Python's own handler first.
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        _interrupt_held_then_raised()
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+
+
+def _interrupt_held_then_raised():
     fake = {"__file__": os.path.join(os.sep, "x", "numba", "core", "fake.py")}
     exec(compile("def inside(f):\n    return f()\n", fake["__file__"], "exec"), fake)   # a frame "in numba"
     seen = []

@@ -126,7 +126,9 @@ def fluid_tets(solids: dict[str, SolidBuilder], lo, hi, *, symmetry_axis: int, s
     import gmsh  # noqa: PLC0415 (the [test] or [samples] extra)
 
     lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
-    gmsh.initialize(["-nt", "1"], readConfigFiles=False)
+    # interruptible=False: gmsh's own choice sets SIGINT to SIG_DFL and (gmsh 4.x forgets a `global`)
+    # never restores it, so any later Ctrl-C or interrupt test would kill the interpreter outright.
+    gmsh.initialize(["-nt", "1"], readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.option.setNumber("General.NumThreads", 1)

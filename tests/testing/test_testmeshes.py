@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import signal
 from dataclasses import replace
 
 import numpy as np
@@ -24,6 +25,12 @@ def mesh_dir(tmp_path_factory):
     for case in SMALL.values():
         tm.write_case(case, folder)
     return folder
+
+
+def test_meshing_leaves_pythons_interrupt_handler_in_place(mesh_dir):
+    """gmsh's default (interruptible) sets SIGINT to SIG_DFL for good: a later Ctrl-C, or the
+    interrupt tests of this suite, would then kill the interpreter instead of raising."""
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
 def test_generated_meshes_are_valid_with_the_tip_inside(mesh_dir):
