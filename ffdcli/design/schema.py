@@ -317,7 +317,11 @@ def optimize_schema() -> dict:
                           "description": "aerodynamic constraints, each with its own adjoint"},
             "variables": {"type": "array", "items": {"type": "string", "minLength": 1}, "minItems": 1,
                           "description": "names or name prefixes of the variables to optimise; default all"},
-            "method": {"enum": ["SLSQP", "trust-constr"], "description": "the optimiser (default SLSQP)"},
+            "method": {"enum": ["SLSQP", "SQP", "trust-constr"],
+                       "description": "the optimiser (default SLSQP; SQP: with move limits, see move_limit)"},
+            "move_limit": {**positive(), "description": "SQP's first move limit: each step's largest change of "
+                                                        "a variable, a fraction of its bound range (default 0.1); "
+                                                        "grown and shrunk by how well the step was predicted"},
             "iterations": {"type": "integer", "minimum": 0, "description": "optimiser iterations at most"},
             "tolerance": {**positive(), "description": "the optimiser's tolerance (default 1e-6)"},
             "folder": {"type": "string", "minLength": 1,

@@ -1,4 +1,5 @@
-"""The optimiser loop: scipy's SLSQP (or trust-constr) on scaled variables, functions and constraints.
+"""The optimiser loop: scipy's SLSQP, ffd's SQP with move limits (:mod:`ffdcli.optimize.sqp`) or scipy's
+trust-constr, on scaled variables, functions and constraints.
 
 What the optimiser sees (every scale applied to a value and its gradient alike):
 
@@ -27,7 +28,9 @@ that spends more than ``line_search`` evaluations (its full step included) witho
 ends the run with that reason instead of spending solves.
 
 Iterations are scipy's: SLSQP counts one when an iteration's full step has been evaluated; the steps
-back of its line search and the accepted design (whose gradients are asked) belong to it.
+back of its line search and the accepted design (whose gradients are asked) belong to it. SQP counts
+an accepted step; its rejected trials (each one flow) belong to the iteration they precede, and more
+than ``line_search`` of them in a row end the run like a collapsed line search.
 """
 
 from __future__ import annotations
@@ -38,6 +41,7 @@ import numpy as np
 import scipy.optimize as so
 
 from ffdcli.design.optimize import OptimizeSettings
+from ffdcli.optimize import sqp
 from ffdcli.optimize.problem import OptimizationProblem
 from ffdcli.optimize.store import Evaluation
 
@@ -234,11 +238,38 @@ class Driver:
         self.iterations += 1
         self.trial_next = False
 
+    def point(self, x: np.ndarray, gradient: bool) -> sqp.Point | None:
+        """The scaled design ``x`` as :class:`ffdcli.optimize.sqp.Point` (every constraint side, inequalities
+        then equalities); None when it failed."""
+        ev = self._get(x, gradient)
+        if ev.failed is not None:
+            return None
+        c = np.concatenate([self._sides(x, False, False), self._sides(x, True, False)])
+        if not gradient:
+            return sqp.Point(x=np.asarray(x, float).copy(), f=self.objective(x), c=c)
+        A = np.vstack([self._sides(x, False, True), self._sides(x, True, True)])
+        return sqp.Point(x=np.asarray(x, float).copy(), f=self.objective(x), c=c, g=self.objective_grad(x), A=A)
+
+    def _run_sqp(self, x0: np.ndarray) -> Outcome:
+        lo, hi = np.array(self.bounds, dtype=float).T
+        equality = np.array([s.equality for s in self.sides if not s.equality]
+                            + [s.equality for s in self.sides if s.equality], dtype=bool)
+
+        def accepted(p):
+            self.iterations += 1
+
+        res = sqp.minimize_sqp(self.point, x0, lo, hi, equality, radius=self.settings.move_limit,
+                               iterations=self.settings.iterations, tolerance=self.settings.tolerance,
+                               callback=accepted)
+        return Outcome(status=res.status, message=res.message, iterations=self.iterations)
+
     # -- the run -----------------------------------------------------------------------------------
     def run(self) -> Outcome:
         """Start (the baseline) and run the optimiser; StopRun propagates to the caller."""
         self.start()
         x0 = np.zeros(len(self.chosen))
+        if self.settings.method == "SQP":
+            return self._run_sqp(x0)
         cons = []
         if any(not s.equality for s in self.sides):
             cons.append({"type": "ineq", "fun": lambda x: self._sides(x, False, False),

@@ -234,3 +234,40 @@ def test_trust_constr_runs_feasible(tmp_path):
     out = run_optimize(path, solver=solver_for(path))
     assert out["status"] in ("converged", "iterations")
     assert out["constraints_satisfied"] and out["objective"]["best"] < out["objective"]["initial"]
+
+
+def test_sqp_with_move_limits_converges_feasible_with_adjoints_only_at_accepted_steps(tmp_path):
+    path = write_case(tmp_path, method="SQP", iterations=40)
+    solver = solver_for(path)
+    out = run_optimize(path, solver=solver)
+    assert out["status"] == "converged", out["message"]
+    assert out["constraints_satisfied"] and out["functions"]["LIFT"] >= 0.1 - 1e-6
+    (tmp_path / "slsqp").mkdir()
+    other = write_case(tmp_path / "slsqp", iterations=40)
+    reference = run_optimize(other, solver=solver_for(other))
+    assert out["objective"]["best"] == pytest.approx(reference["objective"]["best"], rel=1e-3)
+    assert out["flow_solves"] == solver.flows == out["evaluations"]
+    assert out["adjoint_solves"] == solver.adjoints == 2 * (out["iterations"] + 1)
+    rows = history(tmp_path / "opt" / "history.csv")
+    # the first step moves no variable by more than move_limit (0.1) of its bound range
+    first = json.loads((tmp_path / "opt" / rows[1]["folder"] / "result.json").read_text())["values"]
+    base = json.loads((tmp_path / "opt" / rows[0]["folder"] / "result.json").read_text())["values"]
+    model = DesignModel.from_file(path)
+    r = model.upper - model.lower
+    assert np.max(np.abs(np.subtract(first, base)) / np.where(np.isfinite(r), r, 1.0)) <= 0.1 + 1e-12
+
+
+def test_sqp_steps_back_from_a_failed_design(tmp_path):
+    path = write_case(tmp_path, method="SQP", analytic={"fail_calls": [3]}, iterations=40)
+    out = run_optimize(path, solver=solver_for(path))
+    rows = history(tmp_path / "opt" / "history.csv")
+    failed = [r for r in rows if r["failed"]]
+    assert len(failed) == 1 and "failure injected" in failed[0]["failed"]
+    assert out["constraints_satisfied"] and out["status"] == "converged"
+    evs = [json.loads((tmp_path / "opt" / r["folder"] / "result.json").read_text()) for r in rows]
+    k = rows.index(failed[0])
+    anchor = max(i for i in range(k) if evs[i]["gradients"])       # the accepted design before it
+    model = DesignModel.from_file(path)
+    r = np.where(np.isfinite(model.upper - model.lower), model.upper - model.lower, 1.0)
+    x = [np.array(e["values"]) / r for e in evs]                   # the optimiser's scaled variables
+    assert np.abs(x[k + 1] - x[anchor]).max() <= 0.25 * np.abs(x[k] - x[anchor]).max() + 1e-12
