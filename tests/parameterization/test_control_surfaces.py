@@ -9,10 +9,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from test_derivatives import assert_matches_fd
 
+from ffdcli.api import DesignModel
 from ffdcli.box.box import fit_box
 from ffdcli.box.refine import edges_at, span_fractions
 from ffdcli.errors import InputError
@@ -20,6 +23,7 @@ from ffdcli.lattice.lattice import evaluate
 from ffdcli.mesh import CellBlock
 from ffdcli.parameterization.changes import Twist, apply_changes, changes_from_spec, design_variables
 from ffdcli.parameterization.changes.control_surfaces import refine_for_devices, rodrigues
+from ffdcli.parameterization.changes.devices import MAX_ANGLE
 from ffdcli.settings import BoxSettings
 from ffdcli.testing.wings import Planform, crm_planform, naca4, rect_wing_planform, wing_surface
 
@@ -215,3 +219,9 @@ def test_edges_at_interpolates_the_baseline_chord(rect):
     _, box, _ = rect
     le, te = edges_at(box, 0.5)
     assert np.allclose(np.linalg.norm(te - le), 1.0, atol=1e-3)
+
+
+def test_the_optimisers_bound_on_a_device_angle_is_what_a_design_file_may_give():
+    model = DesignModel.from_file(Path(__file__).resolve().parents[2] / "configs" / "rect_flap.yaml")
+    k = [i for i, n in enumerate(model.names) if n.endswith("flap.angle")]
+    assert k and np.all(model.lower[k] == -MAX_ANGLE) and np.all(model.upper[k] == MAX_ANGLE)

@@ -31,6 +31,7 @@ from ffdcli.parameterization.changes.base import DEG, Change, SpecContext
 from ffdcli.parameterization.changes.devices import (
     DEFAULT_BLEND,
     DEFAULT_TRANSITION,
+    MAX_ANGLE,
     DeviceGeometry,
     DeviceSpec,
     device_geometry,
@@ -123,8 +124,9 @@ class ControlSurface(Change):
         return replace(self, angle=float(v[0]), hinge=hinge)
 
     def bounds(self, P, frame):
-        """The angle within (-90, 90) degrees, a hinge fraction within (0, 1)."""
-        out = np.array([[-90.0, 90.0]] + [[0.0, 1.0]] * (self.size - 1))
+        """The angle within +-:data:`MAX_ANGLE` degrees (what a design file may give), a hinge fraction
+        within (0, 1)."""
+        out = np.array([[-MAX_ANGLE, MAX_ANGLE]] + [[0.0, 1.0]] * (self.size - 1))
         return out
 
     # ------------------------------------------------------------------ the map
@@ -275,8 +277,8 @@ def parse_device(kind: str, spec, ctx: SpecContext) -> DeviceSpec:
         raise ctx.fail(f"transition {transition:g}: a chord width in (0, {0.9 * part:.3g}] (inside the "
                        f"{kind})", f"{key}.transition")
     angle = float(spec["angle"])
-    if not -60.0 <= angle <= 60.0:
-        raise ctx.fail(f"angle {angle:g}: degrees within [-60, 60]", f"{key}.angle")
+    if not -MAX_ANGLE <= angle <= MAX_ANGLE:
+        raise ctx.fail(f"angle {angle:g}: degrees within [-{MAX_ANGLE:g}, {MAX_ANGLE:g}]", f"{key}.angle")
     return DeviceSpec(kind=kind, span=span, hinge=tuple(hinge), blend=blend, transition=transition)
 
 

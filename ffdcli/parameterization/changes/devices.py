@@ -37,6 +37,8 @@ from ffdcli.lattice.lattice import evaluate
 DEFAULT_BLEND = 0.2
 #: Default chord width of the transition behind a flap's hinge (ahead of a slat's), local chords.
 DEFAULT_TRANSITION = 0.1
+#: The largest deflection (degrees) of a device: in a design file and as an optimiser's bound alike.
+MAX_ANGLE = 60.0
 #: Tolerance (parameter) when reading which knots are a device's.
 KNOT_TOL = 1e-9
 #: A parameter this close to a knot is that knot (:func:`snap`).
