@@ -184,6 +184,41 @@ def test_stale_partial_files_are_swept(mid_wing):
 # Issue 29: under mpiexec, SIGTERM ends like a serial run (one message, 143, nothing left)
 # ----------------------------------------------------------------------------------------------
 
+def _ranks_handle_sigterm(launcher: int, ranks: int) -> bool:
+    """Whether ``ranks`` ffd processes below the process ``launcher`` have installed their SIGTERM
+    handler (``SigCgt`` of /proc). Before that, a SIGTERM kills a rank while the interpreter starts, which
+    no program can answer; on a loaded machine that start takes seconds. True where /proc is absent."""
+    proc = Path("/proc")
+    if not (proc / "self" / "status").is_file():
+        return True
+    parent, cmd = {}, {}
+    for d in proc.iterdir():
+        if d.name.isdigit():
+            try:
+                parent[int(d.name)] = int((d / "stat").read_text().rsplit(")", 1)[1].split()[1])
+                cmd[int(d.name)] = (d / "cmdline").read_bytes()
+            except (OSError, ValueError, IndexError):
+                continue
+
+    def below(pid):
+        while pid in parent and pid > 1:
+            pid = parent[pid]
+            if pid == launcher:
+                return True
+        return False
+
+    ready = 0
+    for pid, line in cmd.items():
+        if b"ffdcli" in line and pid != launcher and below(pid):
+            try:
+                caught = next(ln for ln in (proc / str(pid) / "status").read_text().splitlines()
+                              if ln.startswith("SigCgt:"))
+            except (OSError, StopIteration):
+                continue
+            ready += bool(int(caught.split()[1], 16) >> (signal.SIGTERM - 1) & 1)
+    return ready >= ranks
+
+
 @pytest.mark.slow
 def test_mpiexec_sigterm_ends_every_rank_with_one_message_and_nothing_left(mid_wing):
     """The probe: under ``mpiexec -n 2`` SIGTERM printed nothing, exited 15 and in 3 of 6 tries left a
@@ -199,8 +234,11 @@ def test_mpiexec_sigterm_ends_every_rank_with_one_message_and_nothing_left(mid_w
         p = subprocess.Popen([MPIEXEC, "-n", "2", sys.executable, "-m", "ffdcli", "deform", "mid.yaml", "-q",
                               "--force", "-o", out.name], cwd=mid_wing, env=_env(), stdout=subprocess.PIPE,
                              stderr=subprocess.PIPE, text=True, preexec_fn=_default_signals)
-        # half the tries inside the write (its temporary file exists), half during the work
-        deadline = time.monotonic() + (120 if k % 2 == 0 else 3 + k)
+        # half the tries inside the write (its temporary file exists), half during the work: once both
+        # ranks handle SIGTERM (a signal while the interpreters start kills them before any code runs)
+        while p.poll() is None and not _ranks_handle_sigterm(p.pid, 2):
+            time.sleep(0.01)
+        deadline = time.monotonic() + (120 if k % 2 == 0 else 0.5 * k)
         while p.poll() is None and time.monotonic() < deadline and not (
                 k % 2 == 0 and list(mid_wing.glob(".out_mpi*part*"))):
             time.sleep(0.002)
