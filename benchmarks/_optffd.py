@@ -4,7 +4,8 @@ The design: SU2's mesh and flow (``inv_NACA0012_basic.cfg``, Euler, M 0.8, alpha
 automatic box (10 x 2 control points), twist (about the trailing edge) and 2 x 9 shape variables (the
 trailing-edge column left out); the constrained version bounds LIFT >= 0.328486 and MOMENT_Z >= 0 (each
 with its own adjoint) and keeps t/c at 30 % chord at least the baseline's (the NACA0012's maximum
-thickness station); 8 SLSQP iterations. ``ffd optimize`` runs in a cached
+thickness station); 8 iterations of ffd's SQP with move limits (``METHOD``; the first runs of
+issue 28 used scipy's SLSQP, whose full steps overshoot the transonic lift: docs/optimize.md). ``ffd optimize`` runs in a cached
 folder like the peers, in the benchmark's solver slot (one SU2 process at a time). ``ffd_path`` points
 to the tree that has the command (``--ffd-path``; default this repository).
 """
@@ -22,12 +23,13 @@ from benchmarks import _optpeers, _su2
 SHAPE_BOUND = 0.05        # chord lengths, each shape variable
 TWIST_BOUND = 3.0         # degrees
 POINTS = 10               # chordwise control points of the automatic box (x 2 rows)
+METHOD = "SQP"            # ffd's SQP with move limits (docs/optimize.md); SLSQP: scipy's, as SU2's scripts
 
 
 def design_text(adjoint: str, constrained: bool, iterations: int = _optpeers.ITERATIONS) -> str:
-    """The design file of a (c) run: ``configs/naca0012_optimize.yaml`` of the ``optimize`` branch (box
-    10 x 2, twist and every shape move but the trailing-edge column's, bounds +-3 deg and +-0.05
-    chord, t/c at 30 % chord >= the baseline's) with the mesh and config copied beside it."""
+    """The design file of a (c) run: ``configs/naca0012_optimize.yaml`` (box 10 x 2, twist and every
+    shape move but the trailing-edge column's, bounds +-3 deg and +-0.05 chord, t/c at 30 % chord >= the
+    baseline's, method SQP) with the mesh and config copied beside it."""
     zeros = ", ".join(["0"] * POINTS)
     shape = [f'"c1.shape.{side}[{i}]"' for side in ("upper", "lower") for i in range(POINTS - 1)]
     lines = [
@@ -42,7 +44,7 @@ def design_text(adjoint: str, constrained: bool, iterations: int = _optpeers.ITE
     if constrained:
         lines += ["  functions:", f"    - {{name: LIFT, lower: {_optpeers.BOUNDS['LIFT']}}}",
                   "    - {name: MOMENT_Z, lower: 0.0}"]
-    lines += [f"  variables: [c0.twist, {', '.join(shape)}]", "  method: SLSQP", f"  iterations: {iterations}",
+    lines += [f"  variables: [c0.twist, {', '.join(shape)}]", f"  method: {METHOD}", f"  iterations: {iterations}",
               "  folder: opt/", f"  adjoint: {adjoint}", "  max_failures: 3", "output: {mesh: out/naca.su2}"]
     return "\n".join(lines) + "\n"
 

@@ -119,10 +119,12 @@ def case_hash(cfg_text: str, inputs: list[Path], command: list[str]) -> str:
 
 @contextlib.contextmanager
 def solver_slot():
-    """One SU2 process of this benchmark at a time on the machine: an exclusive lock on
-    ``<scratch>/su2.lock`` held for the whole run (waiting for it is not counted in a run's time)."""
+    """One SU2 process of this benchmark at a time per slot: an exclusive lock on
+    ``<scratch>/<slot>.lock`` (slot ``FFD_OPTBENCH_SLOT``, default ``su2``: one slot, one process on the
+    machine) held for the whole run (waiting for it is not counted in a run's time). Two invocations with
+    two slots run two SU2 processes at once (a two-core machine: each run on its own core)."""
     SCRATCH.mkdir(parents=True, exist_ok=True)
-    with open(SCRATCH / "su2.lock", "w") as fh:
+    with open(SCRATCH / f"{os.environ.get('FFD_OPTBENCH_SLOT', 'su2')}.lock", "w") as fh:
         fcntl.flock(fh, fcntl.LOCK_EX)
         try:
             yield
