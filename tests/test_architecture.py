@@ -37,7 +37,9 @@ FIXTURES = "testing"
 #: Optional third-party packages: imported where they are used, so that the core runs without them.
 #: matplotlib is imported where a picture is drawn: its import reads MPLBACKEND, which ffd turns
 #: into an input error (viz/plot.py).
-OPTIONAL = {"pyvista", "vtk", "openmdao", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline"}
+#: meshio (with its xml and h5py imports, about 0.1 s) is imported where a VTK mesh is read or written:
+#: every command starts without it (issue 27 outcome 9: the start of `ffd check` on an SU2 mesh).
+OPTIONAL = {"pyvista", "vtk", "openmdao", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline", "meshio"}
 
 
 def _modules() -> dict[str, Path]:

@@ -50,7 +50,6 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
       ffd deform design.yaml --surface-file out/wing_surface.dat   # for SU2_DEF (DV_KIND= SURFACE_FILE)
       for t in 5 10 15; do ffd deform design.yaml --set changes.0.twist.tip=$t -o out/t$t.su2; done
     """
-    from ffdcli.api import constraints_report
     from ffdcli.app.deform import deform_design
     from ffdcli.design import load_design
     from ffdcli.quality.gate import Remedies
@@ -62,6 +61,14 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
     design = load_design(design_file, overrides=overrides)
     report = deform_design(design, output=output, lattice=lattice_out, surface_file=surface_file, plot=plot,
                            force=force, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress,
-                           comm=console.comm, constraints_table=constraints_report, warn=console.warn,
+                           comm=console.comm, constraints_table=_constraints_report, warn=console.warn,
                            remedies=remedies)
     console.result(report.summary, report.text)
+
+
+def _constraints_report(*args, **kwargs):
+    """:func:`ffdcli.api.constraints_report`, imported only for a design that has ``constraints:`` (the
+    API's modules cost a third of a second of every ``ffd deform``'s start)."""
+    from ffdcli.api import constraints_report
+
+    return constraints_report(*args, **kwargs)
