@@ -40,6 +40,9 @@ COMMANDS = (
     ("deform naca0012_s1223 (2D)", ["deform", "configs/naca0012_s1223.yaml", "-q", "-o", "{out}/f.su2"],
      ["f.su2", "f_lattice.vtk"]),
     ("check crm_wing", ["check", "samples/crm_wing.su2", "-q"], []),
+    ("box crm_wing, rebuilt (fit + embed)", ["box", "samples/crm_wing.su2", "--surface", "wing", "--rebuild", "-q",
+                                             "--cache-dir", "{out}", "--lattice", "{out}/g_lattice.vtk"],
+     ["g_lattice.vtk"]),
 )
 
 
