@@ -103,8 +103,9 @@ def test_screening_skips_the_adjoint_of_a_far_constraint(tmp_path):
                                             if int(r["adjoint_solves"]))
 
 
-def test_resume_reuses_every_finished_evaluation(tmp_path):
-    path = write_case(tmp_path, iterations=3)
+@pytest.mark.parametrize("method", ["SLSQP", "SQP"])
+def test_resume_reuses_every_finished_evaluation(tmp_path, method):
+    path = write_case(tmp_path, iterations=3, method=method)
     first = solver_for(path)
     a = run_optimize(path, solver=first)
     again = solver_for(path)
