@@ -31,7 +31,7 @@ from ffdcli.io.formats.sensitivity import read_sensitivity
 
 HH_PARAM = "( 1, 0.50 )"          # the upper-surface bump at mid-chord of SU2's 38
 HH_STEP = 1e-3                    # SU2_DEF value of the bump (linear: any value gives its response)
-TWIST_STEP = 0.01                 # degrees (README: 0.05 is already 7 % off)
+TWIST_STEP = 0.003                # degrees: the lift is nonlinear in incidence (docs/optimize.md: 0.01 is 4e-3 off)
 SHAPE_STEP = 1e-4                 # chord lengths
 BOX_POINTS = (8, 2)
 
