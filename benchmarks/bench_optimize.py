@@ -239,8 +239,9 @@ def main(argv=None) -> int:
 
 def _side_intro() -> str:
     return ("SU2's NACA0012 shape-design case (mesh `mesh_NACA0012_inv.su2`, 5,233 points; "
-            "`inv_NACA0012_basic.cfg`: Euler, M 0.8, alpha 1.25 deg, residuals to 1e-13), 8 SLSQP "
-            "iterations for every run, from CD 0.021481. Constrained: CL >= 0.328486, CMz >= 0, t/c >= 0.12 "
+            "`inv_NACA0012_basic.cfg`: Euler, M 0.8, alpha 1.25 deg, residuals to 1e-13), 8 optimiser "
+            "iterations for every run (SU2's script: scipy's SLSQP; ffd: its SQP with move limits, "
+            "docs/optimize.md), from CD 0.021481. Constrained: CL >= 0.328486, CMz >= 0, t/c >= 0.12 "
             "(SU2: `OPT_CONSTRAINT= " + _optpeers.CONSTRAINTS + "`). The final design is the last one the "
             "optimiser evaluated (SU2's `history_project.csv`) or the best feasible one (ffd's `best.yaml`); "
             "t/c is SU2_GEO's `AIRFOIL_THICKNESS` of its mesh; the worst violation is against the "
