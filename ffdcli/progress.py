@@ -12,7 +12,10 @@ import sys
 from collections.abc import Callable
 from typing import Protocol
 
-from tqdm import tqdm
+from ffdcli.deferred import deferred
+
+tqdm = deferred("tqdm")      # imported when a bar is drawn on a terminal
+
 
 
 class Bar(Protocol):
@@ -52,9 +55,8 @@ def terminal_progress(enabled: bool = True, stream=None) -> ProgressFactory:
         return no_progress
 
     def factory(label: str, total: int) -> Bar:
-
-        return tqdm(total=total, desc=label, file=stream, leave=False, unit_scale=True,
-                    dynamic_ncols=True, mininterval=0.2)
+        return tqdm.tqdm(total=total, desc=label, file=stream, leave=False, unit_scale=True,
+                         dynamic_ncols=True, mininterval=0.2)
 
     return factory
 

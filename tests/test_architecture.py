@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ffdcli"
 
 #: The stages in data-flow order; a module may import its own stage and the ones before it.
 LAYERS = [
-    {"errors", "settings", "progress", "jit", "_compat", ""},
+    {"errors", "settings", "progress", "jit", "_compat", "deferred", ""},
     {"mesh"},
     {"parallel"},
     {"lattice"},          # before io: the SU2 writer refreshes SU2's own FFD section with the splines
@@ -37,9 +37,7 @@ FIXTURES = "testing"
 #: Optional third-party packages: imported where they are used, so that the core runs without them.
 #: matplotlib is imported where a picture is drawn: its import reads MPLBACKEND, which ffd turns
 #: into an input error (viz/plot.py).
-#: meshio (with its xml and h5py imports, about 0.1 s) is imported where a VTK mesh is read or written:
-#: every command starts without it (issue 27 outcome 9: the start of `ffd check` on an SU2 mesh).
-OPTIONAL = {"pyvista", "vtk", "openmdao", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline", "meshio"}
+OPTIONAL = {"pyvista", "vtk", "openmdao", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline"}
 
 
 def _modules() -> dict[str, Path]:

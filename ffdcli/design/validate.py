@@ -7,12 +7,13 @@ from __future__ import annotations
 
 import math
 
-import jsonschema  # 0.1 s: here, not at the top, so that ``ffd schema`` and ``--help`` do not pay it
-
+from ffdcli.deferred import deferred
 from ffdcli.design.schema import CHANGE_KINDS, design_schema
 from ffdcli.design.yamlmap import key_path, line_at
 from ffdcli.errors import InputError
 from ffdcli.settings import degree_problem
+
+jsonschema = deferred("jsonschema")   # 0.05 s of every start: imported when a file is validated
 
 _TYPE_WORDS = {"number": "a number", "integer": "an integer", "string": "text", "array": "a list",
                "object": "a mapping (key: value)", "boolean": "true or false", "null": "nothing"}

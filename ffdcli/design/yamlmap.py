@@ -77,10 +77,12 @@ def yaml_lines(text: str, path=None) -> dict[tuple, int]:
 
     def walk(node, parts):
         budget[0] -= 1       # aliases expand: a few lines may stand for billions of values
-        if budget[0] < 0 or len(parts) > MAX_YAML_DEPTH:
-            raise InputError(f"the design file expands to more than {MAX_YAML_VALUES} values or "
-                             f"{MAX_YAML_DEPTH} levels (YAML aliases?); a design file is small", path=path,
-                             line=node.start_mark.line + 1)
+        if len(parts) > MAX_YAML_DEPTH:
+            raise InputError(f"the design file is nested too deeply (more than {MAX_YAML_DEPTH} levels); a "
+                             "design file is a few levels deep", path=path, line=node.start_mark.line + 1)
+        if budget[0] < 0:
+            raise InputError(f"the design file expands to more than {MAX_YAML_VALUES} values (YAML aliases?); "
+                             "a design file is small", path=path, line=node.start_mark.line + 1)
         if isinstance(node, yaml.MappingNode):
             seen = set()
             for k, v in node.value:

@@ -55,9 +55,9 @@ import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
-import h5py
 import numpy as np
 
+from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.formats import cgns_ngon
 from ffdcli.io.formats.cgns_bc import (  # noqa: F401
@@ -112,6 +112,8 @@ from ffdcli.io.formats.common import check_finite_rows
 from ffdcli.mesh import CELL_DIM, CELL_NODES, CellBlock, Mesh
 from ffdcli.mesh.polyhedra import concat_polyhedra, polyhedra_from_cells
 from ffdcli.parallel.partition import local_mesh_of_blocks, localize, node_owners
+
+h5py = deferred("h5py")
 
 
 def _zone_size(base, zn, file: Path) -> tuple[int, int, bool, tuple[int, ...], int]:

@@ -10,11 +10,13 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import h5py
 import numpy as np
 
+from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.mesh import CellBlock
+
+h5py = deferred("h5py")
 
 
 @dataclass

@@ -7,15 +7,17 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import h5py
 import numpy as np
 
+from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
 from ffdcli.io.formats.cgns_cells import CGNS_CODE, MIXED, WEDGE_CGNS_TO_VTK
 from ffdcli.io.formats.cgns_nodes import CgnsSource, _chars, _node, _str_attr, convert_adf
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
+
+h5py = deferred("h5py")
 
 
 def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> None:
