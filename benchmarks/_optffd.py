@@ -6,8 +6,8 @@ trailing-edge column left out); the constrained version bounds LIFT >= 0.328486 
 with its own adjoint) and keeps t/c at 30 % chord at least the baseline's (the NACA0012's maximum
 thickness station); 8 iterations of ffd's SQP with move limits (``METHOD``; the first runs of
 issue 28 used scipy's SLSQP, whose full steps overshoot the transonic lift: docs/optimize.md).
-``ffd optimize`` runs in a cached folder like the peers, in the benchmark's solver slot (one SU2 process at a time). ``ffd_path`` points
-to the tree that has the command (``--ffd-path``; default this repository).
+``ffd optimize`` runs in a cached folder like the peers, in the benchmark's solver slot (one SU2 process
+at a time). ``ffd_path`` points to the tree that has the command (``--ffd-path``; default this repository).
 """
 
 from __future__ import annotations

@@ -34,7 +34,6 @@ import logging
 import re
 import warnings
 from pathlib import Path
-from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
@@ -44,6 +43,7 @@ from ffdcli.io.atomic import atomic_path
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
 
+saxutils = deferred("xml.sax.saxutils")   # 20 ms (it imports urllib and ssl): for the VTU writer
 meshio = deferred("meshio")     # 0.1 s with its xml imports: imported when a VTK mesh is read or written
 
 #: Cell-data array with the marker id of each cell (0 = interior).
@@ -268,7 +268,7 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
 def _add_field_data(tmp: Path, field: dict[str, np.ndarray], fmt: str) -> None:
     data = tmp.read_bytes()
     if fmt == "vtu":
-        arrays = "".join(f'<DataArray type="Int32" Name={quoteattr(name)} NumberOfTuples="1" '
+        arrays = "".join(f'<DataArray type="Int32" Name={saxutils.quoteattr(name)} NumberOfTuples="1" '
                          f'NumberOfComponents="{len(v)}" format="ascii">'
                          f'{" ".join(str(int(x)) for x in v)}</DataArray>\n'
                          for name, v in field.items())
