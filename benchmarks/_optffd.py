@@ -134,7 +134,8 @@ def ffd_row(adjoint: str, constrained: bool, result: dict) -> dict:
     else:
         values["tc"] = float("nan")
     viol = _optpeers.worst_violation(values)
-    return {"run": "(c) ffd optimize, automatic box (19), best feasible", "adjoint": adjoint,
+    best = "best feasible" if constrained else "best"
+    return {"run": f"(c) ffd optimize, automatic box (19), {best}", "adjoint": adjoint,
             "constrained": constrained, **values, "worst_violation": viol, "feasible": viol <= 1e-4,
             "flow": s.get("flow_solves"), "adjoint_solves": s.get("adjoint_solves"),
             "wall_s": result["wall_s"], "designs": s.get("evaluations"),
