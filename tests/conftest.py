@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from ffdcli.optimize.solvers.base import find_program
+
 REPO = Path(__file__).resolve().parents[1]
 SAMPLES = REPO / "samples"
 
@@ -34,6 +36,17 @@ def _find_shared_data() -> Path | None:
 
 
 SHARED_DATA = _find_shared_data()
+
+
+def su2_folder() -> Path | None:
+    """The folder of SU2_CFD as ``ffd optimize`` finds it (``$SU2_RUN``, PATH), else the shared SU2 build
+    beside the repository (``../shared/su2/bin``); None when there is none (the SU2 tests skip)."""
+    extra = (SHARED_DATA.parent / "su2" / "bin",) if SHARED_DATA is not None else ()
+    found = find_program("SU2_CFD", "SU2_RUN", extra)
+    return None if found is None else found.parent
+
+
+SU2_MISSING = "SU2_CFD not found ($SU2_RUN, PATH, ../shared/su2/bin): SU2 is not installed"
 
 
 @pytest.fixture(scope="session")

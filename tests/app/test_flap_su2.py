@@ -1,5 +1,6 @@
 """A 10 degree flap on the rectangular wing, through SU2 (issue 31): the deformed mesh is read, the
-Euler flow converges, and the lift is higher than the baseline's. Skips without SU2_CFD.
+Euler flow converges, and the lift is higher than the baseline's. Skips without SU2_CFD
+(found as `ffd optimize` finds it, or in ../shared/su2/bin).
 
 The wing's thickness axis is y, so its lift is SU2's side force CSF (configs/rect_euler.cfg sets the
 incidence with SIDESLIP_ANGLE). The numbers of a full run are in docs/design-choices.md.
@@ -8,15 +9,13 @@ incidence with SIDESLIP_ANGLE). The numbers of a full run are in docs/design-cho
 from __future__ import annotations
 
 import csv
-import shutil
 import subprocess
 
 import pytest
-from conftest import REPO, run_ffd
+from conftest import REPO, SU2_MISSING, run_ffd, su2_folder
 
-pytestmark = [pytest.mark.slow,
-              pytest.mark.skipif(shutil.which("SU2_CFD") is None,
-                                 reason="SU2_CFD is not on the PATH (SU2 is not installed)")]
+SU2 = su2_folder()
+pytestmark = [pytest.mark.slow, pytest.mark.skipif(SU2 is None, reason=SU2_MISSING)]
 
 
 def su2_run(folder, mesh):
@@ -25,7 +24,7 @@ def su2_run(folder, mesh):
     cfg = (REPO / "configs" / "rect_euler.cfg").read_text().replace("MESH_FILENAME= mesh.su2",
                                                                      f"MESH_FILENAME= {mesh}")
     (folder / "flow.cfg").write_text(cfg.replace("ITER= 400", "ITER= 120"))
-    proc = subprocess.run(["SU2_CFD", "flow.cfg"], cwd=folder, capture_output=True, text=True, timeout=3600)
+    proc = subprocess.run([str(SU2 / "SU2_CFD"), "flow.cfg"], cwd=folder, capture_output=True, text=True, timeout=3600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     assert "Exit Success" in proc.stdout
     with open(folder / "history.csv") as f:

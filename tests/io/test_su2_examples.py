@@ -5,12 +5,11 @@ from __future__ import annotations
 import importlib.util
 import json
 import os
-import shutil
 import subprocess
 import sys
 
 import pytest
-from conftest import REPO, run_ffd
+from conftest import REPO, SU2_MISSING, run_ffd, su2_folder
 
 
 @pytest.fixture(scope="module")
@@ -66,15 +65,16 @@ def test_design_loop_dry_run(tmp_path):
     assert len(json.loads((tmp_path / "w" / "results.json").read_text())) == 2
 
 
-@pytest.mark.skipif(shutil.which("SU2_CFD") is None, reason="SU2_CFD is not on the PATH (SU2 is not installed)")
+@pytest.mark.skipif(su2_folder() is None, reason=SU2_MISSING)
 def test_design_loop_with_su2(tmp_path):
     design, cfg = _rect_design(tmp_path)
-    cfg.write_text(cfg.read_text() + "MARKER_EULER= ( wing )\nMARKER_FAR= ( farfield )\nMARKER_SYM= ( symmetry )\n"
-                   "ITER= 50\nOUTPUT_FILES= (RESTART)\n")
+    # the rectangular wing's real Euler configuration (configs/rect_euler.cfg), 50 iterations
+    cfg.write_text((REPO / "configs" / "rect_euler.cfg").read_text().replace("ITER= 400", "ITER= 50"))
     proc = subprocess.run([sys.executable, str(REPO / "examples" / "su2_design_loop.py"), str(design), str(cfg),
                            "--variable", "c0.twist.tip", "--values", "0,3", "--work", str(tmp_path / "w")],
                           capture_output=True, text=True, cwd=tmp_path,
-                          env={**os.environ, "PYTHONPATH": str(REPO)})
+                          env={**os.environ, "PYTHONPATH": str(REPO),
+                               "PATH": f"{su2_folder()}{os.pathsep}{os.environ.get('PATH', '')}"})
     assert proc.returncode == 0, proc.stderr
     rows = json.loads((tmp_path / "w" / "results.json").read_text())
     assert all(r["CL"] is not None for r in rows)

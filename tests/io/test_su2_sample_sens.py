@@ -9,26 +9,16 @@ variable is compared with central differences of converged SU2 flows on meshes `
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import REPO, SAMPLES, run_ffd
+from conftest import REPO, SAMPLES, SU2_MISSING, run_ffd, su2_folder
 
 SENS = SAMPLES / "naca0012_2d_cd_sens.csv"
 DESIGN = REPO / "configs" / "naca0012_grad.yaml"
 CFG = SAMPLES / "naca0012_2d_euler.cfg"
-
-
-def _su2_bin() -> Path | None:
-    cands = [Path(os.environ["SU2_RUN"])] if os.environ.get("SU2_RUN") else []
-    if shutil.which("SU2_CFD"):
-        cands.append(Path(shutil.which("SU2_CFD")).resolve().parent)
-    cands.append(REPO.parent / "shared" / "su2" / "bin")
-    return next((c for c in cands if (c / "SU2_CFD").is_file()), None)
 
 
 def test_sample_is_every_node_of_the_bundled_mesh():
@@ -64,11 +54,11 @@ def _cd(mesh: Path, folder: Path, bindir: Path) -> float:
     return last["CD"]
 
 
-@pytest.mark.skipif(_su2_bin() is None, reason="SU2 is not installed (SU2_RUN, PATH or ../shared/su2/bin)")
+@pytest.mark.skipif(su2_folder() is None, reason=SU2_MISSING)
 @pytest.mark.parametrize("key, name, step", [("changes.0.twist", "c0.twist", 0.01),
                                              ("changes.1.shape.upper.3", "c1.shape.upper[3]", 1e-4)])
 def test_grad_of_the_sample_matches_su2_finite_differences(tmp_path, key, name, step):
-    bindir = _su2_bin()
+    bindir = su2_folder()
     proc = run_ffd("grad", DESIGN, "--sens", SENS, "--json", "--cache-dir", tmp_path)
     assert proc.returncode == 0, proc.stderr
     grad = json.loads(proc.stdout)
