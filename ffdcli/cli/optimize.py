@@ -30,6 +30,9 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
     its own folder under optimize.folder (default opt/): history.csv, history.png, best.yaml (the best
     feasible design's values written in) and its mesh are written there. A line per evaluation on
     stderr. Exit 1 when the solver failed more than optimize.max_failures times (best design written).
+    The optimiser is scipy's SLSQP, or optimize.method: SQP (ffd's, with move limits: each step
+    changes a variable by at most optimize.move_limit of its bound range, grown or shrunk by how well
+    the step was predicted; the choice for transonic lift constraints, docs/optimize.md).
 
     \b
     Examples:
