@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -14,6 +15,10 @@ import pytest
 from ffdcli.optimize.solvers.base import find_program
 
 REPO = Path(__file__).resolve().parents[1]
+
+# OpenMDAO writes each problem's reports into <script>_out/ under its work folder, by default the
+# current one (the repository when pytest runs there): a folder of its own for the session instead.
+os.environ.setdefault("OPENMDAO_WORKDIR", tempfile.mkdtemp(prefix="ffd-openmdao-"))
 SAMPLES = REPO / "samples"
 
 # The test folders mirror the package (tests/io/ tests ffdcli/io/, ...). A test reuses another
