@@ -101,7 +101,8 @@ class ConstraintsMixin:
         """What component ``c``'s constraints read: its lattice, its rows of dP'/dv (every variable's
         column), its surface points and basis, and the whole mesh's motion (``mesh_quality``)."""
 
-        mesh = {"mesh_points": self._mesh_points_cached, "mesh_vjp": self.mesh_vjp}
+        mesh = {"mesh_points": self._mesh_points_cached, "mesh_vjp": self.mesh_vjp,
+                "design_map": self.design_map_points, "design_map_vjp": self.design_map_vjp}
         if self.run.single:
             emb = self.run.prep.embedding
             rmatvec = emb.rmatvec if self.run.box.dim == 3 else None       # 3D: core = mesh coordinates

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ffdcli.app.deform import deform_design
-from ffdcli.app.deformation import deform, volume_method
+from ffdcli.app.deformation import deform, design_zone, volume_method
 from ffdcli.app.prepare import is_surface_mesh
 from ffdcli.mesh.numbers import as_numbers
 from ffdcli.quality.gate import Remedies
@@ -59,6 +59,38 @@ class VolumeMixin:
             self._cache["dR"] = frame_jacobian(run.components, self.lattices(), run.layout, self.n_vars,
                                                len(self.surface_ids), run.warp_settings.carry, run.single)
         return self._cache["dR"]
+
+    def _design_zone(self):
+        """The nodes near the wall of :mod:`ffdcli.quality.design_map` (built once)."""
+        if "zone" not in self._static:
+            self._static["zone"] = design_zone(self.run)
+        return self._static["zone"]
+
+    def design_map_points(self):
+        """``(X_map (N, 3), zone (N,) bool)``: the input mesh's nodes near the wall moved by the design's
+        own map (the FFD map linearised at the nearest surface node, the quality gate's reference), the
+        others where they are in the input; None without a volume mesh that follows the surface."""
+        if not self.uses_volume():
+            return None
+        if "map" not in self._cache:
+            zone, run, P = self._design_zone(), self.run, self.lattice()
+            X_map = zone.apply(run.prep.mesh.points, run.surface_displacement(P), run.surface_frames(P, "gradient"))
+            self._cache["map"] = (X_map, zone.mask)
+        return self._cache["map"]
+
+    def design_map_vjp(self, G) -> np.ndarray:
+        """(n_vars,) dJ/dv for ``G = dJ/dX_map`` (N, 3): the reverse product of :meth:`design_map_points`
+        (the map is affine in the surface displacement and the frames F, both linear in the lattice)."""
+        run = self.run
+        g_b, g_F = self._design_zone().vjp(G, len(self.surface_ids))
+        if run.warp_settings.carry == "gradient":          # the warp's frames are F already
+            dF = self._frame_jacobian()
+        else:
+            if "dF" not in self._cache:
+                self._cache["dF"] = frame_jacobian(run.components, self.lattices(), run.layout, self.n_vars,
+                                                   len(self.surface_ids), "gradient", run.single)
+            dF = self._cache["dF"]
+        return self.surface_vjp(g_b) + np.einsum("sij,vsij->v", g_F, dF)
 
     def mesh_jvp(self, dv, progress=None) -> np.ndarray:
         """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW.

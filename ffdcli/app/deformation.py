@@ -17,6 +17,7 @@ from ffdcli.app.run import DesignRun
 from ffdcli.errors import InputError, QualityError
 from ffdcli.parallel.distributed import local_rows
 from ffdcli.progress import no_progress
+from ffdcli.quality.design_map import DesignMapZone, linearised_map
 from ffdcli.quality.gate import QualityReport
 from ffdcli.volume.recovery import attempts, incremental_warp  # it runs the warp of a DesignRun
 
@@ -45,11 +46,17 @@ def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[n
     def moved(node_ids: np.ndarray) -> np.ndarray:       # node ids: global (rows of a local mesh's ids)
         X = mesh.points[local_rows(mesh, node_ids)]
         d, j = tree.query(X)
-        out = X + b[j] + np.einsum("kij,kj->ki", F[j] - np.eye(3), X - Xs[j])
+        out = linearised_map(X, Xs[j], b[j], F[j])
         out[d > zone] = np.nan
         return out
 
     return moved
+
+
+def design_zone(run: DesignRun) -> DesignMapZone:
+    """The nodes of a whole mesh within :data:`DESIGN_ZONE` mean chords of the wall, for the design's own
+    map (:mod:`ffdcli.quality.design_map`; what ``mesh_quality`` compares the cells there with)."""
+    return DesignMapZone.build(run.prep.mesh.points, run.surface_ids, DESIGN_ZONE * run.warp_model().chord)
 
 
 @dataclass(frozen=True, eq=False)

@@ -21,7 +21,7 @@ from ffdcli.constraints.base import (
 from ffdcli.constraints.build import build_constraints
 from ffdcli.constraints.fold_free import FOLD_SAMPLES, FoldFree
 from ffdcli.constraints.le_te import LeTe
-from ffdcli.constraints.mesh_quality import KS_GAP, MESH_QUALITY_LOWER, MeshQuality, ks_min
+from ffdcli.constraints.mesh_quality import KS_GAP, MESH_QUALITY_GOOD, MESH_QUALITY_LOWER, MeshQuality, ks_min
 from ffdcli.constraints.thickness import END_INSET, Thickness, chord_lines, project_thickness
 from ffdcli.constraints.volume import Volume, enclosed_volume
 
@@ -30,6 +30,7 @@ __all__ = [
     "END_INSET",
     "FOLD_SAMPLES",
     "KS_GAP",
+    "MESH_QUALITY_GOOD",
     "MESH_QUALITY_LOWER",
     "SATISFIED_TOL",
     "Constraint",

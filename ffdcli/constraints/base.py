@@ -55,16 +55,23 @@ class ConstraintInputs:
     mesh_vjp : callable (G (N, 3)) -> ndarray (n_vars,), optional
         ``dJ/dv`` for ``G = dJ/dX`` at every mesh node, through the volume motion
         (:meth:`ffdcli.api.DesignModel.mesh_vjp`).
+    design_map : callable () -> (X_map (N, 3), zone (N,) bool) or None, optional
+        The input nodes near the wall moved by the design's own map (:mod:`ffdcli.quality.design_map`;
+        ``mesh_quality`` compares the cells there with it); None or absent: no map.
+    design_map_vjp : callable (G (N, 3)) -> ndarray (n_vars,), optional
+        ``dJ/dv`` for ``G = dJ/dX_map``.
     """
 
     def __init__(self, P, P0, values, lattice_jacobian: Callable, surface_points: Callable, basis: Callable,
                  rmatvec: Callable | None = None, *, mesh_points: Callable | None = None,
-                 mesh_vjp: Callable | None = None):
+                 mesh_vjp: Callable | None = None, design_map: Callable | None = None,
+                 design_map_vjp: Callable | None = None):
         self.P = np.asarray(P, dtype=float)
         self.P0 = np.asarray(P0, dtype=float)
         self.values = np.asarray(values, dtype=float)
         self._D, self._X, self._B, self._rmatvec = lattice_jacobian, surface_points, basis, rmatvec
         self._mesh_points, self._mesh_vjp = mesh_points, mesh_vjp
+        self._design_map, self._design_map_vjp = design_map, design_map_vjp
 
     def _needs_mesh(self, what):
         if what is None:
@@ -80,6 +87,14 @@ class ConstraintInputs:
     def mesh_vjp(self, G: np.ndarray) -> np.ndarray:
         """(n_vars,) ``dJ/dv`` for ``G`` (N, 3) ``= dJ/dX`` at every mesh node."""
         return self._needs_mesh(self._mesh_vjp)(G)
+
+    def design_map(self):
+        """``(X_map (N, 3), zone (N,))`` of the design's own map near the wall, or None without one."""
+        return None if self._design_map is None else self._design_map()
+
+    def design_map_vjp(self, G: np.ndarray) -> np.ndarray:
+        """(n_vars,) ``dJ/dv`` for ``G`` (N, 3) ``= dJ/dX_map``."""
+        return self._design_map_vjp(G)
 
     def rmatvec(self, G: np.ndarray) -> np.ndarray:
         """(n_ctrl, 3) ``B.T @ G`` for ``G`` (S, 3) (a compiled product when one was given)."""

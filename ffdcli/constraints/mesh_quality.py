@@ -3,10 +3,26 @@
 The measure is the quality gate's (:mod:`ffdcli.quality.metrics`): the scaled Jacobian of a cell is
 the smallest of its corners' values ``s = c det[e1, e2, e3] / (|e1| |e2| |e3|)`` (2D: ``c n . (e1 x
 e2) / (|e1| |e2|)``), in the mesh's own orientation convention. Each corner's value after the
-design is divided by its cell's value ``q0`` on the input mesh, so ``min over corners of s / q0`` is
-the smallest ratio ``q_after / q_before`` of any cell (1: no cell got worse; 0: a cell collapsed;
-< 0: a cell inverted). Cells already inverted or degenerate in the input (``q0 <= 0``) are the
-mesh's problem, not the design's (the gate says so), and are left out.
+design is divided by its cell's *reference*, so the minimum over corners is the smallest ratio
+``q_after / reference`` of any cell (1: no cell below its reference; 0: a cell collapsed; < 0: a cell
+inverted). The reference mirrors what the quality gate judges a cell against:
+
+* ``min(q0, good)``: ``q0`` the cell's value on the input mesh, ``good`` 0.1 by default. A cell's loss
+  matters when it nears the qualities the gate refuses (below ``volume.threshold`` 0.05 and 0.01),
+  not when a cube of 0.9 becomes a brick of 0.3; a well-shaped cell counts as worse only below
+  ``lower x good`` (0.03 at the defaults), ahead of the gate's 0.01, and a poor input cell (``q0 <
+  good``) is held to ``lower x q0``. ``good: 1`` is the plain ratio to the input.
+* near the wall (every node within the gate's 0.15 mean chords of the surface), the lower of that and
+  the cell's quality under the design's own map (:mod:`ffdcli.quality.design_map`: the FFD map
+  linearised at the nearest surface node), no lower than :data:`MAP_FLOOR` x the first: what the
+  design itself does to a cell at the wall (halving a tip chord squeezes every cell on the tip's
+  faces) is the design's, which the gate accepts too ("shaped by the design"), not a failure of the
+  volume motion. The reference then depends on the design; its derivative is exact too (the map is
+  affine in the surface displacement and the frames F, both linear in the lattice), except where the
+  corner giving the map's quality, or the branch of the min, switches (a kink, as in any minimum).
+
+Cells already inverted or degenerate in the input (``q0 <= 0``) are the mesh's problem, not the
+design's (the gate says so), and are left out.
 
 The minimum is replaced by the Kreisselmeier-Steinhauser (KS) minimum over every corner ``i``::
 
@@ -15,15 +31,17 @@ The minimum is replaced by the Kreisselmeier-Steinhauser (KS) minimum over every
 a smooth function of the mesh points (the corners' values are smooth wherever no edge has zero
 length) that is never above the true minimum and at most ``ln(n) / rho`` below it (``n`` corners).
 ``rho = ln(n) / gap`` with ``gap`` 0.05 by default: the value is within 0.05 below the worst cell's
-ratio, on any mesh size, so the baseline reads between 0.95 and 1 and a bound ``lower: 0.3`` holds
-the worst cell at 0.3 x its input quality or better. Why KS and not a p-norm: it is defined for
-ratios <= 0 (an inverted cell, exactly what the optimiser must see coming and be pushed back
-from), it bounds the minimum from below (a satisfied constraint is a satisfied minimum), and its
-error is bounded by a number that does not depend on the values.
+ratio, on any mesh size, so the baseline reads 0.95 or more (between 0.95 and 1 when some cell is
+below ``good``) and a bound ``lower: 0.3`` holds every cell at 0.3 x its reference or better. Why KS
+and not a p-norm: it is defined for ratios <= 0 (an inverted cell, exactly what the optimiser must
+see coming and be pushed back from), it bounds the minimum from below (a satisfied constraint is a
+satisfied minimum), and its error is bounded by a number that does not depend on the values.
 
 Derivative: ``dKS/dX = sum_i w_i dr_i/dX`` with the soft-min weights ``w_i = exp(-rho (r_i - m)) /
 sum``; it reaches the design variables through the volume motion's exact transpose
-(:meth:`ffdcli.api.DesignModel.mesh_vjp`: the IDW warp's transpose and the surface's chain rule).
+(:meth:`ffdcli.api.DesignModel.mesh_vjp`: the IDW warp's transpose and the surface's chain rule), and
+through the references near the wall by the design map's transpose
+(:meth:`ffdcli.api.DesignModel.design_map_vjp`).
 Both passes are compiled loops over the cells (:func:`corner_values`, :func:`corner_vjp`), each
 with its NumPy reference beside it.
 """
@@ -38,10 +56,16 @@ from numba import njit, prange
 from ffdcli.constraints.base import Constraint
 from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_table
 
-#: The lower bound when the item gives none: no cell below 0.3 x its input quality.
+#: The lower bound when the item gives none: no cell below 0.3 x its reference.
 MESH_QUALITY_LOWER = 0.3
 #: The KS minimum is at most this below the smallest ratio (``rho = ln(corners) / gap``).
 KS_GAP = 0.05
+#: A cell's reference quality is its input quality, at most this (module docstring): twice the gate's
+#: ``volume.threshold``, so that ``lower x good`` (0.03) is ahead of the qualities the gate refuses.
+MESH_QUALITY_GOOD = 0.1
+#: Near the wall, the design map's quality of a cell counts down to this fraction of its ``base`` (a
+#: map that collapses a cell itself does not excuse the volume from collapsing it too).
+MAP_FLOOR = 0.1
 
 
 # --------------------------------------------------------------------------------------------------
@@ -239,14 +263,19 @@ WEIGHT_CUT = 1e-25
 
 @dataclass(frozen=True, eq=False)
 class MeshQuality(Constraint):
-    """KS minimum over the volume cells' corners of quality after / quality before (module docstring).
+    """KS minimum over the volume cells' corners of quality after / the cell's reference (module
+    docstring): ``min(q0, good)``, and near the wall the lower of that and what the design's own map
+    makes of the cell.
 
     types
         Cell type of each block.
     cells
         Per block: (n_b, nodes) node ids of the cells judged (those valid in the input).
-    inv_base
-        Per block: (n_b,) the block's orientation sign over the cell's input quality ``q0 > 0``.
+    signs
+        Per block: the block's orientation sign.
+    base
+        Per block: (n_b,) the cell's reference away from the wall, ``min(q0, good)`` (``q0 > 0`` the
+        cell's input quality).
     plane
         (3,) the 2D mesh-plane normal (zeros in 3D).
     rho
@@ -255,7 +284,8 @@ class MeshQuality(Constraint):
 
     types: tuple = ()
     cells: tuple = ()
-    inv_base: tuple = ()
+    signs: tuple = ()
+    base: tuple = ()
     plane: np.ndarray = None
     rho: float = 1.0
 
@@ -274,19 +304,51 @@ class MeshQuality(Constraint):
         """Corners aggregated (every corner of every judged cell)."""
         return int(sum(len(d) * len(corner_table(t)[0]) for t, d in zip(self.types, self.cells, strict=True)))
 
-    def ratios(self, X: np.ndarray, *, use_numba: bool = True) -> list[np.ndarray]:
-        """Per block: (n_b, k) each corner's scaled Jacobian at ``X`` (N, 3) over its cell's input quality."""
+    def references(self, X_map: np.ndarray | None = None, zone: np.ndarray | None = None, *,
+                   use_numba: bool = True) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per block: ``(ref (n_b,), active (n_b,) bool, kstar (n_b,))``: each cell's reference; where
+        ``active``, it is the design map's quality of the cell, reached at corner ``kstar``.
+
+        ``X_map`` (N, 3): the input nodes moved by the design's own map where ``zone`` (N,) is true
+        (:mod:`ffdcli.quality.design_map`); a cell with every node there is compared with the lower of
+        its ``base`` and the map's quality, the latter no lower than :data:`MAP_FLOOR` x ``base``."""
         out = []
-        for t, d, ib in zip(self.types, self.cells, self.inv_base, strict=True):
+        for t, d, sign, base in zip(self.types, self.cells, self.signs, self.base, strict=True):
+            ref = base.copy()
+            active = np.zeros(len(d), dtype=bool)
+            kstar = np.zeros(len(d), dtype=np.int64)
+            if X_map is not None and len(d):
+                near = np.flatnonzero(zone[d].all(axis=1))
+                if len(near):
+                    s = sign * corner_values(X_map, d[near], t, self.plane, use_numba=use_numba)
+                    k = np.argmin(s, axis=1)
+                    qm = s[np.arange(len(near)), k]
+                    lo = MAP_FLOOR * base[near]
+                    ref[near] = np.maximum(np.minimum(base[near], qm), lo)
+                    active[near] = (qm < base[near]) & (qm > lo)
+                    kstar[near] = k
+            out.append((ref, active, kstar))
+        return out
+
+    def ratios(self, X: np.ndarray, refs=None, *, use_numba: bool = True) -> list[np.ndarray]:
+        """Per block: (n_b, k) each corner's scaled Jacobian at ``X`` (N, 3) over its cell's reference
+        (``refs`` from :meth:`references`; default the ``base``)."""
+        out = []
+        for j, (t, d, sign) in enumerate(zip(self.types, self.cells, self.signs, strict=True)):
+            ref = self.base[j] if refs is None else refs[j][0]
             s = corner_values(X, d, t, self.plane, use_numba=use_numba)
-            s *= ib[:, None]
+            s *= (sign / ref)[:, None]
             out.append(s)
         return out
 
-    def measure(self, X: np.ndarray, grad: bool = False, *, use_numba: bool = True):
-        """(value, dvalue/dX (N, 3) or None) at mesh points ``X`` (N, 3); ``use_numba=False``: the
-        NumPy reference (:func:`ks_min` of every ratio, the reference reverse product)."""
-        r = self.ratios(X, use_numba=use_numba)
+    def measure(self, X: np.ndarray, grad: bool = False, *, X_map: np.ndarray | None = None,
+                zone: np.ndarray | None = None, use_numba: bool = True):
+        """``(value, dvalue/dX (N, 3) or None, dvalue/dX_map (N, 3) or None)`` at mesh points ``X`` (N, 3)
+        (``X_map``, ``zone``: the design's own map near the wall, see :meth:`references`; without them
+        every cell's reference is its ``base``). ``use_numba=False``: the NumPy reference (:func:`ks_min`
+        of every ratio, the reference reverse products)."""
+        refs = self.references(X_map, zone, use_numba=use_numba)
+        r = self.ratios(X, refs, use_numba=use_numba)
         if not use_numba:
             value, w = ks_min(np.concatenate([b.ravel() for b in r]), self.rho)
             w = np.split(w, np.cumsum([b.size for b in r])[:-1])
@@ -295,33 +357,55 @@ class MeshQuality(Constraint):
             total = sum(_exp_sum_nb(b, m, self.rho) for b in r if b.size)
             value = m - np.log(total) / self.rho
         if not grad:
-            return value, None
+            return value, None, None
         G = np.zeros((len(X), 3))
-        for j, (t, d, ib, b) in enumerate(zip(self.types, self.cells, self.inv_base, r, strict=True)):
+        G_map = None if X_map is None else np.zeros((len(X), 3))
+        for j, (t, d, sign, b, (ref, active, kstar)) in enumerate(zip(self.types, self.cells, self.signs, r, refs,
+                                                                     strict=True)):
+            inv = sign / ref
             if use_numba:
                 coef = np.empty_like(b)
-                _weights_nb(b, m, self.rho, total, ib, WEIGHT_CUT / total, coef)    # the largest weight is 1/total
+                _weights_nb(b, m, self.rho, total, inv, WEIGHT_CUT / total, coef)    # the largest weight is 1/total
             else:
-                coef = w[j].reshape(b.shape) * ib[:, None]
+                coef = w[j].reshape(b.shape) * inv[:, None]
             corner_vjp(X, d, t, self.plane, coef, G, use_numba=use_numba)
-        return value, G
+            if G_map is not None and active.any():
+                # r = sign s / ref: d value / d ref = -sum_k w_k r_k / ref; ref = sign s_map[kstar]
+                a = np.flatnonzero(active)
+                dref = -np.sum(coef[a] / inv[a, None] * b[a], axis=1) / ref[a]
+                cm = np.zeros((len(a), b.shape[1]))
+                cm[np.arange(len(a)), kstar[a]] = sign * dref
+                corner_vjp(X_map, d[a], t, self.plane, cm, G_map, use_numba=use_numba)
+        return value, G, G_map
+
+    def _map(self, inp):
+        """(X_map, zone) of the inputs' design map, or (None, None) without one."""
+        got = inp.design_map()
+        return (None, None) if got is None else got
 
     def value(self, inp):
-        return np.array([self.measure(inp.mesh_X)[0]])
+        X_map, zone = self._map(inp)
+        return np.array([self.measure(inp.mesh_X, X_map=X_map, zone=zone)[0]])
 
     def jacobian(self, inp):
         return self.value_and_jacobian(inp)[1]
 
     def value_and_jacobian(self, inp):
-        value, G = self.measure(inp.mesh_X, grad=True)
-        return np.array([value]), np.asarray(inp.mesh_vjp(G), dtype=float)[None, :]
+        X_map, zone = self._map(inp)
+        value, G, G_map = self.measure(inp.mesh_X, grad=True, X_map=X_map, zone=zone)
+        jac = np.asarray(inp.mesh_vjp(G), dtype=float)
+        if G_map is not None and np.any(G_map):
+            jac = jac + inp.design_map_vjp(G_map)
+        return np.array([value]), jac[None, :]
 
 
 def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuality:
     """The :class:`MeshQuality` of item ``index`` on the input ``mesh`` (its cells and points)."""
     gap = spec.get("gap", KS_GAP)
-    if not isinstance(gap, (int, float)) or isinstance(gap, bool) or not 0 < gap <= 1:
-        raise error(f"gap must be a number in (0, 1], got {gap!r}", f"{key}.gap")
+    good = spec.get("good", MESH_QUALITY_GOOD)
+    for name, v in (("gap", gap), ("good", good)):
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 < v <= 1:
+            raise error(f"{name} must be a number in (0, 1], got {v!r}", f"{key}.{name}")
     cells = [b for b in (mesh.cells if mesh is not None else []) if len(b)]
     if mesh is None or not cells:
         raise error("needs a volume mesh: the mesh has no interior cells whose quality the design could "
@@ -335,7 +419,7 @@ def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuali
         raise error(f"has no quality measure for this mesh: {e}", key) from None
     orientation = cell_orientation(mesh.points, cells, mesh.dim)
     q0 = cell_quality(mesh.points, cells, mesh.dim, orientation=orientation)
-    types, data, inv = [], [], []
+    types, data, signs, base = [], [], [], []
     at = 0
     for blk, sign in zip(cells, orientation.signs, strict=True):
         q = q0[at:at + len(blk)]
@@ -344,11 +428,12 @@ def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuali
         if ok.any():
             types.append(blk.type)
             data.append(np.ascontiguousarray(blk.data[ok], dtype=np.int64))
-            inv.append(float(sign) / q[ok])
+            signs.append(float(sign))
+            base.append(np.minimum(q[ok], float(good)))
     if not data:
         raise error("every cell of the input mesh is inverted or degenerate: there is no quality to keep", key)
     plane = np.zeros(3) if orientation.normal is None else np.asarray(orientation.normal, dtype=np.float64)
     n = sum(len(d) * len(corner_table(t)[0]) for t, d in zip(types, data, strict=True))
     rho = max(np.log(n), 1.0) / float(gap)
     return MeshQuality(index=index, lower=lower, upper=upper, types=tuple(types), cells=tuple(data),
-                       inv_base=tuple(inv), plane=plane, rho=float(rho))
+                       signs=tuple(signs), base=tuple(base), plane=plane, rho=float(rho))

@@ -268,11 +268,14 @@ def constraints_schema() -> dict:
                          {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
                                       "description": "samples per knot span and direction (default 4)"}}),
         "mesh_quality": obj("smooth (KS) minimum over the volume cells of the scaled Jacobian after the design "
-                            "over the cell's input value (1: no cell got worse, < 0: a cell inverted); lower "
-                            "defaults to 0.3",
+                            "over the cell's input value capped at `good` (1: no cell got worse, < 0: a cell "
+                            "inverted); lower defaults to 0.3",
                             {"gap": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
                                      "description": "the smooth minimum is at most this below the worst "
-                                                    "cell's ratio (default 0.05)"}}),
+                                                    "cell's ratio (default 0.05)"},
+                             "good": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                      "description": "a cell's input quality counts as at most this "
+                                                     "(default 0.1; 1: the plain ratio to the input)"}}),
     }
     return {"type": "array",
             "description": "geometric constraints for optimisation; named k<index>.<kind>[<j>]",

@@ -20,6 +20,9 @@ from ffdcli.quality.metrics import cell_orientation, cell_quality, corner_table,
 RECT = REPO / "samples" / "rect_wing.su2"
 AIRFOIL = REPO / "samples" / "naca0012_2d.su2"
 MQ = [{"mesh_quality": {"lower": 0.3}}]
+#: The plain ratio (no cap on the reference): every cell that gets worse counts, so the design map's
+#: branch of the reference (cells near the wall) is active and its derivative is checked too.
+MQ_PLAIN = [{"mesh_quality": {"lower": 0.3, "good": 1.0}}]
 
 # one reference cell of every type (VTK order, positive), and 2D cells in the z = 0 plane
 CELLS = {
@@ -46,8 +49,11 @@ def _jittered(ctype, n=40, scale=0.15, seed=0):
     return pts + jit, data, dim
 
 
-def _mesh_constraint(mesh, gap=None):
-    spec = {} if gap is None else {"gap": gap}
+def _mesh_constraint(mesh, gap=None, good=1.0):
+    """The constraint on ``mesh`` (``good: 1`` unless said: the plain ratio to the input's quality)."""
+    spec = {"good": good} if gap is None else {"gap": gap, "good": good}
+    if good is None:
+        del spec["good"]
     return build_constraints([{"mesh_quality": spec}], None, None, [], mesh=mesh)[0]
 
 
@@ -94,12 +100,12 @@ def test_value_is_a_smooth_lower_bound_of_the_worst_ratio(ctype):
     # a sharper KS: closer
     assert abs(_mesh_constraint(mesh, gap=0.005).measure(moved)[0] - worst) <= 0.005 + 1e-12
     # the gradient of the whole value against central differences
-    val, G = c.measure(moved, grad=True)
+    val, G, _ = c.measure(moved, grad=True)
     d = np.random.default_rng(4).standard_normal(pts.shape) * ([1, 1, 1] if dim == 3 else [1, 1, 0])
     h = 1e-7
     fd = (c.measure(moved + h * d)[0] - c.measure(moved - h * d)[0]) / (2 * h)
     assert np.sum(G * d) == pytest.approx(fd, rel=1e-6)
-    _, Gr = c.measure(moved, grad=True, use_numba=False)
+    _, Gr, _ = c.measure(moved, grad=True, use_numba=False)
     np.testing.assert_allclose(G, Gr, rtol=1e-11, atol=1e-12 * np.abs(G).max())
 
 
@@ -142,11 +148,14 @@ def _fd_constraint(model, names=None, rel=1e-6, step=1e-4):
 def test_derivative_through_the_volume_motion_hex_wing(tmp_path, changes):
     mesh = write_volume_wing(tmp_path, taper=0.6, le_sweep_deg=15)
     model = DesignModel.from_file(write_design(tmp_path, mesh, changes, volume={"method": "idw"},
-                                               extra={"constraints": MQ}))
+                                               extra={"constraints": MQ_PLAIN}))
     assert model.uses_volume()
     J = _fd_constraint(model)
     assert np.abs(J).max() > 0
     assert model.constraint_values()[0] < 1.0 - KS_GAP         # the design made some cell worse
+    c = model.constraints[0]
+    X_map, zone = model.design_map_points()
+    assert sum(a.sum() for _, a, _ in c.references(X_map, zone)) > 0     # the map's branch is in the derivative
 
 
 def test_derivative_through_the_volume_motion_tets_and_quads(tmp_path):
@@ -166,14 +175,15 @@ def test_derivative_through_the_volume_motion_tets_and_quads(tmp_path):
 
 
 @pytest.mark.parametrize("change, path", [
-    ({"twist": {"tip": 0}}, {15.0: "ok", 45.0: "warned", 60.0: "refused"}),
-    ({"dihedral": 0}, {20.0: "ok", 32.0: "warned", 38.0: "refused"}),
+    ({"twist": {"tip": 0}}, {15.0: "ok", 46.0: "warned", 60.0: "refused"}),
+    ({"dihedral": 0}, {20.0: "ok", 35.0: "warned", 38.0: "refused"}),
 ])
 def test_the_constraint_sees_a_refusal_coming(tmp_path, change, path):
     """A growing tip twist (dihedral) on the bundled rectangular wing, volume defaults, recovery off:
     the constraint falls below its bound (0.3) at a value the gate still accepts, and is below 0 (a
     cell inverted) where the gate refuses. (Measured on this mesh: the gate refuses from 48 deg of tip
-    twist, 36 deg of dihedral; mesh_quality crosses 0.3 near 33 and 27 deg.)"""
+    twist, 36 deg of dihedral; mesh_quality crosses 0.3 near 44 and 34 deg; with ``good: 1``, the
+    plain ratio, near 33 and 27 deg.)"""
     design = tmp_path / "rect.yaml"
     design.write_text(json.dumps({"mesh": str(RECT), "surface": "wing", "box": {"points": [6, 8, 2]},
                                   "changes": [change], "constraints": MQ}))
@@ -272,3 +282,24 @@ def test_openmdao_component_outputs_mesh_quality(tmp_path):
         if of == "k0_mesh_quality":
             for key in ("J_fwd", "J_rev"):
                 np.testing.assert_allclose(d[key], d["J_fd"], rtol=1e-5, atol=1e-7, err_msg=f"{wrt} {key}")
+
+
+@pytest.mark.parametrize("changes", [
+    [{"chord": {"tip": 0.5}}],
+    [{"span": 1.15}, {"sweep": 10}, {"twist": {"tip": -10}}, {"chord": {"tip": 0.5}}],
+])
+def test_what_the_design_itself_does_at_the_wall_is_not_counted(tmp_path, changes):
+    """Halving the tip chord squeezes the cells on the tip's faces whatever the volume does: the gate
+    accepts it (shaped by the design's own map), and mesh_quality, which compares the cells near the
+    wall with that map, reads above its default bound; compared with the input mesh alone (``good: 1``,
+    no map) the same mesh reads below it."""
+    design = tmp_path / "chord.yaml"
+    design.write_text(json.dumps({"mesh": str(RECT), "surface": "wing", "box": {"points": [6, 8, 2]},
+                                  "changes": changes, "constraints": [{"mesh_quality": {}}, *MQ_PLAIN]}))
+    model = DesignModel.from_file(design, cache_dir=tmp_path)
+    assert deform(model.run, P=model.lattice()).quality.ok
+    value, plain = model.constraint_values()
+    c = model.constraints[1]
+    alone = c.measure(model.mesh_points())[0]            # no map: every cell against its input quality
+    assert value > MESH_QUALITY_LOWER > alone, (value, plain, alone)
+    assert plain >= alone - 1e-12
