@@ -29,7 +29,9 @@ def check_mesh(mesh, *, threshold: float | None = None, n_worst: int = 5, progre
     kw = {"threshold": DEFAULT_THRESHOLD if threshold is None else threshold, "n_worst": max(n_worst, 1)}
     # the readers through their module: a caller (a test) that replaces one replaces it here too
     if comm.size > 1:        # MPI: each rank judges its part (its cells and nodes), the counts reduced
-        report = check_quality_part(formats.read_part(mesh, comm, progress=progress)[1], comm, **kw)
+        whole, part = formats.read_part(mesh, comm, progress=progress)
+        # polyhedral cells (part None): every rank holds the whole mesh and judges it whole
+        report = check_quality(whole, **kw) if part is None else check_quality_part(part, comm, **kw)
     else:
         report = check_quality(formats.read_mesh(mesh, progress=progress), **kw)
     summary = {"mesh": str(mesh), **report.to_dict(), "seconds": time.perf_counter() - t0}

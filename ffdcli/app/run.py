@@ -60,7 +60,9 @@ class DesignRun:
         :class:`~ffdcli.parallel.partition.MeshPart` and the counts are reduced (the same report, equal to
         the serial one, on every rank)."""
         mesh, comm = self.prep.mesh, self.comm
-        if comm is None or comm.size == 1:
+        if comm is None or comm.size == 1 or mesh.polyhedra is not None:
+            # polyhedral cells: every rank holds the whole mesh and every point, and judges it whole
+            # (the same arithmetic on every rank, so the same report)
             return check_quality(mesh, points, points_before=mesh.points, reference=self.quality_reference(), **kw)
         part = self.quality_part()
         ref = self._quality_part[1]
@@ -277,7 +279,9 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
     part = None
     if comm is not None and comm.size > 1:       # each rank reads its part (where the format allows it)
         mesh, part = formats.read_part(design.mesh, comm, progress=progress)
-        if local and not mesh.is_local:          # a reader that gave every node: keep this rank's rows
+        if mesh.polyhedra is not None:           # polyhedral cells: the mesh stays whole on every rank
+            pass
+        elif local and not mesh.is_local:        # a reader that gave every node: keep this rank's rows
             mesh, rows = localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
             # the reader's part has the global cell indices and count (a partial mesh's own cells are
             # only some): only the rows of its nodes in the local mesh are new

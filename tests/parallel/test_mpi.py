@@ -461,3 +461,52 @@ def test_mpiexec_read_by_parts_gives_each_rank_the_local_mesh_of_the_whole_read(
     """, tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.count(" of ") == 4, proc.stdout
+
+
+@needs_mpi
+@pytest.mark.parametrize("form", ["openfoam-binary-gz", "openfoam-ascii", "cgns-ngon"])
+def test_mpiexec_on_polyhedral_meshes_equals_the_serial_run(tmp_path, form):
+    """Issue 32: an OpenFOAM case (and a CGNS mesh of NGON_n/NFACE_n cells) under 2 ranks: read by
+    rank 0 and broadcast (polyhedra are defined by the whole face list), the warp shared by blocks
+    of rows, the polyhedral gate on every rank, written once: the serial run's files byte for byte,
+    its report, and a refusal's exit status; ``ffd check`` and ``ffd constraints`` too."""
+    from ffdcli.io.formats.openfoam_case import polymesh_of, write_case
+    from ffdcli.testing.cgns_poly import write_ngon_cgns
+    from ffdcli.testing.wings import extruded_wing_mesh
+
+    mesh = extruded_wing_mesh(n_around=25, n_radial=7, n_span=4)
+    poly, patches = polymesh_of(mesh, wall=("wing",))
+    if form == "cgns-ngon":
+        src = write_ngon_cgns(tmp_path / "m.cgns", mesh.points, poly, patches)
+        out_s, out_p = tmp_path / "s.cgns", tmp_path / "p.cgns"
+    else:
+        src = write_case(tmp_path / "case", mesh.points, poly, patches, binary=form.endswith("gz"),
+                         compress=form.endswith("gz"))
+        out_s, out_p = tmp_path / "s", tmp_path / "p"
+    design = tmp_path / "twist.yaml"
+    design.write_text(f"mesh: {src.name}\nsurface: wing\nbox: {{points: [5, 4, 2]}}\n"
+                      "changes:\n  - twist: {tip: 4}\n  - sweep: 5\n"
+                      "constraints:\n  - volume: {lower: 1}\n  - thickness: {chord: [0.3], span: [0.5]}\n")
+    ser = run_ffd("deform", design, "-o", out_s, "--json", cwd=tmp_path)
+    par = mpi_ffd(2, "deform", design, "-o", out_p, "--json", cwd=tmp_path)
+    assert ser.returncode == 0 and par.returncode == 0, par.stderr
+    lines = [ln for ln in par.stdout.splitlines() if ln.strip()]
+    assert len(lines) == 1, par.stdout                                      # printed once
+    a, b = json.loads(ser.stdout), json.loads(lines[0])
+    assert a["quality"] == b["quality"] and a["max_displacement"] == b["max_displacement"]
+    files = sorted(p.relative_to(out_s) for p in out_s.rglob("*") if p.is_file()) if out_s.is_dir() else [Path()]
+    for rel in files:
+        assert (out_s / rel).read_bytes() == (out_p / rel).read_bytes(), rel
+    for cmd in (["check", out_p, "--json"], ["constraints", design, "--json"]):
+        s, p = run_ffd(*cmd, cwd=tmp_path), mpi_ffd(2, *cmd, cwd=tmp_path)
+        assert s.returncode == p.returncode == 0, p.stderr
+        x, y = json.loads(s.stdout), json.loads(p.stdout)
+        for d in (x, y):
+            d.pop("seconds", None)
+        assert x == y
+    # a refusal: the same status and message, nothing written
+    r1, r2 = (tmp_path / f"r{k}{out_s.suffix}" for k in (1, 2))
+    s = run_ffd("deform", design, "--set", "changes.0.twist.tip=80", "-o", r1, cwd=tmp_path)
+    p = mpi_ffd(2, "deform", design, "--set", "changes.0.twist.tip=80", "-o", r2, cwd=tmp_path)
+    assert s.returncode == p.returncode == 3, p.stderr
+    assert p.stderr.count("fails the quality gate") == 1 and not r2.exists()

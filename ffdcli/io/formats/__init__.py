@@ -60,24 +60,22 @@ def read_part(path: str | Path, comm, *, progress=None):
     ``rows`` in the local mesh). SU2 and CGNS/HDF5 files are read by parts, no rank holding every
     node (:func:`ffdcli.io.formats.su2.read_part`, :func:`ffdcli.io.formats.cgns.read_part`); other
     formats are read by rank 0 and broadcast (every rank then holds the whole mesh until it is
-    localized). Errors are agreed on.
+    localized). An OpenFOAM case (polyhedral cells, which only the whole face list defines; ASCII
+    and gzip files cannot be read from an offset either) is read by rank 0 and broadcast, and stays
+    whole on every rank: ``part`` is then None (the run shares the warp by blocks of rows and judges
+    the polyhedra on every rank). Errors are agreed on.
     """
     p = Path(path)
     fmt = comm.run(format_of, p)
     comm.run(check_mesh_path, p)
     if fmt == FOLDER_FORMAT:
-        comm.run(_no_polyhedra_mpi, p)
+        return comm.root_then_bcast(read_mesh, p, progress=progress), None
     if fmt in READ_BY_PARTS:
         mesh, part = _module(fmt).read_part(p, comm, progress=progress)
         comm.run(check_finite_points, mesh)
         return mesh, part
     mesh = comm.root_then_bcast(read_mesh, p, progress=progress)      # transiently whole on every rank
     return localize(mesh, node_owners(mesh.points, comm.size), comm.rank)
-
-
-def _no_polyhedra_mpi(path) -> None:
-    raise InputError("MPI runs on OpenFOAM cases (polyhedral cells) are not supported yet; run without "
-                     "mpiexec (a serial run reads a 1M-cell polyMesh in seconds)", path=path)
 
 
 def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *,

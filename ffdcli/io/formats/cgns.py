@@ -199,9 +199,6 @@ def _unstructured_zone(zn, pts, zone, offset, n_points, cell_dim, phys_dim, file
         sections.append(_read_section(sec, offset, n_points, file))
     poly = cgns_ngon.zone_polyhedra(sections, pts, offset, cell_dim, file)
     if poly is not None:
-        if share is not None:
-            raise InputError("MPI runs on NGON_n/NFACE_n (polyhedral) zones are not supported yet; run "
-                             "without mpiexec", path=file, key=zn.name)
         polys.append(poly)
     used: set[int] = set()
     for zbc in _children(zn, "ZoneBC_t"):
@@ -266,6 +263,12 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
     dim = 0
     bar = progress("reading CGNS zones", len(zones_nodes)) if progress else None
     sizes = [_zone_size(base, zn, file) for base, zn in zones_nodes]
+    if share is not None:        # polyhedral cells need the whole mesh (every rank sees the same tree)
+        for _, zn in zones_nodes:
+            for sec in _children(zn, "Elements_t"):
+                head = _data(sec)
+                if head is not None and int(np.asarray(head).ravel()[0]) in (cgns_ngon.NGON_N, cgns_ngon.NFACE_N):
+                    raise WholeMeshNeeded(zn.name)
     if share is not None and all(not z[2] and z[0] >= z[1] for z in sizes):
         # unstructured volume zones only: this rank reads its block of the points (hyperslabs of
         # the coordinate arrays); structured zones (their orientation) and surfaces need them all
@@ -366,6 +369,11 @@ def _interior_rows(sec, offset: int, n_points: int, cell_dim: int, file: Path, s
     return _Rows(t, n, a, ids + offset)
 
 
+class WholeMeshNeeded(Exception):  # noqa: N818 - not an error: a signal to read_part
+    """Raised by a read by parts that met NGON_n/NFACE_n (polyhedral) cells: polyhedra are defined by
+    the whole face list, so the mesh is read whole (:func:`read_part`)."""
+
+
 def read_part(path: str | Path, comm, progress=None):
     """One MPI rank's read of a CGNS/HDF5 mesh: ``(mesh, part)``, its local mesh and part; a collective.
 
@@ -379,7 +387,9 @@ def read_part(path: str | Path, comm, progress=None):
     owners of their nodes, and the halo and marker nodes' coordinates are asked of the ranks that
     read them. ``mesh`` is the rank's local mesh (:func:`ffdcli.parallel.partition.localize` of :func:`read`'s
     mesh), ``part`` its :class:`~ffdcli.parallel.partition.MeshPart`; ``mesh.source`` (zones, paths: small) on
-    every rank. An ADF file is read by rank 0, broadcast and localized.
+    every rank. An ADF file is read by rank 0, broadcast and localized. A mesh with NGON_n/NFACE_n
+    (polyhedral) zones is read by rank 0 and broadcast, and stays whole on every rank: ``part`` is
+    then None (as for an OpenFOAM case, :func:`ffdcli.io.formats.read_part`).
     """
 
     p = Path(path)
@@ -395,13 +405,18 @@ def read_part(path: str | Path, comm, progress=None):
         with h5:
             try:
                 mesh, got = _read_tree(h5, p, "hdf5", progress, share=comm.share)
+            except WholeMeshNeeded:          # every rank sees the same tree: the same answer on every rank
+                return None
             except (KeyError, OSError, ValueError, TypeError, IndexError) as exc:
                 raise InputError(f"corrupt or unsupported CGNS file: {exc}", path=p) from None
         n = sum(z.n_points for z in mesh.source.zones)
         a, b = comm.share(n) if got is None else got
         return mesh, np.ascontiguousarray(mesh.points if got is not None else mesh.points[a:b]), a, n
 
-    mesh, block, a, n = comm.run(parse)
+    got = comm.run(parse)
+    if got is None:
+        return comm.root_then_bcast(read, p, progress), None
+    mesh, block, a, n = got
     check_finite_rows(comm, block, a, p)         # before the owners (Morton codes of finite points)
     rows = mesh.cells
     types, blocks, ids, start = [], [], [], 0
