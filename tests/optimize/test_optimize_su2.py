@@ -14,7 +14,7 @@ import pytest
 import yaml
 
 from ffdcli.optimize.solvers.base import find_program
-from ffdcli.optimize.solvers.su2 import config_value, read_config, with_keys
+from ffdcli.optimize.solvers.su2 import adjoint_convergence, config_value, read_config, with_keys
 from ffdcli.optimize.workflow import run_optimize
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -64,6 +64,20 @@ def test_with_keys_changes_only_the_named_keys():
     assert text.splitlines() == ["% comment", "SOLVER= EULER", "MESH_FILENAME= mesh.su2", "OUTPUT_FILES= (RESTART)",
                                  "MATH_PROBLEM= DIRECT"]
     assert config_value(lines, "MESH_FILENAME") == "b.su2"
+
+
+@pytest.mark.parametrize("given, expect", [
+    (None, {}),
+    ("RMS_DENSITY", {"CONV_FIELD": "RMS_ADJ_DENSITY"}),
+    ("( RMS_DENSITY, RMS_ENERGY )", {"CONV_FIELD": "(RMS_ADJ_DENSITY, RMS_ADJ_ENERGY)"}),
+    ("RMS_ADJ_DENSITY", {"CONV_FIELD": "RMS_ADJ_DENSITY"}),
+    ("DRAG", {"CONV_FIELD": "DRAG"}),
+])
+def test_the_adjoint_watches_its_own_residual(given, expect):
+    """SU2_CFD_AD ignores a flow residual named in CONV_FIELD and runs to ITER: the adjoint's config
+    names the adjoint's residual instead."""
+    lines = ["SOLVER= EULER", "CONV_RESIDUAL_MINVAL= -8"] + ([] if given is None else [f"CONV_FIELD= {given}"])
+    assert adjoint_convergence(lines) == expect
 
 
 def test_find_program_order(tmp_path, monkeypatch):

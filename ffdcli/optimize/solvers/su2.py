@@ -263,7 +263,8 @@ class SU2(Solver):
         log, seconds = self._run("SU2_CFD_AD" if discrete else "SU2_CFD", folder, f"adjoint_{sfx}", {
             **self._common(mesh, warm), "MATH_PROBLEM": "DISCRETE_ADJOINT" if discrete else "CONTINUOUS_ADJOINT",
             "OBJECTIVE_FUNCTION": function, "OBJECTIVE_WEIGHT": "1.0", "CONV_FILENAME": f"history_adj_{sfx}",
-            "SURFACE_ADJ_FILENAME": f"surface_adjoint_{sfx}", "OUTPUT_FILES": "(RESTART, RESTART_ASCII, SURFACE_CSV)"})
+            "SURFACE_ADJ_FILENAME": f"surface_adjoint_{sfx}", "OUTPUT_FILES": "(RESTART, RESTART_ASCII, SURFACE_CSV)",
+            **adjoint_convergence(self.lines)})
         hist = folder / f"history_adj_{sfx}.csv"
         self._converged(log, read_history(hist) if hist.is_file() else {}, f"adjoint of {function}")
         if discrete:
@@ -273,6 +274,22 @@ class SU2(Solver):
         path = folder / f"surface_adjoint_{sfx}.csv"
         ids, values = _read_surface_sensitivity(path, mesh, log)
         return Sensitivity(ids=ids, values=values, seconds=seconds, log=log, approximate=True)
+
+
+def adjoint_convergence(lines: list[str]) -> dict[str, str]:
+    """The adjoint's ``CONV_FIELD`` for a config that names the flow's: each ``RMS_<VAR>`` becomes
+    ``RMS_ADJ_<VAR>`` (SU2's adjoint history names). SU2_CFD_AD ignores a flow field ("Ignoring
+    Convergence Field(s): RMS_DENSITY") and then runs every ``ITER`` iteration: on the ONERA M6,
+    3,000 iterations where -8 was reached by 2,700, and a warm-started adjoint, which starts near
+    its answer, would run all of them too. No ``CONV_FIELD`` (SU2's default): nothing to change.
+    Other fields (a Cauchy criterion on a coefficient) are kept."""
+    given = config_value(lines, "CONV_FIELD")
+    if not given:
+        return {}
+    fields = [t for t in re.split(r"[\s,()]+", given) if t]
+    mapped = [f"RMS_ADJ_{f[4:]}" if f.upper().startswith("RMS_") and not f.upper().startswith("RMS_ADJ_") else f
+              for f in fields]
+    return {"CONV_FIELD": mapped[0] if len(mapped) == 1 else "(" + ", ".join(mapped) + ")"}
 
 
 def _columns(path: Path, log: Path) -> tuple[list[str], np.ndarray]:
