@@ -60,8 +60,11 @@ venv: $(VENV)/.stamp-test
 demo: $(VENV)/.stamp-viz $(VENV)/.stamp-warm
 	$(BIN)/python -m ffdcli.app.demo --out $(OUT)
 
+# Two runs: the suite without the real solvers, then the tests that run SU2 and OpenFOAM (skipped with a
+# reason where absent); each prints its wall time and its slowest tests.
 test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz $(VENV)/.stamp-openfoam $(VENV)/.stamp-warm
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q -m "not solver" --durations=15
+	$(BIN)/python -m pytest -q -m solver --durations=10
 
 bench: $(VENV)/.stamp-test $(VENV)/.stamp-warm
 	$(BIN)/python -m benchmarks

@@ -15,7 +15,7 @@ import pytest
 from conftest import REPO, SU2_MISSING, run_ffd, su2_folder
 
 SU2 = su2_folder()
-pytestmark = [pytest.mark.slow, pytest.mark.skipif(SU2 is None, reason=SU2_MISSING)]
+pytestmark = [pytest.mark.slow, pytest.mark.solver, pytest.mark.skipif(SU2 is None, reason=SU2_MISSING)]
 
 
 def su2_run(folder, mesh):

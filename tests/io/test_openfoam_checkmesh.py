@@ -15,8 +15,9 @@ from ffdcli.io.formats import read_mesh
 from ffdcli.quality.polyhedral import poly_figures
 from ffdcli.testing import foam
 
-pytestmark = pytest.mark.skipif(not foam.have_openfoam(), reason="OpenFOAM (checkMesh) is not installed: "
-                                "apt-get install openfoam openfoam-examples (make test does it as root)")
+pytestmark = [pytest.mark.solver,
+              pytest.mark.skipif(not foam.have_openfoam(), reason="OpenFOAM (checkMesh) is not installed: "
+                                 "apt-get install openfoam openfoam-examples (make test does it as root)")]
 
 
 def _agree(fig: dict, cm: dict) -> None:

@@ -65,6 +65,7 @@ def test_design_loop_dry_run(tmp_path):
     assert len(json.loads((tmp_path / "w" / "results.json").read_text())) == 2
 
 
+@pytest.mark.solver
 @pytest.mark.skipif(su2_folder() is None, reason=SU2_MISSING)
 def test_design_loop_with_su2(tmp_path):
     design, cfg = _rect_design(tmp_path)

@@ -54,6 +54,7 @@ def _cd(mesh: Path, folder: Path, bindir: Path) -> float:
     return last["CD"]
 
 
+@pytest.mark.solver
 @pytest.mark.skipif(su2_folder() is None, reason=SU2_MISSING)
 @pytest.mark.parametrize("key, name, step", [("changes.0.twist", "c0.twist", 0.01),
                                              ("changes.1.shape.upper.3", "c1.shape.upper[3]", 1e-4)])

@@ -29,6 +29,7 @@ def su2_missing() -> str | None:
     return None
 
 
+@pytest.mark.solver
 @pytest.mark.skipif(su2_missing() is not None, reason=str(su2_missing()))
 def test_two_iterations_with_su2(tmp_path):
     shutil.copyfile(ROOT / "samples" / "naca0012_inv.su2", tmp_path / "naca0012_inv.su2")
