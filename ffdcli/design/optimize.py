@@ -10,7 +10,7 @@ solver's configuration exists.
 Defaults (documented in docs/optimize.md): solver ``su2``, objective ``DRAG``, method ``SLSQP``,
 iterations 20, tolerance 1e-6, folder ``opt/`` beside the design file, adjoint ``None`` (the solver
 chooses: discrete where it is found), max_failures 3, feasibility 1e-4, step 0.1, line_search 4,
-warm_start true, screen 0.3, move_limit 0.1 (method ``SQP`` only).
+warm_start true, screen 0.3, move_limit 0.1 (method ``SQP`` only), concurrent_adjoints 1.
 """
 
 from __future__ import annotations
@@ -57,6 +57,7 @@ class OptimizeSettings:
     warm_start: bool = True
     screen: float | None = 0.3
     move_limit: float = 0.1
+    concurrent_adjoints: int = 1
 
     @property
     def function_names(self) -> list[str]:
@@ -120,7 +121,8 @@ def optimize_settings(design, *, check_files: bool = True) -> OptimizeSettings:
         step=float(data.get("step", 0.1)), line_search=int(data.get("line_search", 4)),
         warm_start=bool(data.get("warm_start", True)),
         screen=None if "screen" in data and data["screen"] is None else float(data.get("screen", 0.3)),
-        move_limit=float(data.get("move_limit", 0.1)))
+        move_limit=float(data.get("move_limit", 0.1)),
+        concurrent_adjoints=int(data.get("concurrent_adjoints", 1)))
 
 
 def select_variables(names: list[str], patterns, *, error=None) -> list[int]:

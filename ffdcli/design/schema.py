@@ -341,6 +341,9 @@ def optimize_schema() -> dict:
             "screen": {"type": ["number", "null"], "minimum": 0,
                        "description": "a constraint function farther than this (scaled) from its bounds reuses its "
                                       "latest adjoint gradient (default 0.3; null: every adjoint at every iterate)"},
+            "concurrent_adjoints": {"type": "integer", "minimum": 1,
+                                    "description": "adjoints of one design run at once (default 1: one after "
+                                                   "the other; a machine with cores to spare: one per function)"},
             "line_search": {"type": "integer", "minimum": 1,
                             "description": "evaluations of one line search before the run ends (default 4)"},
         }}

@@ -80,6 +80,12 @@ def write_picture(path: Path, evaluations: list[Evaluation], violations: dict[in
     ax.set_ylabel(objective, color="C0")
     ax2 = ax.twinx()
     worst = [max(violations[e.index], 1e-2 * feasibility) for e in its]     # 0 drawn at the plot's floor
+    # the range set first (one value, or none, would give an empty range, which matplotlib warns about)
+    ys = [e.functions[objective] for e in ok]
+    if ys and min(ys) == max(ys):
+        ax.set_ylim(ys[0] - (0.1 * abs(ys[0]) or 1.0), ys[0] + (0.1 * abs(ys[0]) or 1.0))
+    ax2.set_yscale("log")
+    ax2.set_ylim(min(worst + [feasibility]) / 3, max(worst + [feasibility]) * 3)
     ax2.semilogy(range(len(its)), worst, "s--", color="C3", ms=4, label="worst violation")
     ax2.axhline(feasibility, color="C3", lw=0.6, ls=":")
     ax2.set_ylabel("worst constraint violation", color="C3")

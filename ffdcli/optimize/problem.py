@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -42,16 +43,22 @@ class OptimizationProblem:
         Called with each evaluation once it is finished (a flow, or its adjoints): the progress line.
     warm_start : bool
         Offer the solver the nearest finished evaluation's folder to start from.
+    concurrent : int
+        Adjoints of one evaluation run at once (``optimize.concurrent_adjoints``): the solver's runs in
+        threads, each waiting on its own process; the chain to dJ/dv stays in this thread, in the
+        functions' order. 1: one after the other.
     """
 
     def __init__(self, model, solver: Solver, store: EvaluationStore, functions: list[str],
-                 report: Callable[[Evaluation, str], None] | None = None, warm_start: bool = True):
+                 report: Callable[[Evaluation, str], None] | None = None, warm_start: bool = True,
+                 concurrent: int = 1):
         self.model = model
         self.solver = solver
         self.store = store
         self.functions = list(functions)
         self.report = report or (lambda ev, stage: None)
         self.warm_start = warm_start
+        self.concurrent = max(1, int(concurrent))
         self.iteration = 0
         self.counts = {"flow": 0, "adjoint": 0, "evaluations": 0, "reused": 0}
         self.seconds = {"solver": 0.0, "ffd": 0.0}
@@ -126,16 +133,19 @@ class OptimizationProblem:
         grads = dict(ev.gradients)
         t_solver = t_ffd = 0.0
         mesh_path = ev.folder / self.mesh_name
-        for name in functions:
-            if name in grads:
-                continue
-            try:
-                sens = self.solver.adjoint(ev.folder, mesh_path, name, start=self._nearest(ev.values, name))
-            except SolverFailure as e:
-                self.counts["adjoint"] += 1
+        todo = [name for name in functions if name not in grads]
+        starts = {name: self._nearest(ev.values, name) for name in todo}
+
+        def run(name):
+            return self.solver.adjoint(ev.folder, mesh_path, name, start=starts[name])
+
+        for name, outcome in self._solve_all(todo, run):
+            self.counts["adjoint"] += 1
+            if isinstance(outcome, SolverFailure):
+                e = outcome
                 ev = ev.with_(failed=f"adjoint of {name}: {e.reason}", log=None if e.log is None else str(e.log))
                 break
-            self.counts["adjoint"] += 1
+            sens = outcome
             t_solver += sens.seconds
             t0 = time.perf_counter()
             grads[name] = self.chain(ev.values, sens)
@@ -149,6 +159,26 @@ class OptimizationProblem:
         ev = self.store.save(ev)
         self.report(ev, "adjoint")
         return ev
+
+    def _solve_all(self, names: list[str], run):
+        """``(name, Sensitivity or SolverFailure)`` for each of ``names`` in order, ``run(name)`` one after
+        the other, or :attr:`concurrent` at once (threads: each waits on its solver process). One after
+        the other, a failure ends the list (the next adjoints are not run)."""
+        if self.concurrent == 1 or len(names) < 2:
+            for name in names:
+                try:
+                    yield name, run(name)
+                except SolverFailure as e:
+                    yield name, e
+                    return
+            return
+        with ThreadPoolExecutor(max_workers=min(self.concurrent, len(names))) as pool:
+            futures = [(name, pool.submit(run, name)) for name in names]
+            for name, fut in futures:
+                try:
+                    yield name, fut.result()
+                except SolverFailure as e:
+                    yield name, e
 
     def _nearest(self, values: np.ndarray, adjoint_of: str | None = None) -> Path | None:
         """The folder of the finished evaluation nearest to ``values`` (with the adjoint of ``adjoint_of``

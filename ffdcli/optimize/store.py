@@ -74,7 +74,8 @@ def file_hash(path: Path) -> str:
 
 #: Keys of ``optimize:`` that steer the optimiser but do not change what an evaluation computes.
 RUN_KEYS = ("iterations", "tolerance", "max_failures", "method", "line_search", "step", "scale", "folder",
-            "feasibility", "functions", "objective", "variables", "warm_start", "screen")
+            "feasibility", "functions", "objective", "variables", "warm_start", "screen",
+            "concurrent_adjoints")
 
 
 def inputs_hash(mesh: Path, solver_state: str, data: dict, names: list[str]) -> str:

@@ -72,7 +72,7 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
         report(f"resuming: {store.reused} finished evaluations in {folder}")
     problem = OptimizationProblem(model, solver, store, settings.function_names,
                                   report=lambda ev, stage: report(progress_line(ev, stage, settings, folder)),
-                                  warm_start=settings.warm_start)
+                                  warm_start=settings.warm_start, concurrent=settings.concurrent_adjoints)
     head = {"solver": info.name, "adjoint": info.adjoint, "variables": [model.names[i] for i in chosen]}
     if check is not None:
         which = chosen if not check else select_variables(model.names, check)

@@ -272,3 +272,50 @@ def test_sqp_steps_back_from_a_failed_design(tmp_path):
     r = np.where(np.isfinite(model.upper - model.lower), model.upper - model.lower, 1.0)
     x = [np.array(e["values"]) / r for e in evs]                   # the optimiser's scaled variables
     assert np.abs(x[k + 1] - x[anchor]).max() <= 0.25 * np.abs(x[k] - x[anchor]).max() + 1e-12
+
+
+class _SlowAdjoints(AnalyticSolver):
+    """The analytic stand-in whose adjoints take 0.3 s each and record when they ran (and fail for
+    ``fail``): what ``concurrent_adjoints`` changes is when they run, never what they give."""
+
+    def __init__(self, config, fail=None):
+        super().__init__(config)
+        self.spans, self.fail = [], fail
+
+    def adjoint(self, folder, mesh, function, start=None):
+        import time
+
+        t0 = time.perf_counter()
+        time.sleep(0.3)
+        self.spans.append((t0, time.perf_counter()))
+        if function == self.fail:
+            from ffdcli.optimize.solvers.base import SolverFailure
+            raise SolverFailure(f"the adjoint of {function} diverged (a test)", None)
+        return super().adjoint(folder, mesh, function, start)
+
+
+def test_concurrent_adjoints_give_the_same_run_and_overlap(tmp_path):
+    runs = {}
+    for n in (1, 2):
+        (tmp_path / f"c{n}").mkdir()
+        path = write_case(tmp_path / f"c{n}", iterations=3, concurrent_adjoints=n)
+        solver = _SlowAdjoints(path.parent / "analytic.yaml")
+        out = run_optimize(path, solver=solver)
+        runs[n] = (out, history(path.parent / "opt" / "history.csv"), solver.spans)
+    (a, ha, sa), (b, hb, sb) = runs[1], runs[2]
+    assert a["adjoint_solves"] == b["adjoint_solves"] > 2
+    assert [r["objective"] for r in ha] == [r["objective"] for r in hb]       # the same run, value for value
+    assert a["objective"]["best"] == b["objective"]["best"]
+
+    def overlapping(spans):
+        spans = sorted(spans)
+        return sum(s1 < e0 for (_, e0), (s1, _) in zip(spans, spans[1:]))
+    assert overlapping(sa) == 0 and overlapping(sb) >= 1                     # two at once with 2
+
+
+def test_a_failed_concurrent_adjoint_is_recorded(tmp_path):
+    path = write_case(tmp_path, iterations=2, concurrent_adjoints=2, max_failures=0)
+    out = run_optimize(path, solver=_SlowAdjoints(path.parent / "analytic.yaml", fail="LIFT"))
+    rows = history(tmp_path / "opt" / "history.csv")
+    assert "adjoint of LIFT" in rows[0]["failed"] and "diverged" in rows[0]["failed"]
+    assert out["status"] != "converged"

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 import re
 import shutil
 from pathlib import Path
@@ -255,7 +256,11 @@ class SU2(Solver):
 
     def adjoint(self, folder: Path, mesh: Path, function: str, start: Path | None = None) -> Sensitivity:
         sfx = ADJOINT_SUFFIX.get(function, function.lower())
-        shutil.copyfile(folder / "restart_flow.dat", folder / "solution_flow.dat")
+        # the flow's solution, in place by a rename: adjoints of one design may run at once
+        # (optimize.concurrent_adjoints), and one must never read the file while another writes it
+        part = folder / f".solution_flow.{sfx}.part"
+        shutil.copyfile(folder / "restart_flow.dat", part)
+        os.replace(part, folder / "solution_flow.dat")
         warm = start is not None and (Path(start) / f"restart_adj_{sfx}.dat").is_file()
         if warm:                      # the adjoint starts from a nearby design's adjoint solution
             shutil.copyfile(Path(start) / f"restart_adj_{sfx}.dat", folder / f"solution_adj_{sfx}.dat")
