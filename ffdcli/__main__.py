@@ -8,9 +8,10 @@ def run() -> None:
     ends like one during the work: one line, status 130, no traceback."""
     from ffdcli.errors import SignalRecorder  # noqa: PLC0415  (light, stdlib only)
 
-    # under mpiexec, SIGTERM/SIGHUP recorded from here (before numpy loads) to the process's end: a signal
-    # during the interpreter's exit (MPI_Finalize) is recorded, not fatal
-    SignalRecorder().__enter__()
+    # under mpiexec, SIGTERM/SIGHUP recorded from here (before numpy loads) to the end of the run, then
+    # ignored: a signal during the interpreter's exit (MPI_Finalize) changes nothing of a finished run
+    recorder = SignalRecorder()
+    recorder.__enter__()
     try:
         from ffdcli.cli import main  # noqa: PLC0415  (imported here: an interrupt during the import is caught)
 
@@ -18,6 +19,8 @@ def run() -> None:
     except KeyboardInterrupt:
         sys.stderr.write("ffd: error: interrupted; nothing was written\n")
         sys.exit(130)
+    finally:
+        recorder.ignore_from_now_on()
 
 
 if __name__ == "__main__":

@@ -117,6 +117,16 @@ class SignalRecorder:
                     self._old[s] = signal.signal(s, self)
         return self
 
+    def ignore_from_now_on(self) -> None:
+        """The process is ending (the run's status is settled): the watched signals are ignored from
+        here. CPython's finalization puts back the default handler of every signal that has a Python
+        one, and ``MPI_Finalize`` runs after it: a SIGTERM that mpiexec forwards then killed a rank with
+        no message (exit 15) after the run had finished. Active recorders only (under mpiexec)."""
+        if self.active:
+            for s in WATCHED_SIGNALS:
+                with contextlib.suppress(ValueError, OSError):
+                    signal.signal(s, signal.SIG_IGN)
+
     def __exit__(self, *exc) -> None:
         for s, h in self._old.items():
             with contextlib.suppress(ValueError, OSError):
