@@ -464,9 +464,9 @@ def test_mpiexec_read_by_parts_gives_each_rank_the_local_mesh_of_the_whole_read(
 
 
 @needs_mpi
-@pytest.mark.parametrize("form", ["openfoam-binary-gz", "openfoam-ascii", "cgns-ngon"])
+@pytest.mark.parametrize("form", ["openfoam-binary-gz", "cgns-ngon"])   # (the ASCII reader: the serial tests)
 def test_mpiexec_on_polyhedral_meshes_equals_the_serial_run(tmp_path, form):
-    """Issue 32: an OpenFOAM case (and a CGNS mesh of NGON_n/NFACE_n cells) under 2 ranks: read by
+    """Issue 32: an OpenFOAM case (binary, gzip) and a CGNS mesh of NGON_n/NFACE_n cells under 2 ranks: read by
     rank 0 and broadcast (polyhedra are defined by the whole face list), the warp shared by blocks
     of rows, the polyhedral gate on every rank, written once: the serial run's files byte for byte,
     its report, and a refusal's exit status; ``ffd check`` and ``ffd constraints`` too."""
