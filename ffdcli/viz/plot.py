@@ -115,7 +115,9 @@ def section_stations(box) -> list[tuple[str, int, float]]:
     """(label, lattice section j, span coordinate of the cut) of the root, mid and tip panels.
 
     The root and mid cuts lie on their lattice section; the tip cut lies 2 % of the span inboard of
-    the last section, which sits at the very tip, where a closed tip has no airfoil left to cut."""
+    the last section, which sits at the very tip, where a closed tip has no airfoil left to cut (and
+    the root cut moves 2 % outboard when the root is open at its plane, a symmetry plane: the panels'
+    titles say "near")."""
     m = len(box.stations)
     st = np.asarray(box.stations, dtype=np.float64)
     jm = (m - 1) // 2 if m > 2 else 0
@@ -136,9 +138,15 @@ def _section_curves(part: Part) -> dict:
     if box.dim == 2:               # the airfoil itself: every surface point
         return {"airfoil": (0.0, 0, X0[:, [c, t]], X1[:, [c, t]])}
     out = {}
+    st = np.asarray(box.stations, dtype=np.float64)
     for label, j, value in section_stations(box):
         if len(part.edges):
             a, b, w = _edge_cut(X0, part.edges, s, value)
+            cut = X0[a] + w[:, None] * (X0[b] - X0[a])
+            if label == "root" and (len(a) < 3 or np.ptp(cut[:, c]) <= 1e-3 * abs(st[-1] - st[0])):
+                # a root open at its plane (a symmetry plane) leaves no airfoil there: 2 % outboard
+                value = float(st[0] + 0.02 * (st[-1] - st[0]))
+                a, b, w = _edge_cut(X0, part.edges, s, value)
             q0 = (X0[a] + w[:, None] * (X0[b] - X0[a]))[:, [c, t]]
             q1 = (X1[a] + w[:, None] * (X1[b] - X1[a]))[:, [c, t]]
         else:
@@ -318,7 +326,7 @@ def _section_panel(ax, part: Part, label: str, value: float, j: int, q0, q1, nam
         ax.plot(Q[..., 0].ravel(), Q[..., 1].ravel(), "o", ms=2.5, color=color, alpha=0.8)
     if box.dim == 3:
         eta = span_fraction(box, value)
-        on = "on" if label != "tip" else "near"
+        on = "on" if abs(value - float(box.stations[j])) <= 1e-9 * abs(box.stations[-1] - box.stations[0]) else "near"
         ax.set_title(f"{label}: cut {on} lattice section j = {j}, \u03b7 = {eta:.2f}", fontsize=10)
     ax.set_xlabel(names[0])
     ax.set_ylabel(names[1])

@@ -243,3 +243,27 @@ def test_plot_parts_draws_several_components(tmp_path):
     r1, b1 = red_and_black(read_png(one))
     r2, b2 = red_and_black(read_png(two))
     assert b2.sum() > b1.sum() + 300 and r2.sum() > r1.sum()
+
+
+def test_root_cut_of_a_root_open_at_a_noisy_symmetry_plane(tmp_path):
+    """A half-wing's root nodes lie on the symmetry plane only to rounding (the ONERA M6 mesh: span
+    coordinates -3e-11 to 0): a cut on the lattice's first section, which the box puts at the lowest
+    of them, met only that node's edges (four points in one place, an empty root panel). The root cut
+    then moves 2 % of the span outboard, and the panel says "near"."""
+    from ffdcli.app.deformation import deform
+    from ffdcli.app.run import load_run
+    from ffdcli.design import load_design
+    from ffdcli.io.formats import read_mesh, write_mesh
+    from ffdcli.viz.plot import section_curves, span_fraction
+
+    src = read_mesh(write_surface_wing(tmp_path))
+    pts = src.points.copy()
+    s = int(np.argmax(np.ptp(pts, axis=0)))                    # the span axis
+    root = np.flatnonzero(pts[:, s] == pts[:, s].min())
+    pts[root, s] += np.random.default_rng(0).uniform(-3e-11, 0.0, len(root))
+    mesh = tmp_path / "noisy.su2"
+    write_mesh(src, mesh, pts)
+    run = load_run(load_design(write_design(tmp_path, mesh, [{"twist": {"tip": 5}}], name="noisy.yaml")))
+    value, j, q0, q1 = section_curves(run, deform(run))["root"]
+    assert j == 0 and len(q0) > 20 and np.ptp(q0[:, 0]) > 0.5 * np.ptp(pts[:, 0]) / 2
+    assert np.isclose(span_fraction(run.box, value), 0.02)
