@@ -2,7 +2,8 @@
 
 Runs every design file of ``configs/`` that is a deformation (:func:`demo_cases`: deform, lattice
 VTK, PNG), the NACA0012 -> S1223 fit, and writes ``out/index.md`` listing each case with its one-line
-summary and picture. This is what ``make demo`` runs.
+summary and picture. This is what ``make demo`` runs; the cases run side by side, one worker process
+per core (:mod:`ffdcli.app.processes`), and print one line each as they finish.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import yaml
 
 from ffdcli.app.deformation import deform
 from ffdcli.app.fit import fit_design
+from ffdcli.app.processes import default_jobs, run_steps
 from ffdcli.app.run import load_run
 from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
@@ -120,36 +122,50 @@ def write_index(rows: list[dict], out: Path) -> Path:
     return path
 
 
+def demo_step(kind: str, arg: str, out: str) -> dict:
+    """One demo step in a worker (:func:`run_case` of a design file, or :func:`run_fit`); its summary
+    row, or ``{"error": message}`` for a design that cannot run (the demo then stops with exit 2)."""
+    try:
+        if kind == "fit":
+            return run_fit(Path(out), no_progress) or {}
+        return run_case(Path(arg), Path(out), no_progress)
+    except FfdError as e:
+        return {"error": str(e)}
+
+
 def main(argv=None) -> int:
 
     ap = argparse.ArgumentParser(prog="python -m ffdcli.app.demo", description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out", help="output folder (default: out)")
     ap.add_argument("--configs", default=str(REPO / "configs"), help="folder of design files")
     ap.add_argument("--only", nargs="*", help="case names (file stems) to run")
+    ap.add_argument("-j", "--jobs", type=int, default=None,
+                    help="cases side by side in worker processes (default: one per core; 1: one after the other)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     configs = demo_cases(Path(args.configs))
     if args.only:
         configs = [c for c in configs if c.stem in args.only]
-
-    rows = []
-    t0 = time.perf_counter()
-    for i, config in enumerate(configs, 1):
-        try:
-            row = run_case(config, out, no_progress)
-        except FfdError as e:
-            print(f"[{i}/{len(configs)}] {config.stem}: error: {e}", file=sys.stderr, flush=True)
-            return 2
-        rows.append(row)
-        print(f"[{i}/{len(configs)}] {row['case']:<24} {row['changes']:<28} max disp {row['max_displacement']:.3g}"
-              f"  {row['quality']}  ({row['seconds']:.1f} s)", flush=True)
+    todo = [("case", str(c)) for c in configs]
     if not args.only or "naca0012_s1223_fit" in args.only:
-        row = run_fit(out, no_progress)
-        if row:
-            rows.append(row)
-            print(f"[fit] {row['changes']} ({row['seconds']:.1f} s)", flush=True)
-    index = write_index(rows, out)
+        todo.insert(0, ("fit", ""))                          # the longest step first
+    names = [Path(arg).stem if kind == "case" else "naca0012_s1223_fit" for kind, arg in todo]
+    jobs = args.jobs or default_jobs(len(todo))
+    print(f"ffd demo: {len(todo)} cases into {out}/, {jobs} at a time", flush=True)
+
+    rows: dict[int, dict] = {}
+    t0 = time.perf_counter()
+    for k, (i, row) in enumerate(run_steps(demo_step, [(kind, arg, str(out)) for kind, arg in todo], jobs), 1):
+        if "error" in row:
+            print(f"[{k}/{len(todo)}] {names[i]}: error: {row['error']}", file=sys.stderr, flush=True)
+            return 2
+        if not row:
+            continue
+        rows[i] = row
+        print(f"[{k}/{len(todo)}] {row['case']:<24} {row['changes']:<28} max disp {row['max_displacement']:.3g}"
+              f"  {row['quality']}  ({row['seconds']:.1f} s)", flush=True)
+    index = write_index([rows[i] for i in sorted(rows)], out)
     print(f"wrote {len(rows)} cases to {out}/ in {time.perf_counter() - t0:.1f} s; see {index}")
     return 0
 

@@ -11,7 +11,8 @@ Steps: the lattice kernels (embedding, ``B @ P``, ``B.T @ g``, the basis matrix,
 product) for every degree combination of :data:`ffdcli.lattice._newton_kernels.SPECIALISED` and for
 the generic ones; then, in a source checkout (``samples/`` and ``configs/`` beside the package), a 3D
 and a 2D design end to end (box fit, changes, volume motion, quality gate, SU2 read and write) into
-a temporary folder, which compiles the volume, gate and I/O kernels.
+a temporary folder, which compiles the volume, gate and I/O kernels. The steps run side by side,
+one worker process per core (:mod:`ffdcli.app.processes`; ``-j 1``: one after the other).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.app.pipeline import deform, load_run, write_outputs
+from ffdcli.app.processes import default_jobs, run_steps
 from ffdcli.design import load_design
 from ffdcli.jit import cache_dir
 from ffdcli.lattice._newton_kernels import SPECIALISED
@@ -76,31 +78,42 @@ def run_design(config: Path, out: Path) -> None:
                   lattice_path=out / f"{config.stem}_lattice.vtk")
 
 
-def steps(repo: Path = REPO) -> list[tuple[str, object]]:
-    """(what, callable) of every step, in order."""
-    out = [(f"lattice kernels, degrees {d}", lambda d=d: lattice_kernels(d)) for d in sorted(SPECIALISED)]
-    out.append(("lattice kernels, every other degree combination (generic)", lambda: lattice_kernels(GENERIC)))
+def run_step(kind: str, arg) -> float:
+    """One warm-up step (``kind`` "lattice": degrees; "design": a design file); its seconds."""
+    t0 = time.perf_counter()
+    if kind == "lattice":
+        lattice_kernels(arg)
+    else:
+        with tempfile.TemporaryDirectory(prefix="ffd-warmup-") as tmp:
+            run_design(Path(arg), Path(tmp))
+    return time.perf_counter() - t0
+
+
+def steps(repo: Path = REPO) -> list[tuple[str, str, object]]:
+    """(what, kind, argument) of every step (:func:`run_step`), the longest first."""
+    out = []
     configs = [repo / "configs" / name for name in DESIGNS]
     if all(c.is_file() for c in configs):
-        tmp = Path(tempfile.mkdtemp(prefix="ffd-warmup-"))
-        out += [(f"end to end: {c.name} (box, volume, quality gate, I/O)", lambda c=c: run_design(c, tmp))
-                for c in configs]
+        out += [(f"end to end: {c.name} (box, volume, quality gate, I/O)", "design", str(c)) for c in configs]
+    out += [(f"lattice kernels, degrees {d}", "lattice", d) for d in sorted(SPECIALISED)]
+    out.append(("lattice kernels, every other degree combination (generic)", "lattice", GENERIC))
     return out
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m ffdcli.app.warmup", description=__doc__.splitlines()[0])
     ap.add_argument("-q", "--quiet", action="store_true", help="print nothing")
+    ap.add_argument("-j", "--jobs", type=int, default=None,
+                    help="worker processes (default: one per core, at most one per step; 1: in this process)")
     args = ap.parse_args(argv)
     say = (lambda text: None) if args.quiet else (lambda text: print(text, file=sys.stderr, flush=True))
     todo = steps()
-    say(f"ffd warmup: compiling the numba kernels once into {cache_dir()} ({len(todo)} steps; "
-        f"a step already compiled takes a second)")
+    jobs = args.jobs or default_jobs(len(todo))
+    say(f"ffd warmup: compiling the numba kernels once into {cache_dir()} ({len(todo)} steps, {jobs} at a "
+        f"time; a step already compiled takes a second)")
     t_all = time.perf_counter()
-    for k, (what, fn) in enumerate(todo, 1):
-        t0 = time.perf_counter()
-        fn()
-        say(f"ffd warmup: [{k}/{len(todo)}] {what}: {time.perf_counter() - t0:.1f} s")
+    for k, (i, seconds) in enumerate(run_steps(run_step, [(kind, arg) for _, kind, arg in todo], jobs), 1):
+        say(f"ffd warmup: [{k}/{len(todo)}] {todo[i][0]}: {seconds:.1f} s")
     say(f"ffd warmup: done in {time.perf_counter() - t_all:.1f} s")
     return 0
 
