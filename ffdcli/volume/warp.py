@@ -57,8 +57,9 @@ group when the bound of the second-order remainder of its weights
 ``S_C = sum_i A_i |x_i - c_C|^2`` the group's second moment (the Hessian of a weight is bounded
 over the group's ball, and each source's remainder is half of it times its own squared distance
 from the centroid; ``A_C r^2``, the form before, bounds S_C and cost 1.4x the CPU time: most
-sources of a group are nearer its centroid than its farthest one), is at most ``tolerance * W / 2``, W the weight the target has summed so far (2 bounds the spread
-of translation votes relative to the largest displacement). The decisions depend on the undeformed
+sources of a group are nearer its centroid than its farthest one), is at most
+``tolerance * W / 2``, W the weight the target has summed so far (2 bounds the spread of
+translation votes relative to the largest displacement). The decisions depend on the undeformed
 geometry only, never on the motion: the approximate warp is one fixed linear map of (b, M), so
 :func:`warp_vjp` (its exact transpose) is the exact derivative, and ``ffd grad`` / ``mesh_vjp``
 match central differences of the written mesh at the default tolerance. This is a per-group
@@ -237,7 +238,8 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     empty_tree = dict(src_pos=np.zeros((0, 3)), src_area=np.zeros(0), src_index=np.zeros(0, np.int64),
                       node_lo=np.zeros(0, np.int64), node_hi=np.zeros(0, np.int64),
                       node_left=np.zeros(0, np.int64), node_right=np.zeros(0, np.int64),
-                      node_center=np.zeros((0, 3)), node_radius=np.zeros(0), node_area=np.zeros(0), node_spread=np.zeros(0))
+                      node_center=np.zeros((0, 3)), node_radius=np.zeros(0), node_area=np.zeros(0),
+                      node_spread=np.zeros(0))
     if settings.method == "none":
         return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, np.zeros((0, 3)),
                          np.zeros(0, np.int64), np.zeros((0, 3, 3)), origin, ldef, chord, **empty_tree)
