@@ -50,7 +50,7 @@ def _fade(r2, rho2):
 
 @njit(cache=True)
 def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left, node_right,
-              node_c, node_r, node_a, node_s, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab,
+              node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab,
               fast, eps2, tol, rho2, rot, fixed_node, src_soa, stack_n, stack_d, acc_node, acc_src,
               res):
     """Walk the tree for one target. Returns the total weight W.
@@ -99,7 +99,7 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                 accept = True
             else:
                 t = r * sq * inv_len
-                tt = node_s[k] * t * t
+                tt = node_a[k] * t * t
                 tw = tol * W
                 if tt * (6.0 * fa + 15.0 * fb) <= tw:
                     u = 1.0 / (1.0 - t)
@@ -115,9 +115,9 @@ def _traverse(x0, x1, x2, mode, wfinal, g0, g1, g2, node_lo, node_hi, node_left,
                 # bound of the second-order Taylor remainder of the weights over the group
                 if fast:
                     u5 = u * u * u * u * u
-                    err = node_s[k] * t * t * u5 * (6.0 * fa + 15.0 * fb * u * u)
+                    err = node_a[k] * t * t * u5 * (6.0 * fa + 15.0 * fb * u * u)
                 else:
-                    err = node_s[k] * 0.5 * t * t * (pa * (pa + 1.0) * fa * u ** (pa + 2.0)
+                    err = node_a[k] * 0.5 * t * t * (pa * (pa + 1.0) * fa * u ** (pa + 2.0)
                                                      + pb * (pb + 1.0) * fb * u ** (pb + 2.0))
                 accept = err <= tol * W
         md = 1 if k >= fixed_node else mode
@@ -360,7 +360,7 @@ def _finish(res, W, x0, x1, x2, rot, out, i):
 
 @njit(parallel=True, cache=True)
 def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right, node_c, node_r,
-                 node_a, node_s, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
+                 node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
                  rho2, rot, fixed_node, src_soa):
     n = tx.shape[0]
     dummy = np.zeros((1, NM))
@@ -376,7 +376,7 @@ def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right
                                ab, fast, eps2, rho2, rot, dummy, res)
             else:
                 W = _traverse(x0, x1, x2, 0, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
-                              node_right, node_c, node_r, node_a, node_s, node_bm, src_x, src_a, src_bm, l2,
+                              node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm, l2,
                               ha, hb, pa, pb, ab, fast, eps2, tol, rho2, rot, fixed_node, src_soa,
                               stack_n, stack_d, dummy, dummy, res)
             _finish(res, W, x0, x1, x2, rot, out, i)
@@ -384,7 +384,7 @@ def _warp_kernel(tx, blocks, out, exact, node_lo, node_hi, node_left, node_right
 
 @njit(parallel=True, cache=True)
 def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, node_right, node_c,
-                node_r, node_a, node_s, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
+                node_r, node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2,
                 tol, rho2, fixed_node, src_soa):
     """Per-thread accumulators acc_node[t], acc_src[t]; thread t takes every T-th block."""
     n = tx.shape[0]
@@ -410,12 +410,12 @@ def _vjp_kernel(tx, g, acc_node, acc_src, exact, node_lo, node_hi, node_left, no
                                    ab, fast, eps2, rho2, True, asrc, res)
                 else:
                     W = _traverse(x0, x1, x2, 1, 1.0, 0.0, 0.0, 0.0, node_lo, node_hi, node_left,
-                                  node_right, node_c, node_r, node_a, node_s, node_bm, src_x, src_a, src_bm,
+                                  node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
                                   l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, fixed_node,
                                   src_soa, stack_n, stack_d, an, asrc, res)
                     if W > 0:
                         _traverse(x0, x1, x2, 2, W, g0, g1, g2, node_lo, node_hi, node_left,
-                                  node_right, node_c, node_r, node_a, node_s, node_bm, src_x, src_a, src_bm,
+                                  node_right, node_c, node_r, node_a, node_bm, src_x, src_a, src_bm,
                                   l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2, True, fixed_node,
                                   src_soa, stack_n, stack_d, an, asrc, res)
 

@@ -102,19 +102,13 @@ def _build_tree(pos, leaf_size):
 
 @njit(cache=True)
 def node_geometry(pos, area, lo, hi):
-    """Per node: area-weighted centroid (nn, 3), radius (nn,) about it, total area (nn,) and spread (nn,).
-
-    The spread ``sum_i A_i |x_i - c|^2 / r^2`` (at most the area) replaces ``A r^2`` by the group's
-    second moment ``sum_i A_i |x_i - c|^2`` in the bound of its second-order remainder: the Hessian of
-    the weight is bounded over the ball of radius r, and each source's remainder is at most half of it
-    times its own squared distance from the centroid.
+    """Per node: area-weighted centroid (nn, 3), radius (nn,) about it and total area (nn,).
 
     A node of zero area takes the plain mean of its sources as its centre."""
     nn = lo.shape[0]
     center = np.zeros((nn, 3))
     radius = np.zeros(nn)
     narea = np.zeros(nn)
-    spread = np.zeros(nn)
     for k in range(nn):
         s = 0.0
         c0 = c1 = c2 = 0.0
@@ -133,14 +127,11 @@ def node_geometry(pos, area, lo, hi):
                 c1 += pos[j, 1] / cnt
                 c2 += pos[j, 2] / cnt
         r2 = 0.0
-        m2 = 0.0
         for j in range(lo[k], hi[k]):
             d = (pos[j, 0] - c0) ** 2 + (pos[j, 1] - c1) ** 2 + (pos[j, 2] - c2) ** 2
             r2 = max(r2, d)
-            m2 += area[j] * d
         center[k, 0], center[k, 1], center[k, 2] = c0, c1, c2
         # a hair larger than the largest distance so rounding never makes it too small
         radius[k] = math.sqrt(r2) * (1.0 + 1e-12)
         narea[k] = s
-        spread[k] = min(s, m2 / r2) if r2 > 0 else s
-    return center, radius, narea, spread
+    return center, radius, narea

@@ -52,14 +52,10 @@ groups first, then the fixed subtree (its groups carry no votes, so they add to 
 weight already summed near the wall lets most far-field groups be taken whole), and aggregates a
 group when the bound of the second-order remainder of its weights
 
-    (S_C / (2 D^2)) [a (a+1) (L/D)^a (1-t)^-(a+2) + b (b+1) (alpha L/D)^b (1-t)^-(b+2)],  t = r/D,
+    A_C (t^2 / 2) [a (a+1) (L/D)^a (1-t)^-(a+2) + b (b+1) (alpha L/D)^b (1-t)^-(b+2)],  t = r/D
 
-``S_C = sum_i A_i |x_i - c_C|^2`` the group's second moment (the Hessian of a weight is bounded
-over the group's ball, and each source's remainder is half of it times its own squared distance
-from the centroid; ``A_C r^2``, the form before, bounds S_C and cost 1.4x the CPU time: most
-sources of a group are nearer its centroid than its farthest one), is at most
-``tolerance * W / 2``, W the weight the target has summed so far (2 bounds the spread of
-translation votes relative to the largest displacement). The decisions depend on the undeformed
+is at most ``tolerance * W / 2``, W the weight the target has summed so far (2 bounds the spread
+of translation votes relative to the largest displacement). The decisions depend on the undeformed
 geometry only, never on the motion: the approximate warp is one fixed linear map of (b, M), so
 :func:`warp_vjp` (its exact transpose) is the exact derivative, and ``ffd grad`` / ``mesh_vjp``
 match central differences of the written mesh at the default tolerance. This is a per-group
@@ -135,7 +131,6 @@ class WarpModel:
     node_center: np.ndarray         # area-weighted centroid
     node_radius: np.ndarray         # max distance of the node's sources from the centroid
     node_area: np.ndarray
-    node_spread: np.ndarray         # sum A |x_i - c|^2 / r^2 (<= node_area): the group's error bound
 
     @property
     def n_surface(self) -> int:
@@ -238,8 +233,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     empty_tree = dict(src_pos=np.zeros((0, 3)), src_area=np.zeros(0), src_index=np.zeros(0, np.int64),
                       node_lo=np.zeros(0, np.int64), node_hi=np.zeros(0, np.int64),
                       node_left=np.zeros(0, np.int64), node_right=np.zeros(0, np.int64),
-                      node_center=np.zeros((0, 3)), node_radius=np.zeros(0), node_area=np.zeros(0),
-                      node_spread=np.zeros(0))
+                      node_center=np.zeros((0, 3)), node_radius=np.zeros(0), node_area=np.zeros(0))
     if settings.method == "none":
         return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, np.zeros((0, 3)),
                          np.zeros(0, np.int64), np.zeros((0, 3, 3)), origin, ldef, chord, **empty_tree)
@@ -265,14 +259,14 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
             perm, nlo, nhi, nleft, nright = build_forest(spos, len(surface_ids))
             spos_t = np.ascontiguousarray(spos[perm])
             a_t = a[perm]
-            center, radius, narea, spread = node_geometry(spos_t, a_t, nlo, nhi)
+            center, radius, narea = node_geometry(spos_t, a_t, nlo, nhi)
         else:
             return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos,
                              slide_rows, slide_proj, origin, ldef, chord, **empty_tree)
         bar.update(1)
     return WarpModel(n, settings, surface_ids, surface_pos, fixed_ids, target_ids, tpos, slide_rows,
                      slide_proj, origin, ldef, chord, spos_t, a_t, perm.astype(np.int64), nlo, nhi, nleft, nright,
-                     center, radius, narea, spread)
+                     center, radius, narea)
 
 
 def _source_areas(pts: np.ndarray, areas, faces, src_ids: np.ndarray) -> np.ndarray:
@@ -420,7 +414,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
             _warp_kernel(model.target_pos[t_lo + lo:t_lo + hi], _blocks(hi - lo), d[lo:hi], exact,
                          model.node_lo, model.node_hi, model.node_left, model.node_right,
-                         model.node_center, model.node_radius, model.node_area, model.node_spread, node_bm,
+                         model.node_center, model.node_radius, model.node_area, node_bm,
                          model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
                          rho2, use_rot, model.fixed_node, soa)
             bar.update(hi - lo)
@@ -479,7 +473,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
                 lo, hi = lo + t_lo, hi + t_lo
                 _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node,
                             acc_src, exact, model.node_lo, model.node_hi, model.node_left,
-                            model.node_right, model.node_center, model.node_radius, model.node_area, model.node_spread,
+                            model.node_right, model.node_center, model.node_radius, model.node_area,
                             dummy_bm, model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab,
                             fast, eps2, tol, rho2, model.fixed_node, soa)
                 bar.update(hi - lo)
