@@ -60,10 +60,12 @@ venv: $(VENV)/.stamp-test
 demo: $(VENV)/.stamp-viz $(VENV)/.stamp-warm
 	$(BIN)/python -m ffdcli.app.demo --out $(OUT)
 
-# Two runs: the suite without the real solvers, then the tests that run SU2 and OpenFOAM (skipped with a
-# reason where absent); each prints its wall time and its slowest tests.
+# Two runs: the suite without the real solvers, on every core (pytest-xdist, at most TEST_JOBS workers),
+# then the tests that run SU2 and OpenFOAM one after the other (skipped with a reason where absent; each
+# solver run takes the cores it finds); each prints its wall time and its slowest tests.
+TEST_JOBS ?= 4
 test: $(VENV)/.stamp-test $(VENV)/.stamp-openmdao $(VENV)/.stamp-viz $(VENV)/.stamp-openfoam $(VENV)/.stamp-warm
-	$(BIN)/python -m pytest -q -m "not solver" --durations=15
+	$(BIN)/python -m pytest -q -m "not solver" -n auto --maxprocesses=$(TEST_JOBS) --durations=15
 	$(BIN)/python -m pytest -q -m solver --durations=10
 
 bench: $(VENV)/.stamp-test $(VENV)/.stamp-warm
