@@ -19,7 +19,8 @@ caches the 8 x 6 x 2 lattice once (untimed for the deform rows, reported as its 
   (``write_outputs``).
 * issue 6 on this mesh: the ``volume`` phase of that run (:func:`ffdcli.volume.warp.prepare_mesh_warp`,
   the surface rotations and :func:`ffdcli.volume.warp.warp`). ``python -m benchmarks.bench_pipeline --warp
-  DESIGN.yaml`` times prepare and warp separately (not part of the table).
+  DESIGN.yaml`` times prepare and warp separately, ``--warp-error DESIGN.yaml [N]`` compares the warp with
+  the exact sum on N ranges of 300 volume nodes (not part of the table).
 """
 
 from __future__ import annotations
@@ -180,6 +181,34 @@ def warp_only(design: str) -> dict:
             "peak_mb": peak_mb()}
 
 
+def warp_error(design: str, n_ranges: int = 60, size: int = 300) -> dict:
+    """The tree warp against the exact sum on ``n_ranges`` row ranges of ``size`` volume nodes spread over
+    the mesh (Morton order: each range is a small neighbourhood), relative to the largest surface move.
+
+    ``python -m benchmarks.bench_pipeline --warp-error DESIGN.yaml [N_RANGES]``; the design of
+    :func:`build_case` (a 5 degree tip twist on the 1M extruded wing) gave 1.07e-3 at the default
+    tolerance with 60 ranges (docs/BENCHMARKS.md).
+    """
+    import numpy as np
+
+    from ffdcli.app.run import load_run
+    from ffdcli.design import load_design
+    from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp
+
+    run = load_run(load_design(design))
+    P1 = run.lattice_after()
+    disp, rot = run.surface_displacement(P1), run.surface_frames(P1)
+    model, _ = prepare_mesh_warp(run.prep.mesh, list(run.prep.surface.names), WarpSettings())
+    d = warp(model, disp, rot)
+    scale = float(np.abs(disp).max())
+    errs = []
+    for lo in np.linspace(0, model.n_targets - size, n_ranges).astype(int):
+        exact = warp(model, disp, rot, exact=True, rows=(int(lo), int(lo) + size))
+        errs.append(float(np.abs(exact - d[model.target_ids[lo:lo + size]]).max()) / scale)
+    return {"ranges": n_ranges, "size": size, "err_max": max(errs), "err_median": float(np.median(errs)),
+            "err_p90": float(np.quantile(errs, 0.9))}
+
+
 def run(quick: bool = False) -> list[dict]:
     sizes = QUICK if quick else FULL
     repeats = 2      # min and max of two runs of each deform (the machine is shared: its load is shown)
@@ -242,6 +271,8 @@ if __name__ == "__main__":
         print(json.dumps(phases(sys.argv[2])))
     elif len(sys.argv) == 3 and sys.argv[1] == "--warp":
         print(json.dumps(warp_only(sys.argv[2])))
+    elif len(sys.argv) in (3, 4) and sys.argv[1] == "--warp-error":
+        print(json.dumps(warp_error(sys.argv[2], *(int(a) for a in sys.argv[3:]))))
     else:
         for row in run("--quick" in sys.argv):
             print(json.dumps(row))
