@@ -10,7 +10,8 @@ solver's configuration exists.
 Defaults (documented in docs/optimize.md): solver ``su2``, objective ``DRAG``, method ``SLSQP``,
 iterations 20, tolerance 1e-6, folder ``opt/`` beside the design file, adjoint ``None`` (the solver
 chooses: discrete where it is found), max_failures 3, feasibility 1e-4, step 0.1, line_search 4,
-warm_start true, screen 0.3, move_limit 0.1 (method ``SQP`` only), concurrent_adjoints 1.
+warm_start true, screen 0.3, move_limit 0.1 (method ``SQP`` only), concurrent_adjoints 1, adjoint_residual
+None (the adjoints converge to the solver config's own target, as the flow).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ class OptimizeSettings:
     screen: float | None = 0.3
     move_limit: float = 0.1
     concurrent_adjoints: int = 1
+    adjoint_residual: float | None = None
 
     @property
     def function_names(self) -> list[str]:
@@ -122,7 +124,8 @@ def optimize_settings(design, *, check_files: bool = True) -> OptimizeSettings:
         warm_start=bool(data.get("warm_start", True)),
         screen=None if "screen" in data and data["screen"] is None else float(data.get("screen", 0.3)),
         move_limit=float(data.get("move_limit", 0.1)),
-        concurrent_adjoints=int(data.get("concurrent_adjoints", 1)))
+        concurrent_adjoints=int(data.get("concurrent_adjoints", 1)),
+        adjoint_residual=None if data.get("adjoint_residual") is None else float(data["adjoint_residual"]))
 
 
 def select_variables(names: list[str], patterns, *, error=None) -> list[int]:

@@ -344,6 +344,10 @@ def optimize_schema() -> dict:
             "concurrent_adjoints": {"type": "integer", "minimum": 1,
                                     "description": "adjoints of one design run at once (default 1: one after "
                                                    "the other; a machine with cores to spare: one per function)"},
+            "adjoint_residual": {"type": "number",
+                                 "description": "the adjoints' convergence target, log10 of the rms residual as "
+                                                "SU2's CONV_RESIDUAL_MINVAL (default: the config's, as the flow); "
+                                                "a transonic adjoint often converges more slowly than its flow"},
             "line_search": {"type": "integer", "minimum": 1,
                             "description": "evaluations of one line search before the run ends (default 4)"},
         }}

@@ -42,7 +42,8 @@ class Interrupted(FfdError):
 
 def make_solver(settings: OptimizeSettings, search: tuple[Path, ...] = ()) -> Solver:
     """The solver of ``optimize.solver`` for ``settings`` (not yet checked)."""
-    return SOLVERS[settings.solver](settings.config, settings.launch, settings.adjoint, search)
+    return SOLVERS[settings.solver](settings.config, settings.launch, settings.adjoint, search,
+                                    adjoint_residual=settings.adjoint_residual)
 
 
 def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list[str] | None = None,

@@ -95,3 +95,64 @@ def test_find_program_order(tmp_path, monkeypatch):
     monkeypatch.setenv("PATH", "/nonexistent")
     assert find_program("SU2_CFD", "SU2_RUN", (a,)) == a / "SU2_CFD"
     assert find_program("SU2_CFD", "SU2_RUN") is None
+
+
+def _stalled(tmp_path, final: float):
+    """An adjoint log without SU2's "All convergence criteria satisfied" and its history (3,000 iterations,
+    the first residual at ``final``)."""
+    log = tmp_path / "adjoint_cd.log"
+    log.write_text("Maximum number of iterations reached (ITER = 3000) before convergence.\n")
+    return log, {"Inner_Iter": [0.0, 2999.0], "rms[A_Rho]": [-4.07, final], "rms[A_E]": [-4.0, -6.9]}
+
+
+def test_a_stalled_adjoint_fails_with_what_to_change(tmp_path):
+    """The adjoint stops at ITER above the config's CONV_RESIDUAL_MINVAL: a SolverFailure whose message
+    names the residual reached, the target, and the two ways out (ITER, optimize.adjoint_residual)."""
+    from ffdcli.optimize.solvers.base import SolverFailure
+    from ffdcli.optimize.solvers.su2 import SU2
+    solver = SU2(tmp_path / "rae.cfg")
+    solver.lines = ["SOLVER= EULER", "CONV_RESIDUAL_MINVAL= -9"]
+    log, hist = _stalled(tmp_path, -6.56)
+    with pytest.raises(SolverFailure) as e:
+        solver._converged(log, hist, "adjoint of DRAG")
+    msg = e.value.reason
+    assert "rms[A_Rho] reached -6.56 after 3000 iterations" in msg
+    assert "rae.cfg's CONV_RESIDUAL_MINVAL -9" in msg and "raise ITER in rae.cfg" in msg
+    assert "optimize.adjoint_residual" in msg and "e.g. -6.5" in msg and "--check-gradient" in msg
+    with pytest.raises(SolverFailure) as e:                  # a flow: no adjoint key suggested
+        solver._converged(log, {"Inner_Iter": [2999.0], "rms[Rho]": [-7.0]}, "flow")
+    assert "adjoint_residual" not in e.value.reason and "loosen its CONV_RESIDUAL_MINVAL" in e.value.reason
+
+
+def test_adjoint_residual_is_the_adjoints_own_target(tmp_path):
+    """optimize.adjoint_residual: written into the adjoints' configs, checked instead of the config's,
+    part of the solver's state (a run's evaluations are keyed by it); the flow keeps the config's."""
+    from ffdcli.optimize.solvers.base import SolverFailure
+    from ffdcli.optimize.solvers.su2 import SU2
+    plain, loose = SU2(tmp_path / "rae.cfg"), SU2(tmp_path / "rae.cfg", adjoint_residual=-6.5)
+    for s in (plain, loose):
+        s.lines = ["SOLVER= EULER", "CONV_RESIDUAL_MINVAL= -9"]
+    assert plain._adjoint_target() == {} and loose._adjoint_target() == {"CONV_RESIDUAL_MINVAL": "-6.5"}
+    assert plain.state() != loose.state()
+    log, hist = _stalled(tmp_path, -6.56)
+    loose._converged(log, hist, "adjoint of DRAG", "-6.5")              # reached its own target
+    log, hist = _stalled(tmp_path, -6.3)
+    with pytest.raises(SolverFailure) as e:
+        loose._converged(log, hist, "adjoint of DRAG", "-6.5")
+    assert "optimize.adjoint_residual -6.5 is the target" in e.value.reason
+    with pytest.raises(SolverFailure):                                   # the flow: the config's -9
+        loose._converged(log, {"rms[Rho]": [-7.0]}, "flow")
+
+
+def test_adjoint_residual_in_the_design_file(tmp_path):
+    from ffdcli.design import load_design
+    from ffdcli.design.optimize import optimize_settings
+    (tmp_path / "flow.cfg").write_text("SOLVER= EULER\n")
+    shutil.copyfile(ROOT / "samples" / "naca0012_inv.su2", tmp_path / "m.su2")
+    base = {"mesh": "m.su2", "surface": "airfoil", "changes": [{"twist": 0}], "optimize": {"config": "flow.cfg"}}
+    path = tmp_path / "d.yaml"
+    path.write_text(yaml.safe_dump(base))
+    assert optimize_settings(load_design(path)).adjoint_residual is None
+    base["optimize"]["adjoint_residual"] = -6.5
+    path.write_text(yaml.safe_dump(base))
+    assert optimize_settings(load_design(path)).adjoint_residual == -6.5

@@ -52,7 +52,7 @@ class AnalyticSolver(Solver):
 
     adjoint_kind = "discrete"
 
-    def __init__(self, config: Path, launch=(), adjoint=None, search=()):
+    def __init__(self, config: Path, launch=(), adjoint=None, search=(), adjoint_residual=None):
         self.config = Path(config)
         self.settings: dict = {}
         self.flows = 0

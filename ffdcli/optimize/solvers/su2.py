@@ -14,7 +14,10 @@ the physics and numerics, is the user's file as written):
   ``solution_flow.dat``): ``MATH_PROBLEM= DISCRETE_ADJOINT`` (``SU2_CFD_AD``) or ``CONTINUOUS_ADJOINT``
   (``SU2_CFD``), ``OBJECTIVE_FUNCTION= <name>``, ``OBJECTIVE_WEIGHT= 1.0``, ``CONV_FILENAME=
   history_adj_<suffix>``, ``SURFACE_ADJ_FILENAME= surface_adjoint_<suffix>``, ``OUTPUT_FILES= (RESTART,
-  RESTART_ASCII, SURFACE_CSV)`` (suffix: SU2's own, ``cd`` for DRAG, ``cl`` for LIFT).
+  RESTART_ASCII, SURFACE_CSV)`` (suffix: SU2's own, ``cd`` for DRAG, ``cl`` for LIFT), ``CONV_FIELD`` the
+  adjoint's names of the config's residual fields (:func:`adjoint_convergence`), and
+  ``CONV_RESIDUAL_MINVAL`` when ``optimize.adjoint_residual`` is given (the adjoints' own target: a
+  transonic adjoint often converges more slowly than its flow).
 
 Functions are read from the final row of ``history.csv`` under SU2's column names (DRAG -> ``CD``,
 LIFT -> ``CL``, MOMENT_Z -> ``CMz``: :data:`HISTORY_COLUMNS`). A run fails (:class:`SolverFailure`,
@@ -151,11 +154,15 @@ class SU2(Solver):
         None: discrete where ``SU2_CFD_AD`` is found, else continuous (with a warning).
     search : tuple of Path
         More folders to look for SU2's programs in after ``$SU2_RUN`` and ``PATH``.
+    adjoint_residual : float, optional
+        The adjoints' convergence target (log10 of the first rms residual, as ``CONV_RESIDUAL_MINVAL``),
+        written into their configs and checked; None: the config's, as for the flow.
     """
 
     def __init__(self, config: Path, launch: tuple[str, ...] = (), adjoint: str | None = None,
-                 search: tuple[Path, ...] = ()):
+                 search: tuple[Path, ...] = (), adjoint_residual: float | None = None):
         self.config = Path(config)
+        self.adjoint_residual = adjoint_residual
         self.launch = tuple(launch)
         self.requested = adjoint
         self.search = tuple(Path(s) for s in search)
@@ -189,7 +196,8 @@ class SU2(Solver):
                           programs={k: str(v) for k, v in self.programs.items()}, warnings=tuple(warnings))
 
     def state(self) -> str:
-        return "\n".join(self.lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
+        return ("\n".join(self.lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
+                + ("" if self.adjoint_residual is None else f"\nadjoint_residual={self.adjoint_residual!r}"))
 
     # -- runs ---------------------------------------------------------------------------------
     def _common(self, mesh: Path, warm: bool) -> dict[str, str]:
@@ -207,21 +215,38 @@ class SU2(Solver):
             raise SolverFailure(f"{program} exited with status {rc}: {_error_line(log)}", log)
         return log, seconds
 
-    def _converged(self, log: Path, history: dict, what: str) -> None:
+    def _converged(self, log: Path, history: dict, what: str, minval: str | None = None) -> None:
+        """SolverFailure unless SU2 said "All convergence criteria satisfied" or the first residual
+        column reached ``minval`` (default the config's ``CONV_RESIDUAL_MINVAL``); the message says
+        what to change."""
         try:
             if "All convergence criteria satisfied" in log.read_text(errors="replace"):
                 return
         except OSError:
             pass
         res = [h for h in history if h.startswith("rms[")]
-        minval = config_value(self.lines, "CONV_RESIDUAL_MINVAL")
+        minval = config_value(self.lines, "CONV_RESIDUAL_MINVAL") if minval is None else minval
+        adjoint = what.startswith("adjoint")
         if res and minval is not None:
             final = history[res[0]][-1]
             if final <= float(minval):
                 return
-            raise SolverFailure(f"the {what} did not converge: {res[0]} reached {final:.3g}, the config asks for "
-                                f"CONV_RESIDUAL_MINVAL {minval}", log)
+            iters = history.get("Inner_Iter") or history.get("Iteration") or []
+            at = f" after {int(iters[-1]) + 1} iterations" if iters and math.isfinite(iters[-1]) else ""
+            asks = (f"optimize.adjoint_residual {minval}" if self.adjoint_residual is not None and adjoint
+                    else f"{self.config.name}'s CONV_RESIDUAL_MINVAL {minval}")
+            hint = (f"raise ITER in {self.config.name}" + (
+                ", or set optimize.adjoint_residual (the adjoints' own target, e.g. "
+                f"{math.ceil(final * 2) / 2:g}) if that residual is enough for its gradient (ffd optimize "
+                "--check-gradient compares it with finite differences)" if adjoint else
+                ", or loosen its CONV_RESIDUAL_MINVAL"))
+            raise SolverFailure(f"the {what} did not converge: {res[0]} reached {final:.3g}{at}, {asks} is "
+                                f"the target; {hint}", log)
         raise SolverFailure(f"the {what} stopped without SU2's 'All convergence criteria satisfied'", log)
+
+    def _adjoint_target(self) -> dict[str, str]:
+        """``CONV_RESIDUAL_MINVAL`` of the adjoints' configs when ``optimize.adjoint_residual`` is given."""
+        return {} if self.adjoint_residual is None else {"CONV_RESIDUAL_MINVAL": f"{self.adjoint_residual:g}"}
 
     def _history_output(self) -> str:
         """``HISTORY_OUTPUT`` with SU2's function columns: the config's list plus ``AERO_COEFF``."""
@@ -269,9 +294,10 @@ class SU2(Solver):
             **self._common(mesh, warm), "MATH_PROBLEM": "DISCRETE_ADJOINT" if discrete else "CONTINUOUS_ADJOINT",
             "OBJECTIVE_FUNCTION": function, "OBJECTIVE_WEIGHT": "1.0", "CONV_FILENAME": f"history_adj_{sfx}",
             "SURFACE_ADJ_FILENAME": f"surface_adjoint_{sfx}", "OUTPUT_FILES": "(RESTART, RESTART_ASCII, SURFACE_CSV)",
-            **adjoint_convergence(self.lines)})
+            **adjoint_convergence(self.lines), **self._adjoint_target()})
         hist = folder / f"history_adj_{sfx}.csv"
-        self._converged(log, read_history(hist) if hist.is_file() else {}, f"adjoint of {function}")
+        self._converged(log, read_history(hist) if hist.is_file() else {}, f"adjoint of {function}",
+                        None if self.adjoint_residual is None else f"{self.adjoint_residual:g}")
         if discrete:
             path = folder / f"restart_adj_{sfx}.csv"
             ids, values = _read_volume_sensitivity(path, log)
