@@ -20,7 +20,7 @@ from ffdcli.api import DesignModel
 from ffdcli.app.pipeline import load_run
 from ffdcli.design import load_design
 from ffdcli.design.optimize import OptimizeSettings, optimize_settings, select_variables
-from ffdcli.errors import FfdError
+from ffdcli.errors import FfdError, InputError
 from ffdcli.io.atomic import Terminated, atomic_path, signals_raise
 from ffdcli.optimize.best import best_design_data, write_best
 from ffdcli.optimize.check import gradient_check
@@ -62,7 +62,12 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
     design = load_design(design_path, overrides=overrides)
     settings = optimize_settings(design)
     solver = solver or make_solver(settings, search)
-    info = solver.check()
+    try:
+        info = solver.check()
+    except InputError as e:
+        if e.path is None and e.key:                    # a key of the design file: name the file and its line
+            raise design.error(e.message, e.key) from None
+        raise
     for w in info.warnings:
         warn(w)
     model = DesignModel(load_run(design, progress=progress))

@@ -72,11 +72,14 @@ def test_with_keys_changes_only_the_named_keys():
     ("RMS_DENSITY", {"CONV_FIELD": "RMS_ADJ_DENSITY"}),
     ("( RMS_DENSITY, RMS_ENERGY )", {"CONV_FIELD": "(RMS_ADJ_DENSITY, RMS_ADJ_ENERGY)"}),
     ("RMS_ADJ_DENSITY", {"CONV_FIELD": "RMS_ADJ_DENSITY"}),
-    ("DRAG", {"CONV_FIELD": "DRAG"}),
+    ("DRAG", {"CONV_FIELD": "RMS_ADJ_DENSITY"}),
+    ("( LIFT, DRAG )", {"CONV_FIELD": "RMS_ADJ_DENSITY"}),
+    ("(RMS_DENSITY, DRAG)", {"CONV_FIELD": "(RMS_ADJ_DENSITY, DRAG)"}),
 ])
 def test_the_adjoint_watches_its_own_residual(given, expect):
-    """SU2_CFD_AD ignores a flow residual named in CONV_FIELD and runs to ITER: the adjoint's config
-    names the adjoint's residual instead."""
+    """SU2_CFD_AD ignores a flow residual named in CONV_FIELD, and a Cauchy criterion on a coefficient
+    ("Ignoring Convergence Field(s): DRAG"), and runs to ITER: the adjoint's config names the adjoint's
+    residual instead."""
     lines = ["SOLVER= EULER", "CONV_RESIDUAL_MINVAL= -8"] + ([] if given is None else [f"CONV_FIELD= {given}"])
     assert adjoint_convergence(lines) == expect
 
@@ -156,3 +159,24 @@ def test_adjoint_residual_in_the_design_file(tmp_path):
     base["optimize"]["adjoint_residual"] = -6.5
     path.write_text(yaml.safe_dump(base))
     assert optimize_settings(load_design(path)).adjoint_residual == -6.5
+
+
+def test_an_incompressible_cauchy_config_watches_the_adjoint_pressure():
+    lines = ["SOLVER= INC_NAVIER_STOKES", "CONV_FIELD= DRAG"]
+    assert adjoint_convergence(lines) == {"CONV_FIELD": "RMS_ADJ_PRESSURE"}
+
+
+def test_a_cauchy_config_without_a_residual_target_is_refused_before_any_work(tmp_path):
+    """CONV_FIELD= DRAG and no CONV_RESIDUAL_MINVAL: the adjoints would run to ITER and fail; exit 2 at
+    check() naming optimize.adjoint_residual. With either target given, check() passes."""
+    from ffdcli.errors import InputError
+    from ffdcli.optimize.solvers.su2 import SU2
+    cfg = tmp_path / "cauchy.cfg"
+    cfg.write_text("SOLVER= EULER\nCONV_FIELD= DRAG\nCONV_CAUCHY_EPS= 1E-6\n")
+    with pytest.raises(InputError) as e:
+        SU2(cfg, search=SEARCH).check()
+    assert "optimize.adjoint_residual" in str(e.value) and "Cauchy" in str(e.value)
+    if su2_missing() is None:
+        assert SU2(cfg, search=SEARCH, adjoint_residual=-8.0).check().name == "su2"
+        cfg.write_text("SOLVER= EULER\nCONV_FIELD= DRAG\nCONV_RESIDUAL_MINVAL= -8\n")
+        assert SU2(cfg, search=SEARCH).check().name == "su2"

@@ -173,6 +173,14 @@ class SU2(Solver):
     def check(self) -> SolverInfo:
         """Find SU2_CFD (and SU2_CFD_AD) and read the configuration; InputError (exit 2) when missing."""
         self.lines = read_config(self.config)
+        if config_value(self.lines, "SOLVER") is None:
+            raise InputError("the SU2 configuration has no SOLVER= key; is it an SU2 config?", path=self.config)
+        if (cauchy_only(self.lines) and self.adjoint_residual is None
+                and config_value(self.lines, "CONV_RESIDUAL_MINVAL") is None):
+            raise InputError(f"the flow converges on a Cauchy criterion (CONV_FIELD= "
+                             f"{config_value(self.lines, 'CONV_FIELD')}), which SU2's adjoints ignore: they need a "
+                             "residual target; set optimize.adjoint_residual (e.g. -8: the adjoints' rms residual, "
+                             f"log10) or CONV_RESIDUAL_MINVAL in {self.config.name}", key="optimize.adjoint_residual")
         cfd = find_program("SU2_CFD", "SU2_RUN", self.search)
         if cfd is None:
             raise InputError("SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
@@ -190,8 +198,6 @@ class SU2(Solver):
         if self.adjoint_kind == "continuous":
             warnings.append("the continuous adjoint's gradients are approximate (0.4-2.75x off on SU2's NACA0012, "
                             "wrong where the trailing edge moves): keep the trailing-edge control points fixed")
-        if config_value(self.lines, "SOLVER") is None:
-            raise InputError("the SU2 configuration has no SOLVER= key; is it an SU2 config?", path=self.config)
         return SolverInfo(name="su2", adjoint=self.adjoint_kind,
                           programs={k: str(v) for k, v in self.programs.items()}, warnings=tuple(warnings))
 
@@ -312,15 +318,27 @@ def adjoint_convergence(lines: list[str]) -> dict[str, str]:
     ``RMS_ADJ_<VAR>`` (SU2's adjoint history names). SU2_CFD_AD ignores a flow field ("Ignoring
     Convergence Field(s): RMS_DENSITY") and then runs every ``ITER`` iteration: on the ONERA M6,
     3,000 iterations where -8 was reached by 2,700, and a warm-started adjoint, which starts near
-    its answer, would run all of them too. No ``CONV_FIELD`` (SU2's default): nothing to change.
-    Other fields (a Cauchy criterion on a coefficient) are kept."""
+    its answer, would run all of them too. A config that converges the flow on coefficients only
+    (a Cauchy criterion, ``CONV_FIELD= DRAG``), which the adjoint ignores just the same: the adjoint
+    watches its first residual (``RMS_ADJ_DENSITY``; ``RMS_ADJ_PRESSURE`` for SU2's incompressible
+    solvers) against ``optimize.adjoint_residual`` or the config's ``CONV_RESIDUAL_MINVAL``. No
+    ``CONV_FIELD`` (SU2's default, a residual): nothing to change."""
     given = config_value(lines, "CONV_FIELD")
     if not given:
         return {}
     fields = [t for t in re.split(r"[\s,()]+", given) if t]
+    if not any(f.upper().startswith("RMS_") for f in fields):
+        solver = (config_value(lines, "SOLVER") or "").upper()
+        return {"CONV_FIELD": "RMS_ADJ_PRESSURE" if solver.startswith("INC_") else "RMS_ADJ_DENSITY"}
     mapped = [f"RMS_ADJ_{f[4:]}" if f.upper().startswith("RMS_") and not f.upper().startswith("RMS_ADJ_") else f
               for f in fields]
     return {"CONV_FIELD": mapped[0] if len(mapped) == 1 else "(" + ", ".join(mapped) + ")"}
+
+
+def cauchy_only(lines: list[str]) -> bool:
+    """True when the config's ``CONV_FIELD`` names coefficients only (a Cauchy criterion), no residual."""
+    given = config_value(lines, "CONV_FIELD")
+    return bool(given) and not any(t.upper().startswith("RMS_") for t in re.split(r"[\s,()]+", given) if t)
 
 
 def _columns(path: Path, log: Path) -> tuple[list[str], np.ndarray]:
