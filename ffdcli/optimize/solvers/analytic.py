@@ -48,7 +48,8 @@ def _values_and_gradients(X: np.ndarray) -> tuple[dict[str, float], dict[str, np
 
 
 class AnalyticSolver(Solver):
-    """The stand-in solver (see the module docstring). ``flows`` and ``adjoints`` count its runs."""
+    """The stand-in solver (see the module docstring). ``flows`` and ``adjoints`` count its runs; it takes
+    the solvers' common arguments and has no residuals (``adjoint_residual`` is accepted and unused)."""
 
     adjoint_kind = "discrete"
 
