@@ -172,13 +172,22 @@ class OptimizationProblem:
                     yield name, e
                     return
             return
+        running = self.solver.running          # made here, in the main thread
         with ThreadPoolExecutor(max_workers=min(self.concurrent, len(names))) as pool:
             futures = [(name, pool.submit(run, name)) for name in names]
-            for name, fut in futures:
-                try:
-                    yield name, fut.result()
-                except SolverFailure as e:
-                    yield name, e
+            try:
+                for name, fut in futures:
+                    try:
+                        yield name, fut.result()
+                    except SolverFailure as e:
+                        yield name, e
+            except BaseException:
+                # Ctrl-C or SIGTERM reach this (the main) thread only: stop the threads' solver
+                # processes, else leaving the pool would wait for every one of them to finish
+                for _, fut in futures:
+                    fut.cancel()
+                running.stop()
+                raise
 
     def _nearest(self, values: np.ndarray, adjoint_of: str | None = None) -> Path | None:
         """The folder of the finished evaluation nearest to ``values`` (with the adjoint of ``adjoint_of``

@@ -3,8 +3,9 @@
 Order: the design file and its ``optimize:`` section (exit 2 on a bad key), the solver's programs and
 configuration (exit 2 when missing, before any work), the design model (the box built and embedded
 once), the run folder (``--resume`` reads its finished evaluations), then the optimiser or the
-gradient check; at the end (also on a stop, Ctrl-C or SIGTERM) ``history.csv``, ``history.png``,
-``best.yaml`` and the best mesh.
+gradient check. ``history.csv`` is written again after every evaluation (a long run can be watched);
+at the end (also on a stop, Ctrl-C or SIGTERM) ``history.csv``, ``history.png``, ``best.yaml`` and the
+best mesh.
 """
 
 from __future__ import annotations
@@ -76,8 +77,14 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
     store = EvaluationStore(folder, inputs_hash(design.mesh, solver.state(), design.data, model.names), resume=resume)
     if store.reused:
         report(f"resuming: {store.reused} finished evaluations in {folder}")
-    problem = OptimizationProblem(model, solver, store, settings.function_names,
-                                  report=lambda ev, stage: report(progress_line(ev, stage, settings, folder)),
+    driver: Driver | None = None
+
+    def on_evaluation(ev, stage: str) -> None:
+        report(progress_line(ev, stage, settings, folder))
+        if driver is not None:              # history.csv as the run goes (a long run can be watched)
+            write_history(folder / "history.csv", history_table(problem, driver, settings, folder)[0])
+
+    problem = OptimizationProblem(model, solver, store, settings.function_names, report=on_evaluation,
                                   warm_start=settings.warm_start, concurrent=settings.concurrent_adjoints)
     head = {"solver": info.name, "adjoint": info.adjoint, "variables": [model.names[i] for i in chosen]}
     if check is not None:
@@ -124,11 +131,7 @@ def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSetti
     evaluations = problem.store.all()
     model = problem.model
     names = model.constraint_names if model.constraints else []
-    sides = driver.sides
-    worst = {ev.index: violation(ev, sides) for ev in evaluations}
-    rows = history_rows(evaluations, objective=settings.objective, functions=settings.function_names,
-                        constraint_names=names, violations=[worst[e.index] for e in evaluations],
-                        chosen=driver.chosen, r=driver.r, folder=folder)
+    rows, worst = history_table(problem, driver, settings, folder)
     write_history(folder / "history.csv", rows)
     if evaluations and any(e.gradients for e in evaluations):
         write_picture(folder / "history.png", evaluations, worst, settings.objective, settings.feasibility)
@@ -157,6 +160,19 @@ def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSetti
         write_best(folder / "best.yaml", data, note)
         out.update(best=str(folder / "best.yaml"), best_mesh=str(mesh_dst), best_evaluation=best.index)
     return out
+
+
+def history_table(problem: OptimizationProblem, driver: Driver, settings: OptimizeSettings,
+                  folder: Path) -> tuple[list[dict], dict[int, float]]:
+    """The rows of ``history.csv`` for the evaluations finished so far, and each one's worst violation."""
+    evaluations = problem.store.all()
+    model = problem.model
+    names = model.constraint_names if model.constraints else []
+    worst = {ev.index: violation(ev, driver.sides) for ev in evaluations}
+    rows = history_rows(evaluations, objective=settings.objective, functions=settings.function_names,
+                        constraint_names=names, violations=[worst[e.index] for e in evaluations],
+                        chosen=driver.chosen, r=driver.r, folder=folder)
+    return rows, worst
 
 
 def progress_line(ev, stage: str, settings: OptimizeSettings, folder: Path) -> str:

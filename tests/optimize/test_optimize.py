@@ -84,6 +84,22 @@ def test_converges_feasible_with_outputs(tmp_path):
                                                   "mesh.su2").read_bytes()
 
 
+def test_history_is_written_after_every_evaluation(tmp_path):
+    """A long run can be watched: history.csv holds every finished evaluation when the next one starts."""
+    path = write_case(tmp_path, iterations=3)
+    seen = []
+
+    class Watched(AnalyticSolver):
+        def flow(self, folder, mesh, start=None):
+            csv_path = tmp_path / "opt" / "history.csv"
+            seen.append(len(history(csv_path)) if csv_path.is_file() else 0)
+            return super().flow(folder, mesh, start)
+
+    out = run_optimize(path, solver=Watched(tmp_path / "analytic.yaml"))
+    assert out["evaluations"] >= 3
+    assert seen == list(range(out["evaluations"]))
+
+
 def test_screening_skips_the_adjoint_of_a_far_constraint(tmp_path):
     far = [{"name": "LIFT", "lower": 0.1}, {"name": "MOMENT_Z", "lower": -10.0}]
     path = write_case(tmp_path, functions=far, iterations=4)

@@ -19,6 +19,7 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import threading
 import time
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
@@ -100,20 +101,90 @@ class Solver(ABC):
         """The solver's inputs as text (its configuration): part of the key of a cached evaluation."""
         return ""
 
+    @property
+    def running(self) -> RunningProcesses:
+        """This solver's processes running now (:func:`run_logged`'s ``running``): what Ctrl-C or SIGTERM
+        stops. Made on first use; the problem asks for it in the main thread before starting threads."""
+        if "_running" not in self.__dict__:
+            self._running = RunningProcesses()
+        return self._running
 
-def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None = None) -> tuple[int, float]:
+
+#: Seconds a solver process gets to end on SIGTERM before it is killed (SU2_CFD_AD was measured
+#: ignoring SIGTERM for 8 s).
+STOP_GRACE = 3.0
+
+
+class RunningProcesses:
+    """The solver processes started and not yet finished (the threads of concurrent adjoints each
+    start one): :meth:`stop` ends them all, from the main thread, when Ctrl-C or SIGTERM stops the
+    run. A signal sent to ffd's pid alone (a scheduler's) reaches none of them, and a thread waiting
+    on its process cannot be interrupted, so without this the run would wait for every solver."""
+
+    def __init__(self):
+        self._procs: set[subprocess.Popen] = set()
+        self._lock = threading.Lock()
+
+    def add(self, proc: subprocess.Popen) -> None:
+        with self._lock:
+            self._procs.add(proc)
+
+    def discard(self, proc: subprocess.Popen) -> None:
+        with self._lock:
+            self._procs.discard(proc)
+
+    def __len__(self) -> int:
+        with self._lock:
+            return len(self._procs)
+
+    def stop(self, grace: float = STOP_GRACE) -> None:
+        """SIGTERM to every running process, SIGKILL to those still running ``grace`` seconds later."""
+        with self._lock:
+            procs = list(self._procs)
+        stop_processes(procs, grace)
+
+
+def stop_processes(procs: list[subprocess.Popen], grace: float = STOP_GRACE) -> None:
+    """SIGTERM to each of ``procs`` still running, then SIGKILL to those still running after ``grace`` s."""
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    end = time.monotonic() + grace
+    for p in procs:
+        try:
+            p.wait(timeout=max(0.0, end - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
+
+
+def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None = None,
+               running: RunningProcesses | None = None) -> tuple[int, float]:
     """Run ``command`` in ``folder`` with stdout and stderr into ``log``; returns (exit status, seconds).
 
     A missing program is a :class:`SolverFailure` naming it (the checks before the run should have
-    caught it). Ctrl-C and SIGTERM reach the child (same process group) and then this process."""
+    caught it). Ctrl-C or SIGTERM raised in this thread while it waits stops the process (SIGTERM,
+    then SIGKILL after :data:`STOP_GRACE` s) before the exception goes on; ``running`` holds it while
+    it runs, so that the main thread can stop it when this is another thread
+    (:meth:`RunningProcesses.stop`)."""
     t0 = time.perf_counter()
     try:
         with open(log, "wb") as out:
-            proc = subprocess.run(command, cwd=folder, stdout=out, stderr=subprocess.STDOUT,
-                                  env={**os.environ, **(env or {})}, check=False)
+            proc = subprocess.Popen(command, cwd=folder, stdout=out, stderr=subprocess.STDOUT,
+                                    env={**os.environ, **(env or {})})
     except FileNotFoundError as e:
         raise SolverFailure(f"cannot start {command[0]}: {e.strerror}", log) from None
-    return proc.returncode, time.perf_counter() - t0
+    if running is not None:
+        running.add(proc)
+    try:
+        rc = proc.wait()
+    except BaseException:
+        stop_processes([proc])
+        raise
+    finally:
+        if running is not None:
+            running.discard(proc)
+    return rc, time.perf_counter() - t0
 
 
 def find_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> Path | None:

@@ -216,7 +216,8 @@ class SU2(Solver):
         cfg = folder / f"{name}.cfg"
         cfg.write_text(with_keys(self.lines, changes))
         log = folder / f"{name}.log"
-        rc, seconds = run_logged([*self.launch, str(self.programs[program]), cfg.name], folder, log)
+        rc, seconds = run_logged([*self.launch, str(self.programs[program]), cfg.name], folder, log,
+                                 running=self.running)
         if rc != 0:
             raise SolverFailure(f"{program} exited with status {rc}: {_error_line(log)}", log)
         return log, seconds
