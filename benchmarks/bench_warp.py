@@ -8,8 +8,10 @@ is a linear twist to 10 degrees at the tip about the trailing-edge line with the
 surface node's frame, i.e. the use case of `ffd deform`.
 
 Columns: ``volume_nodes`` (targets), ``surface_nodes``, ``prepare_s`` (tree build),
-``warp_s`` (one warp with rotations, after a warm-up call that compiles/loads the kernels: the
-smallest of ``repeats`` calls; ``warp_max_s`` the largest), ``warp_cpu_s`` (CPU seconds of the
+``warp_first_s`` (the first warp with rotations on the model, after a warm-up call on another model
+that compiles/loads the kernels: it includes each target's reference weight, which the model then
+keeps; what one ``ffd deform`` pays), ``warp_s`` (the smallest of ``repeats`` calls, the first
+included; ``warp_max_s`` the largest), ``warp_cpu_s`` (CPU seconds of the
 fastest call over all threads: warp_s on an idle machine is about warp_cpu_s / cores), ``load``
 (the 1-minute load average before and after: the machine is shared),
 ``peak_mb`` (peak RSS, VmHWM, of the child process that did everything), ``err_max`` (max |tree - exact|
@@ -142,7 +144,7 @@ def measure(n_volume: int, n_surface: int, n_subset: int, tolerance: float = 1e-
     # VmHWM: this process's own peak (ru_maxrss would include the parent's peak, inherited at exec)
     peak = int(next(ln for ln in open("/proc/self/status") if ln.startswith("VmHWM:")).split()[1]) / 1024
     return {"volume_nodes": model.n_targets, "surface_nodes": model.n_surface,
-            "prepare_s": t1 - t0, "warp_s": min(walls), "warp_max_s": max(walls),
+            "prepare_s": t1 - t0, "warp_first_s": walls[0], "warp_s": min(walls), "warp_max_s": max(walls),
             "warp_cpu_s": cpus[int(np.argmin(walls))], "repeats": repeats, "load": [load0, load1],
             "peak_mb": peak, "err_subset": len(sub),
             "err_max": err, "exact_subset_s": t4 - t3, "tolerance": tolerance,
@@ -171,7 +173,7 @@ def run(quick: bool = False) -> list[dict]:
     rows = []
     for old in ((False,) if quick else (False, True)):
         r = _child(n_volume, 50_000, n_subset, old)
-        total = r["prepare_s"] + r["warp_s"]
+        total = r["prepare_s"] + r.get("warp_first_s", r["warp_s"])
         row = {"name": f"warp_{n_volume // 1000}k_{r['surface_nodes'] // 1000}k" + ("_old" if old else ""),
                **r, "total_s": total, "old_defaults": old}
         if not quick and not old:
@@ -184,8 +186,9 @@ def summary(rows: list[dict]) -> list[dict]:
     """The rows in the runner's columns: case / measured / target / pyGeo reference / met."""
     return [{"case": f"warp {r['volume_nodes'] / 1e6:.2f}M volume / {r['surface_nodes'] / 1e3:.0f}k surface "
                      "nodes (synthetic layers)" + (", old defaults" if r.get("old_defaults") else ""),
-             "measured": f"{r['total_s']:.1f} s ({r['prepare_s']:.1f} prepare + {r['warp_s']:.1f} warp, "
-                         f"max of {r['repeats']} {r['warp_max_s']:.1f}; {r['warp_cpu_s']:.1f} CPU s), "
+             "measured": f"{r['total_s']:.1f} s ({r['prepare_s']:.1f} prepare + {r['warp_first_s']:.1f} first warp; "
+                         f"min / max of {r['repeats']} {r['warp_s']:.1f} / {r['warp_max_s']:.1f} s, "
+                         f"{r['warp_cpu_s']:.1f} CPU s), "
                          f"{r['peak_mb']:.0f} MB, err {r['err_max']:.1e}; load "
                          f"{r['load'][0]:.1f}-{r['load'][1]:.1f} on {os.cpu_count()} cores",
              "target": "<= 8 s, <= 2 GB, err <= 1e-3" if "ok" in r else "",

@@ -47,15 +47,24 @@ area, the area-weighted centroid ``c_C``, the radius ``r`` (largest distance of 
 and dipole terms: ``phi(D) sum A_i v_i + psi(D) sum A_i ((x - c_C).(x_i - c_C)) v_i`` to the
 numerator and ``A_C phi(D)`` to W (the dipole of the weights is zero about the centroid), with
 ``phi(D) = (L/D)^a + (alpha L/D)^b`` and ``psi = -phi'(D)/D`` for the translation votes, and
-``phi g``, ``-(phi g)'/D`` for the rotation votes. Each target walks the surface subtree nearest
-groups first, then the fixed subtree (its groups carry no votes, so they add to W only, and the
-weight already summed near the wall lets most far-field groups be taken whole), and aggregates a
-group when the bound of the second-order remainder of its weights
+``phi g``, ``-(phi g)'/D`` for the rotation votes. A target aggregates a group when the bound of
+the second-order remainder of its weights
 
     A_C (t^2 / 2) [a (a+1) (L/D)^a (1-t)^-(a+2) + b (b+1) (alpha L/D)^b (1-t)^-(b+2)],  t = r/D
 
-is at most ``tolerance * W / 2``, W the weight the target has summed so far (2 bounds the spread
-of translation votes relative to the largest displacement). The decisions depend on the undeformed
+is at most ``tolerance * W_ref / 4`` (:data:`REFERENCE_SHARE`), and otherwise opens it (its
+children, or a leaf's sources one by one). ``W_ref`` is the target's own weight, estimated by a
+coarse walk of its own (nearest groups first, the surface subtree before the fixed one, tolerance
+:data:`REFERENCE_TOLERANCE` against the weight summed so far; kept with the model: it depends on the
+geometry only); 2 bounds the spread of translation votes relative to the largest displacement.
+Every decision is a function of the target and the node alone, and every target takes its nodes in
+the tree's one depth-first order, so a target's value does not depend on which other targets are
+warped with it (an MPI rank's part, a row range, a chunk: bit for bit the whole run's). That is what
+lets nearby targets share the walk: blocks of 64 targets in Morton order walk the tree together
+(:mod:`ffdcli.volume._warp_blocks`), decide for all at once where the block's bounding sphere proves
+what each target would decide, and sum each aggregated group or leaf for all their targets in
+vectorised loops (``python -m benchmarks.bench_versus``: about 2x faster than one walk per target,
+a smaller error). The decisions depend on the undeformed
 geometry only, never on the motion: the approximate warp is one fixed linear map of (b, M), so
 :func:`warp_vjp` (its exact transpose) is the exact derivative, and ``ffd grad`` / ``mesh_vjp``
 match central differences of the written mesh at the default tolerance. This is a per-group
@@ -63,18 +72,15 @@ criterion, not a bound on the total: the error measured against the exact sum is
 ``tolerance x max |b|`` (``benchmarks/bench_warp.py``); the tests check
 ``<= tolerance x max |b|`` on small meshes.
 
-
-Numba kernels (:mod:`ffdcli.volume._warp_kernels`: ``prange`` over blocks of targets, explicit stack
-traversal) have NumPy references (:func:`idw_reference`) used by the tests. With a = 3, b = 5 the
-leaves and the accepted groups of the forward map are summed by small kernels that vectorise
-(sources as rows of one array, scalar accumulators, sums reassociated): the same terms, rounded in
-another order.
+Numba kernels (:mod:`ffdcli.volume._warp_blocks`: ``prange`` over blocks of targets, the block walk;
+:mod:`ffdcli.volume._warp_kernels`: the reference walk, the exact sums, the moments) have NumPy
+references (:func:`idw_reference`) used by the tests.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numba
 import numpy as np
@@ -85,7 +91,16 @@ from ffdcli.mesh.idsets import setdiff_ids, unique_ids
 from ffdcli.mesh.morton import morton_order
 from ffdcli.progress import chunks, no_progress
 from ffdcli.settings import METHODS, WarpSettings  # noqa: F401  (WarpSettings: re-exported)
-from ffdcli.volume._warp_kernels import _BLOCK, NM, NV, _node_moments, _push_down, _vjp_kernel, _warp_kernel
+from ffdcli.volume._warp_blocks import BT, vjp_blocks, warp_blocks
+from ffdcli.volume._warp_kernels import (
+    NM,
+    NV,
+    _exact_kernel,
+    _exact_vjp_kernel,
+    _node_moments,
+    _push_down,
+    weight_reference_kernel,
+)
 from ffdcli.volume.frames import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
 from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names of the warp)
     PLANE_TOLERANCE,
@@ -95,6 +110,16 @@ from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names 
     sliding_projectors,
 )
 from ffdcli.volume.tree import LEAF_SIZE, build_forest, node_geometry  # noqa: F401
+
+#: The tolerance (on the scale of ``tolerance / 2``) of the coarse per-target walk whose weight is each
+#: target's reference in the block walk's decisions (:meth:`WarpModel.tolerances`).
+REFERENCE_TOLERANCE = 0.3
+#: The share of the reference weight a node's remainder bound is held to. A target's final weight is
+#: larger than the weight it has summed when a one-walk-per-target criterion decides (and the coarse
+#: walk's estimate may be a few % high): with the whole reference the largest error on the 1M-node
+#: extruded wing (60 x 300 nodes against the exact sum) was 1.14e-3 of the largest move, with half of
+#: it 7.4e-4 (0.7: 9.4e-4), at 15 % more time.
+REFERENCE_SHARE = 0.5
 
 # ----------------------------------------------------------------------------------------------
 # The model
@@ -131,6 +156,8 @@ class WarpModel:
     node_center: np.ndarray         # area-weighted centroid
     node_radius: np.ndarray         # max distance of the node's sources from the centroid
     node_area: np.ndarray
+    #: each target's reference weight (:meth:`tolerances`), per row range, made on first use
+    weight_refs: dict = field(default_factory=dict, repr=False)
 
     @property
     def n_surface(self) -> int:
@@ -157,6 +184,23 @@ class WarpModel:
         eps2 = (1e-12 * self.ldef) ** 2
         return (self.ldef ** 2, 0.5 * s.a, 0.5 * s.b, s.a, s.b, s.alpha ** s.b, fast, eps2,
                 0.5 * float(s.tolerance), self.rotation_length ** 2 if self.rotation_length else 0.0)
+
+    def tolerances(self, lo: int, hi: int) -> np.ndarray:
+        """(hi - lo,) ``tolerance / 2 x REFERENCE_SHARE x W_ref`` of the targets ``lo:hi``: what a tree
+        node's remainder bound is held to by each target (:mod:`ffdcli.volume._warp_blocks`). ``W_ref``:
+        the target's weight from its own walk at the coarse tolerance :data:`REFERENCE_TOLERANCE`, kept
+        (geometry only)."""
+        key = (int(lo), int(hi))
+        if key not in self.weight_refs:
+            l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
+            soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
+            w = np.empty(hi - lo)
+            weight_reference_kernel(self.target_pos[lo:hi], w, self.node_lo, self.node_hi, self.node_left,
+                                    self.node_right, self.node_center, self.node_radius, self.node_area,
+                                    self.src_pos, self.src_area, l2, ha, hb, pa, pb, ab, fast, eps2,
+                                    REFERENCE_TOLERANCE, self.fixed_node, soa)
+            self.weight_refs[key] = w
+        return self.params()[8] * REFERENCE_SHARE * self.weight_refs[key]
 
     @property
     def rotation_length(self) -> float | None:
@@ -343,9 +387,9 @@ def _source_motion(model: WarpModel, disp, rot):
     return bm, use_rot
 
 
-def _blocks(n: int) -> np.ndarray:
-    """Work items of a chunk, interleaved so that both threads get near-wall and far targets."""
-    nb = (n + _BLOCK - 1) // _BLOCK
+def _blocks(n: int, size: int = BT) -> np.ndarray:
+    """The blocks of ``size`` targets of a chunk, interleaved so that both threads get near-wall and far targets."""
+    nb = (n + size - 1) // size
     stride = 7 if nb % 7 else 11
     return (np.arange(nb, dtype=np.int64) * stride) % nb if nb % stride else np.arange(nb)
 
@@ -407,16 +451,20 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     bm, use_rot = _source_motion(model, b, surface_rotation)
     node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
-    l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = model.params()
-    soa = np.ascontiguousarray(np.vstack([model.src_pos.T, model.src_area[None, :], bm.T]))
+    l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
     d = np.empty((t_hi - t_lo, 3))
+    tolw = None if exact else model.tolerances(t_lo, t_hi)
     with progress("volume mesh", t_hi - t_lo) as bar:
         for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
-            _warp_kernel(model.target_pos[t_lo + lo:t_lo + hi], _blocks(hi - lo), d[lo:hi], exact,
-                         model.node_lo, model.node_hi, model.node_left, model.node_right,
-                         model.node_center, model.node_radius, model.node_area, node_bm,
-                         model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb, ab, fast, eps2, tol,
-                         rho2, use_rot, model.fixed_node, soa)
+            tx = model.target_pos[t_lo + lo:t_lo + hi]
+            if exact:
+                _exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
+                              rho2, use_rot)
+            else:
+                warp_blocks(tx, tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
+                            model.node_left, model.node_right, model.node_center, model.node_radius,
+                            model.node_area, node_bm, model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb,
+                            ab, fast, eps2, rho2, use_rot, model.fixed_node)
             bar.update(hi - lo)
     if len(model.slide_rows):
         mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)
@@ -458,24 +506,26 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     gt = g[model.target_ids]
     if len(model.slide_rows):
         gt[model.slide_rows] = np.einsum("nij,nj->ni", model.slide_proj, gt[model.slide_rows])
-    l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = model.params()
+    l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
     nthreads = numba.get_num_threads()
     nn, ms = len(model.node_lo), len(model.src_index)
     acc_node = np.zeros((nthreads, nn, NM))
     acc_src = np.zeros((nthreads, ms, NV))
-    dummy_bm = np.zeros((1, NM))
-    soa = np.ascontiguousarray(np.vstack([model.src_pos.T, model.src_area[None, :]]))
     t_lo, t_hi = (0, model.n_targets) if comm is None else comm.share(model.n_targets)
 
     def accumulate():
+        tolw = None if exact else model.tolerances(t_lo, t_hi)
         with progress("volume mesh (transpose)", t_hi - t_lo) as bar:
             for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
-                lo, hi = lo + t_lo, hi + t_lo
-                _vjp_kernel(model.target_pos[lo:hi], np.ascontiguousarray(gt[lo:hi]), acc_node,
-                            acc_src, exact, model.node_lo, model.node_hi, model.node_left,
-                            model.node_right, model.node_center, model.node_radius, model.node_area,
-                            dummy_bm, model.src_pos, model.src_area, dummy_bm, l2, ha, hb, pa, pb, ab,
-                            fast, eps2, tol, rho2, model.fixed_node, soa)
+                tx, gc = model.target_pos[lo + t_lo:hi + t_lo], np.ascontiguousarray(gt[lo + t_lo:hi + t_lo])
+                if exact:
+                    _exact_vjp_kernel(tx, gc, acc_src, model.src_pos, model.src_area, l2, ha, hb, ab, fast,
+                                      eps2, rho2)
+                else:
+                    vjp_blocks(tx, tolw[lo:hi], gc, acc_node, acc_src, model.node_lo, model.node_hi,
+                               model.node_left, model.node_right, model.node_center, model.node_radius,
+                               model.node_area, model.src_pos, model.src_area, l2, ha, hb, pa, pb, ab, fast,
+                               eps2, rho2, model.fixed_node)
                 bar.update(hi - lo)
 
     if comm is None:

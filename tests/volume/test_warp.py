@@ -429,3 +429,27 @@ def test_one_schema_for_volume():
     assert WarpSettings.from_dict({"threshold": 0.1, "rotation_reach": None, "chunk": 1000}).chunk == 1000
     with pytest.raises(InputError, match="rotation_reach"):
         WarpSettings.from_dict({"rotation_reach": -1})
+
+
+@pytest.mark.parametrize("rotate", [False, True])
+def test_a_node_moves_the_same_whichever_nodes_are_warped_with_it(rotate):
+    """The block walk only shares the walk: each node's decisions and sums are its own, so a warp of a
+    subset of the nodes (an MPI rank's part, ``targets=``) or of a row range that cuts blocks gives each
+    node the whole run's value, bit for bit; and the subset's transpose is the transpose."""
+    pts, sid, areas, rng = sphere_cloud(ns=2000, nt=6000, seed=3)
+    b = 0.02 * rng.normal(size=(len(sid), 3))
+    R = np.stack([rot_z(a) for a in 0.1 * rng.normal(size=len(sid))]) if rotate else None
+    whole_model = prepare_warp(pts, sid, areas=areas)
+    whole = warp(whole_model, b, R)
+    sub = rng.choice(np.arange(len(sid), len(pts)), size=700, replace=False)
+    part_model = prepare_warp(pts, sid, areas=areas, targets=sub)
+    part = warp(part_model, b, R)
+    np.testing.assert_array_equal(part[sub], whole[sub])
+    rows = [warp(whole_model, b, R, rows=r) for r in ((0, 37), (37, 1000), (1000, whole_model.n_targets))]
+    np.testing.assert_array_equal(np.concatenate(rows), whole[whole_model.target_ids])
+    g = np.zeros_like(part)
+    g[sub] = rng.normal(size=(len(sub), 3))
+    gb, gM = warp_vjp(part_model, g)
+    V = 1e-3 * rng.normal(size=(len(sid), 3, 3))
+    lhs = float((g * warp(part_model, b, np.eye(3) + V)).sum())
+    assert lhs == pytest.approx(float((gb * b).sum() + (gM * V).sum()), rel=1e-12, abs=1e-14)
