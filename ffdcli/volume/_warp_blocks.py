@@ -502,9 +502,10 @@ def warp_blocks(tx, tolw, order, out, node_lo, node_hi, node_left, node_right, n
         nb = min(n, s + BT) - s
         X = np.empty((3, BT))
         tw = np.empty(BT)
-        for i in range(nb):
-            X[0, i], X[1, i], X[2, i] = tx[s + i, 0], tx[s + i, 1], tx[s + i, 2]
-            tw[i] = tolw[s + i]
+        for i in range(BT):             # a short block: its last target repeated, out of the mask
+            j = s + min(i, nb - 1)
+            X[0, i], X[1, i], X[2, i] = tx[j, 0], tx[j, 1], tx[j, 2]
+            tw[i] = tolw[j]
         W = np.empty(BT)
         res = np.empty((NV, BT))
         T = np.empty((8, BT))
@@ -512,7 +513,7 @@ def warp_blocks(tx, tolw, order, out, node_lo, node_hi, node_left, node_right, n
         acc = np.empty(BT)
         stack_n = np.empty(_STACK, np.int64)
         stack_m = np.empty(_STACK, np.uint64)
-        walk(0, X, tw, nb, _full_mask(nb), X, W, node_lo, node_hi, node_left, node_right, node_c, node_r,
+        walk(0, X, tw, BT, _full_mask(nb), X, W, node_lo, node_hi, node_left, node_right, node_c, node_r,
              node_a, node_bm, src_x, src_a, src_bm, l2, ha, hb, pa, pb, ab, fast, eps2, rho2, rot, fixed_node,
              W, res, node_bm, src_bm, T, fl, acc, stack_n, stack_m)
         for i in range(nb):
@@ -556,20 +557,21 @@ def vjp_blocks(tx, tolw, g, acc_node, acc_src, node_lo, node_hi, node_left, node
             s = b * BT
             nb = min(n, s + BT) - s
             mask = np.uint64(0)
-            for i in range(nb):
-                X[0, i], X[1, i], X[2, i] = tx[s + i, 0], tx[s + i, 1], tx[s + i, 2]
-                G[0, i], G[1, i], G[2, i] = g[s + i, 0], g[s + i, 1], g[s + i, 2]
-                tw[i] = tolw[s + i]
-                if G[0, i] != 0.0 or G[1, i] != 0.0 or G[2, i] != 0.0:
+            for i in range(BT):         # a short block: its last target repeated, out of the mask
+                j = s + min(i, nb - 1)
+                X[0, i], X[1, i], X[2, i] = tx[j, 0], tx[j, 1], tx[j, 2]
+                G[0, i], G[1, i], G[2, i] = g[j, 0], g[j, 1], g[j, 2]
+                tw[i] = tolw[j]
+                if i < nb and (G[0, i] != 0.0 or G[1, i] != 0.0 or G[2, i] != 0.0):
                     mask |= np.uint64(1) << np.uint64(i)
             if mask == 0:
                 continue
-            walk(1, X, tw, nb, mask, G, W, node_lo, node_hi, node_left, node_right, node_c, node_r, node_a,
+            walk(1, X, tw, BT, mask, G, W, node_lo, node_hi, node_left, node_right, node_c, node_r, node_a,
                  dummy_bm, src_x, src_a, dummy_bm, l2, ha, hb, pa, pb, ab, fast, eps2, rho2, False, fixed_node,
                  W, res, an, asrc, T, fl, acc, stack_n, stack_m)
-            for i in range(nb):
+            for i in range(BT):
                 if W[i] <= 0.0:
                     W[i] = 1.0          # a lane left out (or of no weight): its terms are zero
-            walk(2, X, tw, nb, mask, G, W, node_lo, node_hi, node_left, node_right, node_c, node_r, node_a,
+            walk(2, X, tw, BT, mask, G, W, node_lo, node_hi, node_left, node_right, node_c, node_r, node_a,
                  dummy_bm, src_x, src_a, dummy_bm, l2, ha, hb, pa, pb, ab, fast, eps2, rho2, True, fixed_node,
                  W, res, an, asrc, T, fl, acc, stack_n, stack_m)

@@ -1,7 +1,7 @@
 """The volume warp beside another revision of ffd, in one run (issue 30): the gain as a ratio that the
 machine's speed and load do not change.
 
-``python -m benchmarks.bench_versus REV [--repeats N] [--quick]`` checks REV out into a temporary git
+``python -m benchmarks.versus REV [--repeats N] [--quick]`` checks REV out into a temporary git
 worktree and runs, alternately in this checkout and in REV's (each with its own sources on
 ``PYTHONPATH`` and its own numba cache, warmed by an untimed first run):
 
