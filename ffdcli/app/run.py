@@ -26,8 +26,9 @@ from ffdcli.parameterization.components import design_variables, layout, set_des
 from ffdcli.progress import no_progress
 from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
 from ffdcli.quality.reference import part_reference, quality_reference
+from ffdcli.volume.cache import ReferenceCache, reference_key, reference_path
 from ffdcli.volume.surface_motion import component_displacement, component_frames, frame_gradient_inputs, full3
-from ffdcli.volume.warp import WarpModel, WarpSettings, prepare_mesh_warp, warp
+from ffdcli.volume.warp import REFERENCE_TOLERANCE, WarpModel, WarpSettings, prepare_mesh_warp, warp
 
 
 @dataclass
@@ -46,6 +47,9 @@ class DesignRun:
     comm: object = field(default=None, repr=False)    # ffdcli.parallel.comm communicator (None: serial)
     _quality_ref: object = field(default=None, repr=False)   # the gate's view of the input mesh, built once
     _quality_part: object = field(default=None, repr=False)  # MPI: (this rank's MeshPart, its PartReference)
+    #: where the warp's reference weights are kept between runs (serial runs with a cache; else None)
+    warp_cache: ReferenceCache | None = field(default=None, repr=False)
+    _warp_cached: bool = field(default=False, repr=False)    # the model's reference weights are in the file
 
     def quality_reference(self):
         """The quality gate's :class:`~ffdcli.quality.reference.QualityReference` of the input mesh, computed
@@ -107,7 +111,11 @@ class DesignRun:
         with every node on every rank: each rank its block, the blocks gathered."""
         if self.local:
             return self.comm.run(warp, model, disp, rot, progress=progress)
-        return warp(model, disp, rot, progress=progress, comm=self.comm)
+        out = warp(model, disp, rot, progress=progress, comm=self.comm)
+        if model is self._warp and self.warp_cache is not None and not self._warp_cached:
+            # the reference weights were computed by this warp: keep them for the next run
+            self._warp_cached = self.warp_cache.save(model.target_ids, model.reference_weights())
+        return out
 
     def all_finite(self, points: np.ndarray) -> bool:
         """Whether every coordinate of the mesh at ``points`` is finite (the same answer on every rank)."""
@@ -167,6 +175,10 @@ class DesignRun:
                                          size=self.mesh_diagonal(), targets=self.warp_targets())
             if not np.array_equal(model.surface_ids, self.surface_ids):
                 raise RuntimeError("the warp's surface nodes differ from the box's")
+            weights = None if self.warp_cache is None else self.warp_cache.load(model.target_ids)
+            if weights is not None:
+                model.set_reference_weights(weights)
+                self._warp_cached = True
             self._warp = model
         return self._warp
 
@@ -338,4 +350,11 @@ def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = 
         comp_mod.check_shared_nodes(comps, path=design.path)
         comp_mod.check_overlap(comps, path=design.path)
     comp_mod.variable_bounds(comps, design)      # bounds: checked for every command, as DesignModel does
-    return DesignRun(design=design, components=comps, comm=comm, _quality_part=None if part is None else (part, None))
+    warp_cache = None
+    if use_cache and mesh_hash is not None and (comm is None or comm.size == 1):
+        names = [n for c in comps for n in c.prep.surface.names]
+        settings = WarpSettings.from_dict(design.volume or {}, path=design.path)
+        key = reference_key(mesh_hash, names, settings, REFERENCE_TOLERANCE)
+        warp_cache = ReferenceCache(reference_path(mesh.path, key, cache_dir), key, read=not rebuild)
+    return DesignRun(design=design, components=comps, comm=comm, _quality_part=None if part is None else (part, None),
+                     warp_cache=warp_cache)

@@ -26,8 +26,9 @@ from ffdcli.cli import cli, common_options
                    "a 3D wing <picture>_3d.png, the 3D view (needs pyvista: the [viz] extra).")
 @click.option("--force", is_flag=True, help="Write the mesh even if the quality check fails.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR",
-              help="Where the box cache lives (default: beside the mesh).")
-@click.option("--no-cache", is_flag=True, help="Neither read nor write the box cache.")
+              help="Where the caches live (default: beside the mesh).")
+@click.option("--no-cache", is_flag=True,
+              help="Neither read nor write the caches (the box's and the volume warp's).")
 @common_options
 def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, force, cache_dir, no_cache,
                console):

@@ -191,6 +191,9 @@ class WarpModel:
         the target's weight from its own walk at the coarse tolerance :data:`REFERENCE_TOLERANCE`, kept
         (geometry only)."""
         key = (int(lo), int(hi))
+        full = self.weight_refs.get((0, self.n_targets))
+        if full is not None:
+            return self.params()[8] * REFERENCE_SHARE * full[lo:hi]
         if key not in self.weight_refs:
             l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
             soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
@@ -201,6 +204,20 @@ class WarpModel:
                                     REFERENCE_TOLERANCE, self.fixed_node, soa)
             self.weight_refs[key] = w
         return self.params()[8] * REFERENCE_SHARE * self.weight_refs[key]
+
+    def reference_weights(self) -> np.ndarray:
+        """(Nt,) every target's reference weight (:meth:`tolerances`), computed on first use: what
+        :mod:`ffdcli.volume.cache` keeps between runs."""
+        self.tolerances(0, self.n_targets)
+        return self.weight_refs[(0, self.n_targets)]
+
+    def set_reference_weights(self, weights: np.ndarray) -> None:
+        """Use ``weights`` (Nt,), as :meth:`reference_weights` returned them for this mesh and these
+        settings (read back from :mod:`ffdcli.volume.cache`), instead of computing them."""
+        w = np.asarray(weights, dtype=np.float64)
+        if w.shape != (self.n_targets,):
+            raise ValueError(f"reference weights must be ({self.n_targets},), got {w.shape}")
+        self.weight_refs[(0, self.n_targets)] = w
 
     @property
     def rotation_length(self) -> float | None:

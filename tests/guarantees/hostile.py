@@ -81,8 +81,8 @@ def assert_hostile(ws: Path, args, code: int, *texts: str, names=(), subprocess_
     assert not changed, f"modified or removed: {changed}\n{line}"
     created = sorted(set(after) - set(before))
     assert not [c for c in created if ".part" in c], created
-    for c in created:   # only the cache of a mesh that was read successfully, and a complete one
-        assert c.endswith(".ffdcache.npz"), f"created {c}: {line}"
+    for c in created:   # only the caches of a mesh that was read successfully, and complete ones
+        assert c.endswith((".ffdcache.npz", ".ffdwarp.npz")), f"created {c}: {line}"
         with np.load(ws / c) as z:
             assert "header" in z.files
     return line

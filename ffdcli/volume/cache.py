@@ -1,0 +1,109 @@
+"""The volume warp's reference weights, kept between runs: one ``.npz`` file beside the mesh (or in
+``--cache-dir``), next to the box cache (:mod:`ffdcli.box.cache`).
+
+Each volume node's reference weight (:meth:`ffdcli.volume.warp.WarpModel.tolerances`) is a walk of the
+source tree of its own: about a seventh of a deformation's warp on a 1M-node mesh. It depends on the
+mesh, the deforming surface and the warp settings only, never on the design, so ``ffd deform`` run in a
+loop over designs computes it once. The file name carries the key (``<mesh name>.<key>.ffdwarp.npz``):
+the SHA-256 of the mesh file's bytes, the surface marker names, the warp settings (all but ``chunk``,
+which changes no value), the reference walk's tolerance, the tool version and this format. A file
+whose key differs, that cannot be read, or whose weights do not fit the model's volume nodes (their
+count and the hash of their ids, checked on every load) is not used and is replaced atomically.
+
+Serial runs only: an MPI rank warps its own part's nodes and computes their weights (bit for bit the
+serial ones: a node's walk is its own).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ffdcli import __version__
+from ffdcli.io.atomic import atomic_path
+from ffdcli.settings import WarpSettings
+
+#: Bumped whenever the content of the file changes meaning.
+CACHE_FORMAT = 1
+
+
+def reference_key(mesh_hash: str, surface: list[str], settings: WarpSettings, reference_tolerance: float) -> str:
+    """The key of a model's reference weights: mesh content, surface names, warp settings (but
+    ``chunk``), the reference walk's tolerance, tool version and cache format."""
+    warp = {k: v for k, v in dataclasses.asdict(settings).items() if k != "chunk"}
+    blob = json.dumps({"mesh": mesh_hash, "surface": list(surface), "warp": warp,
+                       "reference_tolerance": float(reference_tolerance), "version": __version__,
+                       "format": CACHE_FORMAT}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def reference_path(mesh_path: str | Path, key: str, cache_dir: str | Path | None = None) -> Path:
+    """Where the reference weights of ``mesh_path`` with ``key`` live."""
+    mp = Path(mesh_path)
+    folder = Path(cache_dir) if cache_dir else mp.parent
+    return folder / f"{mp.name}.{key[:16]}.ffdwarp.npz"
+
+
+def _ids_hash(target_ids: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(target_ids, dtype=np.int64).tobytes()).hexdigest()
+
+
+def save_references(path: str | Path, key: str, target_ids: np.ndarray, weights: np.ndarray) -> None:
+    """Write the (Nt,) ``weights`` of the volume nodes ``target_ids`` (the model's order) atomically."""
+    header = {"key": key, "version": __version__, "format": CACHE_FORMAT, "targets": _ids_hash(target_ids)}
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
+                     weights=np.asarray(weights, dtype=np.float64))
+
+
+def load_references(path: str | Path, key: str, target_ids: np.ndarray) -> np.ndarray | None:
+    """The (Nt,) reference weights of the volume nodes ``target_ids`` (the model's order), or None if
+    the file is absent, stale, corrupt or of other nodes."""
+    p = Path(path)
+    if not p.is_file():
+        return None
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            header = json.loads(bytes(z["header"]).decode())
+            if not isinstance(header, dict) or header.get("key") != key \
+                    or header.get("format") != CACHE_FORMAT or header.get("version") != __version__:
+                return None
+            w = np.asarray(z["weights"])
+    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError,
+            UnicodeDecodeError):
+        return None
+    if w.dtype != np.float64 or w.shape != (len(target_ids),) or header.get("targets") != _ids_hash(target_ids):
+        return None
+    if not np.all(np.isfinite(w)) or np.any(w <= 0):       # a weight is a sum of positive terms
+        return None
+    return w
+
+
+@dataclass(frozen=True)
+class ReferenceCache:
+    """Where one run keeps its warp's reference weights: the file, its key, and whether an existing
+    file may be read (``ffd box --rebuild`` / ``rebuild=True``: computed again and replaced)."""
+
+    path: Path
+    key: str
+    read: bool = True
+
+    def load(self, target_ids: np.ndarray) -> np.ndarray | None:
+        """:func:`load_references`, or None when the file is not to be read."""
+        return load_references(self.path, self.key, target_ids) if self.read else None
+
+    def save(self, target_ids: np.ndarray, weights: np.ndarray) -> bool:
+        """:func:`save_references`; False (nothing written, the run goes on) when the folder cannot
+        be written: the box cache beside it has already said so."""
+        try:
+            save_references(self.path, self.key, target_ids, weights)
+        except OSError:
+            return False
+        return True
