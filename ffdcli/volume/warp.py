@@ -63,8 +63,9 @@ warped with it (an MPI rank's part, a row range, a chunk: bit for bit the whole 
 lets nearby targets share the walk: blocks of 64 targets in Morton order walk the tree together
 (:mod:`ffdcli.volume._warp_blocks`), decide for all at once where the block's bounding sphere proves
 what each target would decide, and sum each aggregated group or leaf for all their targets in
-vectorised loops (``python -m benchmarks.versus``: the layered 1M-node warp 1.78x faster than one
-walk per target, ``ffd deform`` of a 1M-node mesh 1.65x, at a smaller error). The decisions depend
+vectorised loops (``python -m benchmarks.versus``: the layered 1M-node warp 1.7-1.8x faster than one
+walk per target at a smaller error; ``ffd deform`` of a 1M-node mesh 1.65x, 1.8x with the reference
+weights read from :mod:`ffdcli.volume.cache` on every deform after the first). The decisions depend
 on the undeformed geometry only, never on the motion: the approximate warp is one fixed linear map of (b, M), so
 :func:`warp_vjp` (its exact transpose) is the exact derivative, and ``ffd grad`` / ``mesh_vjp``
 match central differences of the written mesh at the default tolerance. This is a per-group
