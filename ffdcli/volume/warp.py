@@ -207,14 +207,13 @@ class WarpModel:
         return self.params()[8] * REFERENCE_SHARE * self.weight_refs[key]
 
     def reference_weights(self) -> np.ndarray:
-        """(Nt,) every target's reference weight (:meth:`tolerances`), computed on first use: what
-        :mod:`ffdcli.volume.cache` keeps between runs."""
+        """(Nt,) every target's reference weight (:meth:`tolerances`), computed on first use."""
         self.tolerances(0, self.n_targets)
         return self.weight_refs[(0, self.n_targets)]
 
     def set_reference_weights(self, weights: np.ndarray) -> None:
-        """Use ``weights`` (Nt,), as :meth:`reference_weights` returned them for this mesh and these
-        settings (read back from :mod:`ffdcli.volume.cache`), instead of computing them."""
+        """Use ``weights`` (Nt,) as :meth:`reference_weights` of this mesh and settings gave them
+        (read back by :mod:`ffdcli.volume.cache`) instead of computing them."""
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != (self.n_targets,):
             raise ValueError(f"reference weights must be ({self.n_targets},), got {w.shape}")
