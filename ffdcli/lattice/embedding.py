@@ -51,7 +51,7 @@ from ffdcli.lattice._embedding_kernels import _basis_rows_nb, apply, basis_axes,
 from ffdcli.lattice._newton_kernels import STATIONARY, _pinv_nb, _start_nb, run_newton  # noqa: F401  (STATIONARY:
 
 #   the Newton kernel's stopping rule for points outside, part of this module's documented behaviour)
-from ffdcli.lattice.lattice import Lattice, derivatives, evaluate, kernel_args
+from ffdcli.lattice.lattice import DUMMY_KNOTS, Lattice, derivatives, evaluate, kernel_args
 from ffdcli.lattice.spline import basis
 from ffdcli.progress import chunks, no_progress
 
@@ -119,7 +119,7 @@ class Embedding:
                              f"and {residual.shape}")
         first = tuple(np.empty(npts, dtype=np.int32) for _ in range(lattice.pdim))
         values = tuple(np.empty((npts, p + 1)) for p in lattice.degree)
-        knots = (*lattice.knots, _DUMMY_KNOTS)[:3]
+        knots = (*lattice.knots, DUMMY_KNOTS)[:3]
         first3 = (*first, _DUMMY_FIRST)[:3]
         values3 = (*values, _DUMMY_VALUES)[:3]
         degrees = (*lattice.degree, 0)[:3]
@@ -278,7 +278,6 @@ class Embedding:
 
 _DUMMY_FIRST = np.zeros(1, dtype=np.int32)
 _DUMMY_VALUES = np.ones((1, 1))
-_DUMMY_KNOTS = np.array([0.0, 1.0])
 
 
 def rmatvec_reference(emb: Embedding, g) -> np.ndarray:

@@ -41,8 +41,12 @@ from ffdcli.lattice.spline import (
 from ffdcli.mesh import diagonal
 from ffdcli.settings import MAX_DEGREE, check_degree
 
-#: Knot vector of the dummy third axis of a 2D lattice (one control point, degree 0).
-_DUMMY_KNOTS = np.array([0.0, 1.0])
+#: Knot vector of the dummy third axis of a 2D lattice (one control point, degree 0). Read-only, as
+#: every array :func:`kernel_args` hands the kernels: numba compiles one signature per array flag
+#: combination, so a writable array here made 2D lattices compile the generic kernels again after
+#: the warm-up (12 s for ``--degree 1,1`` of a 2D mesh).
+DUMMY_KNOTS = np.array([0.0, 1.0])
+DUMMY_KNOTS.setflags(write=False)
 
 
 @dataclass(frozen=True)
@@ -157,7 +161,7 @@ def kernel_args(lattice: Lattice):
     if lattice.pdim == 2:
         cp = cp.reshape(cp.shape[0], cp.shape[1], 1, cp.shape[2])
         k0, k1 = lattice.knots
-        k2 = _DUMMY_KNOTS
+        k2 = DUMMY_KNOTS
         p0, p1 = lattice.degree
         p2 = 0
     else:
@@ -166,6 +170,8 @@ def kernel_args(lattice: Lattice):
     if cp.shape[-1] < 3:
         cp = np.concatenate([cp, np.zeros(cp.shape[:-1] + (3 - cp.shape[-1],))], axis=-1)
     P4 = np.ascontiguousarray(cp)
+    if P4.flags.writeable:          # a new array (2-coordinate control points): read-only like the rest
+        P4.setflags(write=False)
     return P4, k0, k1, k2, np.int64(p0), np.int64(p1), np.int64(p2)
 
 
