@@ -57,3 +57,16 @@ def test_the_specialised_degrees_are_the_defaults():
     for dim, points in DEFAULT_POINTS.items():
         degrees = tuple(default_degree(n) for n in points) + ((0,) if dim == 2 else ())
         assert specialised(degrees), degrees
+
+
+@pytest.mark.parametrize("make", [lambda: wing_lattice((8, 6, 2), (3, 3, 1)),
+                                  lambda: curved_patch((6, 5), (1, 1), gdim=2),
+                                  lambda: curved_patch((6, 5), (2, 4), gdim=3)])
+def test_the_kernels_get_read_only_arrays_whatever_the_lattice(make):
+    """numba compiles one signature per array flag combination: a writable array among the kernels'
+    arguments (the 2D dummy knots, 2-coordinate control points padded to 3) compiled the generic
+    kernels a second time after the warm-up. Every array handed over is read-only."""
+    args = kernel_args(make())
+    arrays = [a for a in args if isinstance(a, np.ndarray)]
+    assert len(arrays) == 4
+    assert not any(a.flags.writeable for a in arrays)
