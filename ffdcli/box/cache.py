@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -21,8 +20,8 @@ import numpy as np
 from ffdcli import __version__
 from ffdcli.box.box import Box
 from ffdcli.errors import InputError
-from ffdcli.io.atomic import atomic_path
 from ffdcli.io.inputs import polymesh_folder_of
+from ffdcli.io.keyed_npz import read_keyed, write_keyed
 from ffdcli.lattice.embedding import Embedding
 from ffdcli.settings import BoxSettings
 
@@ -65,38 +64,22 @@ def cache_path(mesh_path: str | Path, key: str, cache_dir: str | Path | None = N
 def save(path: str | Path, key: str, box: Box, surface_ids: np.ndarray, embedding, report: dict,
          meta: dict | None = None) -> None:
     """Write the cache file atomically."""
-    header = {"key": key, "version": __version__, "format": CACHE_FORMAT,
-              "settings": box.settings.as_dict(), "report": report, **(meta or {})}
     arrays = {
-        "header": np.frombuffer(json.dumps(header, default=str).encode(), dtype=np.uint8),
         **box.to_arrays(),                 # the box says how it is stored; its names are not the ones below
         "surface_ids": np.asarray(surface_ids, dtype=np.int64),
         "params": embedding.params,
         "inside": embedding.inside,
         "residual": embedding.residual,
     }
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, **arrays)
+    write_keyed(path, key, CACHE_FORMAT, arrays, settings=box.settings.as_dict(), report=report, **(meta or {}))
 
 
 def load(path: str | Path, key: str, settings: BoxSettings):
     """(box, surface_ids, embedding, header) from a cache file, or None if absent, stale or corrupt."""
-    p = Path(path)
-    if not p.is_file():
+    got = read_keyed(path, key, CACHE_FORMAT)
+    if got is None:
         return None
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            header = json.loads(bytes(z["header"]).decode())
-            if not isinstance(header, dict):         # valid JSON, but not what we write: rebuild
-                return None
-            if header.get("key") != key or header.get("format") != CACHE_FORMAT \
-                    or header.get("version") != __version__:
-                return None
-            a = {k: z[k] for k in z.files}
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError,
-            UnicodeDecodeError):
-        return None
+    header, a = got
     if any(v.dtype.kind == "f" and not np.all(np.isfinite(v)) for v in a.values()):
         return None                  # a damaged file: no cache we write holds NaN or inf
     try:

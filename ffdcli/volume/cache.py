@@ -19,14 +19,13 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ffdcli import __version__
-from ffdcli.io.atomic import atomic_path
+from ffdcli.io.keyed_npz import read_keyed, write_keyed
 from ffdcli.settings import WarpSettings
 
 #: Bumped whenever the content of the file changes meaning.
@@ -56,29 +55,18 @@ def _ids_hash(target_ids: np.ndarray) -> str:
 
 def save_references(path: str | Path, key: str, target_ids: np.ndarray, weights: np.ndarray) -> None:
     """Write the (Nt,) ``weights`` of the volume nodes ``target_ids`` (the model's order) atomically."""
-    header = {"key": key, "version": __version__, "format": CACHE_FORMAT, "targets": _ids_hash(target_ids)}
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez(fh, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8),
-                     weights=np.asarray(weights, dtype=np.float64))
+    write_keyed(path, key, CACHE_FORMAT, {"weights": np.asarray(weights, dtype=np.float64)},
+                targets=_ids_hash(target_ids))
 
 
 def load_references(path: str | Path, key: str, target_ids: np.ndarray) -> np.ndarray | None:
     """The (Nt,) reference weights of the volume nodes ``target_ids`` (the model's order), or None if
     the file is absent, stale, corrupt or of other nodes."""
-    p = Path(path)
-    if not p.is_file():
+    got = read_keyed(path, key, CACHE_FORMAT)
+    if got is None or "weights" not in got[1]:
         return None
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            header = json.loads(bytes(z["header"]).decode())
-            if not isinstance(header, dict) or header.get("key") != key \
-                    or header.get("format") != CACHE_FORMAT or header.get("version") != __version__:
-                return None
-            w = np.asarray(z["weights"])
-    except (OSError, ValueError, KeyError, zipfile.BadZipFile, json.JSONDecodeError, EOFError,
-            UnicodeDecodeError):
-        return None
+    header, arrays = got
+    w = arrays["weights"]
     if w.dtype != np.float64 or w.shape != (len(target_ids),) or header.get("targets") != _ids_hash(target_ids):
         return None
     if not np.all(np.isfinite(w)) or np.any(w <= 0):       # a weight is a sum of positive terms
@@ -89,7 +77,7 @@ def load_references(path: str | Path, key: str, target_ids: np.ndarray) -> np.nd
 @dataclass(frozen=True)
 class ReferenceCache:
     """Where one run keeps its warp's reference weights: the file, its key, and whether an existing
-    file may be read (``ffd box --rebuild`` / ``rebuild=True``: computed again and replaced)."""
+    file may be read (``load_run(..., rebuild=True)``: no, computed again and replaced)."""
 
     path: Path
     key: str
