@@ -77,7 +77,7 @@ def load_references(path: str | Path, key: str, target_ids: np.ndarray) -> np.nd
 @dataclass(frozen=True)
 class ReferenceCache:
     """Where one run keeps its warp's reference weights: the file, its key, and whether an existing
-    file may be read (``load_run(..., rebuild=True)``: no, computed again and replaced)."""
+    file may be read (False under ``load_run(..., rebuild=True)``: computed again and replaced)."""
 
     path: Path
     key: str
