@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import sys
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 
@@ -34,8 +35,16 @@ def default_jobs(n_steps: int) -> int:
 
 
 def _limit_threads(threads: int) -> None:
-    """Worker initialiser: numba's thread count, set before the step imports numba."""
+    """Worker initialiser: numba's thread count, before any numba thread starts.
+
+    A spawned worker first imports the caller's main module (``python -m ffdcli.app.warmup``), which
+    may import numba with its default count (every core); numba's config is then read again here.
+    Without that, a kernel loaded from the cache started the default count of threads and the
+    worker's next compile stopped it with "Cannot set NUMBA_NUM_THREADS ... once the threads have
+    been launched" (a warm-up after a source change, where only some kernels compile)."""
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    if "numba" in sys.modules:
+        sys.modules["numba"].config.reload_config()
 
 
 def run_steps(fn: Callable, args: Sequence[tuple], jobs: int) -> Iterator[tuple[int, object]]:
