@@ -23,7 +23,8 @@ from ffdcli.lattice.lattice import evaluate
 from ffdcli.mesh import CellBlock
 from ffdcli.parameterization.changes import Twist, apply_changes, changes_from_spec, design_variables
 from ffdcli.parameterization.changes.control_surfaces import refine_for_devices, rodrigues
-from ffdcli.parameterization.changes.devices import MAX_ANGLE
+from ffdcli.lattice.spline import basis
+from ffdcli.parameterization.changes.devices import BLEND_INTERVALS, MAX_ANGLE, section_weights
 from ffdcli.settings import BoxSettings
 from ffdcli.testing.wings import Planform, crm_planform, naca4, rect_wing_planform, wing_surface
 
@@ -147,6 +148,55 @@ def test_knots_do_not_move_the_surface(rect, crm):
         after = evaluate(rbox.lattice(), emb.params)
         assert np.abs(after - before).max() < 1e-12 * chord
         assert np.abs(surface_after(rbox, remb, rbox.control_points) - before).max() < 1e-12 * chord
+
+
+def test_blend_weights_make_a_linear_ramp_between_full_and_none():
+    """Sections inside the device's span turn fully, those reaching past a blend not at all, and
+    the angle's share along the span, sum_j w_j N_j(v), is 1 in the device, 0 past the blends,
+    monotone, and exactly the linear ramp across the middle of each blend (B-splines reproduce
+    linear functions)."""
+    q, n = 3, BLEND_INTERVALS * 3
+    inner = 0.1 + 0.2 * np.arange(n + 1) / n          # inner blend 0.1 .. 0.3, device 0.3 .. 0.55
+    outer = 0.55 + 0.3 * np.arange(n + 1) / n         # outer blend 0.55 .. 0.85
+    v = np.concatenate([np.zeros(q + 1), [0.05], inner, [0.42], outer, [0.93], np.ones(q + 1)])
+    w = section_weights(v, q, (0.3, 0.55), (0.1, 0.85))
+    t = np.linspace(0.0, 1.0, 4001)
+    first, vals = basis(v, q, t)
+    share = np.einsum("ik,ik->i", vals, w[first[:, None] + np.arange(q + 1)])
+    assert np.all((w >= 0) & (w <= 1)) and np.count_nonzero((w > 0) & (w < 1)) == 2 * (n - q) > 0
+    assert np.allclose(share[(t >= 0.3) & (t <= 0.55)], 1.0, atol=1e-14)
+    assert np.abs(share[(t <= 0.1) | (t >= 0.85)]).max() < 1e-15
+    rising, falling = t < 0.42, t > 0.42
+    assert np.all(np.diff(share[rising]) >= -1e-15) and np.all(np.diff(share[falling]) <= 1e-15)
+    # between the Greville abscissae of the last full and first still section (a knot interval
+    # inside each end of the blend), a straight line across the middle
+    h = 0.3 / n
+    mid = (t > 0.55 + 2 * h) & (t < 0.85 - 2 * h)
+    line = (0.85 - h - t[mid]) / (0.3 - 2 * h)
+    assert np.abs(share[mid] - line).max() < 1e-13
+    # never steeper than that line (the control polygon's slope): 1.5 times the blend's mean slope
+    slope = np.abs(np.diff(share[falling])) / np.diff(t[falling])
+    assert slope.max() <= (1 + 1e-9) / (0.3 - 2 * h) and (0.3 - 2 * h) == pytest.approx(0.3 / 1.5)
+    h = 0.2 / n
+    mid = (t > 0.1 + 2 * h) & (t < 0.3 - 2 * h)
+    assert np.abs(share[mid] - (t[mid] - 0.1 - h) / (0.2 - 2 * h)).max() < 1e-13
+
+
+def test_the_flap_fades_along_the_span_no_steeper_than_its_blend(rect):
+    """On the rectangular wing the trailing edge's drop falls from its full value to 0 across the
+    blend at most 1.7 times as steeply as a straight ramp over the blend would (the spanwise
+    parameter is not proportional to the span fraction)."""
+    pts = rect[0]
+    dev, disp, box = check_oracles(rect, {"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": 20}})
+    f, cf = local_coords(box, pts)
+    te = (cf > 0.995) & (f > 0.55) & (f < 0.85)
+    order = np.argsort(f[te])
+    f_te, drop = f[te][order], -(disp[te] @ box.thickness_dir)[order]
+    full = 0.25 * np.sin(np.radians(20.0))
+    assert drop.max() == pytest.approx(full, rel=0.05) and drop.min() < 1e-12
+    keep = np.diff(f_te) > 1e-3
+    slope = np.abs(np.diff(drop))[keep] / np.diff(f_te)[keep]
+    assert slope.max() < 1.7 * full / dev.spec.blend          # 1.55 here; 2.9 before the ramp
 
 
 def test_zero_angle_is_no_change(rect):

@@ -9,8 +9,9 @@ points turn, and the knots that make the device sharp, are in :mod:`.devices`; h
 
     x' = H + R(omega, theta_j) (x - H)    for the turning rows i of section j, x' = x elsewhere,
 
-``theta_j = angle * weights[j]`` (weights 0 or 1: the B-spline blends the turned and the fixed
-sections over the blend width), ``H`` the inner hinge point, ``omega`` the unit hinge direction
+``theta_j = angle * weights[j]`` (weights 1 for the sections in the device's span, 0 outside it and
+its blends, a straight ramp across each blend: :func:`.devices.section_weights`), ``H`` the inner
+hinge point, ``omega`` the unit hinge direction
 signed so that a positive angle moves the trailing edge (flap) or leading edge (slat) down, and
 ``R`` Rodrigues' rotation. The hinge points are basis rows applied to the input lattice, so the
 device follows the changes before it; a hinge fraction given as a list of two is a design
@@ -219,7 +220,7 @@ class ControlSurface(Change):
                 "blend": None if self.spec.span is None else self.spec.blend,
                 "transition": float(self.geometry.transition.max()),
                 "turning_rows": int(self.geometry.rows.sum()),
-                "turning_sections": int(self.geometry.weights.sum())}
+                "turning_sections": int(np.count_nonzero(self.geometry.weights))}
 
     def hinge_line(self, P) -> np.ndarray:
         """(E, 3) the hinge points of lattice ``P`` (for pictures)."""

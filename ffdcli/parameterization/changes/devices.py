@@ -5,15 +5,16 @@ hinge chord fractions and widths; this module turns them into lattice facts, in 
 
 1. :func:`device_knots`: the knots the lattice needs (on the box as fitted). Chordwise: ``p + 1``
    knots (``p`` the chordwise degree) from the hinge's parameter to the end of the transition
-   (``transition`` local chords behind a flap's hinge, ahead of a slat's); spanwise (3D): ``q + 1``
-   knots across each blend (``q`` the spanwise degree). The box is then refined by exact knot
-   insertion (:func:`ffdcli.box.refine.refine_box`): the surface does not move.
+   (``transition`` local chords behind a flap's hinge, ahead of a slat's); spanwise (3D): ``2 q + 1``
+   knots across each blend (``q`` the spanwise degree; :data:`BLEND_INTERVALS`). The box is then
+   refined by exact knot insertion (:func:`ffdcli.box.refine.refine_box`): the surface does not move.
 2. :func:`device_geometry`: on the refined box, which chordwise rows of control points turn (every
    row whose basis function starts at or behind the hinge knot: a point ahead of it depends on no
    turning row and does not move; a point behind the transition depends on turning rows only and
-   turns rigidly), which sections turn (those whose basis function reaches into the device's span:
-   a point outside the device and its blends depends on none of them), and the basis rows of the
-   hinge points at the device's ends.
+   turns rigidly), by what share of the angle each section turns (:func:`section_weights`: all of
+   it where its basis function reaches into the device's span, none where it reaches beyond a
+   blend, so a point outside the device and its blends does not move, a straight ramp between), and
+   the basis rows of the hinge points at the device's ends.
 
 Span fraction ``f`` is the station ``stations[0] + f (stations[-1] - stations[0])`` (root 0, tip 1);
 the local baseline chord there is interpolated linearly between the box's sections, and the hinge
@@ -26,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
 
 from ffdcli.box.box import Box
 from ffdcli.box.refine import edges_at, lattice_params, span_fractions
@@ -39,6 +41,9 @@ DEFAULT_BLEND = 0.2
 DEFAULT_TRANSITION = 0.1
 #: The largest deflection (degrees) of a device: in a design file and as an optimiser's bound alike.
 MAX_ANGLE = 60.0
+#: Knot intervals across each blend per spanwise degree ``q``: ``2 q`` intervals leave ``q`` sections
+#: whose basis functions lie inside the blend, which turn by a share of the angle (:func:`section_weights`).
+BLEND_INTERVALS = 2
 #: Tolerance (parameter) when reading which knots are a device's.
 KNOT_TOL = 1e-9
 #: A parameter this close to a knot is that knot (:func:`snap`).
@@ -129,12 +134,15 @@ def _hinge_params(box: Box, surface, spec: DeviceSpec):
     return float(pick(u[:k])), float(pick(u[k:])), ends, params[:k]
 
 
-def _span_params(box: Box, surface, spec: DeviceSpec) -> list[tuple[float, float]]:
-    """Spanwise parameter intervals of the blends (inner, outer) that need knots."""
+def _span_params(box: Box, surface, spec: DeviceSpec, *, ends: bool = False) -> list:
+    """Spanwise parameter intervals of the blends (inner, outer) that need knots; ``ends``: one per
+    device end, None at a root or tip end (no blend there)."""
     a, b = spec.span
     out = []
     for f, g in ((a, max(a - spec.blend, 0.0)), (b, min(b + spec.blend, 1.0))):
         if f <= 0.0 or f >= 1.0:
+            if ends:
+                out.append(None)
             continue
         pts = []
         for x in (f, g):
@@ -144,6 +152,50 @@ def _span_params(box: Box, surface, spec: DeviceSpec) -> list[tuple[float, float
         v[1] = 0.0 if g <= 0.0 else 1.0 if g >= 1.0 else v[1]
         out.append((min(v), max(v)))
     return out
+
+
+def _blend_ends(box: Box, surface, spec: DeviceSpec, knots: np.ndarray) -> tuple[float | None, float | None]:
+    """The spanwise parameters where the inner and outer blend end (away from the device; None: no
+    blend at that end), snapped onto the knots inserted there."""
+    inner, outer = _span_params(box, surface, spec, ends=True)
+    return (None if inner is None else snap(knots, inner[0]),
+            None if outer is None else snap(knots, outer[1]))
+
+
+def section_weights(v: np.ndarray, q: int, device: tuple[float, float],
+                    blends: tuple[float | None, float | None]) -> np.ndarray:
+    """(m,) the share of the device's angle each section turns by.
+
+    ``v`` the spanwise knots (degree ``q``, m sections), ``device`` its span ``(va, vb)`` and
+    ``blends`` where its inner and outer blend end (None: none at that end), all parameters.
+    A section whose basis function reaches into the device's span turns fully (1: a point inside
+    the span turns rigidly); one whose function reaches beyond a blend not at all (0: a point
+    outside the device and its blends does not move). The sections whose functions lie inside a
+    blend turn by a straight ramp between their two neighbours, at their Greville abscissae (the
+    mean of a function's inner knots). B-splines reproduce straight lines and never turn steeper
+    than their control polygon, so the angle fades along the span as that ramp, rounded off at its
+    ends: at most ``1 / (1 - 2 / (BLEND_INTERVALS q))`` times the blend's mean slope, where one basis
+    function's tail (the blend before the ramp) was over twice it."""
+    m = len(v) - q - 1
+    j = np.arange(m)
+    start, end = v[j], v[j + q + 1]
+    va, vb = device
+    w = ((end > va + KNOT_TOL) & (start < vb - KNOT_TOL)).astype(float)
+    greville = sliding_window_view(v[1:], q).mean(axis=1)[:m] if q else start
+    lo, hi = blends
+    if hi is not None and hi > vb + KNOT_TOL:
+        ramp = np.flatnonzero((start >= vb - KNOT_TOL) & (end <= hi + KNOT_TOL))
+        if ramp.size:
+            g1 = greville[ramp[0] - 1]                      # the last section that turns fully
+            g0 = greville[ramp[-1] + 1] if ramp[-1] + 1 < m else hi
+            w[ramp] = np.clip((g0 - greville[ramp]) / (g0 - g1), 0.0, 1.0)
+    if lo is not None and lo < va - KNOT_TOL:
+        ramp = np.flatnonzero((end <= va + KNOT_TOL) & (start >= lo - KNOT_TOL))
+        if ramp.size:
+            g1 = greville[ramp[-1] + 1]                     # the first section that turns fully
+            g0 = greville[ramp[0] - 1] if ramp[0] > 0 else lo
+            w[ramp] = np.clip((greville[ramp] - g0) / (g1 - g0), 0.0, 1.0)
+    return w
 
 
 def device_knots(box: Box, surface, spec: DeviceSpec) -> tuple[np.ndarray, np.ndarray]:
@@ -156,8 +208,9 @@ def device_knots(box: Box, surface, spec: DeviceSpec) -> tuple[np.ndarray, np.nd
     span = []
     if box.dim == 3:
         q = box.degree[1]
+        n = BLEND_INTERVALS * q
         for lo, hi in _span_params(box, surface, spec):
-            span.extend(lo + (hi - lo) * np.arange(q + 1) / q)
+            span.extend(lo + (hi - lo) * np.arange(n + 1) / n)
     return chord, np.array(span)
 
 
@@ -168,7 +221,8 @@ class DeviceGeometry:
     rows
         (n,) bool: the chordwise rows that turn.
     weights
-        (m,) 1.0 for the sections that turn, 0.0 for the others.
+        (m,) the share of the angle each section turns by (:func:`section_weights`): 1 inside the
+        device's span, 0 outside it and its blends, a ramp across each blend.
     L, T, M
         (E, n*m*l) basis rows of the baseline leading-edge, trailing-edge and hinge points at the
         device's ends (E = 2; 1 in 2D): ``M @ P.reshape(-1, 3)`` are the hinge points of lattice ``P``.
@@ -217,8 +271,7 @@ def device_geometry(box: Box, surface, spec: DeviceSpec) -> DeviceGeometry:
         a, b = spec.span
         lo = _params(box, ends[:, 2])[:, 1]
         va, vb = (0.0 if a <= 0 else snap(v, lo[0])), (1.0 if b >= 1 else snap(v, lo[1]))
-        j = np.arange(m)
-        weights = ((v[j + q + 1] > va + KNOT_TOL) & (v[j] < vb - KNOT_TOL)).astype(float)
+        weights = section_weights(v, q, (va, vb), _blend_ends(box, surface, spec, v))
     E = len(ends)
     B = _rows_of(ends.reshape(-1, 3), box).reshape(E, 3, -1)
     # the transition: from the hinge line to the parameter ut, along the local chord (largest of the samples)
