@@ -154,10 +154,18 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
     return summary
 
 
+def _squeezed(d: dict) -> str:
+    """Where the root or tip leaves less span than the blend: the rotation fades faster there."""
+    out = [f"; {end} only {w:g}, the {edge} is nearer" for end, edge, w in zip(("inner", "outer"), ("root", "tip"),
+                                                                                d.get("blends") or ())
+           if w is not None and w < d["blend"] - 1e-12]
+    return "".join(out)
+
+
 def device_line(name: str, d: dict) -> str:
     """One flap or slat as ``ffd deform`` prints it, with the chord width of its transition."""
     where = "behind" if d["kind"] == "flap" else "ahead of"
-    span = f", span {d['span'][0]:g}-{d['span'][1]:g} (blend {d['blend']:g})" if d["span"] else ""
+    span = f", span {d['span'][0]:g}-{d['span'][1]:g} (blend {d['blend']:g}{_squeezed(d)})" if d["span"] else ""
     return (f"  {d['kind']:<9} {name}: {d['angle']:g} deg{span}, hinge {'/'.join(f'{h:g}' for h in d['hinge'])} "
             f"of the local chord; turns rigidly beyond a transition of {d['transition']:.3f} local chords "
             f"{where} the hinge")

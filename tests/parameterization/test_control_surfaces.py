@@ -16,14 +16,15 @@ import pytest
 from test_derivatives import assert_matches_fd
 
 from ffdcli.api import DesignModel
+from ffdcli.app.deform import device_line
 from ffdcli.box.box import fit_box
 from ffdcli.box.refine import edges_at, span_fractions
 from ffdcli.errors import InputError
 from ffdcli.lattice.lattice import evaluate
+from ffdcli.lattice.spline import basis
 from ffdcli.mesh import CellBlock
 from ffdcli.parameterization.changes import Twist, apply_changes, changes_from_spec, design_variables
 from ffdcli.parameterization.changes.control_surfaces import refine_for_devices, rodrigues
-from ffdcli.lattice.spline import basis
 from ffdcli.parameterization.changes.devices import BLEND_INTERVALS, MAX_ANGLE, section_weights
 from ffdcli.settings import BoxSettings
 from ffdcli.testing.wings import Planform, crm_planform, naca4, rect_wing_planform, wing_surface
@@ -275,3 +276,16 @@ def test_the_optimisers_bound_on_a_device_angle_is_what_a_design_file_may_give()
     model = DesignModel.from_file(Path(__file__).resolve().parents[2] / "configs" / "rect_flap.yaml")
     k = [i for i, n in enumerate(model.names) if n.endswith("flap.angle")]
     assert k and np.all(model.lower[k] == -MAX_ANGLE) and np.all(model.upper[k] == MAX_ANGLE)
+
+
+def test_ffd_deform_says_when_the_root_or_tip_squeezes_a_blend(rect):
+    """A device 0.05 from the root has only 0.05 of span to fade over, not the 0.2 set: the printed
+    line says so (its rotation fades four times as fast there); a device clear of both ends, or
+    reaching the tip, prints the setting alone."""
+    near = build(rect, [{"flap": {"span": [0.05, 0.45], "hinge": 0.72, "angle": 20}}])[2][0].describe()
+    assert near["blends"] == [0.05, 0.2]
+    assert "(blend 0.2; inner only 0.05, the root is nearer)" in device_line("c0", near)
+    clear = build(rect, [{"flap": {"span": [0.3, 0.7], "hinge": 0.72, "angle": 20}}])[2][0].describe()
+    assert clear["blends"] == [0.2, 0.2] and "(blend 0.2)," in device_line("c0", clear)
+    tip = build(rect, [{"slat": {"span": [0.5, 1.0], "hinge": 0.15, "angle": 10}}])[2][0].describe()
+    assert tip["blends"] == [0.2, None] and "(blend 0.2)," in device_line("c0", tip)
