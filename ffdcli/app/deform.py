@@ -102,7 +102,7 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     result = deform(run, P=P, progress=progress)
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
-                     recovery=result.recovery, remedies=remedies):
+                     recovery=result.recovery, remedies=remedies, hints=device_hints(run)):
         note(w)
     constraints = (constraints_table(run, result.points) if constraints_table and design.data.get("constraints")
                    else None)
@@ -154,12 +154,25 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
     return summary
 
 
+def squeezed_blends(d: dict) -> list[tuple[str, str, float]]:
+    """(end, edge, width) of each blend of a device (its ``describe()``) that the root or tip
+    leaves narrower than set: there the rotation fades faster."""
+    return [(end, edge, w) for end, edge, w in zip(("inner", "outer"), ("root", "tip"), d.get("blends") or ())
+            if w is not None and w < d["blend"] - 1e-12]
+
+
 def _squeezed(d: dict) -> str:
-    """Where the root or tip leaves less span than the blend: the rotation fades faster there."""
-    out = [f"; {end} only {w:g}, the {edge} is nearer" for end, edge, w in zip(("inner", "outer"), ("root", "tip"),
-                                                                                d.get("blends") or ())
-           if w is not None and w < d["blend"] - 1e-12]
-    return "".join(out)
+    return "".join(f"; {end} only {w:g}, the {edge} is nearer" for end, edge, w in squeezed_blends(d))
+
+
+def device_hints(run: DesignRun) -> list[str]:
+    """What a refused design could change in its devices: where the root or tip squeezes a blend,
+    the device's rotation fades over less span than set (the usual cause of the cells it inverts;
+    letting the device reach the root instead inverted as many on the robustness table's meshes)."""
+    return [f"c{i}'s {d['kind']} fades over only {w:g} of the span at its {end} end (the {edge} is nearer "
+            f"than its blend {d['blend']:g}): end it at least {d['blend']:g} from the {edge}"
+            for comp in run.components for i, ch in enumerate(comp.changes) if hasattr(ch, "describe")
+            for d in [ch.describe()] for end, edge, w in squeezed_blends(d)]
 
 
 def device_line(name: str, d: dict) -> str:

@@ -156,12 +156,13 @@ class Remedies:
 
 
 def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, force: bool = False,
-            recovery: list | None = None, remedies: Remedies = Remedies()) -> list[str]:
+            recovery: list | None = None, remedies: Remedies = Remedies(), hints=()) -> list[str]:
     """Apply the gate to a report of ``ffd deform``: raise, or (``force``) return the warnings.
 
     ``recovery``: the attempts of :mod:`ffdcli.volume.recovery` (``Deformation.recovery``); the refusal
     then says what was tried and what to try next. ``remedies``: the caller's words for how to
-    override (:class:`Remedies`).
+    override (:class:`Remedies`). ``hints``: what the design itself could change (e.g. a device
+    whose blend the root squeezes), added to a refusal.
 
     Raises :class:`~ffdcli.errors.InputError` (exit 2) when the input mesh already has inverted or
     degenerate cells, naming the first and where it is; :class:`~ffdcli.errors.QualityError` (exit 3)
@@ -189,6 +190,8 @@ def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, f
                               for a in recovery)
             msg += (f"; tried: {tried}; try next: the change in smaller steps (several runs), "
                     "volume.rotation_reach: null, or a finer surface mesh where the worst cell is")
+        if hints:
+            msg += "; " + "; ".join(hints)
         if not force:
             raise QualityError(msg + "; nothing was written" + remedies.write_anyway, path=design_path,
                                report=report.to_dict())

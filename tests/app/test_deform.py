@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import json
+import shutil
 
 import numpy as np
 import pytest
-from conftest import run_ffd
+from conftest import REPO, run_ffd
 from wingcase import write_design, write_surface_wing
 
 from ffdcli.app.deformation import deform
@@ -204,3 +205,20 @@ def test_cli_deform_json_and_set(tmp_path):
     te = np.flatnonzero(tip)[np.argmax(X0[tip, 0])]
     ang = np.degrees(np.arctan2(X1[i, 1] - X1[te, 1], X1[te, 0] - X1[i, 0]))
     assert ang == pytest.approx(12.0, abs=1e-9)
+
+
+def test_a_refused_device_near_the_root_is_told_to_leave_its_blend_room(tmp_path):
+    """A flap 0.02 from the root fades over 0.02 of the span, not its blend's 0.2: at 30 degrees the
+    gate refuses it (exit 3, nothing written) and the message says which device and what to change;
+    done so (the flap from 0.2), the gate passes it."""
+    mesh = tmp_path / "rect_wing.su2"
+    shutil.copyfile(REPO / "samples" / "rect_wing.su2", mesh)
+    design = write_design(tmp_path, mesh, [{"flap": {"span": [0.02, 0.4], "hinge": 0.72, "angle": 30}}],
+                          sections="xy")
+    proc = run_ffd("deform", design)
+    assert proc.returncode == 3, proc.stderr
+    assert ("c0's flap fades over only 0.02 of the span at its inner end (the root is nearer than its blend "
+            "0.2): end it at least 0.2 from the root") in proc.stderr
+    assert not any(tmp_path.glob("out_*"))
+    ok = run_ffd("deform", design, "--set", "changes.0.flap.span=[0.2, 0.4]")
+    assert ok.returncode == 0, ok.stderr
