@@ -371,6 +371,17 @@ def _cases() -> dict[str, WingCase]:
         WingCase("kinked_z_blunt_bl_ff5", crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.37,
                                                        sections="xy", closed_te=False),
                  layers=5, farfield=5.0),
+        # generated after the flap's blend ramp was chosen (2026-12-04; held out from that choice)
+        WingCase("left_swept_z_bl", Planform(semi_span=2.2, root_chord=1.0, taper=0.4, le_sweep_deg=28.0,
+                                             dihedral_deg=3.0, root_airfoil="2415", tip_airfoil="0010",
+                                             sections="xy", span_sign=-1.0),
+                 layers=5, first_layer=1e-4, farfield=15.0, h_far=4.0),
+        WingCase("thin_left_y_round_bl", Planform(semi_span=2.5, root_chord=1.0, taper=0.9, root_airfoil="0009",
+                                                  sections="xz", span_sign=-1.0, twist_tip_deg=2.0),
+                 tip="round", layers=6, first_layer=5e-5),
+        WingCase("transport_zx_blunt_bl", crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.3,
+                                                       sections="zx", closed_te=False),
+                 layers=4, farfield=8.0),
     ]
     return {c.name: c for c in cases}
 
