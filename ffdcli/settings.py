@@ -232,7 +232,7 @@ class WarpSettings:
         "(default): the FFD map's local deformation gradient F, so the cells at the wall deform "
         "exactly as the FFD deforms space there, also where faces meet at a sharp trailing edge "
         "or tip; rotation: only the rotation of the surface frame (IDWarp's form)"))
-    rotation_reach: float | None = field(default=0.3, metadata=_doc(
+    rotation_reach: float | None = field(default=0.5, metadata=_doc(
         "the local-frame part of the motion (F - I or R - I, see carry) fades with distance r "
         "from each surface node as "
         "1 / (1 + (r / rho)^4), rho = rotation_reach x the mean chord (surface area / (2 x the "
@@ -356,7 +356,7 @@ class WarpSettings:
             "b": {**pos, "default": 5},
             "alpha": {**pos, "default": 1},
             "ldef": {"type": ["number", "null"], "exclusiveMinimum": 0},
-            "rotation_reach": {"type": ["number", "null"], "exclusiveMinimum": 0, "default": 0.3},
+            "rotation_reach": {"type": ["number", "null"], "exclusiveMinimum": 0, "default": 0.5},
             "tolerance": {"type": "number", "minimum": 0, "default": 1e-3},
             "fixed": names(),
             "sliding": names(),

@@ -21,7 +21,7 @@ rigid translation moves every node rigidly, and so does a rigid rotation near th
 ``|g(r) M (x - x_i)| <= 0.57 rho |M|`` whatever the distance, so a node outboard of a twisted tip
 or behind a root whose frame turns moves no further than the surface motion near it explains.
 ``rho = rotation_reach x`` the mean chord (:attr:`WarpModel.rotation_length`; ``rotation_reach``
-0.3; null: no fade, IDWarp's form, which reproduces any rigid motion exactly). The fixed sources
+0.5; null: no fade, IDWarp's form, which reproduces any rigid motion exactly). The fixed sources
 hold the far field still: without them a far node would move with the average surface motion.
 
 Settings (``volume:`` in the design file, :class:`WarpSettings`): ``a`` = 3, ``b`` = 5,

@@ -31,7 +31,7 @@ def crm_design(tmp_path, changes, volume=None, name="d.yaml"):
 def test_attempts_are_a_longer_reach_then_the_rotation_then_increments():
     got = attempts(WarpSettings(alpha=0.5))
     assert [(st.alpha, st.carry, st.rotation_reach, n) for _, st, n in got] == [
-        (2.0, "gradient", 0.3, 1), (0.5, "rotation", 0.3, 1), (0.5, "rotation", None, 1), (2.0, "gradient", 0.3, 4)]
+        (2.0, "gradient", 0.5, 1), (0.5, "rotation", 0.5, 1), (0.5, "rotation", None, 1), (2.0, "gradient", 0.5, 4)]
     assert "alpha: 2" in got[0][0] and "carry: rotation" in got[1][0] and "rotation_reach: null" in got[2][0]
     assert "4 increments" in got[3][0]
     assert len(attempts(WarpSettings(rotation_reach=None))) == 3
