@@ -35,6 +35,7 @@ from ffdcli.parameterization.changes.devices import (
     MAX_ANGLE,
     DeviceGeometry,
     DeviceSpec,
+    blend_widths,
     device_geometry,
     device_knots,
 )
@@ -218,16 +219,10 @@ class ControlSurface(Change):
         return {"kind": self.kind, "angle": float(self.angle), "hinge": [float(h) for h in self.hinge],
                 "span": None if self.spec.span is None else list(self.spec.span),
                 "blend": None if self.spec.span is None else self.spec.blend,
-                "blends": None if self.spec.span is None else self._blends(),
+                "blends": None if self.spec.span is None else list(blend_widths(self.spec)),
                 "transition": float(self.geometry.transition.max()),
                 "turning_rows": int(self.geometry.rows.sum()),
                 "turning_sections": int(np.count_nonzero(self.geometry.weights))}
-
-    def _blends(self) -> list:
-        """[inner, outer] span widths the rotation fades over: the setting, less where the root or
-        tip is nearer (None: the device reaches the root or tip, no blend there)."""
-        a, b = self.spec.span
-        return [None if a <= 0.0 else min(self.spec.blend, a), None if b >= 1.0 else min(self.spec.blend, 1.0 - b)]
 
     def hinge_line(self, P) -> np.ndarray:
         """(E, 3) the hinge points of lattice ``P`` (for pictures)."""

@@ -134,13 +134,20 @@ def _hinge_params(box: Box, surface, spec: DeviceSpec):
     return float(pick(u[:k])), float(pick(u[k:])), ends, params[:k]
 
 
+def blend_widths(spec: DeviceSpec) -> tuple[float | None, float | None]:
+    """(inner, outer) span widths the rotation fades over: ``blend``, less where the root or tip
+    is nearer (the fade is then steeper); None where the device reaches the root or tip (no blend)."""
+    a, b = spec.span
+    return (None if a <= 0.0 else min(spec.blend, a), None if b >= 1.0 else min(spec.blend, 1.0 - b))
+
+
 def _span_params(box: Box, surface, spec: DeviceSpec, *, ends: bool = False) -> list:
     """Spanwise parameter intervals of the blends (inner, outer) that need knots; ``ends``: one per
     device end, None at a root or tip end (no blend there)."""
     a, b = spec.span
     out = []
-    for f, g in ((a, max(a - spec.blend, 0.0)), (b, min(b + spec.blend, 1.0))):
-        if f <= 0.0 or f >= 1.0:
+    for f, g, w in zip((a, b), (max(a - spec.blend, 0.0), min(b + spec.blend, 1.0)), blend_widths(spec)):
+        if w is None:                   # the device reaches the root or tip: no blend there
             if ends:
                 out.append(None)
             continue
