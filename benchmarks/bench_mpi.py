@@ -212,8 +212,8 @@ def _held_mb(run, result=None) -> dict:
 
 def child_memory(comm, design: str, mode: str) -> dict:
     """``ffd deform``'s pipeline (load_run, deform, write_outputs) on local meshes (``mode`` local) or
-    with every node on every rank (``whole``, the path of ``ffd grad --sens``, ``ffd jacobian`` and the API): the resident
-    and peak MB of every rank after each phase, and each rank's local rows."""
+    with every node on every rank (``whole``, the path of ``ffd grad --sens``, ``ffd jacobian`` and the
+    API): the resident and peak MB of every rank after each phase, and each rank's local rows."""
     from ffdcli.app.deformation import deform
     from ffdcli.app.run import load_run
     from ffdcli.app.write import write_outputs
