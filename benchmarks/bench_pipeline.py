@@ -186,7 +186,7 @@ def warp_error(design: str, n_ranges: int = 60, size: int = 300) -> dict:
     the mesh (Morton order: each range is a small neighbourhood), relative to the largest surface move.
 
     ``python -m benchmarks.bench_pipeline --warp-error DESIGN.yaml [N_RANGES]``; the design of
-    :func:`build_case` (a 5 degree tip twist on the 1M extruded wing) gave 1.07e-3 at the default
+    :func:`build_case` (a 5 degree tip twist on the 1M extruded wing) gave 7.4e-4 at the default
     tolerance with 60 ranges (docs/BENCHMARKS.md).
     """
     import numpy as np
