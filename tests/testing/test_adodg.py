@@ -1,0 +1,81 @@
+"""ADODG Case 1's mesh family (benchmarks/adodg/meshes.py) and its Richardson extrapolation
+(benchmarks/adodg/baseline.py): nested levels, the exact sharp-trailing-edge airfoil on every level's
+wall, the far field at 50 chords, positive cells, SU2 files with the two markers, and the
+extrapolation against grids of known order."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from benchmarks.adodg.baseline import richardson
+from benchmarks.adodg.meshes import FARFIELD_RADIUS, family, level_mesh, main
+from ffdcli.io.formats import read_mesh
+from ffdcli.testing.cells import quad_areas
+
+
+def closed_naca0012(x):
+    """The case's airfoil written out here on its own (x^4 coefficient -0.1036: y(1) = 0)."""
+    return 0.6 * (0.2969 * np.sqrt(x) - 0.1260 * x - 0.3516 * x**2 + 0.2843 * x**3 - 0.1036 * x**4)
+
+
+@pytest.fixture(scope="module")
+def small():
+    return family(levels=3, finest=(64, 16))
+
+
+def test_levels_are_nested_and_halve_the_spacing(small):
+    assert [lev.name for lev in small] == ["L0", "L1", "L2"]
+    for coarse, fine in zip(small, small[1:]):
+        assert fine.cells_around == 2 * coarse.cells_around and fine.cells_out == 2 * coarse.cells_out
+        assert coarse.h == 2 * fine.h
+        np.testing.assert_array_equal(coarse.grid, fine.grid[::2, ::2])
+
+
+def test_every_wall_point_is_on_the_sharp_trailing_edge_airfoil(small):
+    for lev in small:
+        wall = lev.grid[0]
+        x, y = wall[:, 0], wall[:, 1]
+        assert np.all((x >= 0) & (x <= 1))
+        np.testing.assert_allclose(np.abs(y), closed_naca0012(x), atol=1e-14)
+        np.testing.assert_array_equal(wall[0], [1.0, 0.0])            # the sharp trailing edge, one point
+        assert np.count_nonzero(np.all(wall == [1.0, 0.0], axis=1)) == 1
+        assert np.isclose(x.min(), 0.0) and np.ptp(x) == 1.0          # chord 1
+
+
+def test_far_field_circle_and_positive_cells(small):
+    for lev in small:
+        r = np.linalg.norm(lev.grid[-1] - [0.5, 0.0], axis=1)
+        np.testing.assert_allclose(r, FARFIELD_RADIUS, rtol=1e-12)
+        mesh = level_mesh(lev)
+        assert quad_areas(mesh.points[:, :2], mesh.cells[0].data).min() > 0
+
+
+def test_command_writes_su2_files_with_the_two_markers(tmp_path):
+    assert main(["--out", str(tmp_path)]) == 0
+    for name, around, out in (("L0", 64, 16), ("L1", 128, 32), ("L2", 256, 64), ("L3", 512, 128)):
+        mesh = read_mesh(tmp_path / f"adodg_{name}.su2")
+        assert set(mesh.markers) == {"airfoil", "farfield"}
+        assert len(mesh.points) == around * (out + 1)
+        assert sum(len(b.data) for b in mesh.markers["airfoil"]) == around
+
+
+@settings(max_examples=50, deadline=None)
+@given(f0=st.floats(0.01, 0.1), c=st.floats(-1.0, 1.0).filter(lambda v: abs(v) > 1e-3),
+       p=st.floats(0.5, 3.0), h=st.floats(1e-3, 0.1))
+def test_richardson_recovers_order_and_limit(f0, c, p, h):
+    f = [f0 + c * (k * h) ** p for k in (4, 2, 1)]                   # coarsest first
+    r = richardson(*f)
+    assert math.isclose(r.order, p, rel_tol=1e-6, abs_tol=1e-6)
+    assert math.isclose(r.value, f0, rel_tol=0, abs_tol=1e-9 + 1e-6 * abs(c * h**p))
+
+
+def test_richardson_refuses_oscillating_values():
+    with pytest.raises(ValueError, match="monotone"):
+        richardson(0.045, 0.046, 0.0455)
+    with pytest.raises(ValueError, match="monotone"):
+        richardson(0.045, 0.046, 0.046)
