@@ -14,6 +14,7 @@ from hypothesis import strategies as st
 
 from benchmarks.adodg.baseline import richardson
 from benchmarks.adodg.meshes import FARFIELD_RADIUS, family, level_mesh, main
+from benchmarks.adodg.surface import add_material
 from ffdcli.io.formats import read_mesh
 from ffdcli.testing.cells import quad_areas
 
@@ -79,3 +80,31 @@ def test_richardson_refuses_oscillating_values():
         richardson(0.045, 0.046, 0.0455)
     with pytest.raises(ValueError, match="monotone"):
         richardson(0.045, 0.046, 0.046)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_add_material_margins_on_manufactured_designs(small, seed):
+    rng = np.random.default_rng(seed)
+    wall = small[1].grid[0]
+    side = np.sign(wall[:, 1])
+    bulge = rng.uniform(0.0, 0.01, len(wall)) * side                  # material added on both sides
+    design = wall + np.c_[np.zeros(len(wall)), bulge]
+    m = add_material(wall, design)
+    assert m.upper >= 0 and m.lower >= 0 and m.thickness >= -1e-15
+    k = int(rng.integers(1, len(wall) // 2 - 1))                      # an upper node, not an edge
+    assert wall[k, 1] > 0
+    dent = design.copy()
+    dent[k, 1] = wall[k, 1] - 1e-4
+    assert math.isclose(add_material(wall, dent).upper, -1e-4, rel_tol=1e-9)
+    shift = rng.uniform(1e-4, 1e-2)                                   # the whole section moved up
+    lifted = add_material(wall, wall + [0.0, shift])
+    assert math.isclose(lifted.lower, -shift, rel_tol=1e-9) and lifted.upper >= shift * (1 - 1e-9)
+    assert abs(lifted.thickness) < 1e-12                              # the thickness reading lets it pass
+
+
+def test_add_material_refuses_a_chordwise_move(small):
+    wall = small[0].grid[0]
+    moved = wall.copy()
+    moved[3, 0] += 1e-6
+    with pytest.raises(ValueError, match="along the chord"):
+        add_material(wall, moved)
