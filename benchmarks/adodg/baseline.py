@@ -25,6 +25,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+import matplotlib
+import numpy as np
+
 from ffdcli.optimize.solvers.base import find_program
 from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history, with_keys
 
@@ -122,12 +125,35 @@ def table(solves: list[Solve], rich: Richardson | None) -> str:
     return "\n".join(rows)
 
 
+def plot_cp(folders: list[tuple[str, Path]], path: Path) -> None:
+    """Cp along the upper surface (the flow is symmetric) of each level's ``surface_flow.csv``,
+    -Cp upward, written to ``path`` (PNG)."""
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415 (pyplot after the backend is chosen)
+
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for level, folder in folders:
+        data = np.genfromtxt(folder / "surface_flow.csv", delimiter=",", names=True)
+        up = data["y"] >= 0
+        order = np.argsort(data["x"][up])
+        ax.plot(data["x"][up][order], -data["Pressure_Coefficient"][up][order], lw=1.2, label=level)
+    ax.set_xlabel("x / c")
+    ax.set_ylabel("-Cp")
+    ax.set_title("ADODG Case 1 baseline, upper surface: NACA 0012 (sharp TE), Euler, M 0.85, alpha 0", fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.baseline", description=__doc__.split("\n")[0])
     ap.add_argument("--meshes", required=True, type=Path, help="folder of adodg_L*.su2 (benchmarks.adodg.meshes)")
     ap.add_argument("--work", required=True, type=Path, help="folder for the runs (one sub-folder per level)")
     ap.add_argument("--levels", nargs="+", default=["L1", "L2", "L3"], help="levels, coarsest first")
     ap.add_argument("--reuse", action="store_true", help="read a level's finished run instead of solving again")
+    ap.add_argument("--plot", type=Path, help="also write the levels' upper-surface Cp to this PNG")
     args = ap.parse_args(argv)
     solves = []
     for level in args.levels:
@@ -147,6 +173,8 @@ def main(argv: list[str] | None = None) -> int:
     out = {"config": str(CONFIG.relative_to(ROOT)), "mach": config_value(read_config(CONFIG), "MACH_NUMBER"),
            "solves": [asdict(s) for s in solves], "richardson": asdict(rich) if rich else None}
     (args.work / "baseline.json").write_text(json.dumps(out, indent=1))
+    if args.plot:
+        plot_cp([(s.level, args.work / s.level) for s in solves], args.plot)
     return 0
 
 
