@@ -1,21 +1,25 @@
-"""ADODG Case 1's mesh family (benchmarks/adodg/meshes.py) and its Richardson extrapolation
-(benchmarks/adodg/baseline.py): nested levels, the exact sharp-trailing-edge airfoil on every level's
-wall, the far field at 50 chords, positive cells, SU2 files with the two markers, and the
-extrapolation against grids of known order."""
+"""ADODG Case 1 without a solver: the mesh family (benchmarks/adodg/meshes.py: nested levels, the exact
+sharp-trailing-edge airfoil on every level's wall, the far field at 50 chords, positive cells, SU2 files
+with the two markers), the Richardson extrapolation (benchmarks/adodg/baseline.py) against grids of
+known order, the add-material check of written designs (benchmarks/adodg/surface.py) on manufactured
+designs, and the three design files (configs/adodg/) through ``ffd constraints``."""
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
 import pytest
+import yaml
+from conftest import REPO, run_ffd
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from benchmarks.adodg.baseline import richardson
 from benchmarks.adodg.meshes import FARFIELD_RADIUS, family, level_mesh, main
 from benchmarks.adodg.surface import add_material
-from ffdcli.io.formats import read_mesh
+from ffdcli.io.formats import read_mesh, write_mesh
 from ffdcli.testing.cells import quad_areas
 
 
@@ -108,3 +112,23 @@ def test_add_material_refuses_a_chordwise_move(small):
     moved[3, 0] += 1e-6
     with pytest.raises(ValueError, match="along the chord"):
         add_material(wall, moved)
+
+
+@pytest.mark.parametrize(("name", "n_vars"), [("case1_v8.yaml", 8), ("case1.yaml", 16), ("case1_v32.yaml", 32)])
+def test_design_files_load_and_their_constraints_hold_at_the_baseline(tmp_path, small, name, n_vars):
+    """The three lattices' design files, on the coarsest mesh: the variables the case asks for, the 99
+    thickness stations and both edges, every one met by the baseline (``ffd constraints``)."""
+    src = REPO / "configs" / "adodg" / name
+    design = yaml.safe_load(src.read_text())
+    variables = design["optimize"]["variables"]
+    assert len(variables) == n_vars == 2 * (design["box"]["points"][0] - 1)
+    assert all(v.startswith("c0.shape.") for v in variables)
+    write_mesh(level_mesh(small[0]), tmp_path / "L0.su2")
+    design.update(mesh=str(tmp_path / "L0.su2"), output={"mesh": str(tmp_path / "out.su2")})
+    design["optimize"].update(config=str(src.parent / "case1.cfg"), folder=str(tmp_path / "opt"))
+    (tmp_path / name).write_text(yaml.safe_dump(design, sort_keys=False))
+    res = run_ffd("constraints", tmp_path / name, "--json")
+    assert res.returncode == 0, res.stderr
+    rows = json.loads(res.stdout)["constraints"]
+    assert [r["name"] for r in rows] == [f"k0.thickness[{j}]" for j in range(99)] + ["k1.le_te[0]", "k1.le_te[1]"]
+    assert all(r["satisfied"] for r in rows)
