@@ -63,6 +63,8 @@ class StandinAero(om.ExplicitComponent):
         self.options.declare("length", types=float, desc="L: reference length")
         self.options.declare("x_ref", types=float, desc="x_c: reference chord station")
         self.options.declare("initial", default=False, desc="also read x_aero0 (MPhys' parallel scenario wiring)")
+        self.options.declare("comm", default=None, recordable=False,
+                             desc="the ranks the surface is split over (default: the component's)")
 
     def setup(self):
         self.add_input(X_AERO, shape_by_conn=True, distributed=True, tags=["mphys_coupling"])
@@ -76,10 +78,13 @@ class StandinAero(om.ExplicitComponent):
         o = self.options
         return 1.0 / (o["n_points"] * o["length"] ** 2)
 
+    def _total(self, local):
+        comm = self.options["comm"] or self.comm
+        return comm.allreduce(local) if comm.size > 1 else local
+
     def _sums(self, X):
         s = self._scale()
-        local = np.array([np.sum(-X[:, 2] * (X[:, 0] - self.options["x_ref"])), np.sum(X[:, 2] ** 2)]) * s
-        return self.comm.allreduce(local) if self.comm.size > 1 else local
+        return self._total(np.array([np.sum(-X[:, 2] * (X[:, 0] - self.options["x_ref"])), np.sum(X[:, 2] ** 2)]) * s)
 
     def compute(self, inputs, outputs):
         a, b = self._sums(inputs[X_AERO].reshape(-1, 3))
@@ -102,7 +107,7 @@ class StandinAero(om.ExplicitComponent):
             if X_AERO in d_inputs:
                 dX = d_inputs[X_AERO].reshape(-1, 3)
                 local = np.array([np.sum(dcl * dX), np.sum(dcd * dX)])
-                tot = self.comm.allreduce(local) if self.comm.size > 1 else local
+                tot = self._total(local)
                 if "cl" in d_outputs:
                     d_outputs["cl"] += tot[0]
                 if "cd" in d_outputs:

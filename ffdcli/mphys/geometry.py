@@ -39,7 +39,8 @@ from ffdcli.errors import InputError
 from ffdcli.mphys.design import from_design_file, from_points
 from ffdcli.mphys.names import FFDNote
 from ffdcli.mphys.pygeo_methods import PyGeoMethods
-from ffdcli.openmdao import constraint_items, input_name, optimiser_bounds
+from ffdcli.mphys.variables import VariablesAndConstraints
+from ffdcli.openmdao import constraint_items
 from ffdcli.parallel.comm import MPIComm, SerialComm
 
 #: Extensions of a design file; any other ``file`` is taken as an FFD lattice (Plot3D), ffd's ``box.file``.
@@ -56,7 +57,7 @@ class PointSetInfo:
     points: np.ndarray | None = None
 
 
-class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
+class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
     """The geometry of an MPhys problem by ffd (see the module docstring).
 
     Options
@@ -83,6 +84,11 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
         Where the design files the component evaluates are written (default ``ffd-mphys``).
     cache_dir : str or None
         Where the box cache lives (default beside the mesh).
+    comm : mpi4py communicator or None
+        The ranks a distributed point set is split over (default: the component's own). Given when each
+        rank evaluates an OpenMDAO problem of its own (``Problem(comm=MPI.COMM_SELF)``, e.g. where
+        OpenMDAO's distributed vectors, which need PETSc, are not installed) and the ranks together
+        hold the solver's surface.
     """
 
     def initialize(self):
@@ -98,6 +104,8 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
         self.options.declare("design_vars", default=False, types=bool, desc="every change item as an input")
         self.options.declare("work_dir", default="ffd-mphys", desc="where the evaluated design files go")
         self.options.declare("cache_dir", default=None, allow_none=True, desc="where the box cache lives")
+        self.options.declare("comm", default=None, allow_none=True, recordable=False,
+                             desc="the communicator of the distributed point sets (default: the component's)")
         self.notes: list[str] = []
         self.model = None
 
@@ -111,7 +119,8 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
         self._cons: dict[str, tuple[str, np.ndarray | None]] = {}    # output -> (item, rows)
         self._con_specs: list | None = None                         # None: the design file's
         self._index: dict[str, int] = {}
-        self._comm = SerialComm() if self.comm.size == 1 else MPIComm(self.comm)
+        comm = self.options["comm"] or self.comm
+        self._comm = SerialComm() if comm.size == 1 else MPIComm(comm)
         opts = self.options
         if opts["DVGeoInfo"] is not None:
             raise InputError("DVGeoInfo (several DVGeos): ffd takes several components in one design file "
@@ -133,7 +142,7 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
         if design is not None:
             self._source = from_design_file(design, opts["overrides"])
             self._build()
-            for out, _, c in constraint_items(self.model):       # the design file's constraints
+            for out, _, _c in constraint_items(self.model):      # the design file's constraints
                 self._constraint_output(out, out, None)
         for d in opts["disciplines"]:
             self.nom_add_discipline_coords(d)
@@ -142,10 +151,11 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
         for name, names in (opts["dvs"] or {}).items():
             self.nom_add_variables(name, names)
 
-    def _note(self, message: str) -> None:
+    def _note(self, message: str, depth: int = 0) -> None:
+        """Record a note and warn once (rank 0); ``depth``: calls between the run script and the caller."""
         self.notes.append(message)
         if self._comm.is_root:
-            warnings.warn(f"ffd: {message}", FFDNote, stacklevel=3)
+            warnings.warn(f"ffd: {message}", FFDNote, stacklevel=3 + depth)
 
     def _require_model(self, what: str) -> DesignModel:
         if self.model is None:
@@ -179,9 +189,17 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
     def _add_change(self, spec: dict) -> str:
         """Append a change item to the design and reload; returns its variables' prefix ``c<index>.``."""
         self._require_model("adding a design variable")
-        self._source = self._source.with_change(spec)
+        before = self._source
+        self._source = before.with_change(spec)
         k = self._source.n_base_changes + len(self._source.added) - 1
-        self._build()
+        try:
+            self._build()
+        except InputError as e:
+            self._source = before                # the model is the one before: nothing half-added
+            if "sections" in str(e) and any(kind in spec for kind in ("flap", "slat")):
+                raise InputError(f"{e} (a device adds sections to the box: add devices before the per-section "
+                                 "variables such as twist and chord)") from None
+            raise
         return f"c{k}."
 
     # -- point sets -----------------------------------------------------------------------------------
@@ -212,108 +230,6 @@ class FFDGeometry(PyGeoMethods, om.ExplicitComponent):
         outside = self._comm.allreduce_sum(int(report["outside"]))
         if outside:
             self._note(f"{outside} points of {name!r} are outside the box: they never move")
-
-    # -- design variables (ffd's own) -----------------------------------------------------------------
-    def resolve_variables(self, names) -> list[str]:
-        """The model's variable names matching ``names`` (one or a list; each a name or a name prefix such
-        as ``c0.twist``), in the model's order; an InputError names one that matches nothing."""
-        model = self._require_model("design variables")
-        names = [names] if isinstance(names, str) else list(names)
-        picked = []
-        for want in names:
-            hits = [n for n in model.names if n == want or n.startswith(want + ".") or n.startswith(want + "[")]
-            if not hits:
-                raise InputError(f"no design variable named {want!r} (nor starting with it); the variables are "
-                                 f"{', '.join(model.names[:12])}{' ...' if len(model.names) > 12 else ''}")
-            picked += [n for n in hits if n not in picked]
-        return sorted(picked, key=self._index.__getitem__)
-
-    def nom_add_variables(self, dvName: str, names, value=None) -> int:
-        """ffd's own: an input ``dvName`` over ffd design variables (names or name prefixes, e.g.
-        ``"c0.twist"``, ``["c2.flap.angle"]``); returns its size. ``value``: its initial value (default the
-        design's)."""
-        if dvName in self._dvs:
-            raise InputError(f"a design variable named {dvName!r} exists already")
-        picked = tuple(self.resolve_variables(names))
-        idx = self._indices(picked)
-        val = self.model.values[idx] if value is None else np.broadcast_to(np.asarray(value, float), (len(idx),))
-        self._dvs[dvName] = picked
-        self.add_input(dvName, val=np.array(val, dtype=float), distributed=False, desc=", ".join(picked))
-        return len(picked)
-
-    def nom_add_design_variables(self) -> list[str]:
-        """ffd's own: every change item of the design an input, named as ``FFDComponent`` names them
-        (``c0_twist``, ``wing_c1_span``); returns the input names."""
-        model = self._require_model("nom_add_design_variables")
-        groups: dict[str, list[str]] = {}
-        for n in model.names:
-            groups.setdefault(input_name(n), []).append(n)
-        for name, names in groups.items():
-            self.nom_add_variables(name, names)
-        return list(groups)
-
-    def nom_add_change(self, dvName: str, change: dict, value=None, hold=()) -> int:
-        """ffd's own: add a change item (as in a design file's ``changes:``, e.g. ``{"flap": {"span": [0.6,
-        0.9], "hinge": 0.75, "angle": 0}}``) and an input ``dvName`` over its variables, but for the
-        positions ``hold`` (indices into the change's variables, held at their values); returns its size."""
-        prefix = self._add_change(change)
-        names = [n for n in self.model.names if n.startswith(prefix)]
-        keep = [n for q, n in enumerate(names) if q not in set(int(h) for h in hold)]
-        return self.nom_add_variables(dvName, keep, value)
-
-    def _indices(self, names) -> np.ndarray:
-        return np.array([self._index[n] for n in names], dtype=np.int64)
-
-    @property
-    def input_names(self) -> list[str]:
-        """The design-variable inputs, in the order added."""
-        return list(self._dvs)
-
-    def input_variables(self, name: str) -> list[str]:
-        """The ffd variable names (``DesignModel.names``) of input ``name``, in its order."""
-        return list(self._dvs[name])
-
-    def design_var_bounds(self, name: str) -> tuple[np.ndarray, np.ndarray]:
-        """(lower, upper) of input ``name`` for ``add_design_var`` (+-1e30 where there is no bound);
-        :func:`ffdcli.openmdao.add_design_vars` takes this component too."""
-        lo, hi = optimiser_bounds(self.model.bounds)
-        idx = self._indices(self._dvs[name])
-        return lo[idx], hi[idx]
-
-    # -- constraints -----------------------------------------------------------------------------------
-    def _add_constraint(self, name: str, spec: dict, rows=None, reuse: str | None = None) -> int:
-        """Add a ``constraints:`` item (or reuse the first of kind ``reuse``) and an output ``name`` of its
-        values (``rows(constraint object)``: a mask of the items kept); returns the output's size."""
-        model = self._require_model(f"constraint {name!r}")
-        if self._source.components:
-            raise InputError(f"constraint {name!r}: a design of several components takes its constraints in "
-                             "the design file (a component's constraints:)")
-        specs = list(self._source.data.get("constraints") or []) if self._con_specs is None else self._con_specs
-        at = next((k for k, s in enumerate(specs) if reuse and reuse in s), None)
-        if at is None:
-            specs = specs + [spec]
-            model.set_constraints(specs)        # checked as a design file's item (the schema's words)
-            self._con_specs = specs
-            at = len(specs) - 1
-        item = next((o for o, _, c in constraint_items(model) if c.index == at), None)
-        if item is None:
-            raise InputError(f"constraint {name!r}: it has no values for this design (an le_te needs a shape "
-                             "variable first: nom_addLocalDV)")
-        return self._constraint_output(name, item, rows)
-
-    def _constraint_output(self, name: str, item: str, rows) -> int:
-        c = next(c for o, _, c in constraint_items(self.model) if o == item)
-        mask = None if rows is None else np.asarray(rows(c), dtype=bool)
-        size = c.size if mask is None else int(mask.sum())
-        self._cons[name] = (item, mask)
-        self.add_output(name, shape=(size,), distributed=False, desc=", ".join(np.asarray(c.names)[
-            slice(None) if mask is None else mask]))
-        return size
-
-    def _constraint_rows(self):
-        """{output: index array into model.constraint_names} at the current model."""
-        where = {o: np.arange(sl.start, sl.stop) for o, sl, _ in constraint_items(self.model)}
-        return {name: where[item] if mask is None else where[item][mask] for name, (item, mask) in self._cons.items()}
 
     # -- evaluation -------------------------------------------------------------------------------------
     def _sync(self, inputs) -> None:

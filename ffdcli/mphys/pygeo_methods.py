@@ -214,7 +214,7 @@ class PyGeoMethods:
         chord = grid_fractions(nChord) if chord is None else [float(c) for c in chord]
         span = span_fractions(nSpan) if span is None else [float(s) for s in span]
         self._note(f"{name!r}: {kind} at chord fractions {_short(chord)} x span fractions {_short(span)} of ffd's "
-                   "sections (leList/teList not read)")
+                   "sections (leList/teList not read)", depth=1)
         return self._add_constraint(name, {kind: {"chord": chord, "span": span, "lower": lower, "upper": upper}})
 
     def nom_addVolumeConstraint(self, name, leList, teList, nSpan=10, nChord=10, scaled=True, addToPyOpt=True,
