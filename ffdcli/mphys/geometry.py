@@ -120,7 +120,7 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
         self._con_specs: list | None = None                         # None: the design file's
         self._index: dict[str, int] = {}
         comm = self.options["comm"] or self.comm
-        self._comm = SerialComm() if comm.size == 1 else MPIComm(comm)
+        self._ffd_comm = SerialComm() if comm.size == 1 else MPIComm(comm)
         opts = self.options
         if opts["DVGeoInfo"] is not None:
             raise InputError("DVGeoInfo (several DVGeos): ffd takes several components in one design file "
@@ -154,7 +154,7 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
     def _note(self, message: str, depth: int = 0) -> None:
         """Record a note and warn once (rank 0); ``depth``: calls between the run script and the caller."""
         self.notes.append(message)
-        if self._comm.is_root:
+        if self._ffd_comm.is_root:
             warnings.warn(f"ffd: {message}", FFDNote, stacklevel=3 + depth)
 
     def _require_model(self, what: str) -> DesignModel:
@@ -166,8 +166,8 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
     def _build(self) -> None:
         """(Re)load the model from the design source; re-embed the point sets, re-set the constraints."""
         work = Path(self.options["work_dir"])
-        path = self._comm.root_then_bcast(self._source.write, work)
-        comm = self._comm if self._comm.size > 1 else None
+        path = self._ffd_comm.root_then_bcast(self._source.write, work)
+        comm = self._ffd_comm if self._ffd_comm.size > 1 else None
         model = DesignModel.from_file(path, cache_dir=self.options["cache_dir"], comm=comm)
         if self._con_specs is not None:
             model.set_constraints(self._con_specs)
@@ -179,11 +179,11 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
 
     def _build_from_points(self, X) -> None:
         """The box fitted to a surface point set (every rank's part gathered)."""
-        whole = self._comm.allgather_rows(np.ascontiguousarray(X, dtype=np.float64).reshape(-1, 3))
+        whole = self._ffd_comm.allgather_rows(np.ascontiguousarray(X, dtype=np.float64).reshape(-1, 3))
         box = dict(self.options["box"] or {})
         if self._box_file:
             box["file"] = self._box_file
-        self._source = self._comm.root_then_bcast(from_points, whole, Path(self.options["work_dir"]), box=box)
+        self._source = self._ffd_comm.root_then_bcast(from_points, whole, Path(self.options["work_dir"]), box=box)
         self._build()
 
     def _add_change(self, spec: dict) -> str:
@@ -217,7 +217,7 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
         X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if self.model is None:
             self._build_from_points(X)
-            self._note(f"the automatic box is fitted to the point set {name!r} ({self._comm.allreduce_sum(len(X))}"
+            self._note(f"the automatic box is fitted to the point set {name!r} ({self._ffd_comm.allreduce_sum(len(X))}"
                        " points, every rank's)")
         self._embed(name, X)
         if input_name_ is not None:
@@ -227,7 +227,7 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
     def _embed(self, name: str, X: np.ndarray) -> None:
         report = self.model.add_points(name, X)
         self._sets[name].points = X.copy()
-        outside = self._comm.allreduce_sum(int(report["outside"]))
+        outside = self._ffd_comm.allreduce_sum(int(report["outside"]))
         if outside:
             self._note(f"{outside} points of {name!r} are outside the box: they never move")
 
