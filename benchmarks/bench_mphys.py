@@ -1,4 +1,4 @@
-"""ffd and pyGeo as the geometry of one MPhys run script, side by side (issue 48).
+"""ffd and pyGeo as the geometry of one MPhys run script, side by side.
 
 ``python -m benchmarks.bench_mphys`` (also a module of ``make bench``). The run script is
 ``examples/mphys_aero_wing.py``: MACH-Aero's aerodynamic script of its tutorial wing, with a stand-in
