@@ -38,6 +38,8 @@ REPO = Path(__file__).resolve().parents[1]
 SCRIPT = REPO / "examples" / "mphys_aero_wing.py"
 ROOT_CHORD = 5.0
 CASES = {"shape": (0.0, 1.0), "twist": (3.0, 0.0), "both": (3.0, 1.0)}
+#: Surface sizes (points a side from leading to trailing edge, stations): 1,200 and 64,000 points.
+COARSE, FINE = (41, 15), (201, 161)
 
 
 def _child(python: str, geometry: str, folder: Path, case: str, check: bool) -> dict:
@@ -82,15 +84,25 @@ def _worst(check: dict) -> tuple[float, str]:
     return worst, where
 
 
+def _prepare(folder: Path, size) -> None:
+    subprocess.run([sys.executable, str(SCRIPT), "prepare", str(folder), "--size", *map(str, size)], check=True,
+                   cwd=REPO, env={"PYTHONPATH": str(REPO), "PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin"})
+
+
 def run(quick: bool = False) -> list[dict]:
     py = pygeo_python()
     with tempfile.TemporaryDirectory(prefix="ffd-mphys-") as tmp:
         folder = Path(tmp)
-        subprocess.run([sys.executable, str(SCRIPT), "prepare", str(folder)], check=True, cwd=REPO,
-                       env={"PYTHONPATH": str(REPO), "PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin"})
+        _prepare(folder, COARSE)
         X0 = np.load(folder / "surface.npz")["points"]
         ffd = {c: _child(sys.executable, "ffd", folder, c, c == "both") for c in CASES}
         pg = {c: _child(py, "pygeo", folder, c, c == "both") for c in CASES} if py else None
+        fine = {}
+        if not quick:            # the times on a finer surface (a RANS wall's count), no check_totals
+            _prepare(folder / "fine", FINE)
+            fine["ffd"] = _child(sys.executable, "ffd", folder / "fine", "both", False)
+            fine["pyGeo"] = _child(py, "pygeo", folder / "fine", "both", False) if py else None
+            fine["points"] = len(np.load(folder / "fine" / "surface.npz")["points"])
     rows = []
     for case in CASES:
         f = ffd[case]
@@ -115,6 +127,10 @@ def run(quick: bool = False) -> list[dict]:
                   "pyGeo compute_totals rev": p["seconds"]["compute_totals_rev"],
                   "pyGeo compute_totals fwd": p["seconds"]["compute_totals_fwd"]})
     rows.append(t)
+    for tool, r in ((k, v) for k, v in fine.items() if k != "points" and v):
+        rows.append({"case": f"times (s), {fine['points']} points, {tool}", "setup": r["seconds"]["setup"],
+                     "run_model": r["seconds"]["run_model"], "compute_totals rev": r["seconds"]["compute_totals_rev"],
+                     "cd": r["cruise.cd"][0]})
     for mode in ("fwd", "rev"):
         wf, kf = _worst(ffd["both"][f"check_totals_{mode}"])
         r = {"case": f"check_totals {mode}", "ffd worst": wf, "ffd block": kf}

@@ -16,7 +16,7 @@ stand-in builder by ``ADflowBuilder(aero_options, scenario="aerodynamic")`` and 
 by ADflow's grid (docs/mphys.md).
 
 The wing: MACH-Aero's tutorial planform (root chord 5, tip chord 1.5, semi-span 14, leading edge from
-(0, 0) to (7.5, 14)), NACA 0012, chord x, span y, up z, as a surface mesh of 41 x 15 points a side.
+(0, 0) to (7.5, 14)), NACA 0012, chord x, span y, up z, as a surface mesh of 41 x 15 points a side (``--size``: more).
 """
 
 from __future__ import annotations
@@ -43,9 +43,10 @@ LE_LIST = [[0.01, 0.001, 0.0], [7.51, 13.99, 0.0]]
 TE_LIST = [[4.99, 0.001, 0.0], [8.99, 13.99, 0.0]]
 
 
-def prepare(folder: Path) -> None:
-    """ffd's side, once: the wing's surface mesh and design file, the stand-in's surface (``surface.npz``)
-    and ffd's automatic box exported as a Plot3D FFD file (``ffd.xyz``) for pyGeo: one lattice for both."""
+def prepare(folder: Path, n_chord: int = 41, n_span: int = 15) -> None:
+    """ffd's side, once: the wing's surface mesh (``n_chord`` points a side from leading to trailing edge,
+    ``n_span`` stations) and design file, the stand-in's surface (``surface.npz``) and ffd's automatic box
+    exported as a Plot3D FFD file (``ffd.xyz``) for pyGeo: one lattice for both."""
     import yaml
 
     from ffdcli.io.formats import write_mesh
@@ -54,7 +55,7 @@ def prepare(folder: Path) -> None:
     folder.mkdir(parents=True, exist_ok=True)
     planform = Planform(semi_span=14.0, root_chord=5.0, taper=0.3, le_sweep_deg=float(np.degrees(np.arctan2(7.5, 14))),
                         sections="xz", root_airfoil="0012")
-    mesh = surface_mesh(planform, n_chord=41, n_span=15)
+    mesh = surface_mesh(planform, n_chord=n_chord, n_span=n_span)
     write_mesh(mesh, folder / "wing.su2")
     ids = mesh.marker_point_ids(["wing"])
     where = np.full(len(mesh.points), -1)
@@ -182,6 +183,9 @@ def run(folder: Path, geometry: str, check: bool = True, twist: float = TWIST_TI
                  "geometry.tecon"):
         out[name] = np.atleast_1d(prob.get_val(name)).tolist()
     out["x_aero"] = prob.get_val("geometry.x_aero0_geometry_output", get_remote=True).reshape(-1, 3).tolist()
+    t2 = time.perf_counter()
+    prob.compute_totals(of=["cruise.cd", "cruise.cl", "geometry.thickcon", "geometry.volcon"], wrt=["twist", "local"])
+    out["seconds"]["compute_totals_rev"] = time.perf_counter() - t2
     if check:
         for mode in ("fwd", "rev"):
             prob.setup(mode=mode)
@@ -229,9 +233,11 @@ def main(argv=None):
     parser.add_argument("--twist", type=float, default=TWIST_TIP, help="run: tip twist, degrees (linear from 0)")
     parser.add_argument("--shape", type=float, default=1.0, help="run: the shape's scale (1: shape_values)")
     parser.add_argument("--out", type=Path, default=None, help="run: the result file (JSON)")
+    parser.add_argument("--size", type=int, nargs=2, default=(41, 15), metavar=("N_CHORD", "N_SPAN"),
+                        help="prepare: surface points a side from leading to trailing edge, and stations")
     args = parser.parse_args(argv)
     if args.task == "prepare":
-        prepare(args.folder)
+        prepare(args.folder, *args.size)
     elif args.task == "run":
         out = run(args.folder, args.geometry, check=not args.no_check, twist=args.twist, shape=args.shape,
                   out_file=args.out)
