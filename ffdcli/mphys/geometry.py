@@ -36,6 +36,7 @@ import openmdao.api as om
 
 from ffdcli.api import DesignModel
 from ffdcli.errors import InputError
+from ffdcli.mesh.numbers import as_numbers
 from ffdcli.mphys.design import from_design_file, from_points
 from ffdcli.mphys.names import FFDNote
 from ffdcli.mphys.pygeo_methods import PyGeoMethods
@@ -214,7 +215,8 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
             self.add_input(input_name_, distributed=True, shape_by_conn=True, tags=tags)
             self.add_output(name, distributed=True, copy_shape=input_name_, tags=tags)
             return
-        X = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        X = as_numbers(np.reshape(points, (-1, 3)) if np.size(points) % 3 == 0 else points, (None, 3),
+                       f"the points of {name!r}", hint="(N, 3) or (3N,) coordinates")
         if self.model is None:
             self._build_from_points(X)
             self._note(f"the automatic box is fitted to the point set {name!r} ({self._ffd_comm.allreduce_sum(len(X))}"

@@ -222,22 +222,42 @@ def test_pygeo_lattice_file_and_point_set_box(wing):
     np.testing.assert_allclose(prob.get_val(f"geometry.{GEO.COORDINATES_OUTPUT}"), a, atol=1e-10)
 
 
-def test_coordinates_read_at_first_compute_and_reembedded_when_they_change(wing):
+def test_aero_and_struct_coordinates_read_at_first_compute_and_reembedded_when_they_change(wing):
+    """Two disciplines (an aerostructural script): the wall points and points inside the wing (a wing box's
+    nodes) read from their inputs at the first compute, moved by one box, re-embedded when they change."""
     folder, design, X = wing
+    data = yaml.safe_load(design.read_text())
+    data["changes"] = [{"twist": {"root": 0, "tip": 3}}, {"chord": {"tip": 0.8}}]
+    design.write_text(yaml.safe_dump(data))
+    STRUCT = MPhysVariables.Structures.Geometry
+    inner = 0.5 * (X + X.mean(axis=0) * np.array([1, 0, 1]) + X * np.array([0, 1, 0]))   # pulled inside
     prob = om.Problem(reports=False)
     ivc = prob.model.add_subsystem("ivc", om.IndepVarComp())
     ivc.add_output("x", val=X.ravel())
-    prob.model.add_subsystem("geo", FFDGeometry(design=str(design), disciplines=("aero",), work_dir=str(folder / "w"),
-                                                dvs=None))
+    ivc.add_output("s", val=inner.ravel())
+    prob.model.add_subsystem("geo", FFDGeometry(design=str(design), disciplines=("aero", STRUCT), design_vars=True,
+                                                work_dir=str(folder / "w")))
     prob.model.connect("ivc.x", f"geo.{GEO.COORDINATES_INPUT}")
+    prob.model.connect("ivc.s", f"geo.{STRUCT.COORDINATES_INPUT}")
     prob.setup()
     geo = prob.model.geo
     prob.run_model()
-    np.testing.assert_array_equal(prob.get_val(f"geo.{GEO.COORDINATES_OUTPUT}"), X.ravel())   # no change: the input
+    ref = DesignModel.from_file(design)
+    for name, P in (("x", X), ("s", inner), ("x2", X * 1.001)):
+        ref.add_points(name, P)
+    np.testing.assert_allclose(prob.get_val(f"geo.{GEO.COORDINATES_OUTPUT}").reshape(-1, 3), ref.points("x"),
+                               rtol=0, atol=1e-13)
+    np.testing.assert_allclose(prob.get_val(f"geo.{STRUCT.COORDINATES_OUTPUT}").reshape(-1, 3), ref.points("s"),
+                               rtol=0, atol=1e-13)
+    assert np.abs(ref.points("s") - inner).max() > 1e-3
     prob.set_val("ivc.x", (X * 1.001).ravel())
     prob.run_model()
-    np.testing.assert_array_equal(geo._sets[GEO.COORDINATES_OUTPUT].points, X * 1.001)
-    np.testing.assert_allclose(prob.get_val(f"geo.{GEO.COORDINATES_OUTPUT}"), (X * 1.001).ravel(), atol=1e-13)
+    np.testing.assert_allclose(prob.get_val(f"geo.{GEO.COORDINATES_OUTPUT}").reshape(-1, 3), ref.points("x2"),
+                               rtol=0, atol=1e-13)
+    with pytest.raises(InputError, match="the points of 'p'"):
+        geo.nom_addPointSet(np.zeros((4, 2)), "p")
+    with pytest.raises(InputError, match="exists already"):
+        geo.nom_add_discipline_coords("struct", inner)
 
 
 def test_design_file_variables_and_constraints_and_the_builder_wires_the_parallel_scenario(wing):
