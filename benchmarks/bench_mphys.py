@@ -89,8 +89,18 @@ def _prepare(folder: Path, size) -> None:
                    cwd=REPO, env={"PYTHONPATH": str(REPO), "PATH": str(Path(sys.executable).parent) + ":/usr/bin:/bin"})
 
 
-def run(quick: bool = False) -> list[dict]:
+def pygeo_mphys_python() -> str | None:
+    """pyGeo's interpreter if its environment also has OpenMDAO and MPhys (``pip install openmdao 'mphys>=2,<3'``
+    beside the wheels), else None."""
     py = pygeo_python()
+    if py is None:
+        return None
+    ok = subprocess.run([py, "-c", "import pygeo.mphys, mphys"], capture_output=True).returncode == 0
+    return py if ok else None
+
+
+def run(quick: bool = False) -> list[dict]:
+    py = pygeo_mphys_python()
     with tempfile.TemporaryDirectory(prefix="ffd-mphys-") as tmp:
         folder = Path(tmp)
         _prepare(folder, COARSE)
@@ -139,7 +149,8 @@ def run(quick: bool = False) -> list[dict]:
             r.update({"pyGeo worst": wp, "pyGeo block": kp})
         rows.append(r)
     if not pg:
-        rows.append({"case": "pyGeo", "ffd cl": "skipped: no pyGeo environment (FFD_PYGEO_PYTHON)"})
+        rows.append({"case": "pyGeo", "ffd cl": "skipped: no pyGeo environment with openmdao and mphys "
+                                                "(FFD_PYGEO_PYTHON; ../shared/peers/README.md)"})
     return rows
 
 
@@ -150,6 +161,16 @@ def summary(rows: list[dict]) -> list[dict]:
             out.append({"case": f"{r['case']}: cd ffd / pyGeo", "measured": f"{r['ffd cd']:.6g} / {r['pyGeo cd']:.6g}",
                         "target": "", "pyGeo reference": f"surface diff {r['surface max diff / root chord']:.2e} c, "
                                                           f"incidence diff {r['incidence max diff (deg)']:.2e} deg"})
+        elif r["case"].startswith("times (s), "):
+            out.append({"case": r["case"], "measured": f"setup {r['setup']:.3g} s, run_model {r['run_model']:.3g} s, "
+                                                       f"totals (rev) {r['compute_totals rev']:.3g} s",
+                        "target": "", "pyGeo reference": ""})
+        elif r["case"] == "times (s)":
+            out.append({"case": "times, 1,200 points", "measured": f"setup {r['ffd setup']:.3g} s, run_model "
+                        f"{r['ffd run_model']:.3g} s, totals (rev) {r['ffd compute_totals rev']:.3g} s", "target": "",
+                        "pyGeo reference": f"{r.get('pyGeo setup', float('nan')):.3g} / "
+                                           f"{r.get('pyGeo run_model', float('nan')):.3g} / "
+                                           f"{r.get('pyGeo compute_totals rev', float('nan')):.3g} s"})
         elif r["case"].startswith("check_totals"):
             out.append({"case": r["case"], "measured": f"ffd {r['ffd worst']:.1e}", "target": "<= 1e-6",
                         "pyGeo reference": f"{r.get('pyGeo worst', float('nan')):.1e}", "met": r["ffd worst"] <= 1e-6})
