@@ -29,6 +29,7 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.mphys.names import coordinate_names
+from ffdcli.openmdao import input_name, input_parts
 
 #: Changes a global variable of that name adds when the design has none of that kind: per section or one value.
 SECTION_KINDS = ("twist", "chord")
@@ -141,8 +142,10 @@ class PyGeoMethods:
 
         What it moves, first that applies: ``change=`` (a change item added, as in a design file);
         ``variables=`` (ffd variable names or prefixes: ``"c0.twist"``); ``dvName`` naming ffd variables;
-        ``dvName`` a change kind: ``twist``/``chord`` one value per section (``len(value)`` one less than
-        the sections: the root held, as MACH-Aero's twist), ``span``/``sweep``/``dihedral`` one value.
+        ``dvName`` the kind of one change of the design file (``"twist"``, ``"flap"``): its variables (one
+        fewer values than variables: the first held); ``dvName`` a change kind the design lacks, added:
+        ``twist``/``chord`` one value per section (``len(value)`` one less than the sections: the root held,
+        as MACH-Aero's twist), ``span``/``sweep``/``dihedral`` one value.
         pyGeo's callback ``func`` is not called (ffd's changes are its own), with a note."""
         if change is not None:
             size = self.nom_add_change(dvName, change, value)
@@ -161,6 +164,15 @@ class PyGeoMethods:
 
     def _kind_dv(self, dvName: str, value) -> int:
         kind = str(dvName).lower()
+        model = self._require_model("nom_addGlobalDV")
+        changes = sorted({input_name(n) for n in model.names if input_parts(input_name(n))[2] == kind})
+        if len(changes) == 1:          # the design has this change already: its variables
+            names = [n for n in model.names if input_name(n) == changes[0]]
+            n = len(names) if value is None else len(np.atleast_1d(value))
+            if n not in (len(names), len(names) - 1):
+                raise InputError(f"nom_addGlobalDV({dvName!r}): {n} values; the design's {kind} ({changes[0]}) has "
+                                 f"{len(names)} variables: give {len(names)}, or {len(names) - 1} (the first held)")
+            return self.nom_add_variables(dvName, names[len(names) - n:], value)
         if kind in SECTION_KINDS:
             m = self._n_sections("nom_addGlobalDV")
             n = m - 1 if value is None else len(np.atleast_1d(value))

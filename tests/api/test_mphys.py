@@ -189,6 +189,35 @@ def test_pygeo_calls_that_ffd_maps_say_so_or_refuse_with_what_to_give(wing):
     assert any("reference axis" in n for n in geo.notes)
 
 
+def test_global_variables_by_the_kind_of_a_change_of_the_design_file(wing):
+    """``nom_addGlobalDV(kind, value)`` on a design that has that change: its variables (the first held when
+    one value fewer), devices by name too; a size that fits neither is refused in words."""
+    folder, design, X = wing
+    data = yaml.safe_load(design.read_text())
+    data["changes"] = [{"flap": {"span": [0.3, 0.8], "hinge": 0.7, "angle": 5}}, {"twist": {"root": 0, "tip": 2}}]
+    design.write_text(yaml.safe_dump(data))
+    seen = {}
+
+    def calls(geo, points):
+        geo.nom_add_discipline_coords(GEO, points)
+        seen["twist"] = geo.nom_addGlobalDV("twist", np.array([2.0]))
+        seen["flap"] = geo.nom_addGlobalDV("flap", func=None)
+        with pytest.raises(InputError, match="has 2 variables: give 2, or 1"):
+            geo.nom_addGlobalDV("twist", np.zeros(3))
+
+    prob = _problem(folder, FFDGeometry(design=str(design), work_dir=str(folder / "w")), calls)
+    geo = prob.model.geometry
+    assert geo.input_variables("twist") == ["c1.twist.tip"] and seen["twist"] == 1
+    assert geo.input_variables("flap") == [n for n in geo.model.names if n.startswith("c0.flap")]
+    prob.set_val("geometry.twist", 3.0)
+    prob.run_model()
+    ref = DesignModel.from_file(design)
+    ref.set_values({"c1.twist.tip": 3.0})
+    ref.add_points("s", X)
+    np.testing.assert_allclose(prob.get_val(f"geometry.{GEO.COORDINATES_OUTPUT}").reshape(-1, 3), ref.points("s"),
+                               rtol=0, atol=1e-13)
+
+
 def test_pygeo_lattice_file_and_point_set_box(wing):
     """No design file: the automatic box fitted to the solver's surface points equals the mesh's box; a
     pyGeo FFD file (Plot3D) is taken as box.file around the same points."""
