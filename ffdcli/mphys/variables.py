@@ -36,6 +36,11 @@ class VariablesAndConstraints:
         if dvName in self._dvs:
             raise InputError(f"a design variable named {dvName!r} exists already")
         picked = tuple(self.resolve_variables(names))
+        taken = {n: other for other, ns in self._dvs.items() for n in ns}
+        if any(n in taken for n in picked):
+            n = next(n for n in picked if n in taken)
+            raise InputError(f"design variable {dvName!r}: {n} is already moved by the input {taken[n]!r}; one "
+                             "input per variable")
         idx = self._indices(picked)
         val = self.model.values[idx] if value is None else np.broadcast_to(np.asarray(value, float), (len(idx),))
         self._dvs[dvName] = picked

@@ -178,13 +178,14 @@ def test_pygeo_calls_that_ffd_maps_say_so_or_refuse_with_what_to_give(wing):
         with pytest.raises(InputError, match="add devices before the per-section"):
             geo.nom_add_change("flap", {"flap": {"span": [0.3, 0.8], "hinge": 0.7, "angle": 0}})
         seen["sweep"] = geo.nom_addGlobalDV("sweep", value=2.0)
-        seen["by_name"] = geo.nom_addGlobalDV("same_sweep", variables="c1")
+        with pytest.raises(InputError, match="already moved by the input 'sweep'"):
+            geo.nom_addGlobalDV("same_sweep", variables="c1")
 
     prob = _problem(folder, FFDGeometry(design=str(design), work_dir=str(folder / "w")), calls)
     geo = prob.model.geometry
     assert seen["n_ref"] == geo.model.lattice().shape[1]
     assert geo.input_variables("twist") == [f"c0.twist[{j}]" for j in range(seen["n_ref"])]
-    assert seen["sweep"] == seen["by_name"] == 1 and geo.input_variables("same_sweep") == ["c1.sweep"]
+    assert seen["sweep"] == 1 and geo.input_variables("sweep") == ["c1.sweep"]
     np.testing.assert_array_equal(prob.get_val("geometry.sweep"), [2.0])
     assert any("reference axis" in n for n in geo.notes)
 
@@ -264,8 +265,8 @@ def test_aero_and_struct_coordinates_read_at_first_compute_and_reembedded_when_t
     ivc = prob.model.add_subsystem("ivc", om.IndepVarComp())
     ivc.add_output("x", val=X.ravel())
     ivc.add_output("s", val=inner.ravel())
-    prob.model.add_subsystem("geo", FFDGeometry(design=str(design), disciplines=("aero", STRUCT), design_vars=True,
-                                                work_dir=str(folder / "w")))
+    prob.model.add_subsystem("geo", FFDGeometry(design=str(design), disciplines=("aero", STRUCT),
+                                                dvs={"tw": "c0.twist", "ch": ["c1.chord"]}, work_dir=str(folder / "w")))
     prob.model.connect("ivc.x", f"geo.{GEO.COORDINATES_INPUT}")
     prob.model.connect("ivc.s", f"geo.{STRUCT.COORDINATES_INPUT}")
     prob.setup()
@@ -283,6 +284,9 @@ def test_aero_and_struct_coordinates_read_at_first_compute_and_reembedded_when_t
     prob.run_model()
     np.testing.assert_allclose(prob.get_val(f"geo.{GEO.COORDINATES_OUTPUT}").reshape(-1, 3), ref.points("x2"),
                                rtol=0, atol=1e-13)
+    assert geo.input_names == ["tw", "ch"] and geo.input_variables("tw") == ["c0.twist.root", "c0.twist.tip"]
+    with pytest.raises(InputError, match="c0.twist.tip is already moved by the input 'tw'"):
+        geo.nom_add_variables("again", "c0.twist.tip")
     with pytest.raises(InputError, match="the points of 'p'"):
         geo.nom_addPointSet(np.zeros((4, 2)), "p")
     with pytest.raises(InputError, match="exists already"):
