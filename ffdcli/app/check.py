@@ -38,7 +38,10 @@ def check_mesh(mesh, *, threshold: float | None = None, n_worst: int = 5, progre
     summary["worst"] = summary["worst"][:n_worst]
     summary["worst_nodes"] = summary["worst_nodes"][:n_worst]
     if report.count == 0:
-        return CheckReport(summary, f"{mesh}: no volume cells (surface-only mesh): nothing to check", report)
+        what = (f"{report.surface_cells} cells of a surface in space (2-D cells not in one plane), "
+                if report.surface_cells else "")
+        return CheckReport(summary, f"{mesh}: no volume cells (surface-only mesh: {what}nothing to check)",
+                           report)
     failed = report.n_inverted + (report.n_below if threshold is not None else 0)
     if failed:
         worst = report.worst[0]

@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit, prange
 
 from ffdcli.constraints.base import Constraint
-from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_table
+from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_table, in_one_plane
 
 #: The lower bound when the item gives none: no cell below 0.3 x its reference.
 MESH_QUALITY_LOWER = 0.3
@@ -418,6 +418,9 @@ def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuali
     except ValueError as e:
         raise error(f"has no quality measure for this mesh: {e}", key) from None
     orientation = cell_orientation(mesh.points, cells, mesh.dim)
+    if mesh.dim == 2 and not in_one_plane(mesh.points, cells, orientation.normal):
+        raise error("needs a volume mesh: the mesh's cells are a surface in space (2-D cells not in one "
+                    "plane), with no volume whose quality the design could spoil", key)
     q0 = cell_quality(mesh.points, cells, mesh.dim, orientation=orientation)
     types, data, signs, base = [], [], [], []
     at = 0

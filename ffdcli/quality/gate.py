@@ -131,7 +131,8 @@ def _with_minima(reference: QualityReference) -> QualityReference:
     q = reference.q
     valid = q[q > 0]
     return QualityReference(reference.orientation, q, reference.topology, reference.ortho,
-                            q_min=float(q.min()), q_min_valid=float(valid.min()) if len(valid) else None)
+                            q_min=float(q.min()), q_min_valid=float(valid.min()) if len(valid) else None,
+                            surface=reference.surface)
 
 
 @dataclass(frozen=True)
@@ -243,6 +244,9 @@ def check_quality_part(part, comm, points_after=None, points_before=None, thresh
         return QualityReport(0, 0, 0, min_before=None, min_after=None, **kw)
     if reference is None or (orthogonality and reference.ortho is None):
         reference = part_reference(part, comm, ref, orthogonality=orthogonality)
+    if reference.surface:        # 2-D cells of a surface in space: no volume cells, nothing to judge
+        return QualityReport(0, 0, 0, min_before=None, min_after=None, surface_cells=comm.allreduce_sum(
+            int(sum(int(c.sum()) for c in part.counted))), **kw)
     # the rank's own figures, agreed on (an error on one rank ends every rank), then gathered
     local_map = None if design_map is None else (lambda local: design_map(part.ids[local]))
     mine = comm.run(_part_figures, part, after, before, ref, reference, threshold, relative, collapse,

@@ -35,6 +35,10 @@ from ffdcli.mesh import CellBlock
 
 #: Cells evaluated per vectorised step (bounds the temporary arrays to ~100 MB).
 CHUNK = 200_000
+#: 2-D cells whose nodes lie farther than this (relative to the mesh's extent) from one plane are a
+#: surface in space (a wing's skin, a closed box's faces), not an airfoil mesh: they have no volume
+#: and no "inverted" (:func:`in_one_plane`).
+PLANAR_TOL = 1e-6
 
 # Corners: (corner node, edge-end a, edge-end b, edge-end c) with det[a-p, b-p, c-p] > 0 for a
 # cell in VTK order. 2D corners: (node, a, b) with n . ((a-p) x (b-p)) > 0.
@@ -194,6 +198,32 @@ def cell_quality(points: np.ndarray, cells: list[CellBlock], dim: int = 3, *,
     parts = [np.clip(orientation.signs[i] * raw_quality(pts, blk.data, blk.type, orientation.normal),
                      -1.0, 1.0) for i, blk in enumerate(cells)]
     return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def plane_distance(points: np.ndarray, cells: list[CellBlock], normal: np.ndarray, origin: np.ndarray) -> float:
+    """The largest distance of the cells' nodes from the plane through ``origin`` (3,) with unit
+    ``normal`` (3,) (0 without cells)."""
+    out = 0.0
+    for blk in cells:
+        d = blk.data
+        for lo in range(0, len(d), CHUNK):
+            nodes = np.unique(d[lo:lo + CHUNK])
+            if len(nodes):
+                out = max(out, float(np.abs((points[nodes] - origin) @ normal).max()))
+    return out
+
+
+def in_one_plane(points: np.ndarray, cells: list[CellBlock], normal: np.ndarray) -> bool:
+    """True when 2-D ``cells`` lie in one plane (normal ``normal``, through their nodes' mean) to
+    :data:`PLANAR_TOL` of their extent: an airfoil mesh, judged as flat cells. False: a surface in
+    space, which has no volume cells to judge."""
+    used = [b for b in cells if len(b)]
+    if not used:
+        return True
+    nodes = np.unique(np.concatenate([b.data.reshape(-1) for b in used]))
+    pts = np.asarray(points, dtype=np.float64)[nodes]
+    size = float(np.linalg.norm(np.ptp(pts, axis=0)))
+    return plane_distance(points, used, normal, pts.mean(axis=0)) <= PLANAR_TOL * max(size, np.finfo(float).tiny)
 
 
 def plane_normal(total: np.ndarray, ext: np.ndarray) -> np.ndarray:

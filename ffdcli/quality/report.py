@@ -49,6 +49,9 @@ class QualityReport:
     input_bad
         Up to ``n_worst`` cells inverted or degenerate in the input: ``{"cell", "type", "quality",
         "centroid"}`` (input coordinates).
+    surface_cells
+        2-D cells of a surface in space (not in one plane: a wing's skin read as a mesh), not judged:
+        they have no volume (``count`` is then 0).
     """
 
     count: int
@@ -82,6 +85,7 @@ class QualityReport:
     #: checkMesh's figures after and before (``{"after", "before", "faces_failed", "worst_faces"}``).
     n_faces_failed: int = 0
     polyhedral: dict | None = None
+    surface_cells: int = 0
 
     @property
     def relative_check(self) -> bool:
@@ -135,7 +139,7 @@ class QualityReport:
                                   "failed": self.n_ortho_failed, "min": self.ortho_min,
                                   "loss": self.ortho_loss_max},
                 "failed": self.n_failed, "ok": self.ok, "worst": self.worst, "worst_nodes": self.worst_nodes,
-                "input_bad": self.input_bad, **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
+                "input_bad": self.input_bad, "surface_cells": self.surface_cells, **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
 
     def summary(self) -> str:
         """One line for people: the same words for ``ffd deform`` and ``ffd check``."""

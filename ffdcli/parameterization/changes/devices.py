@@ -23,7 +23,7 @@ its ``hinge_range`` (the fractions the hinge may take, :data:`HINGE_RANGE` by de
 the value: chordwise knots evenly spaced across every place its hinge and transition can be
 (:func:`ramp_knots`), and its rows turn by a share of the angle that is a function of the hinge
 (:class:`HingeRamp`): none for a row whose basis function reaches ahead of the hinge, all of it for
-one reaching behind the transition, a straight ramp between. So a point ahead of the hinge still
+one reaching behind the transition, a smooth step between. So a point ahead of the hinge still
 does not move and one behind the transition still turns rigidly, and the share, hence the mesh, is a
 smooth function of the hinge with an exact derivative.
 
@@ -57,7 +57,7 @@ MAX_ANGLE = 60.0
 #: whose basis functions lie inside the blend, which turn by a share of the angle (:func:`section_weights`).
 BLEND_INTERVALS = 2
 #: The chord fractions a hinge given as a list (a design variable) may take unless ``hinge_range`` says.
-HINGE_RANGE = {"flap": (0.6, 0.8), "slat": (0.1, 0.3)}
+HINGE_RANGE = {"flap": (0.6, 0.8), "slat": (0.12, 0.3)}
 #: Tolerance (parameter) when reading which knots are a device's.
 KNOT_TOL = 1e-9
 #: A parameter this close to a knot is that knot (:func:`snap`).

@@ -9,15 +9,16 @@ instead (:func:`ramp_knots`): knots evenly spaced, ``delta`` apart in the chordw
 across every place the hinge and its transition can be, ``delta`` the smallest transition width
 over ``p + 1 + RAMP_INTERVALS``. On it, row ``i`` of section ``j`` of a flap turns by
 
-    w_ij = clip((t_i - uh_j) / (ut_j - uh_j - (p + 1) delta), 0, 1)
+    w_ij = S(clip((t_i - uh_j) / (ut_j - uh_j - (p + 1) delta), 0, 1)),   S(x) = x^3 (10 - 15 x + 6 x^2)
 
-(slat: ``clip((uh_j - t_{i+p+1}) / (uh_j - ut_j - (p + 1) delta), 0, 1)``), ``t`` the chordwise knots,
+(slat: ``S(clip((uh_j - t_{i+p+1}) / (uh_j - ut_j - (p + 1) delta), 0, 1))``), ``t`` the chordwise knots,
 ``uh_j``, ``ut_j`` the chordwise parameters of the hinge line and of the end of the transition at
 section ``j``. A row whose basis function reaches ahead of the hinge (``t_i <= uh_j``) does not turn,
 so a point ahead of the hinge does not move; one whose function reaches behind the transition turns
 fully (its support spans at most ``(p + 1) delta``), so a point there turns rigidly; between them a
-straight ramp. ``uh_j`` and ``ut_j`` are parameters of points that move along the local chord
-linearly with the hinge fractions, so ``w`` is piecewise linear in them with the exact derivative
+smooth step over ``RAMP_INTERVALS delta`` (twice differentiable: a difference quotient across its
+ends sees no corner). ``uh_j`` and ``ut_j`` are parameters of points that move along the local chord
+linearly with the hinge fractions, so ``w`` is a smooth function of them with the exact derivative
 :meth:`HingeRamp.weights` (through the lattice map's inverse Jacobian).
 """
 
@@ -36,7 +37,7 @@ from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.lattice import derivatives, evaluate
 
 #: Knot intervals across a variable hinge's ramp beyond the ``p + 1`` of one basis function.
-RAMP_INTERVALS = 1
+RAMP_INTERVALS = 2
 #: Points along the hinge line at which the knots' extent is read.
 RANGE_SAMPLES = 17
 
@@ -121,8 +122,11 @@ class HingeRamp:
             D = uh - ut - c
             r = (uh - t[p + 1:n + p + 1, None]) / D
             dr = (duh[:, None, :] - r * (duh - dut)[:, None, :]) / D
-        inside = (r > 0.0) & (r < 1.0)
-        return np.clip(r, 0.0, 1.0), np.where(inside, dr, 0.0)
+        x = np.clip(r, 0.0, 1.0)
+        # the smooth step x^3 (10 - 15 x + 6 x^2): 0 and 1 with two derivatives at its ends, so that the
+        # mesh is twice differentiable in the hinge (difference quotients see no corner)
+        w = x * x * x * (10.0 + x * (-15.0 + 6.0 * x))
+        return w, 30.0 * (x * (1.0 - x)) ** 2 * dr
 
     def reachable(self) -> np.ndarray:
         """(n,) bool: the rows some hinge of the range turns (behind (flap; slat: ahead of) the
