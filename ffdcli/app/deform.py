@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ffdcli.app.deformation import Deformation, deform
+from ffdcli.app.prepare import is_surface_mesh
 from ffdcli.app.run import DesignRun, load_run
 from ffdcli.app.write import write_outputs
 from ffdcli.io.formats.su2_ffd import describe
@@ -100,6 +101,11 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
         if outside:
             note(f"{who}{outside} surface points are outside the lattice and will not move")
     result = deform(run, P=P, progress=progress)
+    if result.volume_method == "none" and run.prep.mesh.n_cells and not is_surface_mesh(run.prep.mesh):
+        note("volume.method none: the volume mesh was not moved and its cells are not judged (the "
+             "gate judges what ffd moves); the written mesh keeps the input's volume nodes, so cells "
+             "beside the moved surface may be inverted in it: move the volume with SU2_DEF "
+             "(DV_KIND= SURFACE_FILE, from --surface-file) or your own tool before a solver runs on it")
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
                      recovery=result.recovery, remedies=remedies, hints=device_hints(run)):

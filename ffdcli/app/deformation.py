@@ -139,7 +139,9 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         raise QualityError("the deformed mesh has non-finite coordinates; are the design values far too "
                            "large? nothing was written", path=run.design.path)
     quality = None
-    if mesh.n_cells and check and not is_surface_mesh(mesh):
+    # the gate judges what ffd moved: with volume.method none the volume is another tool's to move
+    # (SU2_DEF's, from --surface-file), and its cells beside the moved surface are not the design's
+    if mesh.n_cells and check and not is_surface_mesh(mesh) and method != "none":
         t2 = time.perf_counter()
         threshold = (run.design.volume or {}).get("threshold")
         kw = {} if threshold is None else {"threshold": float(threshold)}
