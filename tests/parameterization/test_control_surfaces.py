@@ -261,6 +261,11 @@ def test_2d_flap_turns_the_whole_aft_part():
     ({"flap": {"span": [0.6, 0.2], "hinge": 0.75, "angle": 10}}, "inner < outer"),
     ({"flap": {"span": [0.2, 0.6], "hinge": 0.995, "angle": 10}}, "between 0.02 and 0.98"),
     ({"flap": {"span": [0.2, 0.6], "hinge": [0.7, 0.7, 0.7], "angle": 10}}, "list of 2"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": [0.5, 0.7], "angle": 10}}, "default hinge_range of a flap"),
+    ({"slat": {"span": [0.2, 0.6], "hinge": [0.15, 0.35], "angle": 10}}, "default hinge_range of a slat"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": [0.7, 0.7], "hinge_range": [0.72, 0.9], "angle": 10}}, "inside hinge_range"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": [0.7, 0.7], "hinge_range": [0.8, 0.6], "angle": 10}}, "lo < hi"),
+    ({"flap": {"span": [0.2, 0.6], "hinge": 0.7, "hinge_range": [0.6, 0.8], "angle": 10}}, "give hinge as a list"),
     ({"slat": {"span": [0.2, 0.6], "hinge": 0.15, "angle": 80}}, "within [-60, 60]"),
     ({"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": 5, "transition": 0.5}}, "transition"),
 ])

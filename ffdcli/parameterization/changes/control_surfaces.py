@@ -306,11 +306,11 @@ def parse_device(kind: str, spec, ctx: SpecContext) -> DeviceSpec:
         if not 0.02 <= lo < hi <= 0.98:
             raise ctx.fail(f"hinge_range [{lo:g}, {hi:g}]: two chord fractions with 0.02 <= lo < hi <= 0.98",
                            f"{key}.hinge_range")
-        if any(not lo <= h <= hi for h in hinge):
+        if any(not lo < h < hi for h in hinge):
             where = "hinge_range" if "hinge_range" in spec else f"the default hinge_range of a {kind}"
-            raise ctx.fail(f"hinge {hinge}: a variable hinge lies within {where} [{lo:g}, {hi:g}] (the "
-                           "lattice has its knots there); give hinge_range: [lo, hi] around it",
-                           f"{key}.hinge")
+            raise ctx.fail(f"hinge {hinge}: a variable hinge lies strictly inside {where} ({lo:g}, {hi:g}) "
+                           "(the lattice has its knots there, and it is the variable's bounds); give "
+                           "hinge_range: [lo, hi] around it", f"{key}.hinge")
         hinge_range = (lo, hi)
     blend = float(spec.get("blend", DEFAULT_BLEND))
     if not 0.0 <= blend <= 0.5:
