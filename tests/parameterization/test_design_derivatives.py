@@ -100,6 +100,7 @@ def _check_columns(tmp_path, planform: dict, changes: list, only=None) -> list[s
     return names
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [2, 3])
 def test_every_column_is_the_derivative_of_what_deform_writes(tmp_path, seed):
     planform, changes = _designs(seed)
@@ -109,6 +110,7 @@ def test_every_column_is_the_derivative_of_what_deform_writes(tmp_path, seed):
     assert any("hinge[0]" in n for n in names) and any("hinge[1]" in n for n in names)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1, 4, 5, 7])
 def test_device_columns_are_the_derivatives_of_what_deform_writes(tmp_path, seed):
     """More drawn devices (flap and slat, straight and tapered lines, default and given ranges),
