@@ -102,8 +102,7 @@ def _designs() -> dict:
         # (added after the blend's ramp was chosen: held out from that choice)
         "flap_mid10": [{"flap": {"span": [0.3, 0.7], "hinge": 0.7, "angle": 10}}],
         "flap_mid25": [{"flap": {"span": [0.3, 0.7], "hinge": 0.7, "angle": 25}}],
-        "flap_out20_tapered": [{"flap": {"span": [0.5, 0.9], "hinge": [0.8, 0.75], "hinge_range": [0.7, 0.85],
-                                        "angle": 20}}],
+        "flap_out20_tapered": [{"flap": {"span": [0.5, 0.9], "hinge": [0.8, 0.75], "angle": 20}}],
         "flap_root30": [{"flap": {"span": [0.05, 0.45], "hinge": 0.72, "angle": 30}}],
         "slat_mid20": [{"slat": {"span": [0.2, 0.8], "hinge": 0.12, "angle": 20}}],
         "flap15+twist": [{"flap": {"span": [0.25, 0.65], "hinge": 0.75, "angle": 15}}, {"twist": {"tip": -5}}],

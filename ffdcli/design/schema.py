@@ -105,8 +105,8 @@ def _device_schema(kind: str, part: str, down: str) -> dict:
                            "variables); blend: span width over which the rotation fades at each end "
                            "(default 0.2); transition: chord width behind the hinge where the surface "
                            "bends (default 0.1); hinge_range: [lo, hi] the chord fractions a variable "
-                           "hinge may take (the lattice is made for them; default flap [0.6, 0.8], slat "
-                           "[0.12, 0.3]); in 2D no span and no blend",
+                           "hinge may take (the lattice is made for them; default flap [0.6, 0.85], slat "
+                           "[0.1, 0.3]); in 2D no span and no blend",
             "type": "object", "additionalProperties": False, "required": ["hinge", "angle"],
             "properties": {
                 "span": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1},

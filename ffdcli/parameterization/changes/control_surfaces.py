@@ -315,10 +315,16 @@ def parse_device(kind: str, spec, ctx: SpecContext) -> DeviceSpec:
     blend = float(spec.get("blend", DEFAULT_BLEND))
     if not 0.0 <= blend <= 0.5:
         raise ctx.fail(f"blend {blend:g}: a span width in [0, 0.5]", f"{key}.blend")
-    # the device's chord: at the least of the range for a variable hinge (its lattice cannot depend on the value)
-    at = hinge if hinge_range is None else hinge_range
-    part = (1.0 - min(at)) if kind == "flap" else (max(at) if hinge_range is None else min(at))
-    transition = float(spec.get("transition", min(DEFAULT_TRANSITION, 0.5 * part)))
+    # the device's chord; a variable hinge's default transition is read at the middle of its range, and
+    # the transition must fit the least device chord over the range (its lattice cannot depend on the value)
+    if hinge_range is None:
+        part = (1.0 - min(hinge)) if kind == "flap" else max(hinge)
+        default = min(DEFAULT_TRANSITION, 0.5 * part)
+    else:
+        middle = 0.5 * (hinge_range[0] + hinge_range[1])
+        part = (1.0 - hinge_range[1]) if kind == "flap" else hinge_range[0]
+        default = min(DEFAULT_TRANSITION, 0.5 * ((1.0 - middle) if kind == "flap" else middle), 0.9 * part)
+    transition = float(spec.get("transition", default))
     if not 0.0 < transition <= 0.9 * part:
         raise ctx.fail(f"transition {transition:g}: a chord width in (0, {0.9 * part:.3g}] (inside the "
                        f"{kind})", f"{key}.transition")

@@ -57,7 +57,7 @@ MAX_ANGLE = 60.0
 #: whose basis functions lie inside the blend, which turn by a share of the angle (:func:`section_weights`).
 BLEND_INTERVALS = 2
 #: The chord fractions a hinge given as a list (a design variable) may take unless ``hinge_range`` says.
-HINGE_RANGE = {"flap": (0.6, 0.8), "slat": (0.12, 0.3)}
+HINGE_RANGE = {"flap": (0.6, 0.85), "slat": (0.1, 0.3)}
 #: Tolerance (parameter) when reading which knots are a device's.
 KNOT_TOL = 1e-9
 #: A parameter this close to a knot is that knot (:func:`snap`).
