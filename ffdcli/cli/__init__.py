@@ -130,10 +130,12 @@ def _run(argv, as_json, verbose, signals):
             raise error
     except click.exceptions.Exit as e:
         sys.exit(e.exit_code)
-    except click.ClickException as e:        # usage errors: exit 2 (click's own convention)
+    except click.exceptions.NoArgsIsHelpError as e:      # a bare ``ffd`` (or group): its help, exit 2
         if comm.is_root:
             e.show()
         sys.exit(e.exit_code)
+    except click.ClickException as e:        # usage errors: one line, exit 2 (click's own convention)
+        _fail(usage_message(e, argv), e.exit_code, as_json, show=comm.is_root)
     except (click.Abort, KeyboardInterrupt):
         _fail("interrupted; nothing was written", 130, as_json)
     except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
@@ -154,6 +156,19 @@ def _run(argv, as_json, verbose, signals):
         _fail(f"internal error: {type(e).__name__}: {e} (this is a bug in ffd; -v shows where)",
               1, as_json, show=comm.is_root)
     sys.exit(0)
+
+
+def usage_message(e: click.ClickException, argv: list[str] = ()) -> str:
+    """Click's error (a usage error: a missing argument, an unknown option, a value of the wrong type) as
+    the one line of every other error, with where the usage is: ``Missing argument 'DESIGN.yaml'.`` ->
+    ``missing argument 'DESIGN.yaml'; `ffd deform --help` shows the usage``."""
+    text = " ".join(e.format_message().split()).rstrip(".")
+    text = text[:1].lower() + text[1:] if text[:2] != text[:2].upper() else text
+    ctx = getattr(e, "ctx", None)
+    where = ctx.command_path if ctx is not None else "ffd"
+    if where == "ffd":              # an option's error is raised before its command's context exists
+        where = next((f"ffd {a}" for a in argv if a in cli.commands), where)
+    return f"{text}; `{where} --help` shows the usage"
 
 
 def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, show: bool = True):

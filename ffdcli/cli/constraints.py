@@ -10,9 +10,9 @@ from ffdcli.cli.console import bound_text
 
 
 @cli.command("constraints")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
-@click.option("--jacobian", "jacobian_file", type=click.Path(dir_okay=False), metavar="FILE.npz",
+@click.option("--jacobian", "jacobian_file", type=click.Path(), metavar="FILE.npz",
               help="Write the exact derivatives: arrays names (C), variables (V), values, lower, upper (C) "
                    "and jacobian (C x V).")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")

@@ -8,17 +8,17 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("deform")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override one value of the design file, e.g. --set changes.0.twist.tip=12 "
                    "(repeatable; the key path uses list positions).")
-@click.option("--output", "-o", type=click.Path(dir_okay=False), metavar="FILE",
+@click.option("--output", "-o", type=click.Path(), metavar="FILE",
               help="Write the deformed mesh here instead of the file's output.mesh; the lattice and the "
                    "picture are named after it (out/t5.su2 -> out/t5_lattice.vtk, out/t5.png) unless "
                    "--lattice is given.")
-@click.option("--lattice", "lattice_out", type=click.Path(dir_okay=False), metavar="FILE.vtk",
+@click.option("--lattice", "lattice_out", type=click.Path(), metavar="FILE.vtk",
               help="Write the lattice here (a .vtk name) instead of the file's output.lattice.")
-@click.option("--surface-file", "surface_file", type=click.Path(dir_okay=False), metavar="FILE",
+@click.option("--surface-file", "surface_file", type=click.Path(), metavar="FILE",
               help="Also write the deformed surface nodes as SU2's surface-positions file (DV_KIND= "
                    "SURFACE_FILE, DV_FILENAME= FILE), for SU2_DEF's own volume deformation. See docs/su2.md.")
 @click.option("--plot", "plot", is_flag=True,

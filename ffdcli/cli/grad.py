@@ -8,10 +8,10 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("grad")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
-@click.option("--sens", required=True, type=click.Path(dir_okay=False), metavar="FILE",
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
+@click.option("--sens", required=True, type=click.Path(), metavar="FILE",
               help="dJ/dX at mesh nodes: SU2 surface_sens.csv / volume_sens.csv, or rows x y z dJ/dx dJ/dy dJ/dz.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="GRAD.json",
+@click.option("-o", "--output", type=click.Path(), metavar="GRAD.json",
               help="Write {variable: dJ/dv} here (JSON) as well as printing it.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
@@ -45,8 +45,8 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console
 
 
 @cli.command("jacobian")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), metavar="JAC.npz",
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(), metavar="JAC.npz",
               help="Where to write the Jacobian factors (NumPy .npz).")
 @click.option("--dense", is_flag=True, help="Also store the dense dX/dv (3 S x n_vars; large for big meshes).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")

@@ -9,7 +9,7 @@ from ffdcli.cli.console import bound_text
 
 
 @cli.command("vars")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
 @common_options

@@ -32,6 +32,7 @@ import contextlib
 import io
 import logging
 import re
+import sys
 import warnings
 from pathlib import Path
 
@@ -40,6 +41,7 @@ import numpy as np
 from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.room import diagnosed
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
 
@@ -70,6 +72,10 @@ def _quiet_meshio(path: Path, action: str):
                 logging.disable(logging.NOTSET)
     except InputError:
         raise
+    except OSError:
+        if action == "write":                     # a full disk, a file-size limit: the output plan's words
+            raise
+        raise InputError(f"cannot read this {_format(path).upper()} file: {sys.exc_info()[1]}", path=path) from None
     except (Exception, SystemExit) as e:          # meshio calls sys.exit(1) on some bad files
         said = " ".join(err.getvalue().split())
         detail = f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
@@ -255,11 +261,14 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     m = meshio.Mesh(points, cells, cell_data={MARKER_ARRAY: tags} if cells else {})
     fmt = _format(path)
     with progress(f"writing {path.name}", 1) as bar, atomic_path(path) as tmp:
-        with _quiet_meshio(path, "write"):
-            if fmt == "vtu":
-                meshio.write(tmp, m, file_format="vtu")
-            else:
-                meshio.write(tmp, m, file_format="vtk42", binary=False)
+        try:
+            with _quiet_meshio(path, "write"):
+                if fmt == "vtu":
+                    meshio.write(tmp, m, file_format="vtu")
+                else:
+                    meshio.write(tmp, m, file_format="vtk42", binary=False)
+        except OSError as e:                      # NumPy's tofile says no errno: find why again
+            raise diagnosed(e, tmp) from None
         if field:
             _add_field_data(tmp, field, fmt)
         bar.update(1)
