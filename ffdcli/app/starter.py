@@ -29,6 +29,7 @@ from ffdcli.geometry.axes import AXIS_NAMES, detect_axes
 from ffdcli.geometry.surface import extract_surface
 from ffdcli.io.atomic import output_error
 from ffdcli.io.formats import read_mesh
+from ffdcli.io.inputs import existing_kind
 from ffdcli.quality.rules import DEFAULT_THRESHOLD
 from ffdcli.settings import DEFAULT_POINTS
 from ffdcli.volume.extruded import one_cell_thick
@@ -195,8 +196,12 @@ def init_design(mesh_path, surface=None, *, output=None, force: bool = False, pr
     fails (a full disk, a file-size limit, a read-only file system) is one line naming the file."""
     out = Path(output) if output is not None else default_design_path(mesh_path)
     plan = plan_design_output(out, inputs=(mesh_path,), force=force)
-    text = starter_design(mesh_path, surface, design_path=out, progress=progress)
     folder = out.parent / "out"               # where its outputs go (output: out/...)
+    kind = existing_kind(folder)
+    if kind not in (None, "folder"):
+        raise InputError(f"the design's outputs go into the folder out/ beside it, and {folder} is {kind}",
+                         path=folder, hint="move it away, or give -o in another folder")
+    text = starter_design(mesh_path, surface, design_path=out, progress=progress)
     made = not folder.exists()
     try:
         folder.mkdir(exist_ok=True)

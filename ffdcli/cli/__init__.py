@@ -75,15 +75,18 @@ def _register():
 
 def _compiled_code_guards(argv: list[str], notice: bool):
     """Ctrl-C held while numba loads or compiles kernels (an interrupt there crashes the interpreter
-    later) and, when ``notice``, a line on stderr before the first compile of a kernel
+    later), a kernel that numba cannot save in its cache used all the same (a warning with ``notice``)
+    and, when ``notice``, a line on stderr before the first compile of a kernel
     (:mod:`ffdcli.jit`). Nothing for ``--help``/``--version``, which run no kernel: importing numba
     would double the time of ``ffd --help``."""
     if not argv or any(a in ("-h", "--help", "-V", "--version") for a in argv):
         return contextlib.nullcontext()
-    from ffdcli.jit import compile_notice, interrupts_outside_compilers
+    from ffdcli.jit import cache_failures_warn, compile_notice, interrupts_outside_compilers
 
     stack = contextlib.ExitStack()
     stack.enter_context(interrupts_outside_compilers())
+    # a kernel numba cannot save (a full disk, a file-size limit) is a warning, not a failed run
+    stack.enter_context(cache_failures_warn(None if notice else (lambda text: None)))
     if notice:
         stack.enter_context(compile_notice())
     return stack
