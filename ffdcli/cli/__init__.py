@@ -13,6 +13,7 @@ import functools
 import os
 import sys
 import traceback
+import warnings
 
 import click
 
@@ -104,8 +105,19 @@ def main(argv=None):
     verbose = "-v" in argv or "--verbose" in argv
     # under mpiexec, SIGTERM/SIGHUP are held from before MPI starts (``ffd``'s entry point holds
     # them from before the imports): every rank stops together
-    with SignalRecorder() as signals:
+    with SignalRecorder() as signals, warnings.catch_warnings():
+        warnings.showwarning = functools.partial(_show_warning, verbose=verbose)
         _run(argv, as_json, verbose, signals)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, verbose: bool = False):
+    """A Python warning that reaches the command line (a library's, e.g. NumPy's "invalid value
+    encountered"): one ``ffd: warning:`` line instead of the warning and its source line; where it
+    was raised with ``-v``."""
+    where = f" ({filename}:{lineno})" if verbose else ""
+    with contextlib.suppress(OSError, ValueError):
+        print(f"ffd: warning: {category.__name__}: {' '.join(str(message).split())}{where}", file=sys.stderr,
+              flush=True)
 
 
 def _run(argv, as_json, verbose, signals):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
+from ffdcli.cli.params import FINITE
 
 
 def int_list(ctx, param, value):
@@ -35,7 +36,7 @@ def int_list(ctx, param, value):
                    "Default: detected (span = largest extent, thickness = smallest).")
 @click.option("--root", type=click.Choice(["min", "max"]),
               help="End of the span axis where the root is. Default: the end nearer 0.")
-@click.option("--margin", type=float, metavar="F",
+@click.option("--margin", type=FINITE, metavar="F",
               help="Clearance around the wing as a fraction of the local chord. Default 0.02.")
 @click.option("--lattice", "lattice_out", type=click.Path(), metavar="FILE",
               help="Where to write the lattice (VTK). Default: <mesh stem>_lattice.vtk beside the mesh.")

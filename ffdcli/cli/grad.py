@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
+from ffdcli.cli.params import FiniteFloat
 
 
 @cli.command("grad")
@@ -15,7 +16,7 @@ from ffdcli.cli import cli, common_options
               help="Write {variable: dJ/dv} here (JSON) as well as printing it.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
-@click.option("--tolerance", type=click.FloatRange(min=0.0), metavar="DIST",
+@click.option("--tolerance", type=FiniteFloat(min=0.0), metavar="DIST",
               help="How far (mesh units) the file's coordinates may stand from the mesh nodes "
                    "(default 1e-6 of the mesh diagonal); farther, the file is refused.")
 @common_options

@@ -41,6 +41,7 @@ import numpy as np
 from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.formats import vtk_check
 from ffdcli.io.room import diagnosed
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
@@ -51,6 +52,10 @@ meshio = deferred("meshio")     # 0.1 s with its xml imports: imported when a VT
 #: Cell-data array with the marker id of each cell (0 = interior).
 MARKER_ARRAY = "ffd_marker"
 _GMSH_ARRAY = "gmsh:physical"
+
+
+#: What a file of each format is expected to be, in messages.
+_KIND = {"vtu": "a VTK XML unstructured grid (.vtu)", "vtk": "a legacy VTK unstructured grid (.vtk)"}
 
 
 def _format(path: Path) -> str:
@@ -77,12 +82,14 @@ def _quiet_meshio(path: Path, action: str):
             raise
         raise InputError(f"cannot read this {_format(path).upper()} file: {sys.exc_info()[1]}", path=path) from None
     except (Exception, SystemExit) as e:          # meshio calls sys.exit(1) on some bad files
-        said = " ".join(err.getvalue().split())
-        detail = f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
-        if said:
-            detail += f" ({said[:200]})"
-        raise InputError(f"cannot {action} this {_format(path).upper()} file: {detail}",
-                         path=path) from None
+        found = vtk_check.problem(path) if action == "read" else None
+        if found is not None:                     # the first problem, on its line, in words
+            line, text = found
+            raise InputError(f"{text}; expected {_KIND[_format(path)]}", path=path, line=line) from None
+        said = " ".join(err.getvalue().split()).removeprefix("Error: ")
+        detail = said or (str(e) if not isinstance(e, SystemExit) else "")
+        raise InputError(f"cannot {action} this {_format(path).upper()} file" + (f" ({detail[:200]})" if detail else "")
+                         + (f"; expected {_KIND[_format(path)]}" if action == "read" else ""), path=path) from None
 
 
 # ----------------------------------------------------------------------------------------------
