@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 from ffdcli.app.deformation import deform
 from ffdcli.app.run import load_run
 from ffdcli.app.write import deform_writers
+from ffdcli.errors import InputError
 from ffdcli.io.formats.airfoil import read_airfoil
 from ffdcli.io.outputs import plan_plot
 
@@ -26,6 +27,9 @@ def plot_design_file(design, *, output=None, view3d: bool = True, target=None, p
     plan = plan_plot(design, output, view3d=view3d)       # checked before the work
     coords = read_airfoil(target).coords if target is not None else None
     run = load_run(design, progress=progress)
+    if coords is not None and run.box.dim != 2:      # never silently ignored
+        raise InputError("draws a target airfoil on a 2D design; this design is 3D "
+                         "(leave it out)", path=design.path, key="--target")
     result = deform(run, progress=progress)
     q = result.quality
     warnings = []
