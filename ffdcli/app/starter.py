@@ -172,7 +172,8 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     add(_line(f"  mesh: {_flow('out/' + stem + mesh_path.suffix)}", "the deformed mesh, every marker kept"))
     add(_line(f"  lattice: {_flow('out/' + stem + '_lattice.vtk')}",
               "original and deformed lattice (ParaView)"))
-    add(_line(f"  plot: {_flow('out/' + stem + '.png')}", "the picture of `ffd plot`"))
+    add(_line(f"  plot: {_flow('out/' + stem + '.png')}",
+              "where `ffd plot` (and `ffd deform --plot`) put the picture; ffd deform draws none without --plot"))
     return "\n".join(L) + "\n"
 
 

@@ -37,12 +37,11 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console
     Example:
       ffd grad design.yaml --sens surface_sens.csv -o grad.json
     """
-    from ffdcli.api.gradient import grad_design
-    from ffdcli.design import load_design
+    from ffdcli.api.commands import gradient_report
 
-    design = load_design(design_file, overrides=overrides)
-    console.result(*grad_design(design, sens, output=output, cache_dir=cache_dir, progress=console.progress,
-                                comm=console.comm, tol=tolerance))
+    report = gradient_report(design_file, sens, overrides, output=output, cache_dir=cache_dir, tol=tolerance,
+                             progress=console.progress, comm=console.comm)
+    console.result(report.summary, report.text)
 
 
 @cli.command("jacobian")
@@ -68,8 +67,8 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     Example:
       ffd jacobian design.yaml -o jac.npz
     """
-    from ffdcli.api.gradient import jacobian_design
-    from ffdcli.design import load_design
+    from ffdcli.api.commands import jacobian_report
 
-    design = load_design(design_file, overrides=overrides)
-    console.result(*jacobian_design(design, output, dense=dense, progress=console.progress, comm=console.comm))
+    report = jacobian_report(design_file, output, overrides, dense=dense, progress=console.progress,
+                             comm=console.comm)
+    console.result(report.summary, report.text)

@@ -36,11 +36,9 @@ def plot_cmd(design_file, output, overrides, view3d, target, console):
       ffd plot configs/rect_twist_linear.yaml -o out/twist.png
       ffd plot out/s1223.yaml --target samples/s1223.dat -o out/fit.png
     """
-    from ffdcli.app.plot import plot_design_file
-    from ffdcli.design import load_design
+    from ffdcli.app.plot import plot_file
 
-    design = load_design(design_file, overrides=overrides)
-    report = plot_design_file(design, output=output, view3d=view3d, target=target, progress=console.progress)
+    report = plot_file(design_file, overrides, output=output, view3d=view3d, target=target, progress=console.progress)
     for w in report.warnings:
         console.warn(w)
     console.result(report.summary, report.text)

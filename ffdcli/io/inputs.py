@@ -61,7 +61,8 @@ def check_input_file(path: str | Path, what: str = "file", *, key: str | None = 
     if kind is None:
         text = f"{what} not found" if design is not None else "no such file"
     elif kind == "folder":
-        text = f"is a folder, expected {_article(what)}" if design is None else f"{what} {p} is a folder, expected a file"
+        text = (f"is a folder, expected {_article(what)}" if design is None
+                else f"{what} {p} is a folder, expected a file")
     else:
         text = (f"is {kind}, expected {_article(what)} (a regular file)" if design is None
                 else f"{what} {p} is {kind}, expected a regular file")

@@ -41,7 +41,8 @@ def ws(tmp_path_factory):
     deformed = read_mesh(d / "ref.su2")
     ids = deformed.marker_point_ids("wing")
     rows = ['"PointID","x","y","z","Sensitivity_x","Sensitivity_y","Sensitivity_z"']
-    rows += [f"{i},{float(x)!r},{float(y)!r},{float(z)!r},0,0,1" for i, (x, y, z) in zip(ids, deformed.points[ids], strict=True)]
+    rows += [f"{i},{float(x)!r},{float(y)!r},{float(z)!r},0,0,1"
+             for i, (x, y, z) in zip(ids, deformed.points[ids], strict=True)]
     (d / "sens.csv").write_text("\n".join(rows) + "\n")
     return d
 

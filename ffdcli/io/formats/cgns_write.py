@@ -13,8 +13,8 @@ from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
 from ffdcli.io.formats.cgns_cells import CGNS_CODE, MIXED, WEDGE_CGNS_TO_VTK
-from ffdcli.io.room import check_room
 from ffdcli.io.formats.cgns_nodes import CgnsSource, _chars, _node, _str_attr, convert_adf
+from ffdcli.io.room import check_room
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
 
