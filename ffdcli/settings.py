@@ -32,10 +32,8 @@ DEFAULT_POINTS = {3: (6, 8, 2), 2: (6, 5)}
 #: The most control points in one direction of a lattice (an FFD lattice has tens; millions would
 #: run out of memory or time).
 MAX_POINTS = 256
-#: The highest B-spline degree of a lattice direction. The kernels size their work arrays by the run's
-#: degrees (no bound compiled in); the bound is the field's: SU2's own RAE2822 FFD box is degree 14, and
-#: a point's support, (p + 1) control points per direction, grows with it.
-MAX_DEGREE = 15
+#: The highest B-spline degree the lattice kernels support (their work arrays are sized by it).
+MAX_DEGREE = 5
 #: Planes of the airfoil sections (``box.sections``): chord axis, then thickness axis.
 SECTION_CHOICES = ("xy", "xz", "yz", "yx", "zx", "zy")
 #: Ends of the span axis where the root may be (``box.root``).

@@ -24,6 +24,7 @@ from ffdcli.jit import axpy4, axpy8, axpy8x3, fma, inlined, kernel, tensor_v, tu
 from ffdcli.lattice._newton_kernels import specialised
 from ffdcli.lattice.lattice import fixed_widths
 from ffdcli.lattice.spline import basis_d1_tuple, basis_row_nb, find_span_nb
+from ffdcli.settings import MAX_DEGREE
 
 # ----------------------------------------------------------------------------------------------
 # The basis of every point: first index and values per axis
@@ -108,7 +109,7 @@ def _axis_generic(knots, p, params, i, axis, first, values, W):
 
 @kernel
 def _basis_axes_generic_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, p0, p1, p2, W):
-    """:func:`_basis_axes_chunk_nb` with the degrees at run time (``W`` a (3, max degree + 1) work
+    """:func:`_basis_axes_chunk_nb` with the degrees at run time (``W`` a (3, MAX_DEGREE + 1) work
     array): the same operations (:func:`ffdcli.lattice.spline.basis_row_nb` is
     :func:`ffdcli.lattice.spline.basis_d1_tuple`'s values, bit for bit)."""
     pdim = params.shape[1]
@@ -129,7 +130,7 @@ def _basis_axes_generic_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, nchunk, p
     for ch in prange(nchunk):
         lo = ch * npts // nchunk
         hi = (ch + 1) * npts // nchunk
-        W = np.zeros((3, max(p0, p1, p2) + 1))      # the degrees at run time: no upper bound compiled in
+        W = np.zeros((3, MAX_DEGREE + 1))
         bad += _basis_axes_generic_chunk_nb(k0, k1, k2, params, f0, V0, f1, V1, f2, V2, lo, hi, p0, p1, p2, W)
     return bad == 0
 

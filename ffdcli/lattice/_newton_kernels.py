@@ -24,6 +24,7 @@ from numba.extending import overload
 
 from ffdcli.jit import inlined, kernel
 from ffdcli.lattice.lattice import eval_point_fixed_nb, eval_point_nb, fixed_widths, padded_rows
+from ffdcli.settings import MAX_DEGREE
 
 #: Lattice degrees ``(p0, p1, p2)`` of the kernels' three-axis form (a 2D lattice's third is 0) that
 #: have kernels compiled for them: the default boxes (3D 6 x 8 x 2 and 2D 6 x 5 give (3, 3, 1) and
@@ -311,7 +312,7 @@ def _newton_generic_nb(P, k0, k1, k2, p0, p1, p2, X, params, tol, stop, snap, ma
         hi = (ch + 1) * npts // nchunk
         work = np.zeros(48)
         fixed = np.zeros(3, dtype=np.bool_)
-        W = np.zeros((8, max(p0, p1, p2) + 1))      # the degrees at run time: no upper bound compiled in
+        W = np.zeros((8, MAX_DEGREE + 1))
         _newton_chunk_nb((P, k0, k1, k2, p0, p1, p2, W), X, params, tol2, stop2, snap, max_iter, residual,
                          lo, hi, use_table, t_lo, t_inv_h, t_dims, t_centers, t_params, t_jinv, work, fixed)
 

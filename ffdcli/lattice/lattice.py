@@ -39,7 +39,7 @@ from ffdcli.lattice.spline import (
     find_span_nb,
 )
 from ffdcli.mesh import diagonal
-from ffdcli.settings import check_degree
+from ffdcli.settings import MAX_DEGREE, check_degree
 
 #: Knot vector of the dummy third axis of a 2D lattice (one control point, degree 0). Read-only, as
 #: every array :func:`kernel_args` hands the kernels: numba compiles one signature per array flag
@@ -180,7 +180,7 @@ def eval_point_nb(P, k0, k1, k2, p0, p1, p2, u0, u1, u2, W):
     """V and its first derivatives at (u0, u1, u2), for the kernels (``P`` as from :func:`kernel_args`).
 
     Returns a tuple of 12 floats: ``V`` (3), ``dV/du0`` (3), ``dV/du1`` (3), ``dV/du2`` (3). ``W`` is
-    a (8, max degree + 1) work array whose rows 0-5 receive the basis values and derivatives of the
+    a (8, MAX_DEGREE + 1) work array whose rows 0-5 receive the basis values and derivatives of the
     three axes (N0, D0, N1, D1, N2, D2) and rows 6-7 are scratch. The tensor product is contracted one
     axis at a time (w, then v, then u) into scalar accumulators. Inlined into the callers' loops (no
     array views, no reference counting per point: 2.5x faster than passing 1D work arrays).
@@ -292,7 +292,7 @@ def _evaluate_nb(P, k0, k1, k2, p0, p1, p2, params, gdim, want_jac, out, jac):
     pdim = params.shape[1]
     nchunk = min(npts, 256)
     for c in prange(nchunk):
-        W = np.zeros((8, max(p0, p1, p2) + 1))      # the degrees at run time: no upper bound compiled in
+        W = np.zeros((8, MAX_DEGREE + 1))
         lo = c * npts // nchunk
         hi = (c + 1) * npts // nchunk
         for i in range(lo, hi):
