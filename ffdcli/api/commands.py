@@ -21,7 +21,7 @@ def bound_text(x) -> str:
     return "-" if x is None else f"{x:.6g}"
 
 
-def variables_report(design_file, overrides=(), *, cache_dir=None, progress=None) -> CommandReport:
+def run_vars(design_file, overrides=(), *, cache_dir=None, progress=None) -> CommandReport:
     """``ffd vars``: the design variables with value, unit and bounds."""
     model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=progress)
     rows = model.variables_table()
@@ -34,7 +34,7 @@ def variables_report(design_file, overrides=(), *, cache_dir=None, progress=None
     return CommandReport({"variables": rows}, "\n".join(lines))
 
 
-def constraints_report(design_file, overrides=(), *, jacobian_file=None, cache_dir=None, progress=None,
+def run_constraints(design_file, overrides=(), *, jacobian_file=None, cache_dir=None, progress=None,
                        comm=None) -> CommandReport:
     """``ffd constraints``: the constraints at the design's values and, with ``jacobian_file``, their
     exact Jacobian written as ``.npz`` (planned before the work; once, by rank 0 of an MPI run)."""
@@ -63,7 +63,7 @@ def constraints_report(design_file, overrides=(), *, jacobian_file=None, cache_d
     return CommandReport(summary, "\n".join(lines))
 
 
-def gradient_report(design_file, sens, overrides=(), *, output=None, cache_dir=None, tol=None, progress=None,
+def run_grad(design_file, sens, overrides=(), *, output=None, cache_dir=None, tol=None, progress=None,
                     comm=None) -> CommandReport:
     """``ffd grad``: dJ/dv of every design variable from a sensitivity file (:func:`grad_design`)."""
     design = load_design(design_file, overrides=overrides)
@@ -72,7 +72,7 @@ def gradient_report(design_file, sens, overrides=(), *, output=None, cache_dir=N
     return CommandReport(summary, text)
 
 
-def jacobian_report(design_file, output, overrides=(), *, dense: bool = False, progress=None,
+def run_jacobian(design_file, output, overrides=(), *, dense: bool = False, progress=None,
                     comm=None) -> CommandReport:
     """``ffd jacobian``: the factors of dX/dv written as ``.npz`` (:func:`jacobian_design`)."""
     design = load_design(design_file, overrides=overrides)

@@ -37,8 +37,8 @@ def constraints_cmd(design_file, overrides, jacobian_file, cache_dir, console):
       ffd constraints design.yaml --set changes.0.chord.tip=0.8 --json
       ffd constraints design.yaml --jacobian dcdv.npz
     """
-    from ffdcli.api.commands import constraints_report
+    from ffdcli.api.commands import run_constraints
 
-    report = constraints_report(design_file, overrides, jacobian_file=jacobian_file, cache_dir=cache_dir,
-                                progress=console.progress, comm=console.comm)
+    report = run_constraints(design_file, overrides, jacobian_file=jacobian_file, cache_dir=cache_dir,
+                             progress=console.progress, comm=console.comm)
     console.result(report.summary, report.text)

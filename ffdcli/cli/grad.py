@@ -37,10 +37,10 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console
     Example:
       ffd grad design.yaml --sens surface_sens.csv -o grad.json
     """
-    from ffdcli.api.commands import gradient_report
+    from ffdcli.api.commands import run_grad
 
-    report = gradient_report(design_file, sens, overrides, output=output, cache_dir=cache_dir, tol=tolerance,
-                             progress=console.progress, comm=console.comm)
+    report = run_grad(design_file, sens, overrides, output=output, cache_dir=cache_dir, tol=tolerance,
+                      progress=console.progress, comm=console.comm)
     console.result(report.summary, report.text)
 
 
@@ -67,8 +67,8 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     Example:
       ffd jacobian design.yaml -o jac.npz
     """
-    from ffdcli.api.commands import jacobian_report
+    from ffdcli.api.commands import run_jacobian
 
-    report = jacobian_report(design_file, output, overrides, dense=dense, progress=console.progress,
-                             comm=console.comm)
+    report = run_jacobian(design_file, output, overrides, dense=dense, progress=console.progress,
+                          comm=console.comm)
     console.result(report.summary, report.text)

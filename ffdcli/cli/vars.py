@@ -29,7 +29,7 @@ def vars_cmd(design_file, overrides, cache_dir, console):
       ffd vars design.yaml
       ffd vars design.yaml --json | jq '.variables[] | select(.unit == "deg")'
     """
-    from ffdcli.api.commands import variables_report
+    from ffdcli.api.commands import run_vars
 
-    report = variables_report(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
+    report = run_vars(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
     console.result(report.summary, report.text)
