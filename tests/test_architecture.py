@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ffdcli"
 
 #: The stages in data-flow order; a module may import its own stage and the ones before it.
 LAYERS = [
-    {"errors", "settings", "progress", "jit", "_compat", "deferred", ""},
+    {"errors", "settings", "progress", "jit", "_compat", "deferred", "registry", "schema_parts", ""},
     {"mesh"},
     {"parallel"},
     {"lattice"},          # before io: the SU2 writer refreshes SU2's own FFD section with the splines
@@ -24,6 +24,7 @@ LAYERS = [
     {"volume"},
     {"quality"},
     {"constraints"},
+    {"optimize.solvers"},  # before design: the design file's optimize: schema is assembled from the solver kinds
     {"design"},
     {"viz"},
     {"app"},
@@ -90,9 +91,16 @@ def _imports(name: str, path: Path):
     return own, other
 
 
+#: Sub-packages that are a stage of their own, apart from their package's.
+SUBSTAGES = ("optimize.solvers",)
+
+
 def _stage(module: str) -> str:
-    parts = module.split(".")
-    return parts[1] if len(parts) > 1 else ""
+    rest = module.split(".", 1)[1] if "." in module else ""
+    for sub in SUBSTAGES:
+        if rest == sub or rest.startswith(sub + "."):
+            return sub
+    return rest.split(".")[0]
 
 
 def _layer(module: str) -> int | None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ffdcli.constraints.base import Constraint
+from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema
 from ffdcli.lattice.embedding import sample_grid
 from ffdcli.lattice.lattice import _axis_tables, derivatives
 
@@ -42,6 +42,27 @@ class FoldFree(Constraint):
     det0: np.ndarray = None
 
     kind = "fold_free"
+
+    @classmethod
+    def schema(cls) -> dict:
+        return item_schema("smallest Jacobian determinant of the lattice map over the box, as a ratio to "
+                           "the baseline (> 0: the box does not fold)",
+                           {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
+                                        "description": "samples per knot span and direction (default 4)"}})
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx) -> FoldFree:
+        """The sample grid (``samples`` per knot span, default :data:`FOLD_SAMPLES`) and the baseline
+        determinants."""
+        samples = int(spec.get("samples", FOLD_SAMPLES))
+        if not 1 <= samples <= 64:
+            raise ctx.fail(f"samples per knot span must be 1 to 64, got {samples}", f"{ctx.key}.samples")
+        lat = ctx.box.lattice()
+        params = sample_grid(lat, samples)
+        det0 = np.linalg.det(derivatives(lat, params))
+        if not np.all(np.abs(det0) > 0) or not (np.all(det0 > 0) or np.all(det0 < 0)):
+            raise ctx.fail("the baseline lattice is already folded (its Jacobian determinant changes sign)")
+        return cls(index=ctx.index, lower=ctx.lower, upper=ctx.upper, box=ctx.box, params=params, det0=det0)
 
     @property
     def size(self) -> int:
@@ -85,15 +106,4 @@ class FoldFree(Constraint):
         return out[None, :]
 
 
-
-def build_fold_free(index, lower, upper, box, samples, key, error) -> FoldFree:
-    """The :class:`FoldFree` of item ``index``: the sample grid and the baseline determinants."""
-    if not 1 <= samples <= 64:
-        raise error(f"samples per knot span must be 1 to 64, got {samples}", f"{key}.samples")
-    lat = box.lattice()
-    params = sample_grid(lat, samples)
-    det0 = np.linalg.det(derivatives(lat, params))
-    if not np.all(np.abs(det0) > 0) or not (np.all(det0 > 0) or np.all(det0 < 0)):
-        raise error("the baseline lattice is already folded (its Jacobian determinant changes sign)", key)
-    return FoldFree(index=index, lower=lower, upper=upper, box=box, params=params, det0=det0)
-
+CONSTRAINTS.register(FoldFree)

@@ -108,7 +108,7 @@ from ffdcli.io.formats.cgns_nodes import (  # noqa: F401
     convert_adf,
 )
 from ffdcli.io.formats.cgns_write import write  # noqa: F401  (the format's writer: formats.write_mesh calls cgns.write)
-from ffdcli.io.formats.common import check_finite_rows
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat, check_finite_rows
 from ffdcli.mesh import CELL_DIM, CELL_NODES, CellBlock, Mesh
 from ffdcli.mesh.polyhedra import concat_polyhedra, polyhedra_from_cells
 from ffdcli.parallel.partition import local_mesh_of_blocks, localize, node_owners
@@ -479,3 +479,4 @@ def _read_file(h5path: Path, file: Path, container: str, progress) -> Mesh:
 # -- from scratch ------------------------------------------------------------------------------
 
 
+MESH_FORMATS.register(MeshFormat("cgns", (".cgns",), "a CGNS/HDF5 mesh", read, write, read_part))

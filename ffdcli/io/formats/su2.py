@@ -45,6 +45,7 @@ from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_write
 from ffdcli.io.formats import su2_ffd
 from ffdcli.io.formats._su2_parser import _KEY_RE, Su2Source, _Parser, _release  # noqa: F401  (Su2Source: the layout the writers read)
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat
 from ffdcli.mesh import CELL_DIM, CELL_NODES, VTK_ID, Mesh
 from ffdcli.parallel.partition import local_mesh_of_blocks
 from ffdcli.progress import no_progress
@@ -467,3 +468,6 @@ def _check_marker_name(name: str, path: Path) -> None:
     if not name.strip() or name != name.strip() or "\n" in name or "\r" in name:
         raise InputError(f"marker name {name!r} cannot be written as an SU2 MARKER_TAG "
                          "(empty, surrounding blanks or a line break)", path=path)
+
+
+MESH_FORMATS.register(MeshFormat("su2", (".su2",), "an SU2 native mesh", read, write, read_part))

@@ -40,6 +40,7 @@ import numpy as np
 from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
 
@@ -286,3 +287,7 @@ def _add_field_data(tmp: Path, field: dict[str, np.ndarray], fmt: str) -> None:
             raise RuntimeError("meshio wrote a legacy VTK file without DATASET")
         data = data[:m.end()] + block + data[m.end():]
     tmp.write_bytes(data)
+
+
+MESH_FORMATS.register(MeshFormat("vtu", (".vtu",), "a VTK XML unstructured grid", read, write))
+MESH_FORMATS.register(MeshFormat("vtk", (".vtk",), "a legacy VTK unstructured grid", read, write))
