@@ -7,6 +7,7 @@
 Each kind registers itself in :data:`CONSTRAINTS` at the end of its module; this face imports them all.
 """
 
+from ffdcli.constraints.add_material import AddMaterial  # noqa: F401  (registers its kind)
 from ffdcli.constraints.base import (
     CONSTRAINTS,
     SATISFIED_TOL,
