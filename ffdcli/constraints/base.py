@@ -143,13 +143,11 @@ def surface_triangles(faces) -> np.ndarray:
     return np.concatenate(out)
 
 
-
 def surface_segments(faces) -> np.ndarray:
     """(E, 2) local point indices of the line blocks (a 2D surface)."""
     out = [np.zeros((0, 2), dtype=np.int64)]
     out += [np.asarray(b.data, dtype=np.int64) for b in faces if b.type == "line"]
     return np.concatenate(out)
-
 
 
 @dataclass(frozen=True)
@@ -241,7 +239,6 @@ class Constraint:
         return self.value(inp), self.jacobian(inp)
 
 
-
 def read_bounds(spec: dict, lower=None, upper=None) -> tuple[float, float]:
     """(lower, upper) of an item's settings (absent: the defaults given; ``None``: no bound)."""
     return _bound(spec, "lower", lower), _bound(spec, "upper", upper)
@@ -250,7 +247,6 @@ def read_bounds(spec: dict, lower=None, upper=None) -> tuple[float, float]:
 def _bound(spec: dict, key: str, default):
     v = spec.get(key, default)
     return -np.inf if v is None and key == "lower" else np.inf if v is None else float(v)
-
 
 
 # --------------------------------------------------------------------------------------------------

@@ -19,7 +19,7 @@ import numpy as np
 
 from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema
 from ffdcli.lattice.embedding import sample_grid
-from ffdcli.lattice.lattice import _axis_tables, derivatives
+from ffdcli.lattice.lattice import axis_tables, derivatives
 
 #: Samples per knot span and direction of ``fold_free`` by default.
 FOLD_SAMPLES = 4
@@ -74,7 +74,6 @@ class FoldFree(Constraint):
 
     def ratios(self, P) -> np.ndarray:
         """(N,) det J'(u) / det J0(u) at the samples for control points ``P`` (n, m, l, 3)."""
-
         J = derivatives(self.box.lattice(P), self.params)
         return np.linalg.det(J) / self.det0
 
@@ -82,7 +81,6 @@ class FoldFree(Constraint):
         return np.array([self.ratios(inp.P).min()])
 
     def jacobian(self, inp):
-
         box = self.box
         r = self.ratios(inp.P)
         q = int(np.argmin(r))
@@ -90,7 +88,7 @@ class FoldFree(Constraint):
         J = derivatives(box.lattice(inp.P), u)[0]                        # (gdim, pdim)
         nv = inp.D.shape[1]
         D = inp.D.reshape(*inp.P.shape, nv)                               # (n, m, l, 3, nv)
-        t = _axis_tables(box.lattice(), u, 1)                             # per axis (2, 1, n_axis)
+        t = axis_tables(box.lattice(), u, 1)                             # per axis (2, 1, n_axis)
         if box.dim == 3:
             a, b, c = (t[k][:, 0] for k in range(3))
             dJ = np.stack([np.einsum("i,j,k,ijkdv->vd", a[1], b[0], c[0], D),

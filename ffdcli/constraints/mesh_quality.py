@@ -54,7 +54,7 @@ import numpy as np
 from numba import njit, prange
 
 from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema
-from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_table
+from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_det_length, corner_table
 
 #: The lower bound when the item gives none: no cell below 0.3 x its reference.
 MESH_QUALITY_LOWER = 0.3
@@ -78,28 +78,7 @@ def _corner_values_nb(points, data, corners, scale, plane, out):
     n_corners, width = corners.shape
     for c in prange(data.shape[0]):
         for k in range(n_corners):
-            p = data[c, corners[k, 0]]
-            a = data[c, corners[k, 1]]
-            b = data[c, corners[k, 2]]
-            e10 = points[a, 0] - points[p, 0]
-            e11 = points[a, 1] - points[p, 1]
-            e12 = points[a, 2] - points[p, 2]
-            e20 = points[b, 0] - points[p, 0]
-            e21 = points[b, 1] - points[p, 1]
-            e22 = points[b, 2] - points[p, 2]
-            x0 = e11 * e22 - e12 * e21
-            x1 = e12 * e20 - e10 * e22
-            x2 = e10 * e21 - e11 * e20
-            length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
-            if width == 4:
-                d = data[c, corners[k, 3]]
-                e30 = points[d, 0] - points[p, 0]
-                e31 = points[d, 1] - points[p, 1]
-                e32 = points[d, 2] - points[p, 2]
-                det = x0 * e30 + x1 * e31 + x2 * e32
-                length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
-            else:
-                det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+            det, length = corner_det_length(points, data, c, corners, k, width, plane)
             out[c, k] = scale * det / length if length > 0 else 0.0
 
 

@@ -109,7 +109,6 @@ def project_thickness(points, faces, box, Q) -> tuple[np.ndarray, np.ndarray, np
     return U, L, ok
 
 
-
 def _norm_jac(d: np.ndarray, Jd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(|d| (k,), d|d|/dv (k, nv)) for vectors d (k, 3) with derivatives Jd (k, 3, nv)."""
     r = np.linalg.norm(d, axis=1)
@@ -179,7 +178,6 @@ class Thickness(Constraint):
         JC = self.chords.jacobian(inp.D)
         c, dc = _norm_jac(C[:G] - C[G:], JC[:G] - JC[G:])
         return ((dt * c[:, None] - t[:, None] * dc) / (c * c)[:, None]) / self.base[:, None]
-
 
 
 def _fractions(spec, name, key, error) -> np.ndarray:

@@ -151,7 +151,6 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     box = box_settings(data.get("box"))
     components = None
     if "components" in data:
-
         components = []
         for c, item in enumerate(data["components"]):
             names = item["surface"]
@@ -181,7 +180,6 @@ _MESH_MAGIC = ((b"\x89HDF", "CGNS/HDF5"), (b"# vtk DataFile", "legacy VTK"), (b"
 def _not_a_mesh(path: Path) -> None:
     """InputError when ``path`` is a mesh (by its extension or its first bytes): say so and how to
     start a design file, instead of quoting the mesh back as a YAML error."""
-
     fmt = extensions().get(path.suffix.lower())
     if fmt is None:
         try:

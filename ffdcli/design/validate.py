@@ -104,7 +104,6 @@ def _walk_nonfinite(value, parts=()):
 
 def validate(data, path=None, lines: dict | None = None) -> None:
     """Raise :class:`InputError` for the first problem (in file order) of ``data``; None if valid."""
-
     lines = lines or {}
 
     def fail(parts, message):

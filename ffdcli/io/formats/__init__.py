@@ -2,10 +2,11 @@
 
 Each format module registers its :class:`~ffdcli.io.formats.common.MeshFormat` at its end
 (:data:`MESH_FORMATS`; this face imports them all). ``read_mesh(path)`` picks the reader from the
-extension (a folder, or a path without one, is an OpenFOAM case: :mod:`ffdcli.io.formats.openfoam`); ``write_mesh(mesh, path, points)`` writes a
-mesh with new point coordinates. When ``path`` has the format the mesh was read from, the writer
-patches a copy of the input file (only coordinates change, everything else byte for byte);
-otherwise it writes the mesh from scratch in the new format, markers included.
+extension (a folder, or a path without one, is an OpenFOAM case: :mod:`ffdcli.io.formats.openfoam`);
+``write_mesh(mesh, path, points)`` writes a mesh with new point coordinates. When ``path`` has the
+format the mesh was read from, the writer patches a copy of the input file (only coordinates change,
+everything else byte for byte); otherwise it writes the mesh from scratch in the new format, markers
+included.
 """
 
 from __future__ import annotations

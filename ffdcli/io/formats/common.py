@@ -75,7 +75,6 @@ def mismatch_message(read: str, written: str) -> str:
             f"the input with new coordinates): give the output the .{read} extension")
 
 
-
 def check_finite_points(mesh: Mesh) -> None:
     """InputError naming the file and the first node (0-based, as in the file; a local mesh's global
     id) with a NaN or infinite coordinate; every reader's mesh passes here (SU2's reader also names

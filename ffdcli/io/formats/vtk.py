@@ -92,7 +92,6 @@ def read(path: str | Path, progress=None) -> Mesh:
     the interior cells (of all cells when the file has no marker array). Raises InputError naming
     the file when it is empty, not a VTK unstructured grid, or meshio cannot read it.
     """
-
     path = Path(path)
     progress = progress or no_progress
     try:
@@ -234,7 +233,6 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     gives the same floats; the legacy ASCII writer prints 16 significant digits (meshio's choice),
     which round-trips to about 1e-16 relative, not always to the last bit.
     """
-
     path = Path(path)
     progress = progress or no_progress
     points = np.asarray(points, dtype=np.float64)

@@ -246,7 +246,6 @@ class Change:
         return len(self.variables())
 
 
-
 def check_sections(P: np.ndarray, m: int, what: str):
     if P.ndim != 4 or P.shape[-1] != 3:
         raise ValueError(f"a lattice must have shape (n, m, l, 3), got {P.shape}")
