@@ -41,7 +41,8 @@ import numpy as np
 from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
-from ffdcli.io.formats import vtk_check
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat
+from ffdcli.io.formats.vtk_check import problem as file_problem
 from ffdcli.io.room import diagnosed
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
@@ -82,7 +83,7 @@ def _quiet_meshio(path: Path, action: str):
             raise
         raise InputError(f"cannot read this {_format(path).upper()} file: {sys.exc_info()[1]}", path=path) from None
     except (Exception, SystemExit) as e:          # meshio calls sys.exit(1) on some bad files
-        found = vtk_check.problem(path) if action == "read" else None
+        found = file_problem(path) if action == "read" else None
         if found is not None:                     # the first problem, on its line, in words
             line, text = found
             raise InputError(f"{text}; expected {_KIND[_format(path)]}", path=path, line=line) from None
@@ -104,7 +105,6 @@ def read(path: str | Path, progress=None) -> Mesh:
     the interior cells (of all cells when the file has no marker array). Raises InputError naming
     the file when it is empty, not a VTK unstructured grid, or meshio cannot read it.
     """
-
     path = Path(path)
     progress = progress or no_progress
     try:
@@ -246,7 +246,6 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     gives the same floats; the legacy ASCII writer prints 16 significant digits (meshio's choice),
     which round-trips to about 1e-16 relative, not always to the last bit.
     """
-
     path = Path(path)
     progress = progress or no_progress
     points = np.asarray(points, dtype=np.float64)
@@ -302,3 +301,7 @@ def _add_field_data(tmp: Path, field: dict[str, np.ndarray], fmt: str) -> None:
             raise RuntimeError("meshio wrote a legacy VTK file without DATASET")
         data = data[:m.end()] + block + data[m.end():]
     tmp.write_bytes(data)
+
+
+MESH_FORMATS.register(MeshFormat("vtu", (".vtu",), "a VTK XML unstructured grid", read, write))
+MESH_FORMATS.register(MeshFormat("vtk", (".vtk",), "a legacy VTK unstructured grid", read, write))
