@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 from conftest import run_ffd
 
-from ffdcli.constraints.mesh_quality import build_mesh_quality
+from ffdcli.constraints.base import ConstraintContext
+from ffdcli.constraints.mesh_quality import MeshQuality
 from ffdcli.errors import InputError
 from ffdcli.io.formats import write_mesh
 from ffdcli.mesh import CellBlock, Mesh
@@ -111,16 +112,17 @@ def test_flat_cells_in_any_plane_are_still_judged(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_mesh_quality_refuses_a_surface_in_space(seed):
-    def error(message, key):
-        return InputError(message, key=key)
+    def ctx(mesh):
+        return ConstraintContext(index=0, key="constraints[0].mesh_quality", lower=0.3, upper=np.inf, box=None,
+                                 surface=None, mesh=mesh)
 
     for mesh in _surfaces(seed):
         with pytest.raises(InputError, match="volume mesh") as e:
-            build_mesh_quality(0, 0.3, None, {}, mesh, "constraints[0].mesh_quality", error)
+            MeshQuality.from_spec({}, ctx(mesh))
         assert e.value.key == "constraints[0].mesh_quality"
     flat, _ = _tilted_flat(np.random.default_rng(seed))
     flat = Mesh(points=flat.points, dim=2, cells=[CellBlock("quad", flat.cells[0].data[:10])])
-    assert build_mesh_quality(0, 0.3, None, {}, flat, "constraints[0].mesh_quality", error).rho > 0
+    assert MeshQuality.from_spec({}, ctx(flat)).rho > 0
 
 
 def test_ffd_check_of_a_unit_cube_says_no_volume_cells(tmp_path):
