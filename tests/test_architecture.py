@@ -25,6 +25,7 @@ LAYERS = [
     {"quality"},
     {"constraints"},
     {"design"},
+    {"chain"},            # the derivative chain: stages over volume/ and quality/, composed; the MPI reductions
     {"viz"},
     {"app"},
     {"api", "openmdao"},
