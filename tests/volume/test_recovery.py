@@ -45,9 +45,9 @@ def test_one_increment_is_the_plain_warp_and_the_surface_is_exact(tmp_path):
     st = WarpSettings()
     model, _ = prepare_mesh_warp(run.prep.mesh, "wing", st)
     plain = run.prep.mesh.points + warp(model, run.surface_displacement(P1), run.surface_frames(P1))
-    one = incremental_warp(run, P1, st, 1)
+    one = incremental_warp(run.chain, P1, st, 1)
     np.testing.assert_allclose(one, plain, rtol=0, atol=1e-13)
-    four = incremental_warp(run, P1, st, 4)
+    four = incremental_warp(run.chain, P1, st, 4)
     sid = run.prep.surface.ids
     assert np.array_equal(four[sid], run.prep.mesh.points[sid] + run.surface_displacement(P1))
     # the increments really move the volume differently (the warp is rebuilt on each step's mesh)
