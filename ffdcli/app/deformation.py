@@ -64,7 +64,7 @@ class Deformation:
     """The result of one design: new coordinates of every mesh node, and what was checked."""
 
     points: np.ndarray           # (N, 3) all mesh nodes; a run on an MPI rank's local mesh: its rows (n, 3), of
-    #                              which the part's (owned, halo) and the surface's are moved (DesignRun.warp_targets)
+    #                              which the part's (owned, halo) and the surface's are moved (MeshShare.targets)
     lattice: object              # (n, m, l, 3) deformed control points; several components: a list
     surface_displacement: np.ndarray   # (S, 3)
     volume_method: str

@@ -187,6 +187,10 @@ class DesignRun:
         """True when the run's mesh is this MPI rank's local mesh."""
         return self.share.local
 
+    def warp_targets(self) -> np.ndarray | None:
+        """:meth:`ffdcli.chain.share.MeshShare.targets`: the rows the warp moves (a local mesh's part's)."""
+        return self.share.targets()
+
 
 def load_run(design, *, cache_dir=None, use_cache: bool = True, rebuild: bool = False,
              progress=None, comm=None, local: bool = False) -> DesignRun:
