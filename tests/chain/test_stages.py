@@ -1,4 +1,4 @@
-"""Each stage of the derivative chain on its own (issue 42): its ``jvp`` against central differences of
+"""Each stage of the derivative chain on its own: its ``jvp`` against central differences of
 its ``forward``, and its ``vjp`` the exact transpose of its ``jvp`` (``<J dx, w> = <dx, J^T w>``), in
 several random directions, 3D and 2D, one component and several, both frame carries."""
 
