@@ -2,8 +2,8 @@
 
 ``x`` a tuple of every component's control points (n, m, l, 3); ``y`` the displacement (S, 3) of the
 run's surface points (rows as ``surface_ids``: every component's nodes, sorted). The map is affine, so
-``jvp`` is ``B dP`` (the embedding's compiled ``displace``) and ``vjp`` is ``B^T g`` (the embedding's compiled ``rmatvec``) per component.
-Points outside a lattice do not move.
+``jvp`` is ``B dP`` (the embedding's compiled ``displace``) and ``vjp`` is ``B^T g`` (its compiled
+``rmatvec``), per component. Points outside a lattice do not move.
 """
 
 from __future__ import annotations
