@@ -67,7 +67,6 @@ def incremental_warp(chain, P1, settings: WarpSettings, steps: int, *, progress=
     share). Step k moves the lattice to ``P0 + k/steps (P1 - P0)``; the warp of each step is prepared on
     the points of the step before. Surface nodes end exactly at ``X0 + B (P1 - P0)``.
     """
-
     progress = progress or no_progress
     share = chain.share
     mesh = share.mesh

@@ -21,7 +21,8 @@ from ffdcli.chain import (
     VolumeStage,
     derivative_basis,
 )
-from ffdcli.constraints.mesh_quality import build_mesh_quality
+from ffdcli.constraints.base import ConstraintContext
+from ffdcli.constraints.mesh_quality import MeshQuality
 from ffdcli.design import load_design
 from ffdcli.lattice.lattice import derivatives
 from ffdcli.parameterization.components import layout
@@ -211,8 +212,10 @@ def test_volume_stage(case, request):
 def test_quality_stage(case, request):
     run = request.getfixturevalue(case)
     mesh = run.prep.mesh
-    items = [build_mesh_quality(0, 0.3, np.inf, {}, mesh, "k0", lambda m, k: ValueError(m)),
-             build_mesh_quality(1, 0.3, np.inf, {"gap": 0.05, "good": 0.8}, mesh, "k1", lambda m, k: ValueError(m))]
+    items = [MeshQuality.from_spec(spec, ConstraintContext(index=k, key=f"constraints[{k}].mesh_quality", lower=0.3,
+                                                           upper=np.inf, box=run.box, surface=run.prep.surface,
+                                                           mesh=mesh))
+             for k, spec in enumerate([{}, {"gap": 0.05, "good": 0.8}])]
     chord = 0.5 * float(np.ptp(mesh.points[run.surface_ids], axis=0).max())
     stage = QualityStage(items, mesh.points, run.surface_ids, lambda: 0.3 * chord)
     comps, lay, S = _stages(run)
