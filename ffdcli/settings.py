@@ -361,6 +361,7 @@ class WarpSettings:
         props = {
             "method": {"enum": list(METHODS), "default": "idw"},
             "carry": {"enum": list(CARRY), "default": "gradient"},
+            "wall_layer": {"enum": list(WALL_LAYER), "default": "rigid"},
             "a": {**pos, "default": 3},
             "b": {**pos, "default": 5},
             "alpha": {**pos, "default": 1},
