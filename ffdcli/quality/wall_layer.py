@@ -10,7 +10,9 @@ height (its projection on the wall normal) and the off-wall angle (its angle to 
 largest change of the off-wall angle, and the gate refuses a design that changes a first cell by more
 than ``volume.first_cell`` (default 0.01: outside 1 +- 1 %), as it refuses an inverted cell (exit 3;
 ``--force`` writes it with a warning). ``ffd check`` reports the heights and angles of the mesh as it is.
-Only meshes with a boundary layer are judged (median first-cell aspect ratio at least
+The wall nodes on a sharp edge (a sharp trailing edge, a flat tip's rim: faces turning by more than
+60 degrees, :func:`ffdcli.volume.wall_layer.sharp_nodes`) have no wall normal and their off-wall edge
+is the wake's or the tip's: they are left out. Only meshes with a boundary layer are judged (median first-cell aspect ratio at least
 :data:`ffdcli.volume.wall_layer.MIN_ASPECT`): on an Euler mesh the first cell is not a y+ and the
 cell rules serve.
 """
@@ -23,7 +25,7 @@ import numpy as np
 
 from ffdcli.errors import QualityError
 from ffdcli.mesh import Mesh
-from ffdcli.volume.wall_layer import MIN_ASPECT, off_wall_edges
+from ffdcli.volume.wall_layer import MIN_ASPECT, off_wall_edges, sharp_nodes
 
 #: The default tolerance on a first cell's height change (``volume.first_cell``).
 DEFAULT_FIRST_CELL = 0.01
@@ -81,6 +83,7 @@ def wall_layer_report(mesh: Mesh, walls, points_after: np.ndarray | None = None,
     ref = after if points_before is None else np.asarray(points_before, dtype=np.float64)
     e0 = off_wall_edges(ref, mesh.cells, faces, ids)
     ok = (e0.node >= 0) & (e0.height > 0) & (e0.spacing > 0)
+    ok[sharp_nodes(ref, faces, ids)] = False        # no wall normal: the edge's first cell is the wake's
     if not ok.any() or np.median(e0.spacing[ok] / e0.height[ok]) < MIN_ASPECT:
         return None
     e1 = e0 if points_before is None else off_wall_edges(after, mesh.cells, faces, ids, edge_nodes=e0.node)

@@ -7,20 +7,28 @@ quad or prism stacked on the wall; in a tetrahedral mesh the most normal edge).
 Its projection on the normal is the first-cell height ``h_k`` (:func:`off_wall_edges`).
 
 The mesh *has* a boundary layer when its first cells are thin against the wall's own spacing
-``s_k`` (the mean length of the wall edges at ``k``): the median aspect ratio ``s_k / h_k`` is at
-least :data:`MIN_ASPECT` (10). An Euler mesh (aspect about 1) has none and its volume moves as
+``s_k`` (the shortest wall edge at ``k``): the median aspect ratio ``s_k / h_k`` is at
+least :data:`MIN_ASPECT` (50). An Euler mesh (aspect about 1) has none and its volume moves as
 before. The layer's thickness ``delta`` is the wall's median spacing: the height at which the
 stacked cells of a geometric growth become as tall as they are wide (past it the cells are
 isotropic and the warp's own motion serves them). A node at distance ``d`` from its nearest wall
-node ``w`` (its *wall point*) has the weight
+node has the weight
 
     s(d) = 1 for d <= delta;  1 - 3 t^2 + 2 t^3,  t = (d - delta) / (BLEND x delta)  up to
     delta (1 + BLEND);  0 beyond,
 
-with which it follows its wall point rigidly (:mod:`ffdcli.volume.layer_motion`); the rest of its
-motion is the warp's. ``BLEND`` (4): the warp's thickness-wise stretch ``f`` of the first cells
-(0.4 to 1.6 for shape moves of 5 % chord) is taken up over the blend, which stays monotone for
-``BLEND > (1 - f) / f``.
+with which it follows the wall rigidly (:mod:`ffdcli.volume.layer_motion`); the rest of its motion is
+the warp's. ``BLEND`` (4): the warp's thickness-wise stretch ``f`` of the first cells (0.4 to 1.6 for
+shape moves of 5 % chord) is taken up over the blend, which stays monotone for ``BLEND > (1 - f) / f``.
+
+Which wall: the node's ``K + 1`` nearest wall nodes (``K`` = :data:`NEIGHBOURS`: 4 in 2D, 8 in 3D) give
+the Franke-Little weights ``psi_k = ((R - d_k)_+ / (R d_k))^3``, ``R`` the distance to the last of them,
+normalised (:attr:`WallLayer.partition`): a node on an off-wall edge 1e-6 above its wall node and a
+wall spacing of 1e-2 gives that node all but 1e-18 of the weight (its first cell is that node's
+alone), while between wall nodes, and in the wedge behind a sharp trailing edge, the weights vary
+continuously (a node leaving the ``K`` nearest has weight 0 as it leaves): no jump between stacks.
+A wall node on a sharp edge (faces turning by more than 60 degrees: :func:`sharp_nodes`) has no
+normal; it carries the FFD map's gradient itself (:mod:`ffdcli.volume.layer_motion`).
 
 Everything here depends on the undeformed mesh only (a fixed assignment: the layer motion is then
 differentiable exactly, its derivative taken at the frames of the design).
@@ -31,22 +39,24 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.sparse import csr_matrix
 from scipy.spatial import cKDTree
 
 from ffdcli.geometry.surface import face_vectors, vertex_normals
 from ffdcli.mesh import CellBlock
 
-#: The median first-cell aspect ratio (wall spacing / first-cell height) from which a mesh has a
-#: boundary layer that moves with its wall.
-MIN_ASPECT = 10.0
+#: The median first-cell aspect ratio (shortest wall spacing / first-cell height) from which a mesh has
+#: a boundary layer that moves with its wall: a RANS mesh's first cell (1e-6 to 1e-5 chord) against a
+#: wall spacing of 1e-3 to 1e-2 chord is 100 to 1e4; an Euler mesh's about 1, a coarse mesh with a
+#: first cell of 5e-3 chord (y+ in the hundreds) about 10.
+MIN_ASPECT = 50.0
 #: The blend from the rigid layer into the warp's motion, in layer thicknesses.
 BLEND = 4.0
 #: A wall node is on a sharp edge (a sharp trailing edge, a flat tip's rim) when the faces around it
 #: turn by more than 60 degrees: |sum of their vector areas| < cos(30 deg) x the sum of their areas.
 SHARP_COS = float(np.cos(np.radians(30.0)))
-#: Around a sharp edge the rigid layer gives way to the warp (whose frame is one smooth map there)
-#: over this many layer thicknesses from the edge.
-SHARP_REACH = 2.0
+#: The wall nodes whose rigid motions a layer node blends (2D, 3D).
+NEIGHBOURS = {2: 4, 3: 8}
 
 
 @dataclass(frozen=True)
@@ -55,21 +65,24 @@ class WallLayer:
 
     rows
         (n,) rows of the warp's targets (``WarpModel.target_ids``) in the layer or its blend.
-    wall
-        (n,) each one's wall point: its row in the warp's surface nodes (``WarpModel.surface_ids``).
-    offset
-        (n, 3) ``x - x_wall`` in the undeformed mesh.
+    partition
+        (n, Ns) sparse: each one's weights of the wall nodes (rows sum to 1).
+    position
+        (n, 3) the nodes' undeformed positions, relative to ``origin``.
+    wall_position
+        (Ns, 3) the wall nodes' positions relative to ``origin``.
     weight
         (n,) ``s`` in (0, 1]: 1 in the layer, falling to 0 over the blend.
     normals
-        (Ns, 3) unit wall normals of the surface nodes (zero where a node is on no face).
+        (Ns, 3) unit wall normals of the surface nodes (zero where a node is on no face or on a sharp edge).
     thickness
         ``delta``: the layer's thickness (mesh units); the blend ends at ``delta (1 + BLEND)``.
     """
 
     rows: np.ndarray
-    wall: np.ndarray
-    offset: np.ndarray
+    partition: csr_matrix
+    position: np.ndarray
+    wall_position: np.ndarray
     weight: np.ndarray
     normals: np.ndarray
     thickness: float
@@ -86,7 +99,7 @@ class OffWallEdges:
     angle
         (Ns,) angle (degrees) between the edge and the wall normal.
     spacing
-        (Ns,) mean length of the wall edges at the node (0 where it is on none).
+        (Ns,) the shortest wall edge at the node (0 where it is on none).
     """
 
     node: np.ndarray
@@ -125,10 +138,10 @@ def _cell_pairs(cells: list[CellBlock], on_wall: np.ndarray) -> tuple[np.ndarray
 
 
 def _wall_spacing(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray) -> np.ndarray:
-    """(Ns,) mean length of the wall face edges at each wall node (0 on none)."""
+    """(Ns,) the shortest wall face edge at each wall node (0 on none): a first cell is thin when it
+    is thin against the wall's spacing in every direction along it."""
     n = len(points)
-    tot = np.zeros(n)
-    cnt = np.zeros(n)
+    short = np.full(n, np.inf)
     for b in faces:
         if b.type == "vertex" or not len(b.data):
             continue
@@ -136,10 +149,10 @@ def _wall_spacing(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarr
         for i in range(k if k > 2 else 1):
             p, q = b.data[:, i], b.data[:, (i + 1) % k]
             ln = np.linalg.norm(points[q] - points[p], axis=1)
-            tot += np.bincount(p, ln, n) + np.bincount(q, ln, n)
-            cnt += np.bincount(p, minlength=n) + np.bincount(q, minlength=n)
-    sel = cnt[wall_ids]
-    return np.where(sel > 0, tot[wall_ids] / np.maximum(sel, 1), 0.0)
+            np.minimum.at(short, p, ln)
+            np.minimum.at(short, q, ln)
+    sel = short[wall_ids]
+    return np.where(np.isfinite(sel), sel, 0.0)
 
 
 def off_wall_edges(points: np.ndarray, cells: list[CellBlock], faces: list[CellBlock], wall_ids: np.ndarray,
@@ -229,17 +242,35 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
         return None
     delta = float(np.median(edges.spacing[ok]))
     reach = delta * (1.0 + BLEND)
-    dist, near = cKDTree(pts[wall_ids]).query(pts[target_ids], distance_upper_bound=reach)
-    rows = np.flatnonzero(np.isfinite(dist) & (near < len(wall_ids)))
-    d, w = dist[rows], near[rows].astype(np.int64)
-    t = np.clip((d - delta) / (BLEND * delta), 0.0, 1.0)
+    wall = pts[wall_ids]
+    tree = cKDTree(wall)
+    dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
+    rows = np.flatnonzero(np.isfinite(dist))
+    t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
     weight = 1.0 - t * t * (3.0 - 2.0 * t)
-    sharp = sharp_nodes(pts, faces, wall_ids)
-    if len(sharp) and len(rows):
-        r, _ = cKDTree(pts[wall_ids[sharp]]).query(pts[target_ids[rows]])
-        t = np.clip(r / (SHARP_REACH * delta), 0.0, 1.0)
-        weight *= t * t * (3.0 - 2.0 * t)
     keep = weight > 0
-    rows, w, weight = rows[keep], w[keep], weight[keep]
-    offset = pts[target_ids[rows]] - pts[wall_ids[w]]
-    return WallLayer(rows.astype(np.int64), w, offset, weight, nrm, delta)
+    rows, weight = rows[keep], weight[keep]
+    flat = np.ptp(pts, axis=0).min() <= 1e-12 * max(float(np.ptp(pts, axis=0).max()), 1e-300)
+    k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
+    nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
+    origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
+    x = pts[target_ids[rows]]
+    return WallLayer(rows.astype(np.int64), _partition(tree, x, k, len(wall_ids)), x - origin, wall - origin,
+                     weight, nrm, delta)
+
+
+def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
+    """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module docstring)."""
+    n = len(x)
+    if k < 1:
+        return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns))
+    d, j = tree.query(x, k=k + 1)
+    R = d[:, -1:]
+    d, j = d[:, :-1], j[:, :-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        psi = (np.maximum(R - d, 0.0) / (R * np.maximum(d, 1e-300))) ** 3
+    bad = ~np.isfinite(psi).all(axis=1) | (psi.sum(axis=1) <= 0)
+    psi[bad] = 0.0
+    psi[bad, 0] = 1.0                   # on a wall node, or every neighbour as far: the nearest
+    psi /= psi.sum(axis=1, keepdims=True)
+    return csr_matrix((psi.ravel(), (np.repeat(np.arange(n), k), j.ravel())), shape=(n, ns))

@@ -9,8 +9,8 @@ import pytest
 
 from ffdcli.quality.metrics import cell_quality
 from ffdcli.testing.ogrid import airfoil_ogrid_mesh
-from ffdcli.volume.layer_motion import wall_rotations, wall_rotations_jvp, wall_rotations_vjp
-from ffdcli.volume.wall_layer import detect_wall_layer, off_wall_edges
+from ffdcli.volume.layer_motion import wall_frames, wall_frames_jvp, wall_frames_vjp
+from ffdcli.volume.wall_layer import detect_wall_layer, off_wall_edges, sharp_nodes
 from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp, warp_vjp
 
 
@@ -71,23 +71,24 @@ def test_a_twist_keeps_every_first_cell(rans, twist):
 
 
 @pytest.mark.parametrize("amp,squeeze", [(0.05, 1.0), (-0.05, 1.0), (0.02, 1.4), (-0.03, 0.7)])
-def test_a_shape_move_keeps_first_cells_away_from_the_sharp_edge(rans, amp, squeeze):
+def test_a_shape_move_keeps_every_first_cell(rans, amp, squeeze):
     """The warp alone stretches the first cells with the map's thickness-wise stretch; the layer keeps
-    them (every wall node but those the sharp trailing edge's taper reaches), and the trailing edge's
-    cells are those of the warp alone."""
+    them at every wall node but the sharp trailing edge's own (no normal: its off-wall edge is the
+    wake's), and no cell is worse than with the warp alone."""
     m, model = rans
     b, F = _map(m.points[model.surface_ids], amp, squeeze)
     ratio, dangle = _heights(m, model, warp(model, b, F))
     plain = replace(model, layer=None)
-    ratio0, dangle0 = _heights(m, model, warp(plain, b, F))
-    x = m.points[model.surface_ids, 0]
-    far = np.abs(x - 1) > 2.2 * model.layer.thickness
-    assert np.abs(ratio[far] - 1).max() < 0.005
-    assert dangle[far].max() < 0.5
-    assert np.abs(ratio0[far] - 1).max() > 0.02          # what the warp alone does
+    ratio0, _ = _heights(m, model, warp(plain, b, F))
+    judged = np.ones(model.n_surface, bool)
+    judged[sharp_nodes(m.points, m.marker_faces("airfoil"), model.surface_ids)] = False
+    assert judged.sum() == model.n_surface - 1
+    assert np.abs(ratio[judged] - 1).max() < 1e-4
+    assert dangle[judged].max() < 0.5
+    assert np.abs(ratio0[judged] - 1).max() > 0.02          # what the warp alone does
     q = cell_quality(m.points + warp(model, b, F), m.cells, m.dim)
     q0 = cell_quality(m.points + warp(plain, b, F), m.cells, m.dim)
-    assert q.min() >= q0.min() - 1e-9
+    assert q.min() >= q0.min() - 1e-3
 
 
 def test_no_design_moves_nothing(rans):
@@ -119,21 +120,27 @@ def test_layer_derivatives_match_central_differences(rans, seed):
         warp_vjp(model, g)
 
 
-def test_wall_rotation_products():
+def test_wall_frame_products():
+    """G maps the normal to the deformed unit normal, keeps F along the wall, is F where there is no
+    normal (a sharp edge) and I where F is; its forward and transposed products are exact."""
     rng = np.random.default_rng(3)
     n = 50
     nrm = rng.normal(size=(n, 3))
     nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    nrm[:5] = 0.0
     F = np.eye(3) + 0.3 * rng.normal(size=(n, 3, 3))
-    Q = wall_rotations(F, nrm)
-    assert np.allclose(Q @ np.swapaxes(Q, 1, 2), np.eye(3))
+    F[5] = np.eye(3)
+    G = wall_frames(F, nrm)
+    assert np.array_equal(G[:5], F[:5]) and np.array_equal(G[5], np.eye(3))
     n1 = np.einsum("nij,nj->ni", np.linalg.det(F)[:, None, None] * np.linalg.inv(np.swapaxes(F, 1, 2)), nrm)
-    n1 /= np.linalg.norm(n1, axis=1)[:, None]
-    assert np.allclose(np.einsum("nij,nj->ni", Q, nrm), n1)        # the normal goes to the deformed normal
+    n1 /= np.maximum(np.linalg.norm(n1, axis=1), 1e-300)[:, None]
+    assert np.allclose(np.einsum("nij,nj->ni", G, nrm)[6:], n1[6:])
+    t = np.cross(nrm, rng.normal(size=(n, 3)))
+    assert np.allclose(np.einsum("nij,nj->ni", G, t), np.einsum("nij,nj->ni", F, t))
     dF = rng.normal(size=(n, 3, 3))
     h = 1e-6
-    fd = (wall_rotations(F + h * dF, nrm) - wall_rotations(F - h * dF, nrm)) / (2 * h)
-    jv = wall_rotations_jvp(F, nrm, dF)
+    fd = (wall_frames(F + h * dF, nrm) - wall_frames(F - h * dF, nrm)) / (2 * h)
+    jv = wall_frames_jvp(F, nrm, dF)
     assert np.abs(fd - jv).max() < 1e-7
-    gQ = rng.normal(size=(n, 3, 3))
-    assert np.isclose(np.sum(gQ * jv), np.sum(wall_rotations_vjp(F, nrm, gQ) * dF))
+    gG = rng.normal(size=(n, 3, 3))
+    assert np.isclose(np.sum(gG * jv), np.sum(wall_frames_vjp(F, nrm, gG) * dF))
