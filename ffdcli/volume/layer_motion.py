@@ -49,26 +49,60 @@ def _with_normal(normals: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", normals, normals) > 0
 
 
-def wall_frames(F: np.ndarray, normals: np.ndarray) -> np.ndarray:
+def _planes(planes, ns: int) -> np.ndarray:
+    return np.zeros((ns, 3)) if planes is None else planes
+
+
+def _frame(F, n, p):
+    """G (k, 3, 3) of nodes with unit normals n (k, 3) and plane normals p (k, 3; zero: no plane)."""
+    Fs = surface_frame_gradient(F, n)
+    n1 = np.einsum("kij,kj->ki", Fs, n)
+    pn = n1 - p * np.einsum("ki,ki->k", p, n1)[:, None]
+    n2 = pn / np.einsum("ki,ki->k", n1, pn)[:, None]
+    return Fs + (n2 - n1)[:, :, None] * n[:, None, :]
+
+
+def _frame_jvp(F, n, p, dF):
+    Fs = surface_frame_gradient(F, n)
+    dFs = surface_frame_gradient_jvp(F, n, dF)
+    n1 = np.einsum("kij,kj->ki", Fs, n)
+    dn1 = np.einsum("kij,kj->ki", dFs, n)
+    pn = n1 - p * np.einsum("ki,ki->k", p, n1)[:, None]
+    dpn = dn1 - p * np.einsum("ki,ki->k", p, dn1)[:, None]
+    q = np.einsum("ki,ki->k", n1, pn)[:, None]
+    dq = 2.0 * np.einsum("ki,ki->k", pn, dn1)[:, None]
+    dn2 = dpn / q - pn * dq / q ** 2
+    return dFs + (dn2 - dn1)[:, :, None] * n[:, None, :]
+
+
+def wall_frames(F: np.ndarray, normals: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
     """(Ns, 3, 3) each wall node's surface frame ``G`` (module docstring) for frames ``F`` (Ns, 3, 3) and
-    unit ``normals`` (Ns, 3; a zero row: ``G = F``). ``G = I`` exactly where ``F`` is the identity."""
+    unit ``normals`` (Ns, 3; a zero row: ``G = F``). ``G = I`` exactly where ``F`` is the identity.
+
+    ``planes`` (Ns, 3): the unit normal ``p`` of the plane a wall node slides in (zero: none). Its
+    off-wall nodes slide in that plane too, while the wall's deformed normal ``n'`` may leave it (a
+    twist that grows along the span tilts the root's normal): ``G`` then maps ``n`` to
+    ``P n' / (n' . P n')`` (``P = I - p p^T``), in the plane and as far from the wall along ``n'`` as
+    before: the first cell's height is kept, its edge leaning by the tilt."""
     G = np.array(F, dtype=np.float64, copy=True)
     m = np.flatnonzero(_with_normal(normals) & np.any(G != _EYE, axis=(1, 2)))
     if len(m):
-        G[m] = surface_frame_gradient(G[m], normals[m])
+        G[m] = _frame(G[m], normals[m], _planes(planes, len(G))[m])
     return G
 
 
-def wall_frames_jvp(F: np.ndarray, normals: np.ndarray, dF: np.ndarray) -> np.ndarray:
+def wall_frames_jvp(F: np.ndarray, normals: np.ndarray, dF: np.ndarray, planes: np.ndarray | None = None
+                    ) -> np.ndarray:
     """(Ns, 3, 3) ``dG``: the derivative of :func:`wall_frames` at ``F`` in the direction ``dF``."""
     dG = np.array(dF, dtype=np.float64, copy=True)
     m = np.flatnonzero(_with_normal(normals))
     if len(m):
-        dG[m] = surface_frame_gradient_jvp(F[m], normals[m], dF[m])
+        dG[m] = _frame_jvp(F[m], normals[m], _planes(planes, len(dG))[m], dF[m])
     return dG
 
 
-def wall_frames_vjp(F: np.ndarray, normals: np.ndarray, gG: np.ndarray) -> np.ndarray:
+def wall_frames_vjp(F: np.ndarray, normals: np.ndarray, gG: np.ndarray, planes: np.ndarray | None = None
+                    ) -> np.ndarray:
     """(Ns, 3, 3) ``gF``: the transpose of :func:`wall_frames_jvp` applied to ``gG`` (Ns, 3, 3) (each
     node's 9 x 9 Jacobian from nine forward products)."""
     out = np.array(gG, dtype=np.float64, copy=True)
@@ -79,8 +113,9 @@ def wall_frames_vjp(F: np.ndarray, normals: np.ndarray, gG: np.ndarray) -> np.nd
     basis = np.eye(9).reshape(9, 3, 3)
     Fm = np.broadcast_to(F[m][None], (9, k, 3, 3)).reshape(-1, 3, 3)
     nm = np.broadcast_to(normals[m][None], (9, k, 3)).reshape(-1, 3)
+    pm = np.broadcast_to(_planes(planes, len(out))[m][None], (9, k, 3)).reshape(-1, 3)
     dF = np.broadcast_to(basis[:, None], (9, k, 3, 3)).reshape(-1, 3, 3)
-    J = surface_frame_gradient_jvp(Fm, nm, dF).reshape(9, k, 9)         # J[a, node, :] = vec dG(E_a)
+    J = _frame_jvp(Fm, nm, pm, dF).reshape(9, k, 9)          # J[a, node, :] = vec dG(E_a)
     out[m] = np.einsum("ank,nk->na", J, gG[m].reshape(k, 9)).reshape(k, 3, 3)
     return out
 
@@ -108,9 +143,9 @@ def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, l
     ns = len(layer.normals)
     F = _frames(frames, ns)
     if at is None:
-        M = wall_frames(F, layer.normals) - _EYE
+        M = wall_frames(F, layer.normals, layer.planes) - _EYE
     else:
-        M = wall_frames_jvp(_frames(at, ns), layer.normals, F - _EYE)
+        M = wall_frames_jvp(_frames(at, ns), layer.normals, F - _EYE, layer.planes)
     rows, s = layer.rows[sel] - lo, layer.weight[sel][:, None]
     d[rows] = (1.0 - s) * d[rows] + s * _rigid(layer, np.asarray(b, dtype=np.float64), M, sel)
     return d
@@ -130,4 +165,4 @@ def layer_transpose(layer: WallLayer, gt: np.ndarray, at) -> tuple[np.ndarray, n
     g_b = PT @ gs
     g_M = (PT @ (gs[:, :, None] * layer.position[:, None, :]).reshape(-1, 9)).reshape(ns, 3, 3)
     g_M -= g_b[:, :, None] * layer.wall_position[:, None, :]
-    return g_b, wall_frames_vjp(_frames(at, ns), layer.normals, g_M)
+    return g_b, wall_frames_vjp(_frames(at, ns), layer.normals, g_M, layer.planes)

@@ -75,6 +75,9 @@ class WallLayer:
         (n,) ``s`` in (0, 1]: 1 in the layer, falling to 0 over the blend.
     normals
         (Ns, 3) unit wall normals of the surface nodes (zero where a node is on no face or on a sharp edge).
+    planes
+        (Ns, 3) the unit normal of the plane a wall node slides in (a wing's root on a symmetry plane),
+        zero for the others.
     thickness
         ``delta``: the layer's thickness (mesh units); the blend ends at ``delta (1 + BLEND)``.
     """
@@ -86,6 +89,7 @@ class WallLayer:
     weight: np.ndarray
     normals: np.ndarray
     thickness: float
+    planes: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -222,11 +226,12 @@ def sharp_nodes(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray
 
 
 def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[CellBlock], wall_ids: np.ndarray,
-                      target_ids: np.ndarray) -> WallLayer | None:
+                      target_ids: np.ndarray, sliding=()) -> WallLayer | None:
     """The wall layer of a mesh (module docstring), or None when its first cells are not thin.
 
     ``faces``: the deforming surface's faces (global ids); ``wall_ids`` (Ns,): its sorted nodes (the
-    warp's surface nodes); ``target_ids`` (Nt,): the warp's targets, in its order."""
+    warp's surface nodes); ``target_ids`` (Nt,): the warp's targets, in its order; ``sliding``: the warp's
+    :class:`~ffdcli.volume.roles.SlidingPlane` s (the wall nodes in one slide with it)."""
     pts = np.asarray(points, dtype=np.float64)
     wall_ids = np.asarray(wall_ids, dtype=np.int64)
     target_ids = np.asarray(target_ids, dtype=np.int64)
@@ -255,8 +260,15 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
     x = pts[target_ids[rows]]
+    planes = np.zeros((len(wall_ids), 3))
+    size = float(np.linalg.norm(np.ptp(wall, axis=0)))
+    for plane in sliding:               # the wall nodes on a sliding plane (a root on a symmetry plane)
+        normal = np.asarray(plane[1], dtype=np.float64)
+        on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= 1e-9 * size
+        on &= np.abs(nrm @ normal) < 0.05          # the wall meets the plane nearly square (within 3 degrees)
+        planes[on] = normal
     return WallLayer(rows.astype(np.int64), _partition(tree, x, k, len(wall_ids)), x - origin, wall - origin,
-                     weight, nrm, delta)
+                     weight, nrm, delta, planes)
 
 
 def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:

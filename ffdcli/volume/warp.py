@@ -379,7 +379,7 @@ def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, pr
     if settings.wall_layer == "rigid" and settings.method != "none":
         names = [surface] if isinstance(surface, str) else list(surface)
         model.layer = detect_wall_layer(mesh.points, mesh.cells, mesh.marker_faces(names), model.surface_ids,
-                                        model.target_ids)
+                                        model.target_ids, roles.sliding)
     return model, roles
 
 

@@ -176,3 +176,28 @@ def test_design_model_products_through_the_layer_match_central_differences(tmp_p
     minus = model.mesh_points()
     fd = (plus - minus) / (2 * h)
     assert np.abs(fd - jv).max() <= 1e-6 * np.abs(fd).max()
+
+
+def test_a_sliding_wall_node_keeps_its_first_cell_in_its_plane():
+    """A root node on a symmetry plane: G n stays in the plane and as far from the tilted wall as n was;
+    forward and transposed products exact."""
+    rng = np.random.default_rng(4)
+    n = 40
+    nrm = rng.normal(size=(n, 3))
+    nrm[:, 2] = 0.0                                      # the normals of root nodes lie in the plane z = 0
+    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+    planes = np.tile([0.0, 0.0, 1.0], (n, 1))
+    F = np.eye(3) + 0.2 * rng.normal(size=(n, 3, 3))
+    G = wall_frames(F, nrm, planes)
+    Gn = np.einsum("nij,nj->ni", G, nrm)
+    n1 = np.einsum("nij,nj->ni", wall_frames(F, nrm), nrm)     # the deformed normal, out of the plane
+    assert np.abs(n1[:, 2]).max() > 0.05
+    assert np.abs(Gn[:, 2]).max() < 1e-14
+    assert np.allclose(np.einsum("ni,ni->n", Gn, n1), 1.0)
+    dF = rng.normal(size=(n, 3, 3))
+    h = 1e-6
+    fd = (wall_frames(F + h * dF, nrm, planes) - wall_frames(F - h * dF, nrm, planes)) / (2 * h)
+    jv = wall_frames_jvp(F, nrm, dF, planes)
+    assert np.abs(fd - jv).max() < 1e-7
+    gG = rng.normal(size=(n, 3, 3))
+    assert np.isclose(np.sum(gG * jv), np.sum(wall_frames_vjp(F, nrm, gG, planes) * dF))
