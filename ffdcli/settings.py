@@ -386,9 +386,9 @@ class WarpSettings:
 #: threshold there is ``DEFAULT_THRESHOLD``, checked equal to this one by the tests).
 GATE_KEYS = {
     "first_cell": {"type": "number", "exclusiveMinimum": 0, "default": 0.01,
-                   "description": "wall layer: a design that changes the height of a first cell on the "
-                                  "wall by more than this fraction (after / before outside 1 +- it) "
-                                  "is refused, like a cell it inverts; default 0.01 (1 %)"},
+                   "description": "wall layer: ffd deform warns of a design that changes the height of a "
+                                  "first cell on the wall by more than 1 %; set, this tolerance is a rule: "
+                                  "a design outside 1 +- it is refused, like a cell it inverts"},
     "threshold": {"type": "number", "exclusiveMinimum": 0, "maximum": 1, "default": 0.05,
                   "description": "quality gate (scaled Jacobian, 0..1): a cell below it that the "
                                  "deformation made markedly worse fails; default 0.05"},

@@ -106,6 +106,7 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
                      recovery=result.recovery, remedies=remedies, hints=device_hints(run)):
         note(w)
     for w in enforce_wall_layer(result.wall_layer, design_path=design.path, force=force,
+                                refuse="first_cell" in (design.volume or {}),
                                 write_anyway=remedies.write_anyway, forced=remedies.forced):
         note(w)
     constraints = (constraints_table(run, result.points) if constraints_table and design.data.get("constraints")

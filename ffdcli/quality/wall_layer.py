@@ -7,8 +7,9 @@ the input mesh's edge from the node into the volume most normal to the wall) giv
 height (its projection on the wall normal) and the off-wall angle (its angle to the normal).
 
 ``ffd deform`` reports the ratio after / before of every first-cell height (min and max) and the
-largest change of the off-wall angle, and the gate refuses a design that changes a first cell by more
-than ``volume.first_cell`` (default 0.01: outside 1 +- 1 %), as it refuses an inverted cell (exit 3;
+largest change of the off-wall angle, and warns of a design that changes a first cell by more than 1 %
+(counted, as the cells below 0.05 are). A design file that sets ``volume.first_cell`` (a tolerance)
+makes it a rule: a design outside 1 +- that tolerance is refused as an inverted cell is (exit 3;
 ``--force`` writes it with a warning). ``ffd check`` reports the heights and angles of the mesh as it is.
 The wall nodes on a sharp edge (a sharp trailing edge, a flat tip's rim: faces turning by more than
 60 degrees, :func:`ffdcli.volume.wall_layer.sharp_nodes`) have no wall normal and their off-wall edge
@@ -102,12 +103,19 @@ def wall_layer_report(mesh: Mesh, walls, points_after: np.ndarray | None = None,
                            worst_node=node, worst_at=tuple(float(v) for v in ref[node]))
 
 
-def enforce_wall_layer(report: WallLayerReport | None, *, design_path=None, force: bool = False,
+def enforce_wall_layer(report: WallLayerReport | None, *, design_path=None, force: bool = False, refuse: bool = False,
                        write_anyway: str = " (--force writes it anyway)", forced: str = " (--force)") -> list[str]:
-    """The gate's rule on the first cells: raise :class:`QualityError` (exit 3, nothing written) when a
-    first cell changed by more than the tolerance; with ``force`` the refusal is a warning (returned)."""
+    """The gate's rule on the first cells: a first cell changed by more than the tolerance is a warning
+    (returned); with ``refuse`` (the design sets ``volume.first_cell``: a requirement) it raises
+    :class:`QualityError` (exit 3, nothing written), unless ``force``."""
     if report is None or report.ok:
         return []
+    if not refuse:
+        where = ", ".join(f"{v:.6g}" for v in report.worst_at)
+        return [f"the design changes {report.n_failed} first cells on the wall by more than "
+                f"{100 * report.tolerance:g} % ({report.ratio_min:.4f} to {report.ratio_max:.4f}; worst at node "
+                f"{report.worst_node}, ({where})): y+ changes with them (volume.first_cell: a tolerance "
+                "makes it a refusal)"]
     where = ", ".join(f"{v:.6g}" for v in report.worst_at)
     message = (f"the design changes {report.n_failed} first cells on the wall by more than "
                f"{100 * report.tolerance:g} % ({report.ratio_min:.4f} to {report.ratio_max:.4f}; worst at node "
