@@ -9,9 +9,11 @@ Its projection on the normal is the first-cell height ``h_k`` (:func:`off_wall_e
 The mesh *has* a boundary layer when its first cells are thin against the wall's own spacing
 ``s_k`` (the shortest wall edge at ``k``): the median aspect ratio ``s_k / h_k`` is at
 least :data:`MIN_ASPECT` (50). An Euler mesh (aspect about 1) has none and its volume moves as
-before. The layer's thickness ``delta`` is the wall's median spacing: the height at which the
-stacked cells of a geometric growth become as tall as they are wide (past it the cells are
-isotropic and the warp's own motion serves them). A node at distance ``d`` from its nearest wall
+before. The layer's thickness ``delta_k`` at a wall node is its stack's height
+(:mod:`ffdcli.volume.wall_stacks`: the stacked quads or prisms, as long as they are thinner than wide:
+a prism layer's thickness, or where a structured mesh's cells become isotropic); where a node is, the
+thickness is the blend ``delta = sum_k psi_k delta_k`` of its wall nodes' (the weights below).
+A node at distance ``d`` from its nearest wall
 node has the weight
 
     s(d) = 1 for d <= delta;  1 - 3 t^2 + 2 t^3,  t = (d - delta) / (BLEND x delta)  up to
@@ -44,6 +46,7 @@ from scipy.spatial import cKDTree
 
 from ffdcli.geometry.surface import face_vectors, vertex_normals
 from ffdcli.mesh import CellBlock
+from ffdcli.volume.wall_stacks import stack_heights
 
 #: The median first-cell aspect ratio (shortest wall spacing / first-cell height) from which a mesh has
 #: a boundary layer that moves with its wall: a RANS mesh's first cell (1e-6 to 1e-5 chord) against a
@@ -79,7 +82,7 @@ class WallLayer:
         (Ns, 3) the unit normal of the plane a wall node slides in (a wing's root on a symmetry plane),
         zero for the others.
     thickness
-        ``delta``: the layer's thickness (mesh units); the blend ends at ``delta (1 + BLEND)``.
+        the median of the stacks' heights (mesh units; the blend ends at ``delta (1 + BLEND)`` of each node's).
     """
 
     rows: np.ndarray
@@ -245,21 +248,24 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     aspect = edges.spacing[ok] / edges.height[ok]
     if np.median(aspect) < MIN_ASPECT:
         return None
-    delta = float(np.median(edges.spacing[ok]))
-    reach = delta * (1.0 + BLEND)
+    thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node)
+    thick = np.maximum(thick, edges.height)
+    reach = float(thick.max()) * (1.0 + BLEND)
     wall = pts[wall_ids]
     tree = cKDTree(wall)
     dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
     rows = np.flatnonzero(np.isfinite(dist))
+    flat = np.ptp(pts, axis=0).min() <= 1e-12 * max(float(np.ptp(pts, axis=0).max()), 1e-300)
+    k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
+    x = pts[target_ids[rows]]
+    part = _partition(tree, x, k, len(wall_ids))
+    delta = part @ thick                        # the layer's thickness where each node is (continuous)
     t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
     weight = 1.0 - t * t * (3.0 - 2.0 * t)
     keep = weight > 0
-    rows, weight = rows[keep], weight[keep]
-    flat = np.ptp(pts, axis=0).min() <= 1e-12 * max(float(np.ptp(pts, axis=0).max()), 1e-300)
-    k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
+    rows, weight, x, part = rows[keep], weight[keep], x[keep], part[keep]
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
-    x = pts[target_ids[rows]]
     planes = np.zeros((len(wall_ids), 3))
     size = float(np.linalg.norm(np.ptp(wall, axis=0)))
     for plane in sliding:               # the wall nodes on a sliding plane (a root on a symmetry plane)
@@ -267,8 +273,8 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
         on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= 1e-9 * size
         on &= np.abs(nrm @ normal) < 0.05          # the wall meets the plane nearly square (within 3 degrees)
         planes[on] = normal
-    return WallLayer(rows.astype(np.int64), _partition(tree, x, k, len(wall_ids)), x - origin, wall - origin,
-                     weight, nrm, delta, planes)
+    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, nrm, float(np.median(thick)),
+                     planes)
 
 
 def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
