@@ -66,7 +66,6 @@ def _round(x: float) -> float:
 
 def volume_defaults() -> list[tuple[str, object, str]]:
     """(key, default, meaning) of every ``volume:`` setting of the design schema, from WarpSettings."""
-
     known = design_schema()["properties"]["volume"]["properties"]
     out = []
     for f in dataclasses.fields(WarpSettings):
@@ -98,7 +97,6 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     str
         YAML text; loading it gives a valid design without changes.
     """
-
     mesh_path = Path(mesh_path)
     design_path = Path(design_path) if design_path is not None else default_design_path(mesh_path)
     mesh = read_mesh(mesh_path, progress=progress)

@@ -8,9 +8,10 @@ from __future__ import annotations
 import math
 
 from ffdcli.deferred import deferred
-from ffdcli.design.schema import CHANGE_KINDS, design_schema
+from ffdcli.design.schema import design_schema
 from ffdcli.design.yamlmap import key_path, line_at
 from ffdcli.errors import InputError
+from ffdcli.parameterization.changes import CHANGES
 from ffdcli.settings import degree_problem
 
 jsonschema = deferred("jsonschema")   # 0.05 s of every start: imported when a file is validated
@@ -61,7 +62,7 @@ def _describe(error) -> tuple[tuple, str]:
         return parts, f"missing key '{missing[0]}'"
     if v in ("minProperties", "maxProperties") and len(parts) == 2 and parts[0] == "changes":
         keys = ", ".join(inst) or "none"
-        return parts, (f"each item of changes has exactly one key ({', '.join(CHANGE_KINDS)}); "
+        return parts, (f"each item of changes has exactly one key ({', '.join(CHANGES.kinds())}); "
                        f"got {len(inst)}: {keys}")
     if v == "exclusiveMinimum":
         return parts, f"must be greater than {error.validator_value}, got {_shown(inst)}"
@@ -103,7 +104,6 @@ def _walk_nonfinite(value, parts=()):
 
 def validate(data, path=None, lines: dict | None = None) -> None:
     """Raise :class:`InputError` for the first problem (in file order) of ``data``; None if valid."""
-
     lines = lines or {}
 
     def fail(parts, message):

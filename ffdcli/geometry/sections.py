@@ -233,7 +233,6 @@ class Cutter:
         return leading_edge_sign([q[:, [self.axes.chord, self.axes.thickness]] for q in probe])
 
 
-
 def _predict(sections, etas, j, toward):
     """Linear extrapolation of section ``j`` from its two neighbours on the ``toward`` side."""
     a, b = j + toward, j + 2 * toward

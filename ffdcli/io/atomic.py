@@ -43,8 +43,6 @@ STALE_AGE = 3600.0
 HANDLED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 
 
-
-
 def check_writable(path: str | Path, *, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Return ``path`` as a Path after checking that it can be written as an output.
 

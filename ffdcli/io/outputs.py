@@ -42,7 +42,7 @@ from ffdcli.io.atomic import (
     signals_deferred,
     signals_raise,
 )
-from ffdcli.io.formats import FOLDER_FORMAT, FORMATS, format_of, mismatch_message
+from ffdcli.io.formats import FOLDER_FORMAT, extensions, format_of, mismatch_message
 from ffdcli.io.inputs import polymesh_folder_of
 
 
@@ -67,7 +67,7 @@ def register(kind: OutputKind) -> OutputKind:
     return kind
 
 
-register(OutputKind("mesh", "the deformed mesh", tuple(FORMATS)))
+register(OutputKind("mesh", "the deformed mesh", tuple(extensions())))
 register(OutputKind("lattice", "the lattice", (".vtk",),
                     "the lattice is written as legacy VTK: give it a .vtk name"))
 register(OutputKind("plot", "the picture", (".png",), "pictures are written as PNG: give it a .png name"))

@@ -40,6 +40,7 @@ import numpy as np
 from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
 
@@ -91,7 +92,6 @@ def read(path: str | Path, progress=None) -> Mesh:
     the interior cells (of all cells when the file has no marker array). Raises InputError naming
     the file when it is empty, not a VTK unstructured grid, or meshio cannot read it.
     """
-
     path = Path(path)
     progress = progress or no_progress
     try:
@@ -233,7 +233,6 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     gives the same floats; the legacy ASCII writer prints 16 significant digits (meshio's choice),
     which round-trips to about 1e-16 relative, not always to the last bit.
     """
-
     path = Path(path)
     progress = progress or no_progress
     points = np.asarray(points, dtype=np.float64)
@@ -286,3 +285,7 @@ def _add_field_data(tmp: Path, field: dict[str, np.ndarray], fmt: str) -> None:
             raise RuntimeError("meshio wrote a legacy VTK file without DATASET")
         data = data[:m.end()] + block + data[m.end():]
     tmp.write_bytes(data)
+
+
+MESH_FORMATS.register(MeshFormat("vtu", (".vtu",), "a VTK XML unstructured grid", read, write))
+MESH_FORMATS.register(MeshFormat("vtk", (".vtk",), "a legacy VTK unstructured grid", read, write))

@@ -15,9 +15,12 @@ import numpy as np
 
 from ffdcli.box.frame import LatticeFrame
 from ffdcli.errors import InputError
+from ffdcli.registry import Registry
 
 #: Radians per degree: angles are given and differentiated in degrees.
 DEG = math.pi / 180.0
+#: The change kinds of ``changes:``, each registered by its own module (:mod:`ffdcli.registry`).
+CHANGES = Registry("change")
 #: Largest leading-edge sweep/dihedral angle a change may produce (tan grows without bound at 90).
 MAX_SHEAR_ANGLE = 85.0
 
@@ -241,7 +244,6 @@ class Change:
     def size(self) -> int:
         """Number of design variables."""
         return len(self.variables())
-
 
 
 def check_sections(P: np.ndarray, m: int, what: str):
