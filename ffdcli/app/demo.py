@@ -90,7 +90,7 @@ def run_fit(out: Path, progress) -> dict | None:
     target = REPO / "samples" / "s1223.dat"
     t0 = time.perf_counter()
     fitted_yaml = out / "naca0012_s1223_fitted.yaml"
-    rep = fit_design(config, target, fitted_yaml, progress=progress)
+    rep = fit_design(config, target, fitted_yaml, progress=progress, force=True)
 
     row = run_case(fitted_yaml, out, progress, target=read_airfoil(target).coords)
     row["case"] = "naca0012_s1223_fit"

@@ -20,7 +20,7 @@ from ffdcli.io.formats import MESH_FORMATS
 from ffdcli.optimize.solvers import SOLVERS
 from ffdcli.parameterization.changes import CHANGES
 from ffdcli.schema_parts import marker_names, positive
-from ffdcli.settings import ROOT_CHOICES, SECTION_CHOICES, WarpSettings
+from ffdcli.settings import MAX_DEGREE, ROOT_CHOICES, SECTION_CHOICES, WarpSettings
 
 #: Objects whose known keys ``--set`` may add when the file does not have them.
 ADDABLE = ("output", "volume", "box", "optimize")
@@ -47,9 +47,10 @@ def box_schema() -> dict:
             "points": {"type": "array", "items": {"type": "integer", "minimum": 2},
                        "minItems": 2, "maxItems": 3,
                        "description": "[n, m, l] chordwise, spanwise, thickness (2D: [n, l])"},
-            "degree": {"type": "array", "items": {"type": "integer", "minimum": 1},
+            "degree": {"type": "array", "items": {"type": "integer", "minimum": 1, "maximum": MAX_DEGREE},
                        "minItems": 2, "maxItems": 3,
-                       "description": "per direction; default min(3, points - 1)"},
+                       "description": f"per direction, 1 to {MAX_DEGREE} and below points; default "
+                                      "min(3, points - 1)"},
             "sections": {"enum": list(SECTION_CHOICES),
                          "description": "plane of the airfoil sections: chord axis, thickness axis"},
             "margin": {"type": "number", "minimum": 0,

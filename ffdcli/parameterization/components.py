@@ -311,9 +311,20 @@ def check_frozen_motion(comp: Component, error) -> None:
                 f"junction holds sections 0..{j.frozen - 1} of {m}")
         if j.at_tip:
             raise error(f"changes[{index}].{kind} {what}; the body is at the far end of the box's span, so the "
-                        "root is on the wrong side: give box.root the other end (or leave it out)", "box.root")
+                        f"root is on the wrong side: {root_advice(comp)}", "box.root")
         raise error(f"{what}, so nothing is free to move; give the lattice more spanwise sections (box.points[1] "
                     f"> {m}) or move sections beyond the junction", f"changes[{index}].{kind}")
+
+
+def root_advice(comp: Component) -> str:
+    """What to do when the root is at the end away from the body: give ``box.root`` the other end, or,
+    when the file gave it, that or leave it out (the detection then looks for the root plane)."""
+    given = getattr(getattr(comp.spec, "box", None), "root", None)
+    now = given or comp.box.axes.root
+    other = "max" if now == "min" else "min"
+    if given is not None:
+        return f"the file gives box.root: {given}; give box.root: {other}, or leave it out (detected)"
+    return f"the root was detected at the {now} end; give box.root: {other}"
 
 
 def rebase_law(law, first: int):

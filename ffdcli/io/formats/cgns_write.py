@@ -14,6 +14,7 @@ from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
 from ffdcli.io.formats.cgns_cells import CGNS_CODE, MIXED, WEDGE_CGNS_TO_VTK
 from ffdcli.io.formats.cgns_nodes import CgnsSource, char_array, convert_adf, new_node, str_attr
+from ffdcli.io.room import check_room
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
 
@@ -61,6 +62,20 @@ def _write_patched(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
                     ds[...] = block[:, axis].astype(ds.dtype).reshape(ds.shape)
 
 
+#: HDF5's own bytes per CGNS node (a group, its attributes, its data set), and of the file: twice what
+#: the files this writer makes hold (about 430 bytes an HDF5 object, two objects a node).
+NODE_BYTES = 2048
+FILE_BYTES = 16384
+
+
+def new_file_bytes(mesh: Mesh, phys: int, int_size: int) -> int:
+    """An upper estimate of the size of the new CGNS file of ``mesh``: its arrays and HDF5's overhead."""
+    cells = [b for b in mesh.cells] + [b for v in mesh.markers.values() for b in v]
+    ints = sum(b.data.size + len(b) for b in cells)          # connectivity, and MIXED's type codes
+    nodes = 12 + 3 * len(mesh.cells) + 6 * len(mesh.markers)
+    return len(mesh.points) * phys * 8 + ints * int_size + nodes * NODE_BYTES + FILE_BYTES
+
+
 def _check_names(mesh: Mesh, path: Path) -> None:
     for name in mesh.markers:
         if not name or len(name.encode("ascii", "replace")) > 32 or "/" in name or name in (".", ".."):
@@ -79,6 +94,9 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
     total_cells = mesh.n_cells + sum(len(b) for v in mesh.markers.values() for b in v
                                      if b.type != "vertex")
     itype, idt = ("I8", np.int64) if max(n, total_cells) >= 2**31 - 1 else ("I4", np.int32)
+    # checked before: a write that fails inside HDF5 leaves its objects in a state that crashes the
+    # interpreter at exit, so the failure (the output plan's one line) must come first
+    check_room(path, new_file_bytes(mesh, phys, np.dtype(idt).itemsize))
     with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as h5:
         str_attr(h5, "label", "Root Node of HDF5 File", 33)
         str_attr(h5, "name", "HDF5 MotherNode", 33)

@@ -210,6 +210,20 @@ def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None 
     return rc, time.perf_counter() - t0
 
 
+def missing_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> str:
+    """Why :func:`find_program` found no ``name``, in words: a file of that name that cannot be run (not
+    executable, a folder) where it looked, else "not found"."""
+    folders = [Path(os.environ[env_var])] if env_var and os.environ.get(env_var) else []
+    folders += [Path(p) for p in os.environ.get("PATH", "").split(os.pathsep) if p] + list(extra)
+    for f in folders:
+        p = f / name
+        if p.is_dir():
+            return f"{p} is a folder, not the program"
+        if p.exists() and not os.access(p, os.X_OK):
+            return f"{p} is there but not executable (chmod +x {p})"
+    return "not found"
+
+
 def find_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> Path | None:
     """``name`` in ``$<env_var>`` (a folder), then on PATH, then in ``extra`` folders; None if nowhere."""
     folders = []

@@ -52,6 +52,7 @@ from ffdcli.optimize.solvers.base import (
     SolverFailure,
     SolverInfo,
     find_program,
+    missing_program,
     run_logged,
 )
 
@@ -205,7 +206,9 @@ class SU2(Solver):
                              f"log10) or CONV_RESIDUAL_MINVAL in {self.config.name}", key="optimize.adjoint_residual")
         cfd = find_program("SU2_CFD", "SU2_RUN", self.search)
         if cfd is None:
-            raise InputError("SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
+            why = missing_program("SU2_CFD", "SU2_RUN", self.search)
+            raise InputError(f"SU2_CFD {why}" if why != "not found" else
+                             "SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
                              key="optimize.solver")
         self.programs["SU2_CFD"] = cfd
         ad = find_program("SU2_CFD_AD", "SU2_RUN", (cfd.parent, *self.search))

@@ -184,6 +184,16 @@ class SpecContext:
         st = self.box.stations
         return (st - st[0]) / (st[-1] - st[0])
 
+    @property
+    def sections_words(self) -> str:
+        """"8 sections (box.points[1])", or where knots were inserted (box.refine, a flap or slat) how
+        the box came to have more sections than box.points[1] says."""
+        base = getattr(self.box, "base_sections", None)
+        if base is None or len(base) == self.m:
+            return f"{self.m} sections (box.points[1])"
+        return (f"{self.m} sections ({len(base)} of box.points[1] and {self.m - len(base)} inserted by box.refine "
+                f"or a flap/slat)")
+
     def fail(self, message: str, key: str | None = None) -> Exception:
         """The exception for ``message`` at ``key`` (default: the change's own key)."""
         key = self.key if key is None else key
@@ -275,8 +285,8 @@ class SectionMap(Change):
             raise ctx.fail(f"in 2D {kind} takes one number (the whole airfoil, about its trailing edge)")
         if isinstance(spec, list):
             if len(spec) != m:
-                raise ctx.fail(f"has {len(spec)} values but the box has {m} sections (box.points[1]); "
-                               "give one value per section, root first")
+                raise ctx.fail(f"has {len(spec)} values but the box has {ctx.sections_words}; give one value "
+                               "per section, root first, or {tip: value} / {root: value, tip: value}")
             return cls(SectionLaw.listed(spec))
         if isinstance(spec, dict):
             return cls(SectionLaw.root_tip(m, tip=spec["tip"], root=spec.get("root"),

@@ -56,7 +56,7 @@ class Shear(Change):
         if isinstance(spec, dict):
             offsets = spec["offsets"]
             if len(offsets) != ctx.m:
-                raise ctx.fail(f"has {len(offsets)} values but the box has {ctx.m} sections (box.points[1])",
+                raise ctx.fail(f"has {len(offsets)} values but the box has {ctx.sections_words}",
                                ctx.key + ".offsets")
             return cls(offsets=SectionLaw.listed(offsets))
         return cls(delta=float(spec))
