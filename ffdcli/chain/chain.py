@@ -145,8 +145,9 @@ class DesignChain:
         Ps = self.lattices.forward(values)
         dPs = self.lattices.jvp(values, dv)
         db = self.surface.jvp(Ps, dPs)
+        x = (None, self.frame_stage().forward(Ps)) if self.volume.moves else None
         dF = self.frame_stage().jvp(Ps, dPs) if self.volume.moves else None
-        return self.volume.jvp(None, (db, dF), progress=progress)
+        return self.volume.jvp(x, (db, dF), progress=progress)
 
     # -- reverse products ------------------------------------------------------------------------
     def _pull(self, values, g_b, g_F=None, carry: str | None = None) -> np.ndarray:
@@ -164,7 +165,8 @@ class DesignChain:
     def mesh_vjp(self, values, g, progress=None) -> np.ndarray:
         """(n_vars,) dJ/dv for ``g`` = dJ/dX at every mesh node (N, 3), through the volume motion (under
         MPI each rank sums its share of the volume, the sums reduced)."""
-        g_b, g_F = self.volume.vjp(None, g, progress=progress)
+        x = (None, self.frames(values)) if self.volume.moves else None
+        g_b, g_F = self.volume.vjp(x, g, progress=progress)
         return self._pull(values, g_b, g_F if self.volume.moves else None)
 
     def design_map_vjp(self, values, G) -> np.ndarray:
