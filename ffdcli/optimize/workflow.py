@@ -10,6 +10,7 @@ best mesh.
 
 from __future__ import annotations
 
+import difflib
 import shutil
 import time
 from collections.abc import Callable
@@ -69,6 +70,7 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
         if e.path is None and e.key:                    # a key of the design file: name the file and its line
             raise design.error(e.message, e.key) from None
         raise
+    check_function_names(settings, solver, design, info.name)
     for w in info.warnings:
         warn(w)
     model = DesignModel(load_run(design, progress=progress))
@@ -119,6 +121,25 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
     return {**head, "status": status, "message": stop.reason if stop else outcome.message,
             "iterations": driver.iterations, **summary, "seconds": _seconds(problem, t_start),
             "exit_code": 1 if status in ("failures", "baseline") else 0}
+
+
+def check_function_names(settings: OptimizeSettings, solver: Solver, design, solver_name: str) -> None:
+    """InputError (exit 2, the design file and line) for an ``optimize.objective`` or an
+    ``optimize.functions[i].name`` that is not in the solver's table of outputs (:meth:`Solver.outputs`),
+    with the nearest names: a misspelt objective is refused when the file is loaded, not after a
+    baseline flow solve (hours for a RANS case)."""
+    table = solver.outputs()
+    if table is None:
+        return
+    keys = [("optimize.objective", settings.objective)]
+    keys += [(f"optimize.functions[{i}].name", f.name) for i, f in enumerate(settings.functions)]
+    for key, name in keys:
+        if name in table:
+            continue
+        near = difflib.get_close_matches(str(name).upper(), table, n=3, cutoff=0.6)
+        hint = f"did you mean {' or '.join(near)}? " if near else ""
+        raise design.error(f"{name!r} is not a function that {solver_name} reports; {hint}"
+                           f"{solver_name}'s functions are {', '.join(table)}", key)
 
 
 def _seconds(problem: OptimizationProblem, t_start: float) -> dict:

@@ -101,6 +101,12 @@ class Solver(ABC):
         """The solver's inputs as text (its configuration): part of the key of a cached evaluation."""
         return ""
 
+    def outputs(self) -> tuple[str, ...] | None:
+        """The names of the functions this solver reports (its table of outputs), which
+        ``optimize.objective`` and ``optimize.functions`` are checked against when the design file is
+        loaded, before any work; None: the solver does not say (no check)."""
+        return None
+
     @property
     def running(self) -> RunningProcesses:
         """This solver's processes running now (:func:`run_logged`'s ``running``): what Ctrl-C or SIGTERM
