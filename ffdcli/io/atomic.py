@@ -379,8 +379,21 @@ _WRITE_ERRORS = {
 }
 
 
-def output_error(e: OSError, path: str | Path, what: str = "the output") -> FfdError:
-    """The one-line error of an OSError while writing ``what`` to ``path``; nothing was written."""
+def output_error(e: OSError, path: str | Path, what: str = "the output", done: str = "nothing was written") -> FfdError:
+    """The one-line error of an OSError while writing ``what`` to ``path``; ``done``: what the files are
+    now (by default: nothing was written)."""
     code, text, hint = _WRITE_ERRORS.get(e.errno, (1, e.strerror or str(e), None))
     cls = InputError if code == 2 else FfdError
-    return cls(f"cannot write {what}: {text}; nothing was written", path=path, hint=hint)
+    return cls(f"cannot write {what}: {text}; {done}", path=path, hint=hint)
+
+
+@contextlib.contextmanager
+def written_as(path: str | Path, what: str = "the output", done: str = "nothing was written") -> Iterator[None]:
+    """During the block an OSError (a full disk, a quota, an I/O error) of writing ``what`` to ``path``
+    becomes the one-line error of :func:`output_error`, naming the file (never a temporary one): for
+    writes outside an :class:`~ffdcli.io.outputs.OutputPlan` (``ffd optimize``'s evaluations and
+    results); ``done``: what the files are now."""
+    try:
+        yield
+    except OSError as e:
+        raise output_error(e, path, what, done) from None

@@ -111,3 +111,157 @@ def test_su2s_objective_names_are_the_table(tmp_path, capsys, monkeypatch, name,
     assert near is None or f"did you mean {near}" in err
     assert not (bin_ / "ran").exists() and not (tmp_path / "opt").exists()
     assert set(HISTORY_COLUMNS) <= set(err.split("functions are ")[1].replace(",", " ").split())
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 4: no output of ffd optimize is an input, under any name
+# ----------------------------------------------------------------------------------------------
+
+def _digest(path: Path) -> bytes:
+    return Path(path).read_bytes()
+
+
+def _collision(tmp_path: Path, how: str) -> tuple[Path, Path]:
+    """A design whose run would write over one of its inputs; returns (design, the input)."""
+    if how == "mesh_is_best_in_folder":
+        (tmp_path / "opt").mkdir()
+        shutil.copyfile(MESH, tmp_path / "opt" / "best.su2")
+        path = write_case(tmp_path)
+        _retarget(path, mesh="opt/best.su2")
+        return path, tmp_path / "opt" / "best.su2"
+    if how == "folder_dot_mesh_beside":
+        shutil.copyfile(MESH, tmp_path / "best.su2")
+        path = write_case(tmp_path, folder=".")
+        _retarget(path, mesh="best.su2")
+        return path, tmp_path / "best.su2"
+    if how == "design_is_best_yaml":
+        path = write_case(tmp_path, folder=".")
+        return path.rename(tmp_path / "best.yaml"), tmp_path / "best.yaml"
+    if how == "folder_other_spelling":
+        (tmp_path / "opt").mkdir()
+        shutil.copyfile(MESH, tmp_path / "opt" / "best.su2")
+        path = write_case(tmp_path, folder="./opt/../opt/")
+        _retarget(path, mesh=str((tmp_path / "opt" / "best.su2").resolve()))
+        return path, tmp_path / "opt" / "best.su2"
+    if how == "symlink":
+        (tmp_path / "opt").mkdir()
+        shutil.copyfile(MESH, tmp_path / "wing.su2")
+        (tmp_path / "opt" / "best.su2").symlink_to(tmp_path / "wing.su2")
+        path = write_case(tmp_path)
+        _retarget(path, mesh="wing.su2")
+        return path, tmp_path / "wing.su2"
+    if how == "hard_link":
+        (tmp_path / "opt").mkdir()
+        shutil.copyfile(MESH, tmp_path / "wing.su2")
+        os.link(tmp_path / "wing.su2", tmp_path / "opt" / "best.su2")
+        path = write_case(tmp_path)
+        _retarget(path, mesh="wing.su2")
+        return path, tmp_path / "wing.su2"
+    if how == "solver_config_is_best_yaml":
+        (tmp_path / "opt").mkdir()
+        path = write_case(tmp_path)
+        (tmp_path / "analytic.yaml").rename(tmp_path / "opt" / "best.yaml")
+        _retarget(path, config="opt/best.yaml")
+        return path, tmp_path / "opt" / "best.yaml"
+    if how == "history_is_the_design":
+        path = write_case(tmp_path, folder=".")
+        (tmp_path / "history.csv").symlink_to(path)
+        return path, path
+    raise ValueError(how)
+
+
+def _retarget(path: Path, mesh: str | None = None, config: str | None = None) -> None:
+    data = yaml.safe_load(path.read_text())
+    if mesh is not None:
+        data["mesh"] = mesh
+    if config is not None:
+        data["optimize"]["config"] = config
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+
+
+COLLISIONS = ["mesh_is_best_in_folder", "folder_dot_mesh_beside", "design_is_best_yaml", "folder_other_spelling",
+              "symlink", "hard_link", "solver_config_is_best_yaml", "history_is_the_design"]
+
+
+@pytest.mark.parametrize("how", COLLISIONS)
+def test_no_output_of_optimize_is_an_input(tmp_path, capsys, how):
+    """Found: ffd optimize wrote best.su2 over its input mesh (mesh opt/best.su2, or folder: . with the
+    mesh best.su2 beside the design). Every collision is refused before any work, exit 2."""
+    path, victim = _collision(tmp_path, how)
+    before = _digest(victim)
+    code, out, err = run_cli([path, "-q"], capsys)
+    assert code == 2, (how, err)
+    assert err.count("ffd: error:") == 1 and "would overwrite" in err, err
+    assert _digest(victim) == before
+    assert not list(tmp_path.rglob("result.json"))            # no evaluation ran
+
+
+# ----------------------------------------------------------------------------------------------
+# Item 8: optimize.folder that cannot be a folder, checked before any work
+# ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("make, folder, why", [
+    (lambda d: (d / "opt").write_text("notes"), "opt", "is a file, not a folder"),
+    (lambda d: os.mkfifo(d / "opt"), "opt", "is a FIFO"),
+    (lambda d: (d / "runs").write_text("x"), "runs/opt", "not a folder, so the folder cannot be made"),
+    (lambda d: (d / "a").mkdir() or (d / "a" / "b").write_text("x"), "a/b/c/d", "not a folder"),
+])
+def test_a_folder_that_cannot_be_one_is_refused_before_any_work(tmp_path, capsys, make, folder, why):
+    make(tmp_path)
+    path = write_case(tmp_path, folder=folder)
+    solver = solver_for(path)
+    with pytest.raises(InputError) as e:
+        run_optimize(path, solver=solver)
+    assert why in str(e.value) and e.value.key == "optimize.folder" and e.value.line is not None, e.value
+    assert str(tmp_path / folder.split("/")[0]) in str(e.value)
+    assert solver.flows == 0
+    code, _, err = run_cli([path, "-q"], capsys)
+    assert code == 2 and err.count("ffd: error:") == 1 and "internal error" not in err
+
+
+def _unshare_ok() -> bool:
+    if shutil.which("unshare") is None or os.geteuid() != 0:
+        return False
+    import subprocess
+    return subprocess.run(["unshare", "-m", "true"], capture_output=True).returncode == 0
+
+
+@pytest.mark.skipif(not _unshare_ok(), reason="needs unshare -m (root) to mount a read-only file system")
+@pytest.mark.parametrize("folder", ["ro/opt", "ro/deep/er/opt", "ro"])
+def test_a_folder_on_a_read_only_file_system_is_refused_before_any_work(tmp_path, folder):
+    """The folder (or where it would be made) on a read-only file system: exit 2 naming it and why, in a
+    private mount namespace (a read-only bind mount of a temporary folder)."""
+    import subprocess
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    path = write_case(tmp_path, folder=folder)
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2]) + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    script = (f'mount --bind "{ro}" "{ro}" && mount -o remount,bind,ro "{ro}" && '
+              f'exec "{sys.executable}" -m ffdcli optimize "{path}" -q')
+    p = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, env=env, timeout=300)
+    assert p.returncode == 2, (p.returncode, p.stderr)
+    assert p.stderr.count("ffd: error:") == 1 and "read-only file system" in p.stderr, p.stderr
+    assert "optimize.folder" in p.stderr and f"{path.name}:" in p.stderr
+    assert not list(tmp_path.rglob("result.json"))
+
+
+@pytest.mark.skipif(not _unshare_ok(), reason="needs unshare -m (root) to mount a small file system")
+@pytest.mark.parametrize("size", ["16k", "400k", "1m"])
+def test_a_full_disk_during_a_run_names_the_file_and_exits_1(tmp_path, size):
+    """optimize.folder on a tmpfs of ``size``: the disk fills at another moment of the run (the first
+    evaluation's mesh, a result, the history); one line naming the file and why, exit 1, never an
+    internal error."""
+    import subprocess
+    (tmp_path / "small").mkdir()
+    path = write_case(tmp_path, folder="small/opt", iterations=30)
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2]) + os.pathsep
+           + os.environ.get("PYTHONPATH", "")}
+    script = (f'mount -t tmpfs -o size={size} tmpfs "{tmp_path / "small"}" && '
+              f'exec "{sys.executable}" -m ffdcli optimize "{path}" -q')
+    p = subprocess.run(["unshare", "-m", "sh", "-c", script], capture_output=True, text=True, env=env, timeout=600)
+    if p.returncode == 0:
+        pytest.skip(f"the run fitted in {size}")
+    assert p.returncode == 1, (p.returncode, p.stderr)
+    assert p.stderr.count("ffd: error:") == 1 and "no space left on the device" in p.stderr, p.stderr
+    assert "internal error" not in p.stderr and ".part" not in p.stderr and "small/opt" in p.stderr

@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.io.atomic import written_as
 from ffdcli.io.formats import read_mesh
 from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
 from ffdcli.optimize.solvers.su2_convergence import criteria, exit_reason, shortfalls, start_iteration
@@ -221,7 +222,8 @@ class SU2(Solver):
 
     def _run(self, program: str, folder: Path, name: str, changes: dict[str, str]) -> tuple[Path, float]:
         cfg = folder / f"{name}.cfg"
-        cfg.write_text(with_keys(self.lines, changes))
+        with written_as(cfg, "the solver's configuration", "the finished evaluations are kept"):
+            cfg.write_text(with_keys(self.lines, changes))
         log = folder / f"{name}.log"
         rc, seconds = run_logged([*self.launch, str(self.programs[program]), cfg.name], folder, log,
                                  running=self.running)
