@@ -9,9 +9,11 @@ Any other exception is a bug in ffd: the command line reports it in one line wit
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import signal
 import threading
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 #: Environment variables by which MPI launchers give the number of processes (MPICH/Intel hydra,
@@ -132,3 +134,54 @@ class SignalRecorder:
             with contextlib.suppress(ValueError, OSError):
                 signal.signal(s, h)
         self._old.clear()
+
+
+#: The outputs the running command has put in place (renamed into their final names), in order: what a
+#: signal's message says when it comes after them. A context variable set by the command line for one
+#: command (:func:`outputs_ledger`), never a list shared between commands; None outside a command.
+COMMITTED: contextvars.ContextVar[list[str] | None] = contextvars.ContextVar("ffd_committed", default=None)
+
+
+def note_committed(paths: Iterable[str | Path]) -> None:
+    """Record outputs that are now complete under their final names (:class:`ffdcli.io.outputs.OutputPlan`
+    calls it once its renames are done). Outside :func:`outputs_ledger`: nothing."""
+    ledger = COMMITTED.get()
+    if ledger is not None:
+        ledger.extend(str(p) for p in paths)
+
+
+def committed_outputs() -> list[str]:
+    """The outputs this command has put in place so far (empty outside a command)."""
+    return list(COMMITTED.get() or ())
+
+
+@contextlib.contextmanager
+def outputs_ledger() -> Iterator[list[str]]:
+    """One command's record of its complete outputs (:data:`COMMITTED`); the handlers of SIGTERM and
+    SIGHUP are put back as they were at the end (a write may leave them raising :class:`Terminated`:
+    :func:`ffdcli.io.atomic.signals_raise`)."""
+    token = COMMITTED.set([])
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in WATCHED_SIGNALS:
+            with contextlib.suppress(ValueError, OSError):
+                old[s] = signal.getsignal(s)
+    try:
+        yield COMMITTED.get()
+    finally:
+        COMMITTED.reset(token)
+        for s, h in old.items():
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(s, h)
+
+
+def interrupt_message(exc: BaseException) -> str:
+    """The one line of a run stopped by Ctrl-C (KeyboardInterrupt) or :class:`Terminated`, true about the
+    files: "nothing was written", or, when the signal came after the outputs were put in place, which
+    outputs are complete."""
+    what = "interrupted" if isinstance(exc, KeyboardInterrupt) else str(exc)
+    done = committed_outputs()
+    if not done:
+        return f"{what}; nothing was written"
+    names = ", ".join(done[:6]) + (f" and {len(done) - 6} more" if len(done) > 6 else "")
+    return f"{what} after the outputs were written: {names} {'is' if len(done) == 1 else 'are'} complete"

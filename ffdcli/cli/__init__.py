@@ -18,7 +18,7 @@ import click
 
 from ffdcli import __version__
 from ffdcli.cli.console import Console, StdoutError
-from ffdcli.errors import FfdError, SignalRecorder, Terminated
+from ffdcli.errors import FfdError, SignalRecorder, Terminated, interrupt_message, outputs_ledger
 from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -101,7 +101,7 @@ def main(argv=None):
     verbose = "-v" in argv or "--verbose" in argv
     # under mpiexec, SIGTERM/SIGHUP are held from before MPI starts (``ffd``'s entry point holds
     # them from before the imports): every rank stops together
-    with SignalRecorder() as signals:
+    with SignalRecorder() as signals, outputs_ledger():
         _run(argv, as_json, verbose, signals)
 
 
@@ -135,9 +135,9 @@ def _run(argv, as_json, verbose, signals):
             e.show()
         sys.exit(e.exit_code)
     except (click.Abort, KeyboardInterrupt):
-        _fail("interrupted; nothing was written", 130, as_json)
+        _fail(interrupt_message(KeyboardInterrupt()), 130, as_json)
     except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
-        _fail(f"{e}; nothing was written", 128 + e.signum, as_json, show=comm.is_root)
+        _fail(interrupt_message(e), 128 + e.signum, as_json, show=comm.is_root)
     except StdoutError as e:          # stdout full or closed: the outputs are complete; say it on stderr
         _quiet_stdout()
         _fail(str(e), 1, False)

@@ -33,7 +33,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from ffdcli.errors import FfdError, InputError, Terminated
+from ffdcli.errors import FfdError, InputError, Terminated, committed_outputs
 from ffdcli.io.inputs import existing_kind
 
 #: A temporary file of another host (or of the old naming) untouched this long is stale (seconds).
@@ -250,8 +250,17 @@ def _handlers(signals, handler, old: dict, *, keep_user: bool) -> Iterator[None]
         yield
     finally:
         for s, h in old.items():
+            if h == signal.SIG_DFL and s != signal.SIGINT and committed_outputs():
+                h = raise_terminated          # outputs are complete: a later signal must say so, not kill
             with contextlib.suppress(ValueError, OSError):
                 signal.signal(s, h)
+
+
+def raise_terminated(signum, frame):
+    """The handler of SIGTERM and SIGHUP once the command's outputs are complete
+    (:func:`ffdcli.errors.committed_outputs`): :class:`Terminated`, whose message names them, instead of
+    the default death without a word; :func:`ffdcli.errors.outputs_ledger` puts the default back."""
+    raise Terminated(signum)
 
 
 @contextlib.contextmanager

@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ffdcli.errors import FfdError, InputError
+from ffdcli.errors import FfdError, InputError, note_committed
 from ffdcli.io.atomic import (
     check_not_input,
     check_writable,
@@ -164,6 +164,8 @@ class OutputPlan:
                             keep_mode(out.path, tmp)
                             os.replace(tmp, out.path)
                         written[out.kind] = str(out.path)
+                    # complete under their names: a signal held above, or any later, says so
+                    note_committed(written.values())
         except OSError as e:
             _remove(temps)
             raise output_error(e, current.path if current else "", current.what if current else "the output") \

@@ -27,7 +27,14 @@ import os
 
 import numpy as np
 
-from ffdcli.errors import SIZE_VARIABLES, FfdError, InputError, SignalRecorder, Terminated  # noqa: F401
+from ffdcli.errors import (  # noqa: F401
+    SIZE_VARIABLES,
+    FfdError,
+    InputError,
+    SignalRecorder,
+    Terminated,
+    interrupt_message,
+)
 
 
 class RankError(FfdError):
@@ -47,9 +54,9 @@ def _describe(exc: BaseException) -> tuple[str, int, dict | None]:
     if isinstance(exc, FfdError):
         return str(exc), int(exc.exit_code), getattr(exc, "report", None)
     if isinstance(exc, KeyboardInterrupt):
-        return "interrupted; nothing was written", 130, None
+        return interrupt_message(exc), 130, None
     if isinstance(exc, Terminated):
-        return f"{exc}; nothing was written", 128 + exc.signum, None
+        return interrupt_message(exc), 128 + exc.signum, None
     if isinstance(exc, MemoryError):
         return "out of memory", 1, None
     return (f"internal error: {type(exc).__name__}: {exc} (this is a bug in ffd; -v shows where)", 1, None)
