@@ -266,16 +266,29 @@ def raise_terminated(signum, frame):
 @contextlib.contextmanager
 def signals_raise() -> Iterator[None]:
     """During the block SIGTERM and SIGHUP raise :class:`Terminated` (SIGINT raises KeyboardInterrupt as
-    always), so the temporary files are removed on the way out. A handler set by the user's program
-    (not the default) is left alone. Outside the main thread: a no-op."""
+    always; under MPI, where ffd's recorder holds it, it raises here too), so the temporary files are
+    removed on the way out; once: a second signal while the first unwinds does not interrupt the
+    clean-up (under MPI it is recorded). A handler set by the user's program (not the default) is left
+    alone. Outside the main thread: a no-op."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
+    fired: list[int] = []
+    replaced: dict = {}
+
     def handler(signum, frame):
+        if fired:              # the run is already stopping: a second signal (mpiexec forwards Ctrl-C that a
+            outer = replaced.get(signum)      # terminal also delivers) must not raise again in the clean-up
+            if getattr(outer, "ffd_replaceable", False):
+                outer(signum, frame)          # or in the ranks' agreement: recorded, as outside a write
+            return
+        fired.append(signum)
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
         raise Terminated(signum)
 
-    with _handlers([s for s in HANDLED_SIGNALS if s != signal.SIGINT], handler, {}, keep_user=True):
+    with _handlers(HANDLED_SIGNALS, handler, replaced, keep_user=True):
         yield
 
 

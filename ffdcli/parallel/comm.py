@@ -24,6 +24,7 @@ happen), so all ranks stop together, with the same exit status, and none waits f
 from __future__ import annotations
 
 import os
+import signal
 
 import numpy as np
 
@@ -236,6 +237,10 @@ class MPIComm(SerialComm):
             return
         message, code, report, rank = failures[0]          # the lowest failing rank's, on every rank
         err = error if rank == self.rank else RankError(message, code, rank, report)
+        if isinstance(err, KeyboardInterrupt):
+            # click turns a KeyboardInterrupt into a new Abort, which has lost the agreement: this rank
+            # then waited in one more agreement than the others (the Ctrl-C deadlock of issue 43)
+            err = Terminated(signal.SIGINT)
         err.ffd_agreed = True
         raise err
 
