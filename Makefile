@@ -11,7 +11,7 @@ OUT    ?= out
 
 help:
 	@echo "make demo    create .venv, install ffd (with the 3D viewer), run the paper's cases into $(OUT)/"
-	@echo "make test    create .venv, install ffd with test tools and the optional extras (mpi, openmdao, viz) and OpenFOAM (apt, as root), run the test suite"
+	@echo "make test    create .venv, install ffd with test tools and the optional extras (mpi, openmdao, mphys, viz) and OpenFOAM (apt, as root), run the test suite"
 	@echo "make bench   print the speed/memory table (embedding, deform, I/O, volume follow, Jacobian) and the robustness matrix"
 	@echo "make warmup  compile the numba kernels once (demo, test and bench do it first; again after the sources change)"
 	@echo "make lint    ruff"
@@ -31,6 +31,7 @@ $(VENV)/.stamp-test: $(VENV)/.stamp-core
 
 $(VENV)/.stamp-openmdao: $(VENV)/.stamp-test
 	$(PIP) install -e '.[openmdao]' || echo "openmdao could not be installed: its tests and examples are skipped"
+	$(PIP) install -e '.[mphys]' || echo "mphys could not be installed: the MPhys tests and example are skipped"
 	@touch $@
 
 # OpenFOAM (ESI v1912, Debian's packages) for the tests that compare with checkMesh and run potentialFoam:

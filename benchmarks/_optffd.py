@@ -4,8 +4,8 @@ The design: SU2's mesh and flow (``inv_NACA0012_basic.cfg``, Euler, M 0.8, alpha
 automatic box (10 x 2 control points), twist (about the trailing edge) and 2 x 9 shape variables (the
 trailing-edge column left out); the constrained version bounds LIFT >= 0.328486 and MOMENT_Z >= 0 (each
 with its own adjoint) and keeps t/c at 30 % chord at least the baseline's (the NACA0012's maximum
-thickness station); 8 iterations of ffd's SQP with move limits (``METHOD``; the first runs of
-issue 28 used scipy's SLSQP, whose full steps overshoot the transonic lift: docs/optimize.md).
+thickness station); 8 iterations of ffd's SQP with move limits (``METHOD``; scipy's SLSQP
+takes full steps, which overshoot the transonic lift: docs/optimize.md).
 ``ffd optimize`` runs in a cached folder like the peers, in the benchmark's solver slot (one SU2 process
 at a time). ``ffd_path`` points to the tree that has the command (``--ffd-path``; default this repository).
 """

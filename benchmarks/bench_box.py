@@ -1,4 +1,4 @@
-"""The automatic box on a big surface (issue 4): fitting must not cost more than embedding.
+"""The automatic box on a big surface: fitting must not cost more than embedding.
 
 A swept, tapered, twisted wing surface of ~1M points (``ffdcli.testing.wings.wing_surface``); ``fit_box``
 (section cuts, rectangles, embedding, margin check) against ``embed`` alone on the final lattice.

@@ -1,4 +1,4 @@
-"""First run against later runs, from an empty numba cache (issue 30).
+"""First run against later runs, from an empty numba cache.
 
 ``python -m benchmarks.bench_compile [--quick]`` (also a module of ``make bench``). Everything runs
 with ``NUMBA_CACHE_DIR`` pointed at a new empty folder, in child processes (a cold process each):

@@ -1,4 +1,4 @@
-"""Constraints (issue 15): values and exact Jacobian of a full constraint set on a 1M-point wing surface.
+"""Constraints: values and exact Jacobian of a full constraint set on a 1M-point wing surface.
 
 One child process (``python -m benchmarks.bench_constraints --child N``). The surface is a generated
 tapered, swept NACA 0012 wing (:func:`ffdcli.testing.wings.surface_mesh`, about N points, quads); its box
@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-TITLE = "Constraints: values + Jacobian on the 1M-point wing surface, 101 variables (issue 15)"
+TITLE = "Constraints: values + Jacobian on the 1M-point wing surface, 101 variables (benchmarks/bench_constraints.py)"
 REPO = Path(__file__).resolve().parents[1]
 CONSTRAINTS = [
     {"thickness": {"chord": list(np.linspace(0.05, 0.95, 10)), "span": list(np.linspace(0.02, 0.98, 8))}},
@@ -35,7 +35,7 @@ Surface: generated tapered (0.5), swept (25 deg) NACA 0012 wing, quads; box 8 x 
 surface embedded before timing ("after the box is cached"). Design: the 101 variables of
 bench_derivatives. Constraints: 10 x 8 thickness grid, t/c at 8 stations, volume, LE/TE, fold-free
 (4 samples per knot span). "evaluate" = every value + the C x 101 Jacobian, including the deformed
-surface and dP/dv. Target (issue 15): <= 1 s at 1M points. The machine is shared (timings noisy).
+surface and dP/dv. Target: <= 1 s at 1M points. The machine is shared (timings noisy).
 """
 
 

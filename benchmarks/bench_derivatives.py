@@ -1,4 +1,4 @@
-"""Derivatives (issue 7): the surface Jacobian dX/dv of 1M surface points x 101 design variables.
+"""Derivatives: the surface Jacobian dX/dv of 1M surface points x 101 design variables.
 
 One child process (``python -m benchmarks.bench_derivatives --child N``) so that its peak memory is
 its own. The lattice is the 8 x 6 x 2, degree (3, 3, 1) curved wing lattice of
@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-TITLE = "Derivatives: surface Jacobian of 1M points x 101 variables (issue 7)"
+TITLE = "Derivatives: surface Jacobian of 1M points x 101 variables (benchmarks/bench_derivatives.py)"
 REPO = Path(__file__).resolve().parents[1]
 SHAPE, DEGREE = (8, 6, 2), (3, 3, 1)
 NOTES = """
@@ -40,7 +40,7 @@ x6, shape upper 8x6, shape upper/lower 8+8, shape rows 2x8), changes built with 
 "factored" = lattice_jacobian + basis_matrix: the two factors of dX/dv = B @ dP/dv that `ffd jacobian`
 writes. "dense" = surface_jacobian (N*3 x 101 float64 in memory: 2.4 GB at 1M). Best of 3-5 runs after
 a warm-up; peak RSS = the child process (points, embedding, B, and the dense Jacobian included).
-Targets (issue 7): Jacobian 1M x 101 <= 2 s (pyGeo measured here: 25.8 s); vjp <= 0.2 s.
+Targets: Jacobian 1M x 101 <= 2 s (pyGeo measured here: 25.8 s); vjp <= 0.2 s.
 """
 
 

@@ -1,4 +1,4 @@
-"""The ``mesh_quality`` constraint's own cost (issue 31): value and gradient on hexahedral grids.
+"""The ``mesh_quality`` constraint's own cost: value and gradient on hexahedral grids.
 
 The mesh is a unit cube of n^3 hexahedra, its nodes moved at random by 5 % of a cell (every cell
 valid); the constraint is built on the unmoved grid and evaluated on the moved one:
@@ -18,7 +18,8 @@ import time
 
 import numpy as np
 
-TITLE = "mesh_quality constraint: KS minimum of the cells' quality ratios and its gradient (issue 31)"
+TITLE = ("mesh_quality constraint: KS minimum of the cells' quality ratios and its gradient "
+         "(benchmarks/bench_mesh_quality.py)")
 NOTES = ("Unit cube of n^3 hexahedra, nodes moved by up to 5 % of a cell; the constraint built on the "
          "unmoved grid (cell_quality of the input, once). value = KS over 8 corners a cell; gradient = "
          "value + dKS/dX (N, 3). Excludes the volume motion (bench_warp). The machine is shared (noisy).")

@@ -1,4 +1,4 @@
-"""Strong scaling over MPI ranks (issue 17): embedding 1M points, the 1M-node volume warp, reading a
+"""Strong scaling over MPI ranks: embedding 1M points, the 1M-node volume warp, reading a
 1M-node mesh by parts (SU2 and CGNS, against rank 0 reading and broadcasting it), the quality gate on
 the parts, and ``ffd deform`` of the 1M-node mesh end to end, at 1 and 2 ranks; peak memory per rank,
 and (case ``memory``) ``ffd deform``'s pipeline at 1, 2 and 4 ranks on local meshes and at 2 with every
@@ -212,8 +212,8 @@ def _held_mb(run, result=None) -> dict:
 
 def child_memory(comm, design: str, mode: str) -> dict:
     """``ffd deform``'s pipeline (load_run, deform, write_outputs) on local meshes (``mode`` local) or
-    with every node on every rank (``whole``, the path before issue 17's local meshes): the resident
-    and peak MB of every rank after each phase, and each rank's local rows."""
+    with every node on every rank (``whole``, the path of ``ffd grad --sens``, ``ffd jacobian`` and the
+    API): the resident and peak MB of every rank after each phase, and each rank's local rows."""
     from ffdcli.app.deformation import deform
     from ffdcli.app.run import load_run
     from ffdcli.app.write import write_outputs
@@ -416,7 +416,7 @@ def summary(rows: list[dict]) -> list[dict]:
 
 
 def _main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description="MPI strong scaling (issue 17)")
+    ap = argparse.ArgumentParser(description="MPI strong scaling")
     ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--only", action="append", help="case names to run (embed, warp, read, gate, deform, memory)")

@@ -1,4 +1,4 @@
-"""``ffd optimize`` beside SU2's own optimiser on SU2's NACA0012 case, and the adjoint chain (issue 28).
+"""``ffd optimize`` beside SU2's own optimiser on SU2's NACA0012 case, and the adjoint chain.
 
 One invocation runs, on this machine, with the mesh and flow of SU2's shape-design case
 (``../shared/data/su2``: ``mesh_NACA0012_inv.su2``, ``inv_NACA0012_basic.cfg``; Euler, M 0.8, alpha

@@ -1,4 +1,4 @@
-"""ffd's own share of an ``ffd optimize`` iteration on SU2's NACA0012 case (issue 28: <= 5 %).
+"""ffd's own share of an ``ffd optimize`` iteration on SU2's NACA0012 case (target: <= 5 %).
 
 ffd's part of an iteration is what :class:`ffdcli.optimize.problem.OptimizationProblem` times as
 ``ffd`` seconds: set the values, deform the surface, move the volume, run the quality gate, write the
@@ -32,7 +32,7 @@ from ffdcli.optimize.problem import OptimizationProblem
 from ffdcli.optimize.solvers.base import FlowResult, Sensitivity, Solver, SolverInfo
 from ffdcli.optimize.store import EvaluationStore
 
-TITLE = "ffd optimize: ffd's own share of an iteration on SU2's NACA0012 (issue 28)"
+TITLE = "ffd optimize: ffd's own share of an iteration on SU2's NACA0012 (benchmarks/bench_optimize_ffd.py)"
 REPO = Path(__file__).resolve().parents[1]
 DESIGN = REPO / "configs" / "naca0012_optimize.yaml"
 RUN = REPO / "out" / "naca0012_optimize"

@@ -1,5 +1,5 @@
-"""End to end: `ffd deform` of a 1M-node wing mesh whose box is cached (issue 5), and the volume warp
-on that real mesh (issue 6).
+"""End to end: `ffd deform` of a 1M-node wing mesh whose box is cached, and the volume warp
+on that real mesh.
 
 The mesh: :func:`ffdcli.testing.wings.extruded_wing_mesh` of a tapered (0.5), swept (20 deg) NACA 0012 wing,
 semi-span 3 (chord x, thickness y, span z): a structured hexahedral O-grid volume mesh,
@@ -17,7 +17,7 @@ caches the 8 x 6 x 2 lattice once (untimed for the deform rows, reported as its 
   (``load_design`` + ``load_run``: read the mesh, load the cached box), ``changes`` / ``volume`` /
   ``quality`` (``Deformation.seconds`` of :func:`ffdcli.app.pipeline.deform`) and ``write``
   (``write_outputs``).
-* issue 6 on this mesh: the ``volume`` phase of that run (:func:`ffdcli.volume.warp.prepare_mesh_warp`,
+* the volume warp on this mesh: the ``volume`` phase of that run (:func:`ffdcli.volume.warp.prepare_mesh_warp`,
   the surface rotations and :func:`ffdcli.volume.warp.warp`). ``python -m benchmarks.bench_pipeline --warp
   DESIGN.yaml`` times prepare and warp separately, ``--warp-error DESIGN.yaml [N]`` compares the warp with
   the exact sum on N ranges of 300 volume nodes (not part of the table).
@@ -34,7 +34,7 @@ import tempfile
 import time
 from pathlib import Path
 
-TITLE = "End to end: ffd deform of a cached-box wing mesh (issue 5) and its volume warp (issue 6)"
+TITLE = "End to end: ffd deform of a cached-box wing mesh and its volume warp (benchmarks/bench_pipeline.py)"
 
 REPO = Path(__file__).resolve().parents[1]
 FULL = dict(n_around=257, n_radial=20, n_span=196)      # 1,003,520 nodes, 50,176 on the wing
@@ -50,9 +50,9 @@ by `ffd box design.yaml` before the timed runs. `ffd deform` rows: wall time of 
 (start-up, read, cached box, changes, volume, quality check, write), the faster of two runs (the
 slower beside it, and the load average before and after), peak RSS (VmHWM) of that process. Phase
 rows: the same steps through `ffdcli.app.pipeline` in one process (`Deformation.seconds` per phase).
-Issue-6 row: the `volume` phase (prepare_mesh_warp + surface rotations + warp, IDW with rotations,
+Volume-phase row: the `volume` phase (prepare_mesh_warp + surface rotations + warp, IDW with rotations,
 default tolerance) of the idw phases run.
-Targets: issue 5 deform + write of a 1M-node mesh with a cached box <= 20 s; issue 6 1M volume
+Targets: deform + write of a 1M-node mesh with a cached box <= 20 s; the volume phase of 1M volume
 nodes / 50k surface nodes <= 30 s and <= 4 GB. No pyGeo reference measured for these.
 """
 
@@ -186,7 +186,7 @@ def warp_error(design: str, n_ranges: int = 60, size: int = 300) -> dict:
     the mesh (Morton order: each range is a small neighbourhood), relative to the largest surface move.
 
     ``python -m benchmarks.bench_pipeline --warp-error DESIGN.yaml [N_RANGES]``; the design of
-    :func:`build_case` (a 5 degree tip twist on the 1M extruded wing) gave 1.07e-3 at the default
+    :func:`build_case` (a 5 degree tip twist on the 1M extruded wing) gave 7.4e-4 at the default
     tolerance with 60 ranges (docs/BENCHMARKS.md).
     """
     import numpy as np
@@ -257,7 +257,7 @@ def run(quick: bool = False) -> list[dict]:
             if method == "idw":
                 phase_idw = ph
         ph = phase_idw
-        rows.append({"case": f"volume phase alone: prepare_mesh_warp + warp on this mesh (issue 6, "
+        rows.append({"case": f"volume phase alone: prepare_mesh_warp + warp on this mesh ("
                              f"{facts['nodes'] / 1e6:.2f}M nodes / {facts['wing_nodes'] / 1e3:.0f}k surface)",
                      "measured": f"{ph['volume']:.1f} s, {ph['peak_mb']:.0f} MB (whole deform process)",
                      "target": TARGET_WARP if not quick else "", "pyGeo reference": "",

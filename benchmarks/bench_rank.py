@@ -1,11 +1,11 @@
-"""The per-rank core (issue 17): embedding, deform (B @ P) and vector-Jacobian product against pyGeo.
+"""The per-rank core: embedding, deform (B @ P) and vector-Jacobian product against pyGeo.
 
 One child process (``python -m benchmarks.bench_rank --child``) times, on the 8 x 6 x 2 lattice of
 degree (3, 3, 1) of :mod:`benchmarks.bench_core` (swept, tapered, twisted, bent) and N random points
 inside it (so the parameters are known):
 
 * embed = ``embed(lattice, X)`` (start table + compiled Newton + the Embedding's basis), N = 22k
-  (the issue's wing-node count), 100k, 1M;
+  (a wing surface's node count), 100k, 1M;
 * deform = ``Embedding.evaluate(P1, out=buf)``: B @ P1 with moved control points, 1M points;
 * vjp = ``derivatives.vjp(embedding, g, D)``: g^T B D for a random g (N, 3) and the 101-variable
   lattice Jacobian D of :mod:`benchmarks.bench_derivatives` (B^T g by the compiled kernel: one 8-wide
@@ -19,7 +19,7 @@ of the machine is printed before and after: on the shared 2-core machine wall ti
 are up to 2-3x those of a quiet one (the CPU column is less sensitive).
 
 pyGeo is not installable here (its pyspline dependency needs a Fortran build): its figures are the
-issue's, measured side by side with ffd on this machine, quiet, min of 3.
+reference figures, measured side by side with ffd on this machine, quiet, min of 3.
 """
 
 from __future__ import annotations
@@ -33,14 +33,14 @@ from pathlib import Path
 
 import numpy as np
 
-TITLE = "Per-rank core (issue 17): embed, deform, vjp vs pyGeo (benchmarks/bench_rank.py)"
+TITLE = "Per-rank core: embed, deform, vjp vs pyGeo (benchmarks/bench_rank.py)"
 REPO = Path(__file__).resolve().parents[1]
 SHAPE, DEGREE = (8, 6, 2), (3, 3, 1)
 EMBED_SIZES = (22_000, 100_000, 1_000_000)
 QUICK_EMBED_SIZES = (22_000, 100_000)
 VJP_SIZES = (22_000, 100_000, 1_000_000)
 
-#: (case, N): (target in s, pyGeo s as measured in the issue)
+#: (case, N): (target in s, pyGeo s, the reference figures)
 TARGETS = {
     ("embed", 22_000): (0.019, 1.86),
     ("embed", 100_000): (0.083, 8.34),
@@ -54,11 +54,11 @@ TARGETS = {
 }
 
 NOTES = """
-Lattice 8 x 6 x 2, degree (3, 3, 1) (bench_core's wing lattice); N random points inside it. Targets
-(issue 17): embed >= 100x pyGeo (1M <= 0.85 s, 100k <= 0.083 s, 22k <= 0.019 s), deform 1M <= 0.03 s,
+Lattice 8 x 6 x 2, degree (3, 3, 1) (bench_core's wing lattice); N random points inside it. Targets:
+embed >= 100x pyGeo (1M <= 0.85 s, 100k <= 0.083 s, 22k <= 0.019 s), deform 1M <= 0.03 s,
 vjp >= 3x pyGeo (22k <= 0.00029 s, 100k <= 0.0013 s, 1M <= 0.013 s), on this 2-core machine when
-quiet. "met" is judged on the min. pyGeo: the issue's figures (not installable here: Fortran build of
-pyspline); at 1M (not measured in the issue) its 100k figure x 10, assuming linear scaling.
+quiet. "met" is judged on the min. pyGeo: the reference figures (measured beside ffd on this machine,
+quiet; `benchmarks/bench_pygeo.py` runs pyGeo live); at 1M (not in them) its 100k figure x 10, assuming linear scaling.
 """
 
 

@@ -23,7 +23,7 @@ Run alone, for quick iteration on the warp settings::
 
 It is also part of ``make bench`` (``python -m benchmarks``), whose ``--quick`` runs the quick form.
 
-The multi-component forms (issue 29) come after the matrix: the bundled wing + tail + fin
+The multi-component forms come after the matrix: the bundled wing + tail + fin
 (``samples/wing_tail_fin.su2``, three components) and wing on a body (``samples/wing_body.su2``, the root
 on the fuselage) under planform designs of one or every component, several of which need the
 recovery. Target: no crash; every outcome 0 (written) or 3 (refused by the gate, with its reason)::
@@ -95,7 +95,7 @@ def _designs() -> dict:
         "mix4_a": [{"twist": {"tip": 8}}, {"span": 1.1}, {"sweep": 5}, {"dihedral": 3}],
         "mix4_b": [{"chord": {"tip": 0.6}}, {"sweep": -8}, {"twist": {"root": 2, "tip": -6}}, {"dihedral": -4}],
         "mix4_c": [{"span": 1.15}, {"sweep": 10}, {"twist": {"tip": -10}}, {"chord": {"tip": 0.5}}],
-        # control surfaces (issue 31), default blend and transition
+        # control surfaces, default blend and transition
         **{f"flap{a}": [{"flap": {"span": [0.2, 0.6], "hinge": 0.75, "angle": a}}] for a in (10, 20, 30)},
         "slat15": [{"slat": {"span": [0.1, 0.9], "hinge": 0.15, "angle": 15}}],
         # devices elsewhere on the span, a tapered hinge, a device near the root, one with a twist

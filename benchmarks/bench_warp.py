@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 TITLE = "Volume-mesh warp (IDW with rotations, tree approximation)"
-NOTES = ("Targets (issue 13): 1M volume nodes and 50k surface nodes in <= 8 s and <= 2 GB with the "
+NOTES = ("Targets: 1M volume nodes and 50k surface nodes in <= 8 s and <= 2 GB with the "
          "default volume settings; err_max <= 1e-3 (x max surface displacement). The row 'old defaults' "
          "(alpha 0.25, no rotation fade) is measured in the same run for the ratio. peak_mb = peak RSS "
          "(VmHWM) of a child process that also built the mesh; the machine has 2 cores shared with other work.")
@@ -105,7 +105,7 @@ def twist_motion(x: np.ndarray, tip_deg: float = 10.0):
 def measure(n_volume: int, n_surface: int, n_subset: int, tolerance: float = 1e-3,
             old: bool = False, repeats: int = 3) -> dict:
     """Everything in this process (run it in a child for a clean peak memory). ``old``: the
-    defaults before issue 13 (alpha 0.25, no rotation fade), for the speed ratio."""
+    old defaults (alpha 0.25, no rotation fade), for the speed ratio."""
     from ffdcli.volume.warp import WarpSettings, prepare_warp, warp
 
     pts, sid, fid, areas = synthetic_mesh(n_volume, n_surface)

@@ -1,6 +1,6 @@
 """This tree beside another checkout of ffd, in one run: ``python -m benchmarks.beside OTHER [--rounds N]``.
 
-For a refactoring that must not change behaviour (issue 27): the same commands run from both trees,
+For a refactoring that must not change behaviour: the same commands run from both trees,
 alternately (old, new, old, new, ...) so that the machine's load falls on both alike, each tree with its
 own sources (``PYTHONPATH``) and numba cache and this interpreter. Prints one Markdown table: each
 command's wall time in each tree (min and max of ``--rounds``, after one untimed run that fills the

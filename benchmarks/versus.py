@@ -1,4 +1,4 @@
-"""The volume warp beside another revision of ffd, in one run (issue 30): the gain as a ratio that the
+"""The volume warp beside another revision of ffd, in one run: the gain as a ratio that the
 machine's speed and load do not change.
 
 ``python -m benchmarks.versus REV [--repeats N] [--quick]`` checks REV out into a temporary git

@@ -40,7 +40,7 @@ OPEN_INSET = 1e-6
 NO_BOUND = 1e30
 
 
-def _optimiser_bounds(bounds) -> tuple[np.ndarray, np.ndarray]:
+def optimiser_bounds(bounds) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) (n_vars,) closed bounds for an optimiser from :class:`ffdcli.parameterization.bounds.Bounds`."""
     lo, hi = bounds.lower.copy(), bounds.upper.copy()
     lo_open = (bounds.natural[:, 0] >= bounds.user[:, 0]) & np.isfinite(lo)
@@ -81,6 +81,19 @@ def constraint_output(component: str, index: int, kind: str) -> str:
     """The output of constraint item ``index`` of a component (``""`` the single form): ``k0_volume``,
     ``wing_k0_volume``: unique across components."""
     return f"{component}_k{index}_{kind}" if component else f"k{index}_{kind}"
+
+
+def constraint_items(model: DesignModel) -> list[tuple[str, slice, object]]:
+    """``(output name, slice of model.constraint_names, constraint object)`` of every constraint item of
+    ``model`` that has values (an ``le_te`` of a design without shape moves has none), in order."""
+    items, at = [], 0
+    for ci, group in model.constraint_groups:
+        comp = model.run.components[ci].name or ""
+        for c in group:
+            if c.size:
+                items.append((constraint_output(comp, c.index, c.kind), slice(at, at + c.size), c))
+            at += c.size
+    return items
 
 
 class FFDComponent(om.ExplicitComponent):
@@ -127,7 +140,7 @@ class FFDComponent(om.ExplicitComponent):
         self._var_index = {}                           # input name -> indices into model.values
         for k, name in enumerate(model.names):
             self._var_index.setdefault(input_name(name), []).append(k)
-        lo, hi = _optimiser_bounds(model.bounds)
+        lo, hi = optimiser_bounds(model.bounds)
         self._var_bounds = {}
         for name, idx in self._var_index.items():
             idx = np.array(idx)
@@ -142,15 +155,9 @@ class FFDComponent(om.ExplicitComponent):
         for name in model.point_sets:
             self.add_output(name, shape=(model.point_set(name).n_points, 3), desc=f"point set {name}")
         self._con_slices = []                       # (output name, slice of model.constraint_names)
-        at = 0
-        for ci, group in model.constraint_groups:
-            comp = model.run.components[ci].name or ""
-            for c in group:
-                if c.size:                           # (le_te of a design without shape moves has none)
-                    out = constraint_output(comp, c.index, c.kind)
-                    self.add_output(out, shape=(c.size,), desc=", ".join(c.names))
-                    self._con_slices.append((out, slice(at, at + c.size)))
-                at += c.size
+        for out, sl, c in constraint_items(model):
+            self.add_output(out, shape=(c.size,), desc=", ".join(c.names))
+            self._con_slices.append((out, sl))
 
     def design_var_bounds(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of input ``name`` for ``add_design_var`` (+-1e30 where there is no bound)."""

@@ -68,7 +68,7 @@ def crm_wing() -> Mesh:
                                 h_far=2.0, name="crm_wing"))
 
 
-# Several components (issue 16). Chord x, span y, thickness z (as the CRM); the symmetry plane is y = 0.
+# Several components. Chord x, span y, thickness z (as the CRM); the symmetry plane is y = 0.
 WING = dict(semi_span=2.5, root_chord=1.0, taper=0.4, le_sweep_deg=25.0, root_airfoil="0012", sections="xz")
 HTAIL = dict(semi_span=1.0, root_chord=0.5, taper=0.6, le_sweep_deg=30.0, root_airfoil="0010", sections="xz",
              root_offset=(3.0, 0.0, 0.0))

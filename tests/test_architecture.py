@@ -27,7 +27,7 @@ LAYERS = [
     {"design"},
     {"viz"},
     {"app"},
-    {"api", "openmdao"},
+    {"api", "openmdao", "mphys"},
     {"optimize"},
     {"cli", "__main__"},
 ]
@@ -37,7 +37,7 @@ FIXTURES = "testing"
 #: Optional third-party packages: imported where they are used, so that the core runs without them.
 #: matplotlib is imported where a picture is drawn: its import reads MPLBACKEND, which ffd turns
 #: into an input error (viz/plot.py).
-OPTIONAL = {"pyvista", "vtk", "openmdao", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline"}
+OPTIONAL = {"pyvista", "vtk", "openmdao", "mphys", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline"}
 
 
 def _modules() -> dict[str, Path]:

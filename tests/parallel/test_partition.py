@@ -290,6 +290,22 @@ def test_su2_read_by_parts_is_the_local_mesh_of_the_whole_read(sample, monkeypat
             assert len(held) < (0.7 if size == 2 else 0.55) * len(off), (len(held), len(off))
 
 
+@pytest.mark.parametrize("size", [2, 3])
+def test_su2_surface_mesh_without_interior_cells_reads_by_parts(tmp_path, size):
+    """A surface-only SU2 mesh (NELEM= 0: a wing's wall, as MPhys runs give ffd) read by parts: every rank
+    gets the marker's points (was an UnboundLocalError in read_part)."""
+    from ffdcli.io.formats import su2, write_mesh
+    from ffdcli.testing.wings import Planform, surface_mesh
+
+    path = tmp_path / "wall.su2"
+    write_mesh(surface_mesh(Planform(), n_chord=9, n_span=4), path)
+    whole = su2.read(path)
+    assert not whole.cells
+    for mesh, _ in run_ranks(size, lambda c: su2.read_part(path, c)):
+        np.testing.assert_array_equal(mesh.points[np.searchsorted(mesh.global_ids, whole.marker_point_ids(["wing"]))],
+                                      whole.points[whole.marker_point_ids(["wing"])])
+
+
 def test_su2_read_by_parts_names_a_bad_line_in_one_ranks_share_on_every_rank(tmp_path, monkeypatch):
     from ffdcli.errors import InputError
     from ffdcli.io.formats import su2

@@ -176,7 +176,7 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
     order: list[str] = []
     for lst in every:
         order += [t for t, _ in lst if t not in order]
-    blocks, ids, start = [], [], 0
+    blocks, ids, start, data = [], [], 0, None        # (a surface-only mesh has no interior cells)
     for t in order:
         counts = [dict(lst).get(t, 0) for lst in every]
         data = local.get(t, np.zeros((0, CELL_NODES[t]), dtype=np.int64))

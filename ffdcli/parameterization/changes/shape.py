@@ -23,8 +23,8 @@ class Shape(Change):
     thickness axis (a twisted section's shape change is the untwisted one turned by the twist), and
     a shape does not turn the direction it moves along (it adds to every edge along it). A box
     fitted to a twisted wing has sections aligned with the local chord: there too a shape moves
-    normal to the local chord line. (Before issue 31 every section moved along the box's one
-    thickness axis, pyGeo's convention.)
+    normal to the local chord line. (pyGeo's convention is the box's one thickness axis for every
+    section.)
 
     upper, lower
         (n,) one value per chordwise index for the upper (k = l-1) / lower (k = 0) row of every
