@@ -15,6 +15,7 @@ from pathlib import Path
 from ffdcli.app.deformation import Deformation, deform
 from ffdcli.app.run import DesignRun, load_run
 from ffdcli.app.write import write_outputs
+from ffdcli.design import load_design
 from ffdcli.io.formats.su2_ffd import describe
 from ffdcli.io.outputs import plan_deform
 from ffdcli.quality.gate import Remedies, enforce
@@ -118,6 +119,12 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     summary = _summary(design, run, result, written, su2_ffd, constraints, time.perf_counter() - t0)
     return DeformReport(summary=summary, written=written, warnings=tuple(warnings),
                         text=_text(summary, run, result, written))
+
+
+def deform_file(design_file, overrides=(), **kwargs) -> DeformReport:
+    """``ffd deform DESIGN.yaml``: the design file loaded (``--set`` ``overrides`` applied), then
+    :func:`deform_design` with ``kwargs``."""
+    return deform_design(load_design(design_file, overrides=overrides), **kwargs)
 
 
 def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd, constraints,

@@ -35,7 +35,6 @@ def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[n
     margin, as the volume warp with ``carry: gradient`` does); other nodes give NaN rows. The quality
     gate compares the volume's cells with it (:func:`ffdcli.quality.gate.check_quality`: what the design
     itself does to a cell at the wall is not a failure of the volume motion)."""
-
     mesh, ids = run.prep.mesh, run.surface_ids
     Xs = mesh.points[ids]
     b = run.surface_displacement(P) if disp is None else disp
@@ -126,7 +125,6 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
     method = volume_method(run)
     t1 = time.perf_counter()
     if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
-
         model = run.warp_model(progress)
         rot = run.surface_frames(P1)
         points += run.warp_volume(model, disp, rot, progress)   # MPI: each rank its rows or its block
@@ -148,7 +146,6 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
     if quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw":
-
         t3 = time.perf_counter()
         tried.append({"attempt": "the design's volume settings", "failed": quality.n_failed, "ok": False})
         best = (_badness(quality), points, quality, None)

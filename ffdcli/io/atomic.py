@@ -43,8 +43,6 @@ STALE_AGE = 3600.0
 HANDLED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
 
 
-
-
 def check_writable(path: str | Path, *, inputs: tuple[str | Path, ...] = ()) -> Path:
     """Return ``path`` as a Path after checking that it can be written as an output.
 
@@ -388,7 +386,8 @@ def _umask() -> int:
 _WRITE_ERRORS = {
     errno.ENOSPC: (1, "no space left on the device", "free some space or write elsewhere"),
     errno.EDQUOT: (1, "disk quota exceeded", "free some space or write elsewhere"),
-    errno.EFBIG: (1, "the file is too large for this file system", None),
+    errno.EFBIG: (1, "the file is larger than this process may write (its file-size limit, `ulimit -f`) or than "
+                     "the file system allows", "raise the limit or write elsewhere"),
     errno.EIO: (1, "input/output error of the device", None),
     errno.ENAMETOOLONG: (2, "the file name is too long", "choose a shorter name"),
     errno.EACCES: (2, "permission denied", "choose a writable folder"),

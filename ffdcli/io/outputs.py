@@ -42,7 +42,7 @@ from ffdcli.io.atomic import (
     signals_deferred,
     signals_raise,
 )
-from ffdcli.io.formats import FOLDER_FORMAT, FORMATS, format_of, mismatch_message
+from ffdcli.io.formats import FOLDER_FORMAT, extensions, format_of, mismatch_message
 from ffdcli.io.inputs import polymesh_folder_of
 
 
@@ -67,7 +67,7 @@ def register(kind: OutputKind) -> OutputKind:
     return kind
 
 
-register(OutputKind("mesh", "the deformed mesh", tuple(FORMATS)))
+register(OutputKind("mesh", "the deformed mesh", tuple(extensions())))
 register(OutputKind("lattice", "the lattice", (".vtk",),
                     "the lattice is written as legacy VTK: give it a .vtk name"))
 register(OutputKind("plot", "the picture", (".png",), "pictures are written as PNG: give it a .png name"))
@@ -373,12 +373,12 @@ def plan_deform(design, *, mesh: str | Path | None = None, lattice: str | Path |
     ``mesh`` (``-o``) replaces ``output.mesh`` and carries the names of the lattice and the picture
     (:func:`carried_name`) unless ``lattice`` (``--lattice``) is given; without ``-o`` they are the
     design file's ``output:`` (defaults ``out/<design stem>...`` beside the design file, whose folder
-    is created). The picture is written with ``plot`` (``--plot``) or when the file has
-    ``output.plot``, with its 3D view ``<picture stem>_3d.png`` beside it (3D designs, when pyvista
-    can render). ``extra``: more ``(kind, path, ...)`` outputs (e.g. a surface file);
-    ``inputs``: more input files of the run."""
+    is created). The picture is written only with ``plot`` (``--plot``: a ``--set`` loop pays for no
+    picture it did not ask for), at ``output.plot`` when the file names it, with its 3D view
+    ``<picture stem>_3d.png`` beside it (3D designs, when pyvista can render). ``extra``: more
+    ``(kind, path, ...)`` outputs (e.g. a surface file); ``inputs``: more input files of the run."""
     given = set((design.data or {}).get("output") or {})
-    want_plot = plot or "plot" in given
+    want_plot = plot
     if mesh is not None:
         mesh_item = ("mesh", mesh, False, "-o")
         lat = lattice if lattice is not None else (None if str(mesh) == "" else carried_name(mesh, "lattice"))

@@ -30,13 +30,8 @@ from ffdcli.optimize.check import gradient_check
 from ffdcli.optimize.driver import Driver, Outcome, StopRun, violation
 from ffdcli.optimize.history import best_evaluation, history_rows, write_history, write_picture
 from ffdcli.optimize.problem import OptimizationProblem
-from ffdcli.optimize.solvers.analytic import AnalyticSolver
-from ffdcli.optimize.solvers.base import Solver
-from ffdcli.optimize.solvers.su2 import SU2
+from ffdcli.optimize.solvers import SOLVERS, Solver, SolverContext
 from ffdcli.optimize.store import EvaluationStore, inputs_hash
-
-#: The solvers ``optimize.solver`` names.
-SOLVERS: dict[str, type[Solver]] = {"su2": SU2, "analytic": AnalyticSolver}
 
 
 class Interrupted(FfdError):
@@ -44,9 +39,9 @@ class Interrupted(FfdError):
 
 
 def make_solver(settings: OptimizeSettings, search: tuple[Path, ...] = ()) -> Solver:
-    """The solver of ``optimize.solver`` for ``settings`` (not yet checked)."""
-    return SOLVERS[settings.solver](settings.config, settings.launch, settings.adjoint, search,
-                                    adjoint_residual=settings.adjoint_residual)
+    """The solver of ``optimize.solver`` for ``settings`` (not yet checked), made by its kind from its own keys."""
+    context = SolverContext(config=settings.config, launch=settings.launch, search=tuple(search))
+    return SOLVERS[settings.solver].from_spec(settings.solver_spec, context)
 
 
 def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list[str] | None = None,

@@ -280,7 +280,6 @@ def world(environ=None) -> SerialComm:
 
     Raises :class:`ffdcli.errors.InputError` when launched by ``mpiexec -n N`` (N > 1) without
     ``mpi4py``: N copies of the serial run would each write the same files."""
-
     if launched_size(environ) <= 1:
         return SerialComm()
     if not mpi_available():

@@ -57,7 +57,7 @@ from ffdcli.quality.metrics import cell_quality, check_types
 from ffdcli.quality.orthogonality import node_orthogonality
 from ffdcli.quality.polyhedral import check_quality_poly
 from ffdcli.quality.reference import QualityReference, counted_blocks, part_reference
-from ffdcli.quality.report import QualityReport, _g, _xyz  # noqa: F401 - the report, named here too
+from ffdcli.quality.report import QualityReport, fmt_g, fmt_xyz  # noqa: F401 - the report, named here too
 from ffdcli.quality.rules import (  # noqa: F401 - the gate's rules, named here too
     DEFAULT_COLLAPSE,
     DEFAULT_ORTHO_LOSS,
@@ -169,14 +169,13 @@ def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, f
     when the design fails the gate, with the counts, the rule and the worst place. With ``force``
     neither is raised and the warnings say what would have been.
     """
-
     if report is None:
         return []
     warnings = []
     if report.n_input_bad:
         w = report.input_bad[0]
         more = f" (and {report.n_input_bad - 1} more)" if report.n_input_bad > 1 else ""
-        msg = (f"cell {w['cell']} ({w['type']}) at {_xyz(w['centroid'])} is already "
+        msg = (f"cell {w['cell']} ({w['type']}) at {fmt_xyz(w['centroid'])} is already "
                f"{'inverted' if w['quality'] < 0 else 'degenerate'} in the input mesh (scaled Jacobian "
                f"{w['quality']:.3g}){more}: a problem of the mesh, not of the design; repair or regenerate "
                f"the mesh{remedies.list_cells}")
@@ -344,7 +343,6 @@ def _part_orthogonality(part, ref, after, reference, ortho_min, ortho_loss, n_wo
 def _merge_parts(parts: list[dict], has_before: bool, orthogonality: bool, reference, n_worst: int,
                  kw: dict) -> QualityReport:
     """The :class:`QualityReport` of the whole mesh from every rank's figures (same on every rank)."""
-
     def total(key):
         return sum(p[key] for p in parts)
 

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from ffdcli.jit import inlined
 from ffdcli.mesh import CellBlock
 
 #: Cells evaluated per vectorised step (bounds the temporary arrays to ~100 MB).
@@ -94,6 +95,38 @@ def raw_quality(points: np.ndarray, data: np.ndarray, ctype: str, normal: np.nda
     return out
 
 
+@inlined
+def corner_det_length(points, data, c, corners, k, width, plane):
+    """``(det, length)`` of corner ``k`` of cell ``c``: the determinant of its edges ``[e1, e2, e3]``
+    (2D: ``(e1 x e2) . plane``) and the product of their lengths; the scaled Jacobian is ``scale * det /
+    length``. The one home of the corner of :func:`_raw_quality_nb` and of the constraint's
+    :func:`ffdcli.constraints.mesh_quality.corner_values` (no division: the callers keep their own
+    rounding)."""
+    p = data[c, corners[k, 0]]
+    a = data[c, corners[k, 1]]
+    b = data[c, corners[k, 2]]
+    e10 = points[a, 0] - points[p, 0]
+    e11 = points[a, 1] - points[p, 1]
+    e12 = points[a, 2] - points[p, 2]
+    e20 = points[b, 0] - points[p, 0]
+    e21 = points[b, 1] - points[p, 1]
+    e22 = points[b, 2] - points[p, 2]
+    x0 = e11 * e22 - e12 * e21
+    x1 = e12 * e20 - e10 * e22
+    x2 = e10 * e21 - e11 * e20
+    length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
+    if width == 4:
+        d = data[c, corners[k, 3]]
+        e30 = points[d, 0] - points[p, 0]
+        e31 = points[d, 1] - points[p, 1]
+        e32 = points[d, 2] - points[p, 2]
+        det = x0 * e30 + x1 * e31 + x2 * e32
+        length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
+    else:
+        det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+    return det, length
+
+
 @njit(cache=True, parallel=True)
 def _raw_quality_nb(points, data, corners, scale, plane, out):
     """Numba twin of the NumPy branch of :func:`raw_quality` (3 edges per corner in 3D, 2 in 2D)."""
@@ -101,28 +134,7 @@ def _raw_quality_nb(points, data, corners, scale, plane, out):
     for c in prange(data.shape[0]):
         best = np.inf
         for k in range(n_corners):
-            p = data[c, corners[k, 0]]
-            a = data[c, corners[k, 1]]
-            b = data[c, corners[k, 2]]
-            e10 = points[a, 0] - points[p, 0]
-            e11 = points[a, 1] - points[p, 1]
-            e12 = points[a, 2] - points[p, 2]
-            e20 = points[b, 0] - points[p, 0]
-            e21 = points[b, 1] - points[p, 1]
-            e22 = points[b, 2] - points[p, 2]
-            x0 = e11 * e22 - e12 * e21
-            x1 = e12 * e20 - e10 * e22
-            x2 = e10 * e21 - e11 * e20
-            length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
-            if width == 4:
-                d = data[c, corners[k, 3]]
-                e30 = points[d, 0] - points[p, 0]
-                e31 = points[d, 1] - points[p, 1]
-                e32 = points[d, 2] - points[p, 2]
-                det = x0 * e30 + x1 * e31 + x2 * e32
-                length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
-            else:
-                det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+            det, length = corner_det_length(points, data, c, corners, k, width, plane)
             q = det / length if length > 0 else 0.0
             if q < best:
                 best = q

@@ -67,7 +67,6 @@ def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *,
     Step k moves the lattice to ``P0 + k/steps (P1 - P0)``; the warp of each step is prepared on
     the points of the step before. Surface nodes end exactly at ``X0 + B (P1 - P0)``.
     """
-
     progress = progress or no_progress
     mesh = run.prep.mesh
     # every component's surface (a multi-component run moves them all, one lattice each)

@@ -35,7 +35,6 @@ def component_frames(comp, P: np.ndarray, carry: str = "gradient") -> np.ndarray
     space there, to first order, so the cells at a sharp trailing edge or at a tip, where faces of
     different normals meet, all see one smooth map. ``carry="rotation"``: the polar rotation of the
     surface frame (:func:`ffdcli.volume.frames.surface_frame_gradient`), IDWarp's form."""
-
     box = comp.box
     S = len(comp.prep.embedding.inside)
     R = np.broadcast_to(np.eye(3), (S, 3, 3)).copy()
@@ -57,7 +56,6 @@ def component_frames(comp, P: np.ndarray, carry: str = "gradient") -> np.ndarray
 
 def frame_gradient_inputs(comp, P: np.ndarray):
     """(inside point indices, F in core coordinates (k, d, d), unit normals n0 (k, d)) of a component."""
-
     box, emb = comp.box, comp.prep.embedding
     n_all = comp.prep.surface.normals[:, box.plane_axes]
     nn = np.linalg.norm(n_all, axis=1)

@@ -96,10 +96,10 @@ from ffdcli.volume._warp_blocks import BT, vjp_blocks, warp_blocks
 from ffdcli.volume._warp_kernels import (
     NM,
     NV,
-    _exact_kernel,
-    _exact_vjp_kernel,
-    _node_moments,
-    _push_down,
+    exact_kernel,
+    exact_vjp_kernel,
+    node_moments,
+    push_down,
     weight_reference_kernel,
 )
 from ffdcli.volume.frames import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
@@ -466,7 +466,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         out[model.surface_ids] = b
         return out
     bm, use_rot = _source_motion(model, b, surface_rotation)
-    node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
+    node_bm = node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
     l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
     d = np.empty((t_hi - t_lo, 3))
@@ -475,7 +475,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
             tx = model.target_pos[t_lo + lo:t_lo + hi]
             if exact:
-                _exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
+                exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
                               rho2, use_rot)
             else:
                 warp_blocks(tx, tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
@@ -536,7 +536,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
             for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
                 tx, gc = model.target_pos[lo + t_lo:hi + t_lo], np.ascontiguousarray(gt[lo + t_lo:hi + t_lo])
                 if exact:
-                    _exact_vjp_kernel(tx, gc, acc_src, model.src_pos, model.src_area, l2, ha, hb, ab, fast,
+                    exact_vjp_kernel(tx, gc, acc_src, model.src_pos, model.src_area, l2, ha, hb, ab, fast,
                                       eps2, rho2)
                 else:
                     vjp_blocks(tx, tolw[lo:hi], gc, acc_node, acc_src, model.node_lo, model.node_hi,
@@ -563,7 +563,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     for f, s in ((0, 3), (12, 15)):
         an[:, f:f + 3] -= np.einsum("npk,nk->np", an[:, s:s + 9].reshape(-1, 3, 3), c)
     an[:, 24:33] -= np.einsum("nk,nkpq->npq", c, an[:, 33:60].reshape(-1, 3, 3, 3)).reshape(-1, 9)
-    _push_down(an, model.node_left, model.node_right)
+    push_down(an, model.node_left, model.node_right)
     leaves = np.flatnonzero(model.node_left < 0)
     leaves = leaves[np.argsort(model.node_lo[leaves])]      # leaf ranges partition the sources
     leaf = an[np.repeat(leaves, model.node_hi[leaves] - model.node_lo[leaves])]

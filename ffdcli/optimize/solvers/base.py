@@ -12,6 +12,13 @@ An evaluation of a design is a folder that holds the deformed mesh. The driver c
 
 A run that fails (non-zero exit, NaN, residual not converged) raises :class:`SolverFailure` with the
 reason and the path of its log; the driver records it and steps back.
+
+A solver kind declares itself as every extension kind does (:mod:`ffdcli.registry`): ``kind`` (the
+name ``optimize.solver`` gives), ``schema()`` (``{"description": ..., "properties": {its own keys of
+optimize:}}``: SU2's ``adjoint`` and ``adjoint_residual`` are SU2's), ``from_spec(spec, ctx)`` (its own
+keys as written, parsed by the solver; ``ctx`` a :class:`SolverContext`), and one line
+``SOLVERS.register(Kind)`` at the end of its module. The design file's ``optimize:`` schema is the
+driver's keys and every solver's own keys (:func:`ffdcli.design.schema.optimize_schema`).
 """
 
 from __future__ import annotations
@@ -27,6 +34,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from ffdcli.registry import Registry
+
+#: The flow solvers ``optimize.solver`` names, each registered by its own module.
+SOLVERS = Registry("solver")
+
+
+@dataclass(frozen=True)
+class SolverContext:
+    """What every solver kind's ``from_spec`` is handed besides its own keys: ``config`` the solver's
+    configuration (``optimize.config``, resolved), ``launch`` a prefix of its commands (``optimize.launch``,
+    split like a shell line), ``search`` more folders to look for its programs in."""
+
+    config: Path
+    launch: tuple[str, ...] = ()
+    search: tuple[Path, ...] = ()
 
 
 class SolverFailure(Exception):
@@ -226,6 +249,20 @@ def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None 
         if running is not None:
             running.discard(proc)
     return rc, time.perf_counter() - t0
+
+
+def missing_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> str:
+    """Why :func:`find_program` found no ``name``, in words: a file of that name that cannot be run (not
+    executable, a folder) where it looked, else "not found"."""
+    folders = [Path(os.environ[env_var])] if env_var and os.environ.get(env_var) else []
+    folders += [Path(p) for p in os.environ.get("PATH", "").split(os.pathsep) if p] + list(extra)
+    for f in folders:
+        p = f / name
+        if p.is_dir():
+            return f"{p} is a folder, not the program"
+        if p.exists() and not os.access(p, os.X_OK):
+            return f"{p} is there but not executable (chmod +x {p})"
+    return "not found"
 
 
 def find_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> Path | None:

@@ -49,12 +49,15 @@ from ffdcli.io.formats import read_mesh
 from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
 from ffdcli.optimize.solvers.su2_convergence import criteria, exit_reason, shortfalls, start_iteration
 from ffdcli.optimize.solvers.base import (
+    SOLVERS,
     FlowResult,
     Sensitivity,
     Solver,
+    SolverContext,
     SolverFailure,
     SolverInfo,
     find_program,
+    missing_program,
     run_logged,
 )
 
@@ -172,6 +175,26 @@ class SU2(Solver):
         self.lines: list[str] = []
         self.adjoint_kind = adjoint or "discrete"
 
+    kind = "su2"
+
+    @classmethod
+    def schema(cls) -> dict:
+        """SU2's own keys of ``optimize:``."""
+        return {"description": "SU2 (SU2_CFD; the discrete adjoint SU2_CFD_AD)", "properties": {
+            "adjoint": {"enum": ["discrete", "continuous"],
+                        "description": "discrete (SU2_CFD_AD, the default where found) | continuous (SU2_CFD)"},
+            "adjoint_residual": {"type": "number",
+                                 "description": "the adjoints' convergence target, log10 of the rms residual as "
+                                                "SU2's CONV_RESIDUAL_MINVAL (default: the config's, as the flow); "
+                                                "a transonic adjoint often converges more slowly than its flow"}}}
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx: SolverContext) -> SU2:
+        """SU2 of ``optimize.config`` with its own keys ``adjoint`` and ``adjoint_residual`` (schema-checked)."""
+        residual = spec.get("adjoint_residual")
+        return cls(ctx.config, launch=ctx.launch, adjoint=spec.get("adjoint"), search=ctx.search,
+                   adjoint_residual=None if residual is None else float(residual))
+
     def check(self) -> SolverInfo:
         """Find SU2_CFD (and SU2_CFD_AD) and read the configuration; InputError (exit 2) when missing."""
         self.lines = read_config(self.config)
@@ -187,7 +210,9 @@ class SU2(Solver):
         self._criteria(adjoint=True)
         cfd = find_program("SU2_CFD", "SU2_RUN", self.search)
         if cfd is None:
-            raise InputError("SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
+            why = missing_program("SU2_CFD", "SU2_RUN", self.search)
+            raise InputError(f"SU2_CFD {why}" if why != "not found" else
+                             "SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
                              key="optimize.solver")
         self.programs["SU2_CFD"] = cfd
         ad = find_program("SU2_CFD_AD", "SU2_RUN", (cfd.parent, *self.search))
@@ -411,3 +436,6 @@ def _read_surface_sensitivity(path: Path, mesh: Path, log: Path) -> tuple[np.nda
     ids = data[:, head.index("pointid")].astype(np.int64)
     m = read_mesh(mesh)
     return ids, surface_sensitivity_gradient(m, m.points, ids, data[:, head.index("surface_sensitivity")])
+
+
+SOLVERS.register(SU2)

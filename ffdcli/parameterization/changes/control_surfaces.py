@@ -28,7 +28,7 @@ import numpy as np
 
 from ffdcli.box.refine import refine_box, refine_embedding
 from ffdcli.errors import InputError
-from ffdcli.parameterization.changes.base import DEG, Change, SpecContext
+from ffdcli.parameterization.changes.base import CHANGES, DEG, Change, SpecContext
 from ffdcli.parameterization.changes.devices import (
     DEFAULT_BLEND,
     DEFAULT_TRANSITION,
@@ -39,6 +39,7 @@ from ffdcli.parameterization.changes.devices import (
     device_geometry,
     device_knots,
 )
+from ffdcli.schema_parts import number
 
 
 def skew(w: np.ndarray) -> np.ndarray:
@@ -235,12 +236,41 @@ class Flap(ControlSurface):
 
     kind = "flap"
 
+    @classmethod
+    def schema(cls) -> dict:
+        return device_schema("trailing-edge", "trailing edge")
+
 
 @dataclass(frozen=True, eq=False)
 class Slat(ControlSurface):
     """A leading-edge device: the part ahead of the hinge turns; positive: leading edge down."""
 
     kind = "slat"
+
+    @classmethod
+    def schema(cls) -> dict:
+        return device_schema("leading-edge", "leading edge")
+
+
+def device_schema(part: str, down: str) -> dict:
+    """The YAML of a flap or slat (``part``: trailing-edge or leading-edge)."""
+    fraction = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    return {"description": f"a {part} device that turns about its hinge line (morphing: the surface stays "
+                           f"one piece): {{span: [inner, outer], hinge: h | [h_inner, h_outer], angle: A, "
+                           f"blend: w, transition: c}}; angle in degrees, positive: {down} down; hinge: "
+                           "chord fraction of the local chord at each end (a list of two: design "
+                           "variables); blend: span width over which the rotation fades at each end "
+                           "(default 0.2); transition: chord width behind the hinge where the surface "
+                           "bends (default 0.1); in 2D no span and no blend",
+            "type": "object", "additionalProperties": False, "required": ["hinge", "angle"],
+            "properties": {
+                "span": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1},
+                         "minItems": 2, "maxItems": 2},
+                "hinge": {"anyOf": [fraction, {"type": "array", "items": fraction, "minItems": 1,
+                                               "maxItems": 2}]},
+                "angle": number(),
+                "blend": {"type": "number", "minimum": 0},
+                "transition": {"type": "number", "exclusiveMinimum": 0}}}
 
 
 def parse_device(kind: str, spec, ctx: SpecContext) -> DeviceSpec:
@@ -308,3 +338,7 @@ def refine_for_devices(box, emb, surface, specs, error=None, key: str = "changes
         return box, emb
     out, _ = refine_box(box, chord=chord, span=span)
     return out, refine_embedding(out, emb)
+
+
+CHANGES.register(Flap)
+CHANGES.register(Slat)
