@@ -60,6 +60,13 @@ class VolumeMixin:
                                                len(self.surface_ids), run.warp_settings.carry, run.single)
         return self._cache["dR"]
 
+    def _frames(self):
+        """(S, 3, 3) the frames the warp is given at the current values: where its wall layer
+        (:mod:`ffdcli.volume.layer_motion`, nonlinear in them) is linearised."""
+        if "frames" not in self._cache:
+            self._cache["frames"] = self.run.surface_frames(self.lattice())
+        return self._cache["frames"]
+
     def _design_zone(self):
         """The nodes near the wall of :mod:`ffdcli.quality.design_map` (built once)."""
         if "zone" not in self._static:
@@ -96,7 +103,7 @@ class VolumeMixin:
         """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW.
 
         The warp is a fixed linear map of the surface translations and frame parts ``M = F - I``
-        (:func:`ffdcli.volume.warp.warp`), so the product is the warp of ``(dX_s/dv dv, I + dF/dv dv)``; the
+        (:func:`ffdcli.volume.warp.warp`; its wall layer linearised at the current frames), so the product is the warp of ``(dX_s/dv dv, I + dF/dv dv)``; the
         surface nodes get ``dX_s/dv dv`` exactly. The transpose of :meth:`mesh_vjp`."""
         dv = self._check_dv(dv, "mesh_jvp")
         ids = self.surface_ids
@@ -105,7 +112,7 @@ class VolumeMixin:
         if self.uses_volume():
 
             dR = np.tensordot(dv, self._frame_jacobian(), axes=1)
-            out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, progress=progress)
+            out = warp(self._warp_model(progress), dXs, np.eye(3) + dR, progress=progress, at=self._frames())
         out[ids] = dXs
         return out
 
@@ -122,7 +129,7 @@ class VolumeMixin:
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
         comm = self.comm if self.comm.size > 1 else None      # each rank sums its share of the volume
-        g_b, g_M = warp_vjp(self._warp_model(progress), gs, progress=progress, comm=comm)
+        g_b, g_M = warp_vjp(self._warp_model(progress), gs, progress=progress, comm=comm, at=self._frames())
         g_b = g_b + g[ids] - gs[ids]
         out = self.surface_vjp(g_b)
         dR = self._frame_jacobian()

@@ -19,6 +19,7 @@ from ffdcli.parallel.distributed import local_rows
 from ffdcli.progress import no_progress
 from ffdcli.quality.design_map import DesignMapZone, linearised_map
 from ffdcli.quality.gate import QualityReport
+from ffdcli.quality.wall_layer import DEFAULT_FIRST_CELL, WallLayerReport, wall_layer_report
 from ffdcli.volume.recovery import attempts, incremental_warp  # it runs the warp of a DesignRun
 
 #: The zone near the wall, in mean chords, where the gate compares cells with the design's own map.
@@ -74,6 +75,8 @@ class Deformation:
     recovery: list = field(default_factory=list)
     #: The attempt whose mesh this is (None: the design's own volume settings).
     recovered_with: str | None = None
+    #: The first cells on the wall before and after (:mod:`ffdcli.quality.wall_layer`; None: no boundary layer)
+    wall_layer: WallLayerReport | None = None
 
     @property
     def max_displacement(self) -> float:
@@ -162,8 +165,13 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
                 break
         _, points, quality, used = best
         t["recovery"] = time.perf_counter() - t3
+    wall = None
+    if quality is not None and not run.local:
+        tol = (run.design.volume or {}).get("first_cell", DEFAULT_FIRST_CELL)
+        wall = wall_layer_report(mesh, [n for c in run.components for n in c.prep.surface.names], points,
+                                 mesh.points, float(tol))
     return Deformation(points=points, lattice=P1, surface_displacement=disp, volume_method=method,
-                       quality=quality, seconds=t, recovery=tried, recovered_with=used)
+                       quality=quality, seconds=t, recovery=tried, recovered_with=used, wall_layer=wall)
 
 
 def _badness(q: QualityReport) -> tuple[int, int]:

@@ -43,7 +43,13 @@ INCREMENTS = 4
 
 
 def attempts(settings: WarpSettings) -> list[tuple[str, WarpSettings, int]]:
-    """(description, settings, increments) of the recovery attempts, in order."""
+    """(description, settings, increments) of the recovery attempts, in order. With a rigid wall layer
+    (:mod:`ffdcli.volume.layer_motion`) the warp alone comes first, then the attempts without the layer:
+    a design the layer's frames fold (a deflected flap's hinge) is never refused where the warp alone
+    passes."""
+    if settings.wall_layer != "none":
+        alone = replace(settings, wall_layer="none")
+        return [("the warp alone near the wall (volume.wall_layer: none)", alone, 1)] + attempts(alone)
     longer = replace(settings, alpha=settings.alpha * REACH_FACTOR)
     out = [(f"longer reach (volume.alpha: {longer.alpha:g})", longer, 1)]
     if settings.carry != "rotation":

@@ -29,13 +29,22 @@ def crm_design(tmp_path, changes, volume=None, name="d.yaml"):
 
 
 def test_attempts_are_a_longer_reach_then_the_rotation_then_increments():
-    got = attempts(WarpSettings(alpha=0.5))
+    got = attempts(WarpSettings(alpha=0.5, wall_layer="none"))
     assert [(st.alpha, st.carry, st.rotation_reach, n) for _, st, n in got] == [
         (2.0, "gradient", 0.5, 1), (0.5, "rotation", 0.5, 1), (0.5, "rotation", None, 1), (2.0, "gradient", 0.5, 4)]
     assert "alpha: 2" in got[0][0] and "carry: rotation" in got[1][0] and "rotation_reach: null" in got[2][0]
     assert "4 increments" in got[3][0]
-    assert len(attempts(WarpSettings(rotation_reach=None))) == 3
-    assert len(attempts(WarpSettings(carry="rotation", rotation_reach=None))) == 2
+    assert len(attempts(WarpSettings(rotation_reach=None, wall_layer="none"))) == 3
+    assert len(attempts(WarpSettings(carry="rotation", rotation_reach=None, wall_layer="none"))) == 2
+
+
+def test_with_a_wall_layer_the_warp_alone_comes_first_then_the_same_attempts_without_it():
+    for kw in ({}, {"rotation_reach": None}, {"carry": "rotation", "alpha": 2.0}):
+        got = attempts(WarpSettings(**kw))
+        assert "wall_layer: none" in got[0][0] and got[0][2] == 1
+        assert all(st.wall_layer == "none" for _, st, _ in got)
+        alone = attempts(WarpSettings(**kw, wall_layer="none"))
+        assert [(w, st, n) for w, st, n in got[1:]] == alone
 
 
 @pytest.mark.slow
