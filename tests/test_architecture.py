@@ -26,6 +26,7 @@ LAYERS = [
     {"constraints"},
     {"optimize.solvers"},  # before design: the design file's optimize: schema is assembled from the solver kinds
     {"design"},
+    {"chain"},            # the derivative chain: stages over volume/ and quality/, composed; the MPI reductions
     {"viz"},
     {"app"},
     {"api", "openmdao", "mphys"},

@@ -20,6 +20,7 @@ from ffdcli.design import load_design
 from ffdcli.io.formats.su2_ffd import describe
 from ffdcli.io.outputs import plan_deform
 from ffdcli.quality.gate import Remedies, enforce
+from ffdcli.quality.wall_layer import enforce_wall_layer
 
 
 @dataclass(frozen=True)
@@ -111,6 +112,10 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
                      recovery=result.recovery, remedies=remedies, hints=device_hints(run)):
         note(w)
+    for w in enforce_wall_layer(result.wall_layer, design_path=design.path, force=force,
+                                refuse="first_cell" in (design.volume or {}),
+                                write_anyway=remedies.write_anyway, forced=remedies.forced):
+        note(w)
     constraints = (constraints_table(run, result.points) if constraints_table and design.data.get("constraints")
                    else None)
     # every output once, together: rank 0 of an MPI run (every node's coordinates gathered there)
@@ -154,6 +159,7 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
         "recovery": result.recovery,
         "recovered_with": result.recovered_with,
         "quality": q.to_dict() if q is not None else None,
+        "wall_layer": result.wall_layer.to_dict() if result.wall_layer is not None else None,
         "su2_ffd": su2_ffd,
         "constraints": constraints,
         "cache": str(run.prep.cache) if run.prep.cache else None,
@@ -218,6 +224,8 @@ def _text(s: dict, run: DesignRun, result: Deformation, written: dict) -> str:
                     if s["recovered_with"] else ""))
     if result.quality is not None:
         lines.append(f"  quality   {result.quality.summary()}")
+    if result.wall_layer is not None:
+        lines.append(f"  wall      {result.wall_layer.summary()}")
     if s["constraints"] is not None:
         bad = [c["name"] for c in s["constraints"] if not c["satisfied"]]
         lines.append(f"  constraints {len(s['constraints'])} items, "

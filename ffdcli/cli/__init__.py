@@ -19,7 +19,7 @@ import click
 
 from ffdcli import __version__
 from ffdcli.cli.console import Console, StdoutError
-from ffdcli.errors import FfdError, SignalRecorder, Terminated
+from ffdcli.errors import FfdError, SignalRecorder, Terminated, interrupt_message, outputs_ledger
 from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -105,7 +105,7 @@ def main(argv=None):
     verbose = "-v" in argv or "--verbose" in argv
     # under mpiexec, SIGTERM/SIGHUP are held from before MPI starts (``ffd``'s entry point holds
     # them from before the imports): every rank stops together
-    with SignalRecorder() as signals, warnings.catch_warnings():
+    with SignalRecorder() as signals, outputs_ledger(), warnings.catch_warnings():
         warnings.showwarning = functools.partial(_show_warning, verbose=verbose)
         _run(argv, as_json, verbose, signals)
 
@@ -152,9 +152,9 @@ def _run(argv, as_json, verbose, signals):
     except click.ClickException as e:        # usage errors: one line, exit 2 (click's own convention)
         _fail(usage_message(e, argv), e.exit_code, as_json, show=comm.is_root)
     except (click.Abort, KeyboardInterrupt):
-        _fail("interrupted; nothing was written", 130, as_json)
+        _fail(interrupt_message(KeyboardInterrupt()), 130, as_json)
     except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
-        _fail(f"{e}; nothing was written", 128 + e.signum, as_json, show=comm.is_root)
+        _fail(interrupt_message(e), 128 + e.signum, as_json, show=comm.is_root)
     except StdoutError as e:          # stdout full or closed: the outputs are complete; say it on stderr
         _quiet_stdout()
         _fail(str(e), 1, False)

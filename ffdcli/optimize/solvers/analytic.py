@@ -90,6 +90,9 @@ class AnalyticSolver(Solver):
     def state(self) -> str:
         return yaml.safe_dump(self.settings, sort_keys=True)
 
+    def outputs(self) -> tuple[str, ...]:
+        return FUNCTIONS
+
     def _wall(self, mesh_path: Path):
         mesh = read_mesh(mesh_path)
         marker = self.settings.get("marker") or next(
