@@ -205,7 +205,7 @@ def _held_mb(run, result=None) -> dict:
     """MB of the arrays a run holds, by what holds them (the rank's local mesh, the gate's part and
     reference, the warp model, the boxes/embeddings/surfaces, the result)."""
     seen: set = set()
-    groups = {"mesh": run.prep.mesh, "gate part": (run._quality_part, run._quality_ref), "warp": run._warp,
+    groups = {"mesh": run.prep.mesh, "gate part": run._share, "warp": run._volume,
               "boxes": [(c.prep.box, c.prep.embedding, c.prep.surface) for c in run.components], "result": result}
     return {k: round(_held_bytes(v, seen) / 2**20, 1) for k, v in groups.items()}
 

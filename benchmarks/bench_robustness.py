@@ -9,6 +9,12 @@ the smooth minimum over the cells of quality after / before; its default bound i
 refusals and 0 inverted cells with the default ``volume:`` settings, and every design above the
 ``mesh_quality`` bound.
 
+RANS meshes (SU2's RAE2822 of ``../shared/data``, a NACA 0012 O-mesh with a first cell of 1e-6 chord
+and 70 layers, ``gen:rect_z_rans32``: 32 prism layers from 1e-6) add the wall layer's figures: the
+first-cell height after / before (min-max) and the off-wall angle change at the wall nodes
+(:mod:`ffdcli.quality.wall_layer`; the first cells changed by more than 1 %: ffd deform's warning); the airfoils
+run the ``2d_`` designs on a 10 x 2 lattice.
+
 Meshes: the bundled wings (``samples/rect_wing.su2``, ``samples/crm_wing.su2``), the ONERA M6 of
 ``../shared/data`` (skipped when absent) and the generated wings of :mod:`ffdcli.testing.gmsh_wings`
 (``gen:<case>``: span along x, y and z, left and right, kinked, flat and round tips, blunt trailing
@@ -106,6 +112,13 @@ def _designs() -> dict:
         "flap_root30": [{"flap": {"span": [0.05, 0.45], "hinge": 0.72, "angle": 30}}],
         "slat_mid20": [{"slat": {"span": [0.2, 0.8], "hinge": 0.12, "angle": 20}}],
         "flap15+twist": [{"flap": {"span": [0.25, 0.65], "hinge": 0.75, "angle": 15}}, {"twist": {"tip": -5}}],
+        # 2D (the RANS airfoils, a 10 x 2 lattice): twist, chord (the planform of an airfoil), shape, devices
+        **{f"2d_twist{a:+d}": [{"twist": {"angle": a, "axis": 0.25}}] for a in (-20, -5, 5, 20)},
+        "2d_chord0.9": [{"chord": 0.9}],
+        **{f"2d_shape_random{p}%": (lambda p: lambda m, chord: [{"shape": {"random": round(p / 100 * chord, 6),
+                                                                             "seed": 7}}])(p) for p in (1, 5)},
+        "2d_flap10": [{"flap": {"hinge": 0.75, "angle": 10}}],
+        "2d_slat10": [{"slat": {"hinge": 0.15, "angle": 10}}],
     }
     return d
 
@@ -125,6 +138,8 @@ class MeshSource:
     surface: str
     bundled: str | None = None      # a path (relative to the repo, or absolute)
     case: str | None = None         # a ffdcli.testing.gmsh_wings case
+    ogrid: tuple | None = None      # (NACA code, points around, nodes off the wall, first cell): ffdcli.testing.ogrid
+    dim: int = 3
 
     def path(self, work: Path) -> Path | None:
         """The mesh file (generated into ``work`` when needed); None when it is not available."""
@@ -136,6 +151,16 @@ class MeshSource:
             except ImportError:         # the [test] extra brings gmsh
                 return None
             return testmeshes.write_case(self.case, work / "meshes")
+        if self.ogrid is not None:
+            from ffdcli.io.formats import write_mesh
+            from ffdcli.testing.ogrid import airfoil_ogrid_mesh
+
+            code, n_around, n_radial, first = self.ogrid
+            p = work / "meshes" / f"ogrid_{code}_{n_around}x{n_radial}_{first:g}.su2"
+            if not p.is_file():
+                p.parent.mkdir(parents=True, exist_ok=True)
+                write_mesh(airfoil_ogrid_mesh(code, n_around, n_radial, first_cell=first), p)
+            return p
         p = Path(self.bundled)
         p = p if p.is_absolute() else REPO / p
         return p if p.is_file() else None
@@ -150,6 +175,10 @@ def _meshes() -> dict[str, MeshSource]:
                                  bundled="/work/shared/data/oneram6/mesh_ONERAM6_gmsh_coarse.su2")}
     for name in CASES:
         out[f"gen:{name}"] = MeshSource(f"gen:{name}", "wing", case=name)
+    # RANS airfoils (first cells of 1e-5 and 1e-6 chord): the wall layer's figures
+    out["rans:rae2822"] = MeshSource("rans:rae2822", "AIRFOIL", dim=2, bundled="/work/shared/data/su2/"
+                                     "deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
+    out["rans:ogrid_1e-6"] = MeshSource("rans:ogrid_1e-6", "airfoil", dim=2, ogrid=("0012", 193, 71, 1e-6))
     return out
 
 
@@ -196,8 +225,10 @@ def run_one(mesh_path: Path, surface: str, design: str, *, work: Path, overrides
         row.update(status="ERROR" if isinstance(e, QualityError) else "INPUT", error=str(e).splitlines()[0][:160],
                    seconds=round(time.perf_counter() - t0, 2))
         return row
-    q = result.quality
-    row["status"] = "ok" if q is None or q.ok else "REFUSED"
+    q, wall = result.quality, result.wall_layer
+    row["status"] = "ok" if q is None or q.ok else "REFUSED"     # the first cells: ffd deform's warning
+    if wall is not None:                # the first cells on the wall (a RANS mesh)
+        row.update(first_cell=[wall.ratio_min, wall.ratio_max], off_wall=wall.angle_change, wall_failed=wall.n_failed)
     if q is not None:
         row.update(inverted=q.n_inverted, failed=q.n_failed, worse=q.n_worse, ortho_failed=q.n_ortho_failed,
                    input_bad=q.n_input_bad, q_before=q.min_before, q_after=q.min_after,
@@ -229,8 +260,9 @@ def run_matrix(meshes: list[str], designs: list[str], *, work: Path, overrides=(
             if echo:
                 echo(f"(skipped {mname}: not present)")
             continue
-        for d in designs:
-            row = run_one(path, src.surface, d, work=work, overrides=overrides)
+        for d in [d for d in designs if d.startswith("2d_") == (src.dim == 2)]:
+            row = run_one(path, src.surface, d, work=work, overrides=overrides,
+                          points=(10, 2) if src.dim == 2 else (6, 8, 2))
             row["mesh"] = mname
             rows.append(row)
             if echo:
@@ -367,6 +399,8 @@ def _line(r: dict) -> str:
         s += f" (loss {_fmt(r.get('ortho_loss'), '.1f')})"
     if r.get("mesh_quality") is not None:
         s += f"  mq {r['mesh_quality']:.3f}"
+    if r.get("first_cell") is not None:
+        s += f"  first cell {r['first_cell'][0]:.4f}-{r['first_cell'][1]:.4f} off-wall {r['off_wall']:.2f} deg"
     if "recovery" in r:
         s += f"  [{r['recovery']}]"
     return s + f"  {r['seconds']:.1f}s"
@@ -388,10 +422,14 @@ def matrix_table(rows: list[dict]) -> str:
                 notes = ([f"{r['by_design']} by design"] if r.get("by_design") else []) + \
                     (["recovered"] if r.get("recovered_with") else [])
                 notes += [f"mq {r['mesh_quality']:.2f}"] if r.get("mesh_quality") is not None else []
+                notes += ([f"fc {r['first_cell'][0]:.4f}-{r['first_cell'][1]:.4f}, {r['off_wall']:.2f} deg"
+                           + (f", {r['wall_failed']} > 1 %" if r.get("wall_failed") else "")]
+                          if r.get("first_cell") is not None else [])
                 out.append("ok" + (f" ({', '.join(notes)})" if notes else ""))
             elif r["status"] == "REFUSED":
                 parts = [f"{r[k]} {w}" for k, w in (("inverted", "inv"), ("worse", "worse"),
-                                                      ("ortho_failed", "ortho")) if r.get(k)]
+                                                      ("ortho_failed", "ortho"), ("wall_failed", "first cells"))
+                         if r.get(k)]
                 out.append("**R** " + ", ".join(parts))
             else:
                 out.append(r["status"])
@@ -449,7 +487,13 @@ def summary(rows: list[dict]) -> list[dict]:
             {"case": "mesh_quality constraint, min over designs (default bound 0.3)",
              "measured": min((r["mesh_quality"] for r in rows if r.get("mesh_quality") is not None), default=None),
              "target": ">= 0.3",
-             "met": all(r["mesh_quality"] >= 0.3 for r in rows if r.get("mesh_quality") is not None)}]
+             "met": all(r["mesh_quality"] >= 0.3 for r in rows if r.get("mesh_quality") is not None)},
+            {"case": "RANS meshes: first-cell height after / before, farthest from 1 (wall layer)",
+             "measured": max((abs(v - 1) for r in rows for v in r.get("first_cell") or ()), default=None),
+             "target": "<= 0.005", "met": all(abs(v - 1) <= 0.005 for r in rows for v in r.get("first_cell") or ())},
+            {"case": "RANS meshes: off-wall angle change, largest (degrees)",
+             "measured": max((r["off_wall"] for r in rows if r.get("off_wall") is not None), default=None),
+             "target": "< 0.5", "met": all(r["off_wall"] < 0.5 for r in rows if r.get("off_wall") is not None)}]
 
 
 def main(argv=None) -> int:

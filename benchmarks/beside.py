@@ -8,7 +8,8 @@ caches), the ratio of the minima (this tree / the other), and whether the output
 the same (the deformed mesh and the lattice; ``-`` for a command without a file output).
 
 The commands are the bundled samples' main jobs (``ffd deform`` of designs that exist in both trees,
-``ffd box``, ``ffd check``) and the embedding benchmark's in-process kernel timing
+``ffd box``, ``ffd check``), DesignModel's reverse products in process (``benchmarks/bench_model_vjp.py``,
+this tree's script run on each tree's sources) and the embedding benchmark's in-process kernel timing
 (``python -m benchmarks --only core --quick``, its own table printed by each tree, not compared here).
 """
 
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import json
 import os
 import shutil
 import subprocess
@@ -40,6 +42,8 @@ COMMANDS = (
     ("deform naca0012_s1223 (2D)", ["deform", "configs/naca0012_s1223.yaml", "-q", "-o", "{out}/f.su2"],
      ["f.su2", "f_lattice.vtk"]),
     ("check crm_wing", ["check", "samples/crm_wing.su2", "-q"], []),
+    ("DesignModel set_values + surface_vjp + mesh_vjp x2 (in process, median)",
+     ["@script", "benchmarks/bench_model_vjp.py"], []),
     ("box crm_wing, rebuilt (fit + embed)", ["box", "samples/crm_wing.su2", "--surface", "wing", "--rebuild", "-q",
                                              "--cache-dir", "{out}", "--lattice", "{out}/g_lattice.vtk"],
      ["g_lattice.vtk"]),
@@ -63,13 +67,20 @@ def _outputs(folder: Path, files: list[str]) -> list[str]:
 
 
 def run_once(tree: Path, args: list[str], out: Path) -> tuple[float, int]:
-    """Wall seconds and exit code of ``python -m ffdcli ARGS`` in ``tree``."""
+    """Wall seconds and exit code of ``python -m ffdcli ARGS`` in ``tree``. ``["@script", PATH]``: this
+    tree's script ``PATH`` run with ``tree``'s sources, its seconds the ``"seconds"`` of the JSON line it
+    prints (an in-process timing of the public API, the same script for both trees)."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     env.pop("NUMBA_CACHE_DIR", None)                 # each tree's own cache beside its sources
-    cmd = [sys.executable, "-m", "ffdcli", *(a.format(out=out) for a in args)]
+    script = args[0] == "@script"
+    cmd = ([sys.executable, str(HERE / args[1]), *args[2:]] if script else
+           [sys.executable, "-m", "ffdcli", *(a.format(out=out) for a in args)])
     t0 = time.perf_counter()
-    p = subprocess.run(cmd, cwd=tree, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    p = subprocess.run(cmd, cwd=tree, env=env, stdout=subprocess.PIPE if script else subprocess.DEVNULL,
+                       stderr=subprocess.PIPE, text=True)
     seconds = time.perf_counter() - t0
+    if script and p.returncode == 0:
+        seconds = float(json.loads(p.stdout.strip().splitlines()[-1])["seconds"])
     if p.returncode != 0:
         print(f"  {tree.name}: {' '.join(cmd[3:])} exited {p.returncode}: {p.stderr.strip()[-300:]}",
               file=sys.stderr)
@@ -82,7 +93,7 @@ def compare(other: Path, rounds: int) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory(prefix="ffd-beside-") as tmp:
         for label, args, files in COMMANDS:
-            if not (trees["other"] / args[1]).exists() and args[0] == "deform":
+            if args[0] == "deform" and not (trees["other"] / args[1]).exists():
                 rows.append({"command": label, "note": "not in the other tree"})
                 continue
             outs = {k: Path(tmp) / k / label.split()[1] for k in trees}

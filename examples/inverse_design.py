@@ -92,7 +92,7 @@ def run(folder: Path | None = None, maxiter: int = 60, disp: bool = False) -> di
         prob.setup()
         prob.run_driver()
         model = ffd.model
-        return {"values": model.values.copy(), "target": v_target, "names": list(model.names),
+        return {"values": ffd.design_values(prob), "target": v_target, "names": list(model.names),
                 "iterations": prob.driver.iter_count, "success": prob.driver.result.success,
                 "thickness": np.asarray(prob["k0_thickness"]).copy(), "volume": float(prob["k1_volume"][0]),
                 "misfit": float(prob["misfit.f"][0])}

@@ -9,16 +9,20 @@ Any other exception is a bug in ffd: the command line reports it in one line wit
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import os
 import signal
 import threading
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 #: Environment variables by which MPI launchers give the number of processes (MPICH/Intel hydra,
 #: Open MPI, PMIx, Slurm's srun).
 SIZE_VARIABLES = ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "PMIX_SIZE", "SLURM_NTASKS")
-#: Signals that mpiexec forwards to every rank and that end an MPI run together (SIGINT: KeyboardInterrupt).
-WATCHED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP") if hasattr(signal, n))
+#: Signals that end an MPI run together: mpiexec forwards them to every rank (and Ctrl-C at a terminal
+#: reaches every rank of its process group). SIGINT is one of them: a KeyboardInterrupt raised at once on
+#: one rank, while another waits in a collective, deadlocked ``mpiexec -n 2 ffd deform`` in 12 of 21 tries.
+WATCHED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGTERM", "SIGHUP", "SIGINT") if hasattr(signal, n))
 
 
 class FfdError(Exception):
@@ -75,12 +79,15 @@ class Terminated(BaseException):
 
 
 class SignalRecorder:
-    """For the whole run of ``ffd`` under ``mpiexec`` (from before MPI starts): SIGTERM and SIGHUP,
-    which ``mpiexec`` forwards to every rank, are recorded (:attr:`signum`) instead of killing the rank
-    (a rank killed alone leaves the others waiting and rank 0's temporary file behind). Every rank then
+    """For the whole run of ``ffd`` under ``mpiexec`` (from before MPI starts): SIGTERM, SIGHUP and
+    SIGINT (Ctrl-C), which reach every rank, are recorded (:attr:`signum`) instead of killing the rank
+    or raising at once (a rank killed alone, or one that leaves its collective for the error
+    agreement while another waits in the collective, leaves the others waiting forever and rank 0's
+    temporary file behind). Every rank then
     stops at the next :meth:`ffdcli.parallel.comm.MPIComm.agree` (the comm's ``signals``) with
-    :class:`Terminated`: one message, exit 128 + signum, as a serial run. During a write the signal raises at once
-    (:func:`ffdcli.io.atomic.signals_raise` replaces the recorder), so the temporary files go.
+    :class:`Terminated`: one message, exit 128 + signum (130 for Ctrl-C, "interrupted"), as a serial run.
+    During a write the signal raises at once (:func:`ffdcli.io.atomic.signals_raise` replaces the
+    recorder), so the temporary files go.
     ``active`` False (a serial run) or outside the main thread: nothing is installed; default: whether
     an MPI launcher started this process with more than one rank (:data:`SIZE_VARIABLES`). Nested (the
     entry point's, then the command line's), the inner one shares the outer one's record."""
@@ -132,3 +139,55 @@ class SignalRecorder:
             with contextlib.suppress(ValueError, OSError):
                 signal.signal(s, h)
         self._old.clear()
+
+
+#: The outputs the running command has put in place (renamed into their final names), in order: what a
+#: signal's message says when it comes after them. A context variable set by the command line for one
+#: command (:func:`outputs_ledger`), never a list shared between commands; None outside a command.
+COMMITTED: contextvars.ContextVar[list[str] | None] = contextvars.ContextVar("ffd_committed", default=None)
+
+
+def note_committed(paths: Iterable[str | Path]) -> None:
+    """Record outputs that are now complete under their final names (:class:`ffdcli.io.outputs.OutputPlan`
+    calls it once its renames are done). Outside :func:`outputs_ledger`: nothing."""
+    ledger = COMMITTED.get()
+    if ledger is not None:
+        ledger.extend(str(p) for p in paths)
+
+
+def committed_outputs() -> list[str]:
+    """The outputs this command has put in place so far (empty outside a command)."""
+    return list(COMMITTED.get() or ())
+
+
+@contextlib.contextmanager
+def outputs_ledger() -> Iterator[list[str]]:
+    """One command's record of its complete outputs (:data:`COMMITTED`); the handlers of SIGTERM and
+    SIGHUP are put back as they were at the end (a write may leave them raising :class:`Terminated`:
+    :func:`ffdcli.io.atomic.signals_raise`)."""
+    token = COMMITTED.set([])
+    old = {}
+    if threading.current_thread() is threading.main_thread():
+        for s in WATCHED_SIGNALS:
+            with contextlib.suppress(ValueError, OSError):
+                old[s] = signal.getsignal(s)
+    try:
+        yield COMMITTED.get()
+    finally:
+        COMMITTED.reset(token)
+        for s, h in old.items():
+            with contextlib.suppress(ValueError, OSError, TypeError):
+                signal.signal(s, h)
+
+
+def interrupt_message(exc: BaseException) -> str:
+    """The one line of a run stopped by Ctrl-C (KeyboardInterrupt) or :class:`Terminated`, true about the
+    files: "nothing was written", or, when the signal came after the outputs were put in place, which
+    outputs are complete."""
+    ctrl_c = isinstance(exc, KeyboardInterrupt) or getattr(exc, "signum", None) == signal.SIGINT
+    what = "interrupted" if ctrl_c else str(exc)
+    done = committed_outputs()
+    if not done:
+        return f"{what}; nothing was written"
+    names = ", ".join(done[:6]) + (f" and {len(done) - 6} more" if len(done) > 6 else "")
+    return f"{what} after the outputs were written: {names} {'is' if len(done) == 1 else 'are'} complete"

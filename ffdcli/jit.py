@@ -21,6 +21,8 @@ each one on the numba and llvmlite the project pins in ``pyproject.toml``):
   and the scalar :func:`fma` of the generic ``B @ P`` (the same lanes, bit for bit).
 - The interrupt guard around compiled code (:func:`interrupts_outside_compilers`): it reads the
   Python stack for numba's and llvmlite's own files, i.e. it depends on where numba compiles.
+- :func:`cache_failures_warn`: numba's ``Cache.save_overload`` (``numba.core.caching``) wrapped, so a
+  kernel that cannot be saved (a full disk, a file-size limit) is a warning, not a failed run.
 - :func:`compile_notice`: numba's event API (``numba.core.event``, "numba:compile", fired on a
   cache miss only) to say on stderr, once, that kernels are being compiled and why the run waits.
 
@@ -55,6 +57,7 @@ from collections.abc import Callable, Iterator
 
 from llvmlite import ir
 from numba import njit, types
+from numba.core import caching as numba_caching
 from numba.core import cgutils
 from numba.core import event as numba_event
 from numba.cpython.unsafe.tuple import tuple_setitem
@@ -509,3 +512,42 @@ def compile_notice(write: Callable[[str], object] | None = None, package: str = 
         yield
     finally:
         numba_event.unregister("numba:compile", listener)
+
+
+# ----------------------------------------------------------------------------------------------
+# A kernel numba cannot save
+# ----------------------------------------------------------------------------------------------
+
+#: The line :func:`cache_failures_warn` writes (``{dir}``: numba's cache, ``{why}``: the OS's reason).
+SAVE_WARNING = ("ffd: warning: cannot save a compiled kernel in numba's cache {dir}: {why}; the run goes on "
+                "(the kernel is compiled again at the next run)\n")
+
+
+@contextlib.contextmanager
+def cache_failures_warn(write: Callable[[str], object] | None = None) -> Iterator[None]:
+    """During the block, a kernel that numba compiled but cannot save in its cache (a full disk, the
+    process's file-size limit, a read-only folder) is used all the same, with :data:`SAVE_WARNING` once
+    (``write``, default stderr): numba's ``Cache.save_overload`` (``numba.core.caching``, not public)
+    raises the OSError otherwise, and a run would fail for want of a cache. numba removes its own
+    temporary file first."""
+    if write is None:
+        def write(text):
+            sys.stderr.write(text)
+            sys.stderr.flush()
+    original = numba_caching.Cache.save_overload
+    said: list[bool] = []
+
+    def save_overload(self, sig, data):
+        try:
+            original(self, sig, data)
+        except OSError as e:
+            if not said:
+                said.append(True)
+                write(SAVE_WARNING.format(dir=cache_dir(), why=e.strerror or e))
+
+    numba_caching.Cache.save_overload = save_overload
+    try:
+        yield
+    finally:
+        numba_caching.Cache.save_overload = original
+

@@ -19,9 +19,11 @@ given in ``points={name: X}``; one output per ``constraints:`` item, ``k<index>_
 (a component's: ``<component>_k<index>_<kind>``). Every name is unique and reversible
 (:func:`input_parts`) for every design the file format allows.
 
-Derivatives are matrix-free (``compute_jacvec_product``): forward products are
-``DesignModel.surface_jvp``/``mesh_jvp``/``points_jvp`` and ``J @ dv`` for the constraints, reverse
-products the vector-Jacobian products; nothing of size S x n_vars is formed.
+Every call hands the inputs' values down the chain (``DesignModel.evaluate(values)``: nothing is set on
+the model, as OpenMDAO's ``compute`` receives its inputs). Derivatives are matrix-free
+(``compute_jacvec_product``): forward products are ``surface_jvp``/``mesh_jvp``/``points_jvp`` and
+``J @ dv`` for the constraints, reverse products the vector-Jacobian products; nothing of size
+S x n_vars is formed.
 """
 
 from __future__ import annotations
@@ -88,7 +90,7 @@ def constraint_items(model: DesignModel) -> list[tuple[str, slice, object]]:
     ``model`` that has values (an ``le_te`` of a design without shape moves has none), in order."""
     items, at = [], 0
     for ci, group in model.constraint_groups:
-        comp = model.run.components[ci].name or ""
+        comp = model.component_names[ci] or ""
         for c in group:
             if c.size:
                 items.append((constraint_output(comp, c.index, c.kind), slice(at, at + c.size), c))
@@ -151,7 +153,7 @@ class FFDComponent(om.ExplicitComponent):
                 self.add_design_var(name, lower=lo[idx], upper=hi[idx])
         self.add_output("surface", shape=(len(model.surface_ids), 3), desc="deformed surface points")
         if self.options["mesh"]:
-            self.add_output("mesh", shape=(model.run.prep.mesh.n_points, 3), desc="every mesh node")
+            self.add_output("mesh", shape=(model.n_points, 3), desc="every mesh node")
         for name in model.point_sets:
             self.add_output(name, shape=(model.point_set(name).n_points, 3), desc=f"point set {name}")
         self._con_slices = []                       # (output name, slice of model.constraint_names)
@@ -172,36 +174,33 @@ class FFDComponent(om.ExplicitComponent):
         """The inputs, one per change item, in the order of the design file."""
         return list(self._var_index)
 
-    def _values(self, inputs) -> np.ndarray:
+    def design_values(self, inputs) -> np.ndarray:
+        """(n_vars,) the design values in ``model.names`` order from ``inputs``: the component's inputs
+        vector, or anything indexed by its input names (a ``Problem`` whose inputs are promoted). The
+        component holds no values of its own: each call hands them down the chain."""
         v = np.empty(self.model.n_vars)
         for name, idx in self._var_index.items():
             v[idx] = np.asarray(inputs[name]).reshape(-1)
         return v
 
-    def _sync(self, inputs):
-        v = self._values(inputs)
-        if not np.array_equal(v, self.model.values):
-            self.model.set_values(v)
-
     def compute(self, inputs, outputs):
         try:
-            self._sync(inputs)
+            at = self.model.evaluate(self.design_values(inputs))     # the values the driver holds, down the chain
         except InputError as e:              # a value out of its bounds: the driver may step back
             raise om.AnalysisError(str(e)) from None
-        m = self.model
-        outputs["surface"] = m.surface_points()
+        outputs["surface"] = at.surface_points()
         if self.options["mesh"]:
-            outputs["mesh"] = m.mesh_points()
-        for name in m.point_sets:
-            outputs[name] = m.points(name)
+            outputs["mesh"] = at.mesh_points()
+        for name in self.model.point_sets:
+            outputs[name] = at.points(name)
         if self._con_slices:
-            vals = m.constraint_values()
+            vals = at.constraint_values()
             for out, sl in self._con_slices:
                 outputs[out] = vals[sl]
 
     def compute_jacvec_product(self, inputs, d_inputs, d_outputs, mode):
-        self._sync(inputs)
         m = self.model
+        at = m.evaluate(self.design_values(inputs))
         outs = [n for n in ["surface", "mesh", *m.point_sets] if n in d_outputs]
         cons = [(o, sl) for o, sl in self._con_slices if o in d_outputs]
         if mode == "fwd":
@@ -213,13 +212,13 @@ class FFDComponent(om.ExplicitComponent):
                 return
             for name in outs:
                 if name == "surface":
-                    d_outputs[name] += m.surface_jvp(dv)
+                    d_outputs[name] += at.surface_jvp(dv)
                 elif name == "mesh":
-                    d_outputs[name] += m.mesh_jvp(dv)
+                    d_outputs[name] += at.mesh_jvp(dv)
                 else:
-                    d_outputs[name] += m.points_jvp(name, dv)
+                    d_outputs[name] += at.points_jvp(name, dv)
             if cons:
-                Jdv = m.constraint_jacobian() @ dv
+                Jdv = at.constraint_jacobian() @ dv
                 for o, sl in cons:
                     d_outputs[o] += Jdv[sl]
         else:
@@ -229,13 +228,13 @@ class FFDComponent(om.ExplicitComponent):
                 if not d.any():
                     continue
                 if name == "surface":
-                    g += m.surface_vjp(d)
+                    g += at.surface_vjp(d)
                 elif name == "mesh":
-                    g += m.mesh_vjp(d)
+                    g += at.mesh_vjp(d)
                 else:
-                    g += m.points_vjp(name, d)
+                    g += at.points_vjp(name, d)
             if cons:
-                J = m.constraint_jacobian()
+                J = at.constraint_jacobian()
                 for o, sl in cons:
                     g += np.asarray(d_outputs[o]) @ J[sl]
             for name, idx in self._var_index.items():

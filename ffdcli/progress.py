@@ -17,7 +17,6 @@ from ffdcli.deferred import deferred
 tqdm = deferred("tqdm")      # imported when a bar is drawn on a terminal
 
 
-
 class Bar(Protocol):
     def update(self, n: int = 1) -> None: ...
     def close(self) -> None: ...

@@ -202,6 +202,8 @@ class BoxSettings:
 METHODS = ("idw", "none")
 #: What each surface node's neighbourhood carries along (``volume.carry``).
 CARRY = ("gradient", "rotation")
+#: How the near-wall layer of a mesh with thin first cells moves (ffdcli.volume.layer_motion).
+WALL_LAYER = ("rigid", "none")
 
 
 def _doc(text: str) -> dict:
@@ -247,6 +249,10 @@ class WarpSettings:
     sliding: tuple[str, ...] | None = field(default=None, metadata=_doc(
         "planar markers whose nodes move only in their plane (default: planar markers that "
         "touch the surface, e.g. a symmetry plane)"))
+    wall_layer: str = field(default="rigid", metadata=_doc(
+        "rigid (default): on a mesh whose first cells are thin against the wall spacing (a RANS "
+        "mesh, found from the mesh), the near-wall layer moves rigidly with its wall (the first-cell "
+        "height and the off-wall angle kept) and blends into the warp beyond it; none: the warp alone"))
     chunk: int = field(default=65536, metadata=_doc(
         "volume nodes per chunk (progress and memory granularity)"))
 
@@ -266,6 +272,9 @@ class WarpSettings:
         if self.carry not in CARRY:
             raise InputError(f"expected one of {', '.join(CARRY)}, got {self.carry!r}",
                              key="volume.carry")
+        if self.wall_layer not in WALL_LAYER:
+            raise InputError(f"expected one of {', '.join(WALL_LAYER)}, got {self.wall_layer!r}",
+                             key="volume.wall_layer")
         if self.method not in METHODS:
             raise InputError(f"expected one of {', '.join(METHODS)}, got {self.method!r}",
                              key="volume.method")
@@ -320,7 +329,7 @@ class WarpSettings:
                 raise InputError(f"unknown key {k!r}; expected one of {', '.join(names + list(GATE_KEYS))}",
                                  path=path, key=f"{key}.{k}")
             if isinstance(v, bool) and k not in ("fixed", "sliding"):
-                raise InputError(f"expected a {'name' if k in ('method', 'carry') else 'number'}, got {v!r}",
+                raise InputError(f"expected a {'name' if k in ('method', 'carry', 'wall_layer') else 'number'}, got {v!r}",
                                  path=path, key=f"{key}.{k}")
             if k in ("fixed", "sliding") and v is not None:
                 if isinstance(v, str):
@@ -352,6 +361,7 @@ class WarpSettings:
         props = {
             "method": {"enum": list(METHODS), "default": "idw"},
             "carry": {"enum": list(CARRY), "default": "gradient"},
+            "wall_layer": {"enum": list(WALL_LAYER), "default": "rigid"},
             "a": {**pos, "default": 3},
             "b": {**pos, "default": 5},
             "alpha": {**pos, "default": 1},
@@ -375,6 +385,10 @@ class WarpSettings:
 #: The quality gate's keys of ``volume:`` (the gate lives in :mod:`ffdcli.quality.gate`; its default
 #: threshold there is ``DEFAULT_THRESHOLD``, checked equal to this one by the tests).
 GATE_KEYS = {
+    "first_cell": {"type": "number", "exclusiveMinimum": 0, "default": 0.01,
+                   "description": "wall layer: ffd deform warns of a design that changes the height of a "
+                                  "first cell on the wall by more than 1 %; set, this tolerance is a rule: "
+                                  "a design outside 1 +- it is refused, like a cell it inverts"},
     "threshold": {"type": "number", "exclusiveMinimum": 0, "maximum": 1, "default": 0.05,
                   "description": "quality gate (scaled Jacobian, 0..1): a cell below it that the "
                                  "deformation made markedly worse fails; default 0.05"},

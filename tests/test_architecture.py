@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "ffdcli"
 
 #: The stages in data-flow order; a module may import its own stage and the ones before it.
 LAYERS = [
-    {"errors", "settings", "progress", "jit", "_compat", "deferred", ""},
+    {"errors", "settings", "progress", "jit", "_compat", "deferred", "registry", "schema_parts", ""},
     {"mesh"},
     {"parallel"},
     {"lattice"},          # before io: the SU2 writer refreshes SU2's own FFD section with the splines
@@ -24,7 +24,9 @@ LAYERS = [
     {"volume"},
     {"quality"},
     {"constraints"},
+    {"optimize.solvers"},  # before design: the design file's optimize: schema is assembled from the solver kinds
     {"design"},
+    {"chain"},            # the derivative chain: stages over volume/ and quality/, composed; the MPI reductions
     {"viz"},
     {"app"},
     {"api", "openmdao", "mphys"},
@@ -40,10 +42,10 @@ FIXTURES = "testing"
 OPTIONAL = {"pyvista", "vtk", "openmdao", "mphys", "mpi4py", "gmsh", "matplotlib", "pygeo", "pyspline"}
 
 
-def _modules() -> dict[str, Path]:
+def _modules(package: Path = PACKAGE) -> dict[str, Path]:
     out = {}
-    for p in PACKAGE.rglob("*.py"):
-        parts = list(p.relative_to(PACKAGE.parent).with_suffix("").parts)
+    for p in package.rglob("*.py"):
+        parts = list(p.relative_to(package.parent).with_suffix("").parts)
         if parts[-1] == "__init__":
             parts = parts[:-1]
         out[".".join(parts)] = p
@@ -53,9 +55,10 @@ def _modules() -> dict[str, Path]:
 MODULES = _modules()
 
 
-def _imports(name: str, path: Path):
+def _imports(name: str, path: Path, modules: dict[str, Path] = MODULES, *, names: bool = False):
     """(target module, line, function-local?) of every ``ffdcli`` import of a module, and the
-    function-local imports of other packages as (top-level name, line)."""
+    function-local imports of other packages as (top-level name, line); with ``names``, also the
+    (module, name, line) of every name imported from an ``ffdcli`` module."""
     text = path.read_text()
     tree = ast.parse(text)
     lines = text.splitlines()
@@ -66,7 +69,7 @@ def _imports(name: str, path: Path):
             for node in ast.walk(fn):
                 if isinstance(node, (ast.Import, ast.ImportFrom)) and "noqa: PLC0415" not in lines[node.lineno - 1]:
                     local_nodes.add(id(node))     # a kept one says why on the line before
-    own, other = [], []
+    own, other, imported = [], [], []
     for node in ast.walk(tree):
         local = id(node) in local_nodes
         if isinstance(node, ast.ImportFrom):
@@ -80,19 +83,28 @@ def _imports(name: str, path: Path):
                 continue
             for alias in node.names:
                 sub = f"{mod}.{alias.name}"
-                own.append((sub if sub in MODULES else mod, node.lineno, local))
+                own.append((sub if sub in modules else mod, node.lineno, local))
+                if sub not in modules:
+                    imported.append((mod, alias.name, node.lineno))
         elif isinstance(node, ast.Import):
             for alias in node.names:
                 if alias.name.split(".")[0] == "ffdcli":
                     own.append((alias.name, node.lineno, local))
                 else:
                     other.append((alias.name.split(".")[0], node.lineno, local))
-    return own, other
+    return (own, other, imported) if names else (own, other)
+
+
+#: Sub-packages that are a stage of their own, apart from their package's.
+SUBSTAGES = ("optimize.solvers",)
 
 
 def _stage(module: str) -> str:
-    parts = module.split(".")
-    return parts[1] if len(parts) > 1 else ""
+    rest = module.split(".", 1)[1] if "." in module else ""
+    for sub in SUBSTAGES:
+        if rest == sub or rest.startswith(sub + "."):
+            return sub
+    return rest.split(".")[0]
 
 
 def _layer(module: str) -> int | None:
@@ -121,12 +133,30 @@ def test_no_stage_imports_a_later_one():
     assert not wrong, "\n".join(wrong)
 
 
-def test_no_import_cycle():
-    graph = {name: {t for t, _, _ in _imports(name, path)[0] if t in MODULES and t != name}
-             for name, path in MODULES.items()}
-    # a package's __init__ that re-exports its own modules is its face, not a dependency of them
-    for name in graph:
-        graph[name] = {t for t in graph[name] if not (name.startswith(t + "."))}
+def _import_graph(modules: dict[str, Path]) -> dict[str, set[str]]:
+    """Module -> the modules its import runs: every module it imports, and the ``__init__`` of each
+    package above an imported module that is not above the importer itself (Python runs
+    ``a/__init__.py`` before ``a.b``, so a package's face is part of every import through it). A module
+    importing its own package's face is not an edge: the face re-exports its modules (``cli``'s
+    commands import ``cli``, which registers them when it runs)."""
+    graph = {}
+    for name, path in modules.items():
+        targets = set()
+        for t, _, _ in _imports(name, path, modules)[0]:
+            if t not in modules or t == name or name.startswith(t + "."):
+                continue
+            targets.add(t)
+            parts = t.split(".")
+            for k in range(2, len(parts)):
+                parent = ".".join(parts[:k])
+                if parent in modules and parent != name and not name.startswith(parent + "."):
+                    targets.add(parent)
+        graph[name] = targets
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan)."""
     sys.setrecursionlimit(10000)
     index, low, stack, on, cycles = {}, {}, [], set(), []
 
@@ -154,7 +184,61 @@ def test_no_import_cycle():
     for v in graph:
         if v not in index:
             visit(v)
+    return cycles
+
+
+def test_no_import_cycle():
+    cycles = _cycles(_import_graph(MODULES))
     assert not cycles, f"import cycles: {cycles}"
+
+
+def _write_package(root: Path, files: dict[str, str]) -> dict[str, Path]:
+    for rel, text in files.items():
+        (root / rel).parent.mkdir(parents=True, exist_ok=True)
+        (root / rel).write_text(text)
+    return _modules(root / "ffdcli")
+
+
+def test_a_cycle_through_a_package_face_is_caught(tmp_path):
+    """``a.x`` imports ``b.y``, which runs ``b/__init__.py``, which imports ``b.z``, which imports ``a.x``:
+    a cycle although no module names the other directly (the old graph did not see it). A package face
+    importing its own modules is no cycle."""
+    face = {"ffdcli/__init__.py": "", "ffdcli/a/__init__.py": "", "ffdcli/a/x.py": "from ffdcli.b.y import Y\n",
+            "ffdcli/b/__init__.py": "from ffdcli.b.y import Y\nfrom ffdcli.b.z import Z\n",
+            "ffdcli/b/y.py": "Y = 1\n", "ffdcli/b/z.py": "Z = 2\n"}
+    assert not _cycles(_import_graph(_write_package(tmp_path / "ok", face)))
+    bad = {**face, "ffdcli/b/z.py": "from ffdcli.a.x import Y as Z\n"}
+    assert _cycles(_import_graph(_write_package(tmp_path / "bad", bad))) == [
+        ["ffdcli.a.x", "ffdcli.b", "ffdcli.b.z"]]
+    deep = {**face, "ffdcli/b/z.py": "Z = 2\n", "ffdcli/c/__init__.py": "from ffdcli.a.x import Y\n",
+            "ffdcli/b/y.py": "from ffdcli.c import Y\n"}       # b.y -> c's face -> a.x -> b.y
+    assert _cycles(_import_graph(_write_package(tmp_path / "deep", deep))) == [
+        ["ffdcli.a.x", "ffdcli.b", "ffdcli.b.y", "ffdcli.c"]]
+
+
+def _private_imports(modules: dict[str, Path]) -> list[str]:
+    """Every ``_name`` (not ``__dunder__``) imported from another ``ffdcli`` module, as ``module:line``."""
+    wrong = []
+    for name, path in modules.items():
+        for mod, alias, line in _imports(name, path, modules, names=True)[2]:
+            if alias.startswith("_") and not alias.startswith("__") and mod != name:
+                wrong.append(f"{name}:{line} imports {alias} from {mod}")
+    return sorted(wrong)
+
+
+def test_no_private_name_is_imported_across_modules():
+    """A name with a leading underscore is its module's own: another module that needs it means it is
+    public (one home, a public name) or belongs elsewhere."""
+    wrong = _private_imports(MODULES)
+    assert not wrong, f"{len(wrong)} private names imported across modules:\n" + "\n".join(wrong)
+
+
+def test_the_private_import_check_can_fail(tmp_path):
+    modules = _write_package(tmp_path, {"ffdcli/__init__.py": "", "ffdcli/a.py": "def _helper(): pass\n",
+                                        "ffdcli/b.py": "from ffdcli.a import _helper, __doc__\n",
+                                        "ffdcli/c/__init__.py": "from ffdcli.c import _impl\n",
+                                        "ffdcli/c/_impl.py": "def run(): pass\n"})
+    assert _private_imports(modules) == ["ffdcli.b:1 imports _helper from ffdcli.a"]    # a private module: no name
 
 
 def test_function_local_imports_only_in_cli_or_for_optional_packages():

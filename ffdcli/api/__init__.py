@@ -5,12 +5,13 @@
 >>> model.set_values(model.values + 0.1)
 >>> dJdv = model.mesh_vjp(dJdX_all_nodes)      # exact, through the volume-mesh motion
 
-:mod:`ffdcli.api.model` (values, bounds, surface products), :mod:`ffdcli.api.pointsets`,
-:mod:`ffdcli.api.constraints`, :mod:`ffdcli.api.volume` (every mesh node), :mod:`ffdcli.api.gradient`
-(a sensitivity file to dJ/dv).
+:mod:`ffdcli.api.model` (``DesignModel.evaluate(values)`` -> ``DesignPoint``: every product of the
+derivative chain, :mod:`ffdcli.chain`, at those values), :mod:`ffdcli.api.pointsets`,
+:mod:`ffdcli.api.constraints`, :mod:`ffdcli.api.gradient` (a sensitivity file to dJ/dv).
 """
 
 from ffdcli.api.gradient import Gradient, gradient_from_file, read_sensitivity_for
-from ffdcli.api.model import DesignModel, constraints_report
+from ffdcli.api.model import DesignModel, DesignPoint, constraints_report
 
-__all__ = ["DesignModel", "Gradient", "constraints_report", "gradient_from_file", "read_sensitivity_for"]
+__all__ = ["DesignModel", "DesignPoint", "Gradient", "constraints_report", "gradient_from_file",
+           "read_sensitivity_for"]

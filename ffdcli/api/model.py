@@ -1,16 +1,18 @@
-"""The Python API for optimisation loops: load a design once, then set values and get products.
+"""The Python API for optimisation loops: load a design once, then evaluate it at any values.
 
 >>> from ffdcli.api import DesignModel
 >>> model = DesignModel.from_file("configs/rect_twist_linear.yaml")
->>> model.names[:2], model.values[:2]
->>> model.set_values(model.values + 0.1)
->>> X = model.surface_points()                 # (S, 3), ordered as model.surface_ids
->>> dJdv = model.surface_vjp(dJdX)             # (n_vars,), never forms the Jacobian
->>> dJdv = model.mesh_vjp(dJdX_all_nodes)      # through the volume-mesh motion as well
+>>> at = model.evaluate(model.values + 0.1)    # checked once (bounds; MPI: every rank the same)
+>>> X = at.surface_points()                    # (S, 3), ordered as model.surface_ids
+>>> dJdv = at.surface_vjp(dJdX)                # (n_vars,), never forms the Jacobian
+>>> dJdv = at.mesh_vjp(dJdX_all_nodes)         # through the volume-mesh motion as well
 
-Nothing is re-embedded: the box and embedding are loaded (or built and cached) once.
+The older form holds the values in the face: ``model.set_values(v)`` then ``model.surface_points()``,
+``model.mesh_vjp(g)``, ... are ``model.evaluate(v)``'s products. Nothing is re-embedded: the box and
+embedding are loaded (or built and cached) once.
 
-Derivatives are exact (no finite differences):
+The products are the derivative chain's (:mod:`ffdcli.chain`: values -> lattices -> surface; lattices
+-> frames; surface and frames -> volume; volume -> quality), each exact:
 
 * surface: ``dX/dv = B dP'/dv`` (:mod:`ffdcli.parameterization.derivatives`);
 * volume (``volume.method: idw``): the warp is linear in the surface translations ``b`` and frame
@@ -25,33 +27,167 @@ Derivatives are exact (no finite differences):
 
 from __future__ import annotations
 
-import numpy as np
-import scipy.sparse as sp
+import functools
+from dataclasses import dataclass
+from pathlib import Path
 
-from ffdcli.api.constraints import ConstraintsMixin
-from ffdcli.api.pointsets import PointSetsMixin
-from ffdcli.api.volume import VolumeMixin
+import numpy as np
+
+from ffdcli.api.constraints import (
+    ConstraintSet,
+    constraint_jacobian_arrays,
+    constraints_table,
+    variables_table,
+    write_constraint_jacobian,
+)
+from ffdcli.api.pointsets import ComponentPoints
+from ffdcli.app.deform import deform_design
+from ffdcli.app.deformation import Deformation, deform
 from ffdcli.app.run import load_run
+from ffdcli.app.write import write_outputs
 from ffdcli.design import load_design
 from ffdcli.errors import InputError
+from ffdcli.io.outputs import plan_outputs
 from ffdcli.mesh.numbers import as_numbers
 from ffdcli.parallel.comm import SerialComm
 from ffdcli.parameterization.changes import design_units
 from ffdcli.parameterization.components import variable_bounds
-from ffdcli.parameterization.derivatives import surface_jvp, vjp
+from ffdcli.quality.gate import Remedies
+
+#: How the API's user overrides the quality gate (the gate states the rule; :meth:`write` names its argument).
+REMEDIES = Remedies(deform_anyway=", or pass force=True to deform it anyway",
+                    write_anyway=" (force=True writes it anyway)", forced=" (force=True)")
 
 
-class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
+@dataclass(frozen=True, eq=False)
+class DesignPoint:
+    """A design model at some values: every product of the chain there (:meth:`DesignModel.evaluate`).
+
+    Nothing is stored on the model: the chain keeps what it computed for these values (with their
+    hash) and reuses it while they repeat."""
+
+    model: DesignModel
+    values: np.ndarray
+
+    @property
+    def chain(self):
+        return self.model.chain
+
+    def _dv(self, dv, what: str) -> np.ndarray:
+        return as_numbers(dv, (self.model.n_vars,), f"{what}: dv", hint="one value per design variable, in names order")
+
+    # -- lattices and surface ---------------------------------------------------------------------
+    def lattices(self) -> list[np.ndarray]:
+        """Deformed control points of every component (file order)."""
+        return list(self.chain.lattices.forward(self.values))
+
+    def lattice_jacobian(self) -> np.ndarray:
+        """dP'/dv (n_ctrl*3, n_vars); several components: block diagonal (``basis`` column order)."""
+        return self.chain.lattices.jacobian(self.values)
+
+    def surface_points(self) -> np.ndarray:
+        """(S, 3) deformed surface points (the rows of ``surface_ids``)."""
+        return self.chain.surface_points(self.values)
+
+    def surface_jvp(self, dv) -> np.ndarray:
+        """(S, 3) surface motion dX/dv @ dv for ``dv`` (n_vars,)."""
+        return self.chain.surface_jvp(self.values, self._dv(dv, "surface_jvp"))
+
+    def surface_vjp(self, g) -> np.ndarray:
+        """(n_vars,) dJ/dv for g = dJ/dX at the surface points (S, 3)."""
+        g = as_numbers(g, (len(self.chain.surface_ids), 3), "surface_vjp: g",
+                       hint="one row per surface point, surface_ids order")
+        return self.chain.surface_vjp(self.values, g)
+
+    # -- every mesh node ---------------------------------------------------------------------------
+    def mesh_points(self, progress=None) -> np.ndarray:
+        """(N, 3) every mesh node as ``ffd deform`` places it."""
+        return self.chain.mesh_points(self.values, progress).copy()
+
+    def mesh_jvp(self, dv, progress=None) -> np.ndarray:
+        """(N, 3) motion of every mesh node for ``dv`` (n_vars,), through the volume motion when it is IDW:
+        the warp of ``(dX_s/dv dv, I + dF/dv dv)``, the surface nodes ``dX_s/dv dv`` exactly. The
+        transpose of :meth:`mesh_vjp`."""
+        return self.chain.mesh_jvp(self.values, self._dv(dv, "mesh_jvp"), progress)
+
+    def mesh_vjp(self, g, progress=None) -> np.ndarray:
+        """dJ/dv for g = dJ/dX at every mesh node (N, 3), through the volume motion when it is IDW:
+        dJ/dv = (dX_s/dv)^T [g_s + (dX_v/db)^T g_v] + sum_s <(dX_v/dM_s)^T g_v, dF_s/dv>."""
+        g = as_numbers(g, (self.model.run.prep.mesh.n_points, 3), "mesh_vjp: g", hint="one row per mesh node")
+        return self.chain.mesh_vjp(self.values, g, progress)
+
+    def design_map_points(self):
+        """``(X_map (N, 3), zone (N,) bool)``: the input mesh's nodes near the wall moved by the design's
+        own map (the FFD map linearised at the nearest surface node, the quality gate's reference), the
+        others where they are in the input; None without a volume mesh that follows the surface."""
+        return self.chain.design_map(self.values)
+
+    def design_map_vjp(self, G) -> np.ndarray:
+        """(n_vars,) dJ/dv for ``G = dJ/dX_map`` (N, 3): the reverse product of :meth:`design_map_points`."""
+        return self.chain.design_map_vjp(self.values, G)
+
+    # -- point sets --------------------------------------------------------------------------------
+    def points(self, name: str) -> np.ndarray:
+        """(k, 3) the points of set ``name`` moved by the design."""
+        dPs = [P - c.P0 for P, c in zip(self.chain.lattices.forward(self.values), self.chain.components, strict=True)]
+        return self.model.point_set(name).points(dPs)
+
+    def points_jvp(self, name: str, dv) -> np.ndarray:
+        """(k, 3) dX/dv @ dv for the points of set ``name`` and ``dv`` (n_vars,)."""
+        ps = self.model.point_set(name)
+        return ps.motion(self.chain.lattices.jvp(self.values, self._dv(dv, f"points_jvp({name!r})")))
+
+    def points_vjp(self, name: str, g) -> np.ndarray:
+        """(n_vars,) dJ/dv for ``g`` = dJ/dX (k, 3) at the points of set ``name``. Under MPI a
+        collective: each rank passes its own points' ``g`` and every rank gets the sum over all ranks'
+        points (the chain's reduction; forward products stay local)."""
+        ps = self.model.point_set(name)
+        return self.chain.share.sum(lambda: self.chain.lattices.vjp(self.values, ps.pull(g)))
+
+    # -- the deformation as ffd deform makes it -----------------------------------------------------
+    def deform(self, *, recover: bool = True, check: bool = True, progress=None) -> Deformation:
+        """:func:`ffdcli.app.deformation.deform` at these values: every node, the quality gate's report
+        (and, with ``recover``, its recovery attempts); nothing written."""
+        P = self.chain.lattices.forward(self.values)
+        return deform(self.model.run, P=P[0] if self.chain.single else list(P), recover=recover, check=check,
+                      progress=progress)
+
+    # -- constraints -------------------------------------------------------------------------------
+    def constraint_values(self) -> np.ndarray:
+        """(C,) the constraint items."""
+        return self.model.constraint_set.values(self.chain, self.values, self.model.names)
+
+    def constraint_jacobian(self) -> np.ndarray:
+        """(C, n_vars) exact d(constraint item)/d(design variable)."""
+        return self.model.constraint_set.jacobian(self.chain, self.values, self.model.names)
+
+
+def _held(name: str):
+    """A method of :class:`DesignModel` that is :class:`DesignPoint`'s ``name`` at the values held in the
+    face (:meth:`DesignModel.set_values`): the older form of the API."""
+    of_point = getattr(DesignPoint, name)
+
+    @functools.wraps(of_point)
+    def method(self, *args, **kwargs):
+        return of_point(self._here, *args, **kwargs)
+
+    method.__doc__ = f"{(of_point.__doc__ or '').strip()}\n\nAt the values held (:meth:`set_values`)."
+    return method
+
+
+class DesignModel:
     """A design prepared for repeated evaluation: values in, points and derivatives out.
 
     Attributes
     ----------
-    run : ffdcli.app.pipeline.DesignRun
+    run : ffdcli.app.run.DesignRun
         The design file with its box (loaded from the cache or built once) and its changes.
+    chain : ffdcli.chain.DesignChain
+        The derivative chain over the run's components and mesh.
     names : list of str
         (n_vars,) design-variable names, ``c<index>.<kind>[<j>]`` as in ``ffd grad``.
     values : ndarray, shape (n_vars,)
-        Their current values (degrees for angles, factors, mesh units for offsets and shape).
+        The values the older methods (:meth:`surface_points`, ...) are evaluated at (:meth:`set_values`).
     bounds : ffdcli.parameterization.bounds.Bounds
         Natural (open) and user (``bounds:``, closed) bounds; :attr:`lower` and :attr:`upper`.
     """
@@ -60,16 +196,14 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         """``comm`` (:mod:`ffdcli.parallel.comm`; default the run's, else serial): under MPI every rank
         holds the same model (names, values, surface); point sets are per rank (each adds its own
         mesh partition's points) and their reverse products are summed over the ranks."""
-
         self.run = run
         self.comm = comm or getattr(run, "comm", None) or SerialComm()
+        self.chain = run.chain
         self.names, self.values = run.variables()
         self.units = [u for c in run.components for u in design_units(list(c.changes))]
         self.bounds = variable_bounds(run.components, run.design)
-        self._B = None
-        self._cache = {}            # what depends on the values (cleared by set_values)
-        self._static = {}           # what does not (constraint geometry on the baseline)
-        self._point_sets = {}
+        self.constraint_set = ConstraintSet(run)
+        self._point_sets: dict[str, ComponentPoints] = {}
 
     @classmethod
     def from_file(cls, path, overrides=(), *, cache_dir=None, use_cache: bool = True,
@@ -91,7 +225,6 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         comm : ffdcli.parallel.comm.SerialComm, optional
             MPI communicator: rank 0 reads the mesh and the cache and broadcasts them.
         """
-
         design = load_design(path, overrides=overrides)
         return cls(load_run(design, cache_dir=cache_dir, use_cache=use_cache, progress=progress, comm=comm),
                    comm=comm)
@@ -112,12 +245,11 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         """(n_vars,) upper bounds (``inf``: none)."""
         return self.bounds.upper
 
-    def set_values(self, values) -> None:
-        """New values of the design variables: an array (n_vars,) in ``names`` order, or {name: value}.
-
-        Raises :class:`~ffdcli.errors.InputError` naming the variable for NaN, inf, a value out of its
-        bounds (:attr:`lower`, :attr:`upper`; chord and span factors > 0), an unknown name or a wrong
-        length; the model is then unchanged."""
+    def checked(self, values) -> np.ndarray:
+        """``values`` (an array (n_vars,) in ``names`` order, or {name: value} over :attr:`values`) checked:
+        :class:`~ffdcli.errors.InputError` naming the variable for NaN, inf, a value out of its bounds
+        (:attr:`lower`, :attr:`upper`; chord and span factors > 0), an unknown name or a wrong length;
+        under MPI every rank must give the same values (the chain's agreement)."""
         if isinstance(values, dict):
             unknown = [k for k in values if k not in self.names]
             if unknown:
@@ -127,25 +259,47 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
             for k, x in values.items():
                 v[self.names.index(k)] = as_numbers(x, (), f"set_values: {k}")
             values = v
-        values = self.comm.run(self.bounds.check, values)     # a refusal on one rank stops every rank
-        if self.comm.size > 1:      # one design on every rank, or the partitions disagree silently
-            ranks = self.comm.allgather(values.tobytes())
-            if any(r != ranks[0] for r in ranks):
-                raise InputError("set_values: the MPI ranks were given different design values; every rank "
-                                 "must set the same values")
-        self.run.set_values(values)
-        self.values = values.copy()
-        self._cache.clear()
+        return self.chain.share.same_values(values, self.bounds.check)
 
-    def _check_dv(self, dv, what: str) -> np.ndarray:
-        return as_numbers(dv, (self.n_vars,), f"{what}: dv", hint="one value per design variable, in names order")
+    def evaluate(self, values) -> DesignPoint:
+        """The design at ``values`` (checked as :meth:`checked`): its products, nothing set on the model."""
+        return DesignPoint(self, self.checked(values).copy())
 
-    # -- evaluation --------------------------------------------------------------------------
+    def at(self, values) -> DesignPoint:
+        """The design at ``values`` the caller has checked already (:meth:`evaluate` without the check)."""
+        return DesignPoint(self, np.asarray(values, dtype=float))
+
+    def set_values(self, values) -> None:
+        """Hold new values in the face (the older form; :meth:`evaluate` is the one without state). The
+        model is unchanged when they are refused (:meth:`checked`)."""
+        self.values = self.checked(values).copy()
+
+    @property
+    def _here(self) -> DesignPoint:
+        return DesignPoint(self, self.values)
+
+    # -- the products at the held values (the older form) -----------------------------------------
+    lattices = _held("lattices")
+    surface_points = _held("surface_points")
+    lattice_jacobian = _held("lattice_jacobian")
+    surface_jvp = _held("surface_jvp")
+    surface_vjp = _held("surface_vjp")
+    mesh_points = _held("mesh_points")
+    mesh_jvp = _held("mesh_jvp")
+    mesh_vjp = _held("mesh_vjp")
+    design_map_points = _held("design_map_points")
+    design_map_vjp = _held("design_map_vjp")
+    points = _held("points")
+    points_jvp = _held("points_jvp")
+    points_vjp = _held("points_vjp")
+    constraint_values = _held("constraint_values")
+    constraint_jacobian = _held("constraint_jacobian")
+
     @property
     def surface_ids(self) -> np.ndarray:
         """(S,) mesh node ids of the surface points (every component's, sorted), in the row order of
         :meth:`surface_points`."""
-        return self.run.surface_ids
+        return self.chain.surface_ids
 
     @property
     def basis(self):
@@ -153,53 +307,12 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
 
         Several components: block diagonal, the columns of the components' lattices one after the
         other (file order), the rows as ``surface_ids``."""
-        if self._B is None:
-
-            comps = self.run.components
-            if len(comps) == 1:
-                self._B = comps[0].prep.embedding.basis_matrix().tocsr()
-            else:
-                lay = self.run.layout
-                S, K = len(lay.surface_ids), lay.ctrl_offsets[-1]
-                r, c, d = [], [], []
-                for comp, rows, off in zip(comps, lay.rows, lay.ctrl_offsets, strict=False):
-                    b = comp.prep.embedding.basis_matrix().tocoo()
-                    r.append(rows[b.row])
-                    c.append(b.col + off)
-                    d.append(b.data)
-                self._B = sp.csr_matrix((np.concatenate(d), (np.concatenate(r), np.concatenate(c))), shape=(S, K))
-        return self._B
-
-    def lattices(self) -> list[np.ndarray]:
-        """Deformed control points of every component (file order)."""
-        if "Ps" not in self._cache:
-            self._cache["Ps"] = self.run.lattices_after()
-        return self._cache["Ps"]
+        return self.chain.surface.block_basis()
 
     def lattice(self):
         """Deformed control points (n, m, l, 3); several components: the list of every component's."""
         Ps = self.lattices()
-        return Ps[0] if self.run.single else Ps
-
-    def surface_points(self) -> np.ndarray:
-        """(S, 3) deformed surface points (the rows of ``surface_ids``)."""
-        X0 = self.run.prep.mesh.points[self.surface_ids] if not self.run.single else self.run.prep.surface.points
-        return X0 + self.run.surface_displacement(self.lattices())
-
-    def lattice_jacobian(self) -> np.ndarray:
-        """dP'/dv (n_ctrl*3, n_vars); several components: block diagonal (``basis`` column order)."""
-        if "J" not in self._cache:
-            comps = self.run.components
-            blocks = [c.lattice_jacobian() for c in comps]
-            if len(blocks) == 1:
-                self._cache["J"] = blocks[0]
-            else:
-                lay = self.run.layout
-                J = np.zeros((3 * lay.ctrl_offsets[-1], lay.var_offsets[-1]))
-                for blk, c0, v0 in zip(blocks, lay.ctrl_offsets, lay.var_offsets, strict=False):
-                    J[3 * c0:3 * c0 + blk.shape[0], v0:v0 + blk.shape[1]] = blk
-                self._cache["J"] = J
-        return self._cache["J"]
+        return Ps[0] if self.chain.single else Ps
 
     def jacobian_factors(self):
         """(B, D): dX/dv = B @ D reshaped, B (S, n_ctrl) sparse, D (n_ctrl*3, n_vars) dense.
@@ -208,19 +321,109 @@ class DesignModel(PointSetsMixin, ConstraintsMixin, VolumeMixin):
         [s, c*n_vars + v]``; :func:`ffdcli.parameterization.derivatives.surface_jacobian` forms it."""
         return self.basis, self.lattice_jacobian()
 
-    def surface_jvp(self, dv) -> np.ndarray:
-        """(S, 3) surface motion dX/dv @ dv for ``dv`` (n_vars,)."""
+    def uses_volume(self) -> bool:
+        """True when the volume mesh follows the surface (``volume.method: idw`` on a volume mesh)."""
+        return self.chain.volume.moves
 
-        return surface_jvp(self.basis, self.lattice_jacobian(), self._check_dv(dv, "surface_jvp"))
+    def write(self, mesh=None, *, lattice=None, plot: bool = False, force: bool = False, progress=None,
+              values=None) -> dict:
+        """Write the deformed mesh of the held values (or ``values``) (and the lattice VTK, with ``plot``
+        the picture) as ``ffd deform -o MESH --lattice LATTICE [--plot] [--force]`` does, by the same
+        workflow (:func:`ffdcli.app.deform.deform_design`): every output checked before the work, the
+        quality gate (nothing written unless ``force``), all outputs written together or none.
+        ``mesh=None``: the design file's ``output:``. Returns {kind: path}."""
+        at = self._here if values is None else self.evaluate(values)
+        P = at.lattices()
+        report = deform_design(self.run.design, output=mesh, lattice=lattice, plot=plot, force=force,
+                               progress=progress, comm=self.comm, run=self.run, P=P[0] if self.chain.single else P,
+                               remedies=REMEDIES)
+        return report.written
 
-    def surface_vjp(self, g) -> np.ndarray:
-        """(n_vars,) dJ/dv for g = dJ/dX at the surface points (S, 3)."""
+    def write_mesh(self, result: Deformation, path) -> dict:
+        """Write the mesh of a :class:`~ffdcli.app.deformation.Deformation` (:meth:`DesignPoint.deform`) to
+        ``path`` in the format of its suffix, whole or not at all (the input is never overwritten).
+        Returns {kind: path}."""
+        plan = plan_outputs([("mesh", Path(path), False, "mesh")], inputs=(self.run.design.mesh,))
+        return write_outputs(self.run, result, plan=plan)
 
-        g = as_numbers(g, (len(self.surface_ids), 3), "surface_vjp: g",
-                       hint="one row per surface point, surface_ids order")
-        # one component: the embedding's compiled B.T @ g (its rows are the surface points)
-        B = self.run.components[0].prep.embedding if self.run.single else self.basis
-        return vjp(B, g, self.lattice_jacobian())
+    @property
+    def design(self):
+        """The loaded design file (:class:`ffdcli.design.Design`)."""
+        return self.run.design
+
+    @property
+    def component_names(self) -> list[str]:
+        """Each component's name, file order (``""``: the single-component form)."""
+        return [c.name for c in self.run.components]
+
+    @property
+    def n_points(self) -> int:
+        """N, the mesh's nodes (the rows of :meth:`mesh_points` and of ``mesh_vjp``'s ``g``)."""
+        return self.run.prep.mesh.n_points
+
+    # -- point sets --------------------------------------------------------------------------------
+    def add_points(self, name: str, X, progress=None) -> dict:
+        """Embed points ``X`` (k, 3) in the design's lattices under ``name`` (replacing a set of that name).
+
+        Returns ``{"points": k, "outside": count, "outside_ids": [...], "outside_worst": distance}``:
+        points outside every lattice are kept and never move."""
+        cp = ComponentPoints.embed(str(name), self.run.components, X, progress=progress)
+        self._point_sets[str(name)] = cp
+        return {"points": cp.n_points, **cp.outside_report()}
+
+    @property
+    def point_sets(self) -> list[str]:
+        """Names of the point sets added with :meth:`add_points`, in order."""
+        return list(self._point_sets)
+
+    def point_set(self, name: str) -> ComponentPoints:
+        """The :class:`~ffdcli.api.pointsets.ComponentPoints` named ``name``."""
+        try:
+            return self._point_sets[name]
+        except KeyError:
+            have = ", ".join(self._point_sets) or "(none)"
+            raise InputError(f"no point set named {name!r}; the point sets are: {have}") from None
+
+    # -- constraints -------------------------------------------------------------------------------
+    @property
+    def constraints(self) -> list:
+        """The constraint objects of the design file's ``constraints:`` (:mod:`ffdcli.constraints`),
+        built once on the baseline surface and lattice; several components: every component's, in
+        component order (see :attr:`constraint_groups`)."""
+        return self.constraint_set.objects
+
+    @property
+    def constraint_groups(self) -> list[tuple[int, list]]:
+        """``[(component index, its constraint objects)]``: each component's ``constraints:`` built on its
+        own box and surface (the single-component form: one group, the file's ``constraints:``)."""
+        return self.constraint_set.groups
+
+    def set_constraints(self, specs, component: int = 0) -> None:
+        """Replace the constraints of one component (default the first, by index) by a ``constraints:``
+        list. Checked as a design file's ``constraints:`` is (the schema's words, the key path): an
+        :class:`~ffdcli.errors.InputError` for a bad item or a component that does not exist."""
+        self.constraint_set = self.constraint_set.replaced(specs, component)
+
+    @property
+    def constraint_names(self) -> list[str]:
+        """(C,) ``k<index>.<kind>[<j>]`` of every constraint item (``<component>.k...`` with components)."""
+        return self.constraint_set.names
+
+    @property
+    def constraint_lower(self) -> np.ndarray:
+        """(C,) lower bounds of the constraint items (``-inf``: none)."""
+        return self.constraint_set.bounds[0]
+
+    @property
+    def constraint_upper(self) -> np.ndarray:
+        """(C,) upper bounds of the constraint items (``inf``: none)."""
+        return self.constraint_set.bounds[1]
+
+    # -- reports (what ffd vars / ffd constraints print: :mod:`ffdcli.api.constraints`) ----------------
+    variables_table = variables_table
+    constraints_table = constraints_table
+    constraint_jacobian_arrays = constraint_jacobian_arrays
+    write_constraint_jacobian = write_constraint_jacobian
 
 
 def constraints_report(run, mesh_points: np.ndarray | None = None) -> list[dict]:
@@ -228,7 +431,4 @@ def constraints_report(run, mesh_points: np.ndarray | None = None) -> list[dict]
 
     ``mesh_points``: (N, 3) the mesh as deformed already (``mesh_quality`` reads it instead of
     deforming the mesh once more)."""
-    model = DesignModel(run)
-    if mesh_points is not None:
-        model._cache["mesh"] = np.asarray(mesh_points, dtype=float)
-    return model.constraints_table()
+    return DesignModel(run).constraints_table(mesh_points=mesh_points)

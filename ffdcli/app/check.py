@@ -6,10 +6,12 @@ import time
 from dataclasses import dataclass
 
 from ffdcli.errors import QualityError
+from ffdcli.geometry.surface import looks_like_domain_boundary
 from ffdcli.io import formats
 from ffdcli.parallel.comm import SerialComm
 from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
 from ffdcli.quality.rules import DEFAULT_THRESHOLD
+from ffdcli.quality.wall_layer import wall_layer_report
 
 
 @dataclass(frozen=True)
@@ -33,12 +35,19 @@ def check_mesh(mesh, *, threshold: float | None = None, n_worst: int = 5, progre
         # polyhedral cells (part None): every rank holds the whole mesh and judges it whole
         report = check_quality(whole, **kw) if part is None else check_quality_part(part, comm, **kw)
     else:
-        report = check_quality(formats.read_mesh(mesh, progress=progress), **kw)
-    summary = {"mesh": str(mesh), **report.to_dict(), "seconds": time.perf_counter() - t0}
+        whole = formats.read_mesh(mesh, progress=progress)
+        report = check_quality(whole, **kw)
+    wall = wall_layer_report(whole, [n for n in whole.markers if not looks_like_domain_boundary(n)]) \
+        if whole is not None and not whole.is_local and not whole.partial else None
+    summary = {"mesh": str(mesh), **report.to_dict(), "seconds": time.perf_counter() - t0,
+               "wall_layer": wall.to_dict() if wall is not None else None}
     summary["worst"] = summary["worst"][:n_worst]
     summary["worst_nodes"] = summary["worst_nodes"][:n_worst]
     if report.count == 0:
-        return CheckReport(summary, f"{mesh}: no volume cells (surface-only mesh): nothing to check", report)
+        what = (f"{report.surface_cells} cells of a surface in space (2-D cells not in one plane), "
+                if report.surface_cells else "")
+        return CheckReport(summary, f"{mesh}: no volume cells (surface-only mesh: {what}nothing to check)",
+                           report)
     failed = report.n_inverted + (report.n_below if threshold is not None else 0)
     if failed:
         worst = report.worst[0]
@@ -46,7 +55,7 @@ def check_mesh(mesh, *, threshold: float | None = None, n_worst: int = 5, progre
         what = "inverted or degenerate cells" if report.n_inverted else f"cells below {threshold:g}"
         raise QualityError(f"{what}: {report.summary()}; worst: cell {worst['cell']} ({worst['type']}) "
                            f"quality {worst['quality']:.3g} at ({where})", path=mesh, report=summary)
-    text = f"{mesh}: {report.summary()}"
+    text = f"{mesh}: {report.summary()}" + (f"\n  wall: {wall.summary()}" if wall is not None else "")
     if n_worst:
         rows = [w for w in report.worst[:n_worst] if w["quality"] < report.threshold]
         nodes = [w for w in report.worst_nodes[:n_worst] if w["after"] < report.ortho_min]

@@ -13,11 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ffdcli.app.deformation import Deformation, deform
+from ffdcli.app.prepare import is_surface_mesh
 from ffdcli.app.run import DesignRun, load_run
 from ffdcli.app.write import write_outputs
+from ffdcli.design import load_design
 from ffdcli.io.formats.su2_ffd import describe
 from ffdcli.io.outputs import plan_deform
 from ffdcli.quality.gate import Remedies, enforce
+from ffdcli.quality.wall_layer import enforce_wall_layer
 
 
 @dataclass(frozen=True)
@@ -100,9 +103,18 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
         if outside:
             note(f"{who}{outside} surface points are outside the lattice and will not move")
     result = deform(run, P=P, progress=progress)
+    if result.volume_method == "none" and run.prep.mesh.n_cells and not is_surface_mesh(run.prep.mesh):
+        note("volume.method none: the volume mesh was not moved and its cells are not judged (the "
+             "gate judges what ffd moves); the written mesh keeps the input's volume nodes, so cells "
+             "beside the moved surface may be inverted in it: move the volume with SU2_DEF "
+             "(DV_KIND= SURFACE_FILE, from --surface-file) or your own tool before a solver runs on it")
     # the gate: exit 2 for cells already bad in the input, exit 3 for what the design broke
     for w in enforce(result.quality, mesh_path=design.mesh, design_path=design.path, force=force,
                      recovery=result.recovery, remedies=remedies, hints=device_hints(run)):
+        note(w)
+    for w in enforce_wall_layer(result.wall_layer, design_path=design.path, force=force,
+                                refuse="first_cell" in (design.volume or {}),
+                                write_anyway=remedies.write_anyway, forced=remedies.forced):
         note(w)
     constraints = (constraints_table(run, result.points) if constraints_table and design.data.get("constraints")
                    else None)
@@ -118,6 +130,12 @@ def deform_design(design, *, output=None, lattice=None, surface_file=None, plot:
     summary = _summary(design, run, result, written, su2_ffd, constraints, time.perf_counter() - t0)
     return DeformReport(summary=summary, written=written, warnings=tuple(warnings),
                         text=_text(summary, run, result, written))
+
+
+def deform_file(design_file, overrides=(), **kwargs) -> DeformReport:
+    """``ffd deform DESIGN.yaml``: the design file loaded (``--set`` ``overrides`` applied), then
+    :func:`deform_design` with ``kwargs``."""
+    return deform_design(load_design(design_file, overrides=overrides), **kwargs)
 
 
 def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd, constraints,
@@ -141,6 +159,7 @@ def _summary(design, run: DesignRun, result: Deformation, written: dict, su2_ffd
         "recovery": result.recovery,
         "recovered_with": result.recovered_with,
         "quality": q.to_dict() if q is not None else None,
+        "wall_layer": result.wall_layer.to_dict() if result.wall_layer is not None else None,
         "su2_ffd": su2_ffd,
         "constraints": constraints,
         "cache": str(run.prep.cache) if run.prep.cache else None,
@@ -205,6 +224,8 @@ def _text(s: dict, run: DesignRun, result: Deformation, written: dict) -> str:
                     if s["recovered_with"] else ""))
     if result.quality is not None:
         lines.append(f"  quality   {result.quality.summary()}")
+    if result.wall_layer is not None:
+        lines.append(f"  wall      {result.wall_layer.summary()}")
     if s["constraints"] is not None:
         bad = [c["name"] for c in s["constraints"] if not c["satisfied"]]
         lines.append(f"  constraints {len(s['constraints'])} items, "

@@ -14,16 +14,14 @@ from scipy.spatial import cKDTree
 
 from ffdcli.app.prepare import is_surface_mesh
 from ffdcli.app.run import DesignRun
-from ffdcli.errors import InputError, QualityError
+from ffdcli.app.run import volume_method as design_volume_method
+from ffdcli.errors import QualityError
 from ffdcli.parallel.distributed import local_rows
 from ffdcli.progress import no_progress
-from ffdcli.quality.design_map import DesignMapZone, linearised_map
+from ffdcli.quality.design_map import DESIGN_ZONE, DesignMapZone, linearised_map
 from ffdcli.quality.gate import QualityReport
-from ffdcli.volume.recovery import attempts, incremental_warp  # it runs the warp of a DesignRun
-
-#: The zone near the wall, in mean chords, where the gate compares cells with the design's own map.
-DESIGN_ZONE = 0.15
-
+from ffdcli.quality.wall_layer import DEFAULT_FIRST_CELL, WallLayerReport, wall_layer_report
+from ffdcli.volume.recovery import attempts, incremental_warp  # it runs the warp of the chain
 
 def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
     """``f(node_ids) -> (k, 3)``: where the design's own map puts those input mesh nodes near the wall.
@@ -35,12 +33,15 @@ def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[n
     margin, as the volume warp with ``carry: gradient`` does); other nodes give NaN rows. The quality
     gate compares the volume's cells with it (:func:`ffdcli.quality.gate.check_quality`: what the design
     itself does to a cell at the wall is not a failure of the volume motion)."""
+    chain = run.chain
+    Ps = chain.per_component(P)
+    return _gate_map(chain, chain.surface.forward(Ps) if disp is None else disp, chain.frames_gradient.forward(Ps))
 
-    mesh, ids = run.prep.mesh, run.surface_ids
+
+def _gate_map(chain, b: np.ndarray, F: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
+    mesh, ids = chain.share.mesh, chain.surface_ids
     Xs = mesh.points[ids]
-    b = run.surface_displacement(P) if disp is None else disp
-    F = run.surface_frames(P, "gradient")
-    zone = DESIGN_ZONE * run.warp_model().chord
+    zone = DESIGN_ZONE * chain.volume.model().chord
     tree = cKDTree(Xs)
 
     def moved(node_ids: np.ndarray) -> np.ndarray:       # node ids: global (rows of a local mesh's ids)
@@ -56,7 +57,7 @@ def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[n
 def design_zone(run: DesignRun) -> DesignMapZone:
     """The nodes of a whole mesh within :data:`DESIGN_ZONE` mean chords of the wall, for the design's own
     map (:mod:`ffdcli.quality.design_map`; what ``mesh_quality`` compares the cells there with)."""
-    return DesignMapZone.build(run.prep.mesh.points, run.surface_ids, DESIGN_ZONE * run.warp_model().chord)
+    return run.chain.quality.zone()
 
 
 @dataclass(frozen=True, eq=False)
@@ -64,7 +65,7 @@ class Deformation:
     """The result of one design: new coordinates of every mesh node, and what was checked."""
 
     points: np.ndarray           # (N, 3) all mesh nodes; a run on an MPI rank's local mesh: its rows (n, 3), of
-    #                              which the part's (owned, halo) and the surface's are moved (DesignRun.warp_targets)
+    #                              which the part's (owned, halo) and the surface's are moved (MeshShare.targets)
     lattice: object              # (n, m, l, 3) deformed control points; several components: a list
     surface_displacement: np.ndarray   # (S, 3)
     volume_method: str
@@ -75,6 +76,8 @@ class Deformation:
     recovery: list = field(default_factory=list)
     #: The attempt whose mesh this is (None: the design's own volume settings).
     recovered_with: str | None = None
+    #: The first cells on the wall before and after (:mod:`ffdcli.quality.wall_layer`; None: no boundary layer)
+    wall_layer: WallLayerReport | None = None
 
     @property
     def max_displacement(self) -> float:
@@ -83,11 +86,7 @@ class Deformation:
 
 def volume_method(run: DesignRun) -> str:
     """``idw`` or ``none``: the design's ``volume.method``, default idw when the mesh has cells."""
-    mesh = run.prep.mesh
-    method = (run.design.volume or {}).get("method")
-    if method is None:
-        return "idw" if mesh.n_cells and not is_surface_mesh(mesh) else "none"
-    return method
+    return design_volume_method(run.design, run.prep.mesh)
 
 
 @np.errstate(over="ignore", invalid="ignore", divide="ignore")    # absurd values end in the check below
@@ -111,53 +110,40 @@ def deform(run: DesignRun, *, progress=None, P: np.ndarray | None = None, check:
 
 
 def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
+    """Down the chain once: the lattices, the surface, the frames and the volume
+    (:meth:`ffdcli.chain.DesignChain.place`), then the gate and, when it fails, the recovery."""
     progress = progress or no_progress
+    chain = run.chain
     t = {}
     t0 = time.perf_counter()
-    mesh, ids = run.prep.mesh, run.surface_ids
-    P1 = run.lattice_after() if P is None else P
-    disp = run.surface_displacement(P1)
-    if not np.any(disp) and any(not np.array_equal(Q, c.P0) for Q, c in zip(run._per_component(P1), run.components,
-                                                                             strict=True)):
-        raise InputError("the design moves the lattice but no surface point (is the surface outside the lattice?); "
-                         "nothing was written", path=run.design.path)    # never a silent success
+    P1 = (chain.lattices.forward(run.variables()[1]) if P is None else chain.per_component(P))
     t["changes"] = time.perf_counter() - t0
-    points = mesh.points.copy()
-    method = volume_method(run)
     t1 = time.perf_counter()
-    if method == "idw" and mesh.n_cells and not is_surface_mesh(mesh):
-
-        model = run.warp_model(progress)
-        rot = run.surface_frames(P1)
-        points += run.warp_volume(model, disp, rot, progress)   # MPI: each rank its rows or its block
-    else:
-        points[ids] += disp
-    # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).
-    points[ids] = mesh.points[ids] + disp
+    disp, points = chain.place(P1, progress)
     t["volume"] = time.perf_counter() - t1
-    if not run.all_finite(points):
-        raise QualityError("the deformed mesh has non-finite coordinates; are the design values far too "
-                           "large? nothing was written", path=run.design.path)
+    mesh = chain.share.mesh
+    method = volume_method(run)
     quality = None
-    if mesh.n_cells and check and not is_surface_mesh(mesh):
+    # the gate judges what ffd moved: with volume.method none the volume is another tool's to move
+    # (SU2_DEF's, from --surface-file), and its cells beside the moved surface are not the design's
+    if mesh.n_cells and check and not is_surface_mesh(mesh) and method != "none":
         t2 = time.perf_counter()
         threshold = (run.design.volume or {}).get("threshold")
         kw = {} if threshold is None else {"threshold": float(threshold)}
-        kw["design_map"] = design_map(run, P1, disp)
-        quality = run.check_quality(points, **kw)
+        kw["design_map"] = _gate_map(chain, disp, chain.frames_gradient.forward(P1))
+        quality = chain.share.check_quality(points, **kw)
         t["quality"] = time.perf_counter() - t2
     tried, used = [], None
     if quality is not None and not quality.ok and not quality.n_input_bad and recover and method == "idw":
-
         t3 = time.perf_counter()
         tried.append({"attempt": "the design's volume settings", "failed": quality.n_failed, "ok": False})
         best = (_badness(quality), points, quality, None)
-        for what, settings, steps in attempts(run.warp_model(progress).settings):
-            pts = incremental_warp(run, P1, settings, steps, progress=progress)
-            if not run.all_finite(pts):
+        for what, settings, steps in attempts(chain.volume.model(progress).settings):
+            pts = incremental_warp(chain, P1, settings, steps, progress=progress)
+            if not chain.share.all_finite(pts):
                 tried.append({"attempt": what, "failed": None, "ok": False})
                 continue
-            q = run.check_quality(pts, **kw)
+            q = chain.share.check_quality(pts, **kw)
             tried.append({"attempt": what, "failed": q.n_failed, "ok": q.ok})
             if _badness(q) < best[0]:
                 best = (_badness(q), pts, q, what)
@@ -165,8 +151,14 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
                 break
         _, points, quality, used = best
         t["recovery"] = time.perf_counter() - t3
-    return Deformation(points=points, lattice=P1, surface_displacement=disp, volume_method=method,
-                       quality=quality, seconds=t, recovery=tried, recovered_with=used)
+    wall = None
+    if quality is not None and not chain.share.local:
+        tol = (run.design.volume or {}).get("first_cell", DEFAULT_FIRST_CELL)
+        wall = wall_layer_report(mesh, [n for c in run.components for n in c.prep.surface.names], points,
+                                 mesh.points, float(tol))
+    lattice = P1[0] if chain.single else list(P1)
+    return Deformation(points=points, lattice=lattice, surface_displacement=disp, volume_method=method,
+                       quality=quality, seconds=t, recovery=tried, recovered_with=used, wall_layer=wall)
 
 
 def _badness(q: QualityReport) -> tuple[int, int]:

@@ -52,7 +52,6 @@ def run_case(config: Path, out: Path, progress, target=None) -> dict:
     """Deform one design into ``out`` (mesh, lattice, PNG); return its summary row.
 
     ``target``: a unit-chord airfoil (K, 2) drawn on the picture (the fit's target)."""
-
     t0 = time.perf_counter()
     design = load_design(config)
     stem = config.stem
@@ -69,7 +68,6 @@ def run_case(config: Path, out: Path, progress, target=None) -> dict:
     plot_design(run, result, png, target=target)
     png3d = None
     if stem in VIEW_3D:
-
         got = plot_3d(run, result, out / f"{stem}_3d.png")
         png3d = got.name if got else None
     return {
@@ -92,7 +90,7 @@ def run_fit(out: Path, progress) -> dict | None:
     target = REPO / "samples" / "s1223.dat"
     t0 = time.perf_counter()
     fitted_yaml = out / "naca0012_s1223_fitted.yaml"
-    rep = fit_design(config, target, fitted_yaml, progress=progress)
+    rep = fit_design(config, target, fitted_yaml, progress=progress, force=True)
 
     row = run_case(fitted_yaml, out, progress, target=read_airfoil(target).coords)
     row["case"] = "naca0012_s1223_fit"
@@ -103,7 +101,6 @@ def run_fit(out: Path, progress) -> dict | None:
 
 
 def write_index(rows: list[dict], out: Path) -> Path:
-
     lines = ["# ffd demo: the paper's cases on the bundled samples", "",
              "Original surface black, deformed red; lattice points grey (original) and red (deformed).", "",
              "| case | changes | max displacement | quality | mesh | lattice | seconds |",
@@ -134,7 +131,6 @@ def demo_step(kind: str, arg: str, out: str) -> dict:
 
 
 def main(argv=None) -> int:
-
     ap = argparse.ArgumentParser(prog="python -m ffdcli.app.demo", description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out", help="output folder (default: out)")
     ap.add_argument("--configs", default=str(REPO / "configs"), help="folder of design files")

@@ -8,15 +8,16 @@ from __future__ import annotations
 
 import copy
 import os
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
 
+from ffdcli.app.design_output import plan_design_output, write_design_text
 from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 from ffdcli.errors import InputError
 from ffdcli.io.formats.airfoil import read_airfoil
-from ffdcli.io.outputs import plan_outputs
 from ffdcli.parameterization.fit import REG, build_problem, shape_spec, solve
 
 
@@ -37,20 +38,46 @@ def fitted_design_data(design, shape: dict, out_path: Path) -> dict:
     return data
 
 
+@dataclass(frozen=True)
+class FitReport:
+    """What ``ffd fit`` did: the ``--json`` summary (deviations before and after, the fitted shape, the
+    file written), its text, and the fitted design file's path (None when none was asked for)."""
+
+    summary: dict
+    text: str
+    output: str | None = None
+    warnings: tuple[str, ...] = field(default=())
+
+    def __getitem__(self, key):          # the dict fit_design returned before (scripts, the demo)
+        return self.summary[key]
+
+
+def fitted_path(design_file) -> Path:
+    """The default output of ``ffd fit DESIGN.yaml``: ``<design stem>_fitted.yaml`` beside it."""
+    p = Path(design_file)
+    return p.with_name(p.stem + "_fitted.yaml")
+
+
 def fit_design(config, target_file, out_yaml=None, *, overrides=(), rows: str = "all", progress=None,
-               reg: float = REG) -> dict:
-    """Fit the shape of 2D design ``config`` to ``target_file``; write ``out_yaml`` if given."""
+               reg: float = REG, force: bool = False, default_output: bool = False) -> FitReport:
+    """Fit the shape of 2D design ``config`` to ``target_file``; write ``out_yaml`` if given (with
+    ``default_output``, None means :func:`fitted_path`). An existing design file there is replaced only
+    with ``force`` (:mod:`ffdcli.app.design_output`)."""
     design = load_design(config, overrides=overrides)
+    if out_yaml is None and default_output:
+        out_yaml = fitted_path(design.path)
     other = [next(iter(c)) for c in design.changes_spec if "shape" not in c]
+    design.changes_spec = []          # the fit replaces any shape change; its lengths need not match
+    plan = (plan_design_output(out_yaml, inputs=(design.mesh, design.path, target_file), force=force)
+            if out_yaml is not None else None)          # checked before the work
+    target = read_airfoil(target_file)
+    run = load_run(design, progress=progress)
+    if run.box.dim != 2:              # what the mesh is comes first: no advice about changes of a 3D design
+        raise InputError("ffd fit works on 2D airfoil meshes; this design's mesh is 3D", path=design.path)
     if other:
         raise InputError(f"ffd fit fits shape values to the original airfoil; remove the other changes "
                          f"({', '.join(other)}) or fit a design that has only shape changes",
                          path=design.path, key="changes")
-    design.changes_spec = []          # the fit replaces any shape change; its lengths need not match
-    plan = plan_outputs([("design", out_yaml, False, "-o")],      # checked before the work
-                        inputs=(design.mesh, design.path, target_file))
-    target = read_airfoil(target_file)
-    run = load_run(design, progress=progress)
     problem = build_problem(run, target.coords, rows)
     values, stats = solve(problem, reg)
     shape = shape_spec(problem, values)
@@ -58,15 +85,23 @@ def fit_design(config, target_file, out_yaml=None, *, overrides=(), rows: str = 
               "lattice": list(run.box.lattice_shape), "chord": problem.chord,
               "points": int(len(problem.rhs)), **stats,
               "rows": rows, "shape": shape}
-    if out_yaml is not None:
+    written = None
+    if plan is not None:
         data = fitted_design_data(design, shape, Path(out_yaml))
+        text = (f"# fitted by ffd fit to {Path(target_file).name} ({target.name}): max deviation "
+                f"{stats['before']['max']:.5f} -> {stats['after']['max']:.5f} chords\n"
+                + yaml.safe_dump(data, sort_keys=False, default_flow_style=None))
+        written = write_design_text(plan, text)
+        report["output"] = written
+    return FitReport(summary=report, text=_text(report), output=written)
 
-        def write(tmp):
-            with open(tmp, "w") as fh:
-                fh.write(f"# fitted by ffd fit to {Path(target_file).name} ({target.name}): max deviation "
-                         f"{stats['before']['max']:.5f} -> {stats['after']['max']:.5f} chords\n")
-                yaml.safe_dump(data, fh, sort_keys=False, default_flow_style=None)
 
-        plan.write({"design": write})
-        report["output"] = str(out_yaml)
-    return report
+def _text(rep: dict) -> str:
+    b, a = rep["before"], rep["after"]
+    lines = [f"ffd fit: {Path(rep['design']).name} -> {Path(rep['target']).name} ({rep['name']}), lattice "
+             f"{' x '.join(map(str, rep['lattice']))}, {rep['points']} surface points",
+             f"  before    max {b['max']:.5f}, rms {b['rms']:.5f} chords",
+             f"  after     max {a['max']:.5f}, rms {a['rms']:.5f} chords"]
+    if rep.get("output"):
+        lines.append(f"  wrote     {rep['output']}")
+    return "\n".join(lines)

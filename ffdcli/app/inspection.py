@@ -160,7 +160,6 @@ def inspect_mesh(mesh: Mesh | str | Path, surfaces=(), progress=None) -> MeshInf
             warnings.append(extrusion.message())
     contact = None
     if axes is not None and dim == 3:
-
         found = root_contact(mesh, surf.ids, axes.span, skip=names)
         contact = None if found is None else (found[0], len(found[1]))
     return MeshInfo(path=mesh.path, format=mesh.format, dim=dim, surface_mesh=surface_only,

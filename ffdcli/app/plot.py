@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 from ffdcli.app.deformation import deform
 from ffdcli.app.run import load_run
 from ffdcli.app.write import deform_writers
+from ffdcli.design import load_design
+from ffdcli.errors import InputError
 from ffdcli.io.formats.airfoil import read_airfoil
 from ffdcli.io.outputs import plan_plot
 
@@ -26,6 +28,9 @@ def plot_design_file(design, *, output=None, view3d: bool = True, target=None, p
     plan = plan_plot(design, output, view3d=view3d)       # checked before the work
     coords = read_airfoil(target).coords if target is not None else None
     run = load_run(design, progress=progress)
+    if coords is not None and run.box.dim != 2:      # never silently ignored
+        raise InputError("draws a target airfoil on a 2D design; this design is 3D "
+                         "(leave it out)", path=design.path, key="--target")
     result = deform(run, progress=progress)
     q = result.quality
     warnings = []
@@ -40,3 +45,9 @@ def plot_design_file(design, *, output=None, view3d: bool = True, target=None, p
     summary = {"plot": written["plot"], "plots": list(written.values()), "max_displacement": result.max_displacement,
                "refused": bool(q is not None and not q.ok), "quality": q.to_dict() if q is not None else None}
     return PlotReport(summary, "ffd plot: wrote " + ", ".join(written.values()), tuple(warnings))
+
+
+def plot_file(design_file, overrides=(), **kwargs) -> PlotReport:
+    """``ffd plot DESIGN.yaml``: the design file loaded (``--set`` ``overrides`` applied), then
+    :func:`plot_design_file` with ``kwargs``."""
+    return plot_design_file(load_design(design_file, overrides=overrides), **kwargs)

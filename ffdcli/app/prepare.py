@@ -86,7 +86,6 @@ def is_surface_mesh(mesh: Mesh) -> bool:
 
 def resolve_surface(mesh: Mesh, surface) -> list[str]:
     """The surface marker names: as given, else the default rule of :mod:`ffdcli.geometry.surface`."""
-
     if surface:
         names = [surface] if isinstance(surface, str) else list(surface)
         check_markers(mesh.markers, names, path=mesh.path)
@@ -131,7 +130,6 @@ def prepare_box(mesh: Mesh | str | Path, surface=None, settings: BoxSettings | N
     broadcasts them; the cache is written by rank 0 only (it holds the whole surface's embedding, so
     any rank count reads it).
     """
-
     comm = comm or SerialComm()
     if comm.size > 1:
         return _prepare_box_mpi(mesh, surface, settings, cache_dir=cache_dir, use_cache=use_cache,
@@ -214,7 +212,6 @@ def _prepare_box_mpi(mesh, surface, settings, *, cache_dir, use_cache, rebuild, 
     (:func:`ffdcli.io.formats.read_part`: every point and marker), rank 0 hashes it, then every rank
     runs :func:`_prepare_box` with the communicator (rank 0 reads and writes the cache; on a miss
     every rank fits the box, each embedding its block of the surface)."""
-
     def read():
         m = mesh if isinstance(mesh, Mesh) else formats.read_mesh(mesh, progress=progress or no_progress)
         h = mesh_hash or (cache_mod.file_hash(m.path) if m.path is not None else None)

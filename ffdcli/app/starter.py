@@ -10,21 +10,26 @@ schema knows, so its values are the defaults a run uses.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import textwrap
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import yaml
 
 from ffdcli import __version__
+from ffdcli.app.design_output import plan_design_output, write_design_text
 from ffdcli.app.prepare import resolve_surface, space_dim
 from ffdcli.design import design_schema
 from ffdcli.errors import InputError
 from ffdcli.geometry.axes import AXIS_NAMES, detect_axes
 from ffdcli.geometry.surface import extract_surface
+from ffdcli.io.atomic import output_error
 from ffdcli.io.formats import read_mesh
+from ffdcli.io.inputs import existing_kind
 from ffdcli.quality.rules import DEFAULT_THRESHOLD
 from ffdcli.settings import DEFAULT_POINTS
 from ffdcli.volume.extruded import one_cell_thick
@@ -66,7 +71,6 @@ def _round(x: float) -> float:
 
 def volume_defaults() -> list[tuple[str, object, str]]:
     """(key, default, meaning) of every ``volume:`` setting of the design schema, from WarpSettings."""
-
     known = design_schema()["properties"]["volume"]["properties"]
     out = []
     for f in dataclasses.fields(WarpSettings):
@@ -98,7 +102,6 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     str
         YAML text; loading it gives a valid design without changes.
     """
-
     mesh_path = Path(mesh_path)
     design_path = Path(design_path) if design_path is not None else default_design_path(mesh_path)
     mesh = read_mesh(mesh_path, progress=progress)
@@ -167,8 +170,53 @@ def starter_design(mesh_path, surface=None, *, design_path=None, progress=None) 
     add(_line(f"  mesh: {_flow('out/' + stem + mesh_path.suffix)}", "the deformed mesh, every marker kept"))
     add(_line(f"  lattice: {_flow('out/' + stem + '_lattice.vtk')}",
               "original and deformed lattice (ParaView)"))
-    add(_line(f"  plot: {_flow('out/' + stem + '.png')}", "the picture of `ffd plot`"))
+    add(_line(f"  plot: {_flow('out/' + stem + '.png')}",
+              "where `ffd plot` (and `ffd deform --plot`) put the picture; ffd deform draws none without --plot"))
     return "\n".join(L) + "\n"
+
+
+@dataclass(frozen=True)
+class InitReport:
+    """What ``ffd init`` wrote: the design file, the folder made for its outputs, the summary and text."""
+
+    design: str
+    mesh: str
+    out_folder: str
+    summary: dict
+    text: str
+
+
+def init_design(mesh_path, surface=None, *, output=None, force: bool = False, progress=None) -> InitReport:
+    """``ffd init``'s workflow: the starter design file of ``mesh_path`` written at ``output`` (default
+    :func:`default_design_path`), and the folder ``out/`` beside it where its outputs go.
+
+    The design file is checked before the mesh is read (a ``.yaml`` name, a writable folder, not the
+    mesh, not an existing file without ``force``); it is written whole or not at all, and a write that
+    fails (a full disk, a file-size limit, a read-only file system) is one line naming the file."""
+    out = Path(output) if output is not None else default_design_path(mesh_path)
+    plan = plan_design_output(out, inputs=(mesh_path,), force=force)
+    folder = out.parent / "out"               # where its outputs go (output: out/...)
+    kind = existing_kind(folder)
+    if kind not in (None, "folder"):
+        raise InputError(f"the design's outputs go into the folder out/ beside it, and {folder} is {kind}",
+                         path=folder, hint="move it away, or give -o in another folder")
+    text = starter_design(mesh_path, surface, design_path=out, progress=progress)
+    made = not folder.exists()
+    try:
+        folder.mkdir(exist_ok=True)
+    except OSError as e:
+        raise output_error(e, folder, "the folder of the design's outputs") from None
+    try:
+        written = write_design_text(plan, text)
+    except BaseException:
+        if made:                              # nothing of this run stays behind
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+    summary = {"design": written, "mesh": str(mesh_path), "out": str(folder)}
+    return InitReport(design=written, mesh=str(mesh_path), out_folder=str(folder), summary=summary,
+                      text=f"ffd init: wrote {written}\n  next: uncomment a change in it, then `ffd plot {written}` "
+                           f"and `ffd deform {written}`")
 
 
 def _relative(path: Path, folder: Path) -> str:

@@ -30,7 +30,6 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
     ``points``: of a run on a local mesh, every node's (N, 3) (:func:`ffdcli.parallel.distributed.gather_points`,
     on the writing rank), which the mesh is written with; the other outputs need the surface only.
     ``mesh_out``: the mesh to write as it is, with its own points (:func:`ffdcli.io.parts.rendered_mesh`)."""
-
     notes = {} if notes is None else notes
 
     def mesh(tmp):
@@ -56,7 +55,6 @@ def deform_writers(run: DesignRun, result: Deformation, *, progress=None, notes:
                                        space_dim(run.prep.mesh))
 
     def plot(tmp):
-
         plot_design(run, result, tmp, target=target)
 
     def plot_3d(tmp):                # False: no pyvista or no off-screen OpenGL (nothing written)
@@ -90,7 +88,6 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
     (:func:`ffdcli.io.parts.rendered_mesh`); any other first gathers every node's coordinates on
     rank 0 (:func:`ffdcli.parallel.distributed.gather_points`: rank 0 then holds one (N, 3) array, the other
     ranks their rows only)."""
-
     if comm is not None and comm.size > 1:
         if plan is None:
             plan = comm.run(_plan, run, mesh_path, lattice_path, surface_file, plot)
@@ -109,7 +106,6 @@ def write_outputs(run: DesignRun, result: Deformation, *, mesh_path=None, lattic
 
 def _plan(run, mesh_path, lattice_path, surface_file, plot):
     """The output plan of :func:`write_outputs` made from its arguments."""
-
     return plan_deform(run.design, mesh=mesh_path, lattice=lattice_path, plot=plot,
                        extra=[("surface_file", surface_file, False, "--surface-file")])
 

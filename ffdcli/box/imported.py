@@ -94,6 +94,10 @@ def import_box(block: np.ndarray, points: np.ndarray, faces=(), settings: BoxSet
     box = assemble_box(P, settings, axes, dim, chord_sign, stations, secs, imported=True)
     core = embed(box.lattice(), box.core_points(pts), progress=progress, comm=comm)
     n_out = int((~core.inside).sum())
+    if n_out and n_out == len(core.inside):      # nothing would move: not a lattice of this wing
+        raise InputError(f"none of the {n_out} surface points is inside the imported lattice (the nearest "
+                         f"{core.residual.min():.3g} mesh units away): it is not around this wing", path=source,
+                         hint="compare its position, units and axes with `ffd inspect MESH`")
     if n_out:
         warnings.append(f"{n_out} surface points are outside the imported lattice {source}; they will "
                         f"not move (worst distance {core.residual[~core.inside].max():.3g})")

@@ -13,12 +13,13 @@ import functools
 import os
 import sys
 import traceback
+import warnings
 
 import click
 
 from ffdcli import __version__
 from ffdcli.cli.console import Console, StdoutError
-from ffdcli.errors import FfdError, SignalRecorder, Terminated
+from ffdcli.errors import FfdError, SignalRecorder, Terminated, interrupt_message, outputs_ledger
 from ffdcli.io.jsontext import to_json
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
@@ -75,15 +76,18 @@ def _register():
 
 def _compiled_code_guards(argv: list[str], notice: bool):
     """Ctrl-C held while numba loads or compiles kernels (an interrupt there crashes the interpreter
-    later) and, when ``notice``, a line on stderr before the first compile of a kernel
+    later), a kernel that numba cannot save in its cache used all the same (a warning with ``notice``)
+    and, when ``notice``, a line on stderr before the first compile of a kernel
     (:mod:`ffdcli.jit`). Nothing for ``--help``/``--version``, which run no kernel: importing numba
     would double the time of ``ffd --help``."""
     if not argv or any(a in ("-h", "--help", "-V", "--version") for a in argv):
         return contextlib.nullcontext()
-    from ffdcli.jit import compile_notice, interrupts_outside_compilers
+    from ffdcli.jit import cache_failures_warn, compile_notice, interrupts_outside_compilers
 
     stack = contextlib.ExitStack()
     stack.enter_context(interrupts_outside_compilers())
+    # a kernel numba cannot save (a full disk, a file-size limit) is a warning, not a failed run
+    stack.enter_context(cache_failures_warn(None if notice else (lambda text: None)))
     if notice:
         stack.enter_context(compile_notice())
     return stack
@@ -101,8 +105,19 @@ def main(argv=None):
     verbose = "-v" in argv or "--verbose" in argv
     # under mpiexec, SIGTERM/SIGHUP are held from before MPI starts (``ffd``'s entry point holds
     # them from before the imports): every rank stops together
-    with SignalRecorder() as signals:
+    with SignalRecorder() as signals, outputs_ledger(), warnings.catch_warnings():
+        warnings.showwarning = functools.partial(_show_warning, verbose=verbose)
         _run(argv, as_json, verbose, signals)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None, *, verbose: bool = False):
+    """A Python warning that reaches the command line (a library's, e.g. NumPy's "invalid value
+    encountered"): one ``ffd: warning:`` line instead of the warning and its source line; where it
+    was raised with ``-v``."""
+    where = f" ({filename}:{lineno})" if verbose else ""
+    with contextlib.suppress(OSError, ValueError):
+        print(f"ffd: warning: {category.__name__}: {' '.join(str(message).split())}{where}", file=sys.stderr,
+              flush=True)
 
 
 def _run(argv, as_json, verbose, signals):
@@ -130,14 +145,16 @@ def _run(argv, as_json, verbose, signals):
             raise error
     except click.exceptions.Exit as e:
         sys.exit(e.exit_code)
-    except click.ClickException as e:        # usage errors: exit 2 (click's own convention)
+    except click.exceptions.NoArgsIsHelpError as e:      # a bare ``ffd`` (or group): its help, exit 2
         if comm.is_root:
             e.show()
         sys.exit(e.exit_code)
+    except click.ClickException as e:        # usage errors: one line, exit 2 (click's own convention)
+        _fail(usage_message(e, argv), e.exit_code, as_json, show=comm.is_root)
     except (click.Abort, KeyboardInterrupt):
-        _fail("interrupted; nothing was written", 130, as_json)
+        _fail(interrupt_message(KeyboardInterrupt()), 130, as_json)
     except Terminated as e:           # SIGTERM / SIGHUP during a write: the temporary files are gone
-        _fail(f"{e}; nothing was written", 128 + e.signum, as_json, show=comm.is_root)
+        _fail(interrupt_message(e), 128 + e.signum, as_json, show=comm.is_root)
     except StdoutError as e:          # stdout full or closed: the outputs are complete; say it on stderr
         _quiet_stdout()
         _fail(str(e), 1, False)
@@ -154,6 +171,19 @@ def _run(argv, as_json, verbose, signals):
         _fail(f"internal error: {type(e).__name__}: {e} (this is a bug in ffd; -v shows where)",
               1, as_json, show=comm.is_root)
     sys.exit(0)
+
+
+def usage_message(e: click.ClickException, argv: list[str] = ()) -> str:
+    """Click's error (a usage error: a missing argument, an unknown option, a value of the wrong type) as
+    the one line of every other error, with where the usage is: ``Missing argument 'DESIGN.yaml'.`` ->
+    ``missing argument 'DESIGN.yaml'; `ffd deform --help` shows the usage``."""
+    text = " ".join(e.format_message().split()).rstrip(".")
+    text = text[:1].lower() + text[1:] if text[:2] != text[:2].upper() else text
+    ctx = getattr(e, "ctx", None)
+    where = ctx.command_path if ctx is not None else "ffd"
+    if where == "ffd":              # an option's error is raised before its command's context exists
+        where = next((f"ffd {a}" for a in argv if a in cli.commands), where)
+    return f"{text}; `{where} --help` shows the usage"
 
 
 def _fail(message: str, code: int, as_json: bool, extra: dict | None = None, show: bool = True):

@@ -5,6 +5,7 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
+from ffdcli.cli.params import FINITE
 
 
 def int_list(ctx, param, value):
@@ -35,13 +36,13 @@ def int_list(ctx, param, value):
                    "Default: detected (span = largest extent, thickness = smallest).")
 @click.option("--root", type=click.Choice(["min", "max"]),
               help="End of the span axis where the root is. Default: the end nearer 0.")
-@click.option("--margin", type=float, metavar="F",
+@click.option("--margin", type=FINITE, metavar="F",
               help="Clearance around the wing as a fraction of the local chord. Default 0.02.")
-@click.option("--lattice", "lattice_out", type=click.Path(dir_okay=False), metavar="FILE",
+@click.option("--lattice", "lattice_out", type=click.Path(), metavar="FILE",
               help="Where to write the lattice (VTK). Default: <mesh stem>_lattice.vtk beside the mesh.")
-@click.option("--from", "from_file", type=click.Path(dir_okay=False), metavar="FILE.xyz",
+@click.option("--from", "from_file", type=click.Path(), metavar="FILE.xyz",
               help="Use this single-block Plot3D lattice (a pyGeo/DAFoam FFD file) instead of fitting one.")
-@click.option("--export-plot3d", type=click.Path(dir_okay=False), metavar="FILE.xyz",
+@click.option("--export-plot3d", type=click.Path(), metavar="FILE.xyz",
               help="Also write the lattice as Plot3D in the layout pyGeo's DVGeometry reads.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR",
               help="Keep the cache file here instead of beside the mesh.")

@@ -5,11 +5,12 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
+from ffdcli.cli.params import FINITE
 
 
 @cli.command("check")
 @click.argument("mesh", type=click.Path())
-@click.option("--threshold", type=float, default=None, metavar="Q",
+@click.option("--threshold", type=FINITE, default=None, metavar="Q",
               help="Also fail when a cell's scaled Jacobian is below Q (default: only inverted or "
                    "degenerate cells fail; cells below 0.05 are counted).")
 @click.option("--worst", "n_worst", type=click.IntRange(0, None), default=5, show_default=True,

@@ -71,8 +71,3 @@ def _print(text: str) -> None:
 
 #: ``json.dumps(default=)`` of old callers; new code writes JSON with :func:`ffdcli.io.jsontext.to_json`.
 jsonable = plain
-
-
-def bound_text(x) -> str:
-    """A bound in the tables of ``ffd vars`` and ``ffd constraints``: ``-`` for none, else 6 digits."""
-    return "-" if x is None else f"{x:.6g}"

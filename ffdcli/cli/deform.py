@@ -8,22 +8,23 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("deform")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
               help="Override one value of the design file, e.g. --set changes.0.twist.tip=12 "
                    "(repeatable; the key path uses list positions).")
-@click.option("--output", "-o", type=click.Path(dir_okay=False), metavar="FILE",
+@click.option("--output", "-o", type=click.Path(), metavar="FILE",
               help="Write the deformed mesh here instead of the file's output.mesh; the lattice and the "
                    "picture are named after it (out/t5.su2 -> out/t5_lattice.vtk, out/t5.png) unless "
                    "--lattice is given.")
-@click.option("--lattice", "lattice_out", type=click.Path(dir_okay=False), metavar="FILE.vtk",
+@click.option("--lattice", "lattice_out", type=click.Path(), metavar="FILE.vtk",
               help="Write the lattice here (a .vtk name) instead of the file's output.lattice.")
-@click.option("--surface-file", "surface_file", type=click.Path(dir_okay=False), metavar="FILE",
+@click.option("--surface-file", "surface_file", type=click.Path(), metavar="FILE",
               help="Also write the deformed surface nodes as SU2's surface-positions file (DV_KIND= "
                    "SURFACE_FILE, DV_FILENAME= FILE), for SU2_DEF's own volume deformation. See docs/su2.md.")
 @click.option("--plot", "plot", is_flag=True,
-              help="Also write a PNG picture (original black, deformed red) beside the mesh, and for "
-                   "a 3D wing <picture>_3d.png, the 3D view (needs pyvista: the [viz] extra).")
+              help="Also write a PNG picture (original black, deformed red) at output.plot, else beside the "
+                   "mesh, and for a 3D wing <picture>_3d.png, the 3D view (needs pyvista: the [viz] extra). "
+                   "Without --plot no picture is drawn, whatever output.plot says.")
 @click.option("--force", is_flag=True, help="Write the mesh even if the quality check fails.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR",
               help="Where the caches live (default: beside the mesh).")
@@ -51,19 +52,17 @@ def deform_cmd(design_file, overrides, output, lattice_out, surface_file, plot, 
       ffd deform design.yaml --surface-file out/wing_surface.dat   # for SU2_DEF (DV_KIND= SURFACE_FILE)
       for t in 5 10 15; do ffd deform design.yaml --set changes.0.twist.tip=$t -o out/t$t.su2; done
     """
-    from ffdcli.app.deform import deform_design
-    from ffdcli.design import load_design
+    from ffdcli.app.deform import deform_file
     from ffdcli.quality.gate import Remedies
 
     # the gate states its rule; the command line says which flag overrides it
     remedies = Remedies(list_cells=" (ffd check MESH lists such cells)",
                         deform_anyway=", or give --force to deform it anyway",
                         write_anyway=" (--force writes it anyway)", forced=" (--force)")
-    design = load_design(design_file, overrides=overrides)
-    report = deform_design(design, output=output, lattice=lattice_out, surface_file=surface_file, plot=plot,
-                           force=force, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress,
-                           comm=console.comm, constraints_table=_constraints_report, warn=console.warn,
-                           remedies=remedies)
+    report = deform_file(design_file, overrides, output=output, lattice=lattice_out, surface_file=surface_file,
+                         plot=plot, force=force, cache_dir=cache_dir, use_cache=not no_cache, progress=console.progress,
+                         comm=console.comm, constraints_table=_constraints_report, warn=console.warn,
+                         remedies=remedies)
     console.result(report.summary, report.text)
 
 

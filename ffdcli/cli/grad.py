@@ -5,17 +5,18 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
+from ffdcli.cli.params import FiniteFloat
 
 
 @cli.command("grad")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
-@click.option("--sens", required=True, type=click.Path(dir_okay=False), metavar="FILE",
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
+@click.option("--sens", required=True, type=click.Path(), metavar="FILE",
               help="dJ/dX at mesh nodes: SU2 surface_sens.csv / volume_sens.csv, or rows x y z dJ/dx dJ/dy dJ/dz.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="GRAD.json",
+@click.option("-o", "--output", type=click.Path(), metavar="GRAD.json",
               help="Write {variable: dJ/dv} here (JSON) as well as printing it.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
-@click.option("--tolerance", type=click.FloatRange(min=0.0), metavar="DIST",
+@click.option("--tolerance", type=FiniteFloat(min=0.0), metavar="DIST",
               help="How far (mesh units) the file's coordinates may stand from the mesh nodes "
                    "(default 1e-6 of the mesh diagonal); farther, the file is refused.")
 @common_options
@@ -36,17 +37,16 @@ def grad_cmd(design_file, sens, output, overrides, cache_dir, tolerance, console
     Example:
       ffd grad design.yaml --sens surface_sens.csv -o grad.json
     """
-    from ffdcli.api.gradient import grad_design
-    from ffdcli.design import load_design
+    from ffdcli.api.commands import run_grad
 
-    design = load_design(design_file, overrides=overrides)
-    console.result(*grad_design(design, sens, output=output, cache_dir=cache_dir, progress=console.progress,
-                                comm=console.comm, tol=tolerance))
+    report = run_grad(design_file, sens, overrides, output=output, cache_dir=cache_dir, tol=tolerance,
+                      progress=console.progress, comm=console.comm)
+    console.result(report.summary, report.text)
 
 
 @cli.command("jacobian")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), metavar="JAC.npz",
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
+@click.option("-o", "--output", required=True, type=click.Path(), metavar="JAC.npz",
               help="Where to write the Jacobian factors (NumPy .npz).")
 @click.option("--dense", is_flag=True, help="Also store the dense dX/dv (3 S x n_vars; large for big meshes).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
@@ -67,8 +67,8 @@ def jacobian_cmd(design_file, output, dense, overrides, console):
     Example:
       ffd jacobian design.yaml -o jac.npz
     """
-    from ffdcli.api.gradient import jacobian_design
-    from ffdcli.design import load_design
+    from ffdcli.api.commands import run_jacobian
 
-    design = load_design(design_file, overrides=overrides)
-    console.result(*jacobian_design(design, output, dense=dense, progress=console.progress, comm=console.comm))
+    report = run_jacobian(design_file, output, overrides, dense=dense, progress=console.progress,
+                          comm=console.comm)
+    console.result(report.summary, report.text)

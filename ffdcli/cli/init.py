@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from ffdcli.cli import cli, common_options
@@ -14,7 +12,7 @@ from ffdcli.cli import cli, common_options
 @click.option("--surface", "surfaces", multiple=True, metavar="NAME",
               help="Marker of the wing (repeat for several). Default: the only marker, or the one "
                    "that does not look like a domain boundary.")
-@click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="DESIGN.yaml",
+@click.option("-o", "--output", type=click.Path(), metavar="DESIGN.yaml",
               help="Where to write the design file. Default: <mesh stem>.yaml beside the mesh.")
 @click.option("--force", is_flag=True, help="Replace the design file if it exists.")
 @common_options
@@ -30,21 +28,7 @@ def init_cmd(mesh, surfaces, output, force, console):
       ffd plot wing.yaml                 # look at it
       ffd deform wing.yaml               # out/wing.su2
     """
-    from ffdcli.app.starter import default_design_path, starter_design
-    from ffdcli.errors import InputError
-    from ffdcli.io.atomic import atomic_write, check_writable
+    from ffdcli.app.starter import init_design
 
-    out = Path(output) if output else default_design_path(mesh)
-    if out.suffix.lower() not in (".yaml", ".yml"):
-        raise InputError("a design file is YAML: give it a .yaml name", path=out)
-    check_writable(out, inputs=(mesh,))
-    if out.exists() and not force:
-        raise InputError("the design file exists; pass --force to replace it, or -o another name",
-                         path=out)
-    text = starter_design(mesh, list(surfaces) or None, design_path=out, progress=console.progress)
-    with atomic_write(out, "w") as fh:
-        fh.write(text)
-    (out.parent / "out").mkdir(exist_ok=True)        # where its outputs go (output: out/...)
-    console.result({"design": str(out), "mesh": str(mesh)},
-                   f"ffd init: wrote {out}\n  next: uncomment a change in it, then `ffd plot {out}` "
-                   f"and `ffd deform {out}`")
+    report = init_design(mesh, list(surfaces) or None, output=output, force=force, progress=console.progress)
+    console.result(report.summary, report.text)

@@ -7,6 +7,7 @@ import sys
 import click
 
 from ffdcli.cli import cli, common_options
+from ffdcli.errors import FfdError
 
 
 @cli.command("optimize")
@@ -65,12 +66,28 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
     text = [f"ffd optimize: {summary['status']} ({summary['message']}) after {summary['iterations']} iterations, "
             f"{summary['evaluations']} evaluations ({summary['flow_solves']} flow + "
             f"{summary['adjoint_solves']} adjoint solves)",
-            f"  objective {obj['initial']} -> {obj['best']}"
+            f"  objective {_number(obj['initial'])} -> {_number(obj['best'])}"
             + ("" if summary["constraints_satisfied"] else "  (NO FEASIBLE DESIGN)"),
-            "  " + "  ".join(f"{k} {v:.6g}" for k, v in summary["functions"].items()),
-            f"  best: {summary['best']}  (mesh {summary['best_mesh']})",
+            "  " + ("  ".join(f"{k} {v:.6g}" for k, v in summary["functions"].items()) or "no design was evaluated"),
+            (f"  best: {summary['best']}  (mesh {summary['best_mesh']})" if summary["best"] else
+             f"  best: none (no evaluation succeeded; the runs and their logs are in {summary['folder']})"),
             f"  seconds: solver {summary['seconds']['solver']:.1f}, ffd {summary['seconds']['ffd']:.2f}, "
             f"wall {summary['seconds']['wall']:.1f}"]
-    console.result(summary, "\n".join(text))
-    if exit_code:
-        sys.exit(exit_code)          # the summary is printed; exit 1: the solver failed too often
+    if not exit_code:
+        console.result(summary, "\n".join(text))
+        return
+    # the run failed (the baseline, or more than optimize.max_failures failures): the summary in words
+    # (unless -q; with --json it is the error object's "report"), then one "ffd: error:" line, exit 1
+    if not console.json:
+        console.say("\n".join(text))
+    kept = (f"the best design so far is written: {summary['best']}" if summary["best"] else
+            f"no design succeeded; each evaluation's folder and solver log are in {summary['folder']}")
+    err = FfdError(f"ffd optimize failed: {summary['message']}; {kept}")
+    err.exit_code = exit_code
+    err.report = summary
+    raise err
+
+
+def _number(x) -> str:
+    """A figure of the summary: 6 digits, or "n/a" where there is none (a failed baseline)."""
+    return "n/a" if x is None else f"{x:.6g}"

@@ -8,14 +8,14 @@ from ffdcli.cli import cli, common_options
 
 
 @cli.command("plot")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
-@click.option("-o", "--output", type=click.Path(dir_okay=False), metavar="FILE.png",
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
+@click.option("-o", "--output", type=click.Path(), metavar="FILE.png",
               help="Where to write the picture (default: output.plot, else beside output.mesh).")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--3d/--no-3d", "view3d", default=True, show_default=True,
               help="Also write <FILE>_3d.png, a 3D view rendered off-screen with pyvista (3D designs; "
                    "skipped with a note when pyvista or an OpenGL backend is missing).")
-@click.option("--target", type=click.Path(dir_okay=False), metavar="AIRFOIL.dat",
+@click.option("--target", type=click.Path(), metavar="AIRFOIL.dat",
               help="2D: also draw this airfoil (Selig/Lednicer .dat) on the mesh airfoil's chord line, "
                    "e.g. the target of `ffd fit`.")
 @common_options
@@ -36,11 +36,9 @@ def plot_cmd(design_file, output, overrides, view3d, target, console):
       ffd plot configs/rect_twist_linear.yaml -o out/twist.png
       ffd plot out/s1223.yaml --target samples/s1223.dat -o out/fit.png
     """
-    from ffdcli.app.plot import plot_design_file
-    from ffdcli.design import load_design
+    from ffdcli.app.plot import plot_file
 
-    design = load_design(design_file, overrides=overrides)
-    report = plot_design_file(design, output=output, view3d=view3d, target=target, progress=console.progress)
+    report = plot_file(design_file, overrides, output=output, view3d=view3d, target=target, progress=console.progress)
     for w in report.warnings:
         console.warn(w)
     console.result(report.summary, report.text)

@@ -5,11 +5,10 @@ from __future__ import annotations
 import click
 
 from ffdcli.cli import cli, common_options
-from ffdcli.cli.console import bound_text
 
 
 @cli.command("vars")
-@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path(dir_okay=False))
+@click.argument("design_file", metavar="DESIGN.yaml", type=click.Path())
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="As for ffd deform.")
 @click.option("--cache-dir", type=click.Path(file_okay=False), metavar="DIR", help="Where the box cache lives.")
 @common_options
@@ -30,14 +29,7 @@ def vars_cmd(design_file, overrides, cache_dir, console):
       ffd vars design.yaml
       ffd vars design.yaml --json | jq '.variables[] | select(.unit == "deg")'
     """
-    from ffdcli.api import DesignModel
+    from ffdcli.api.commands import run_vars
 
-    model = DesignModel.from_file(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
-    rows = model.variables_table()
-    width = max([len(r["name"]) for r in rows] + [8])
-    lines = [f"{'variable':<{width}}  {'value':>12}  {'unit':<6}  {'lower':>12}  {'upper':>12}"]
-    lines += [f"{r['name']:<{width}}  {r['value']:>12.6g}  {r['unit']:<6}  {bound_text(r['lower']):>12}  "
-              f"{bound_text(r['upper']):>12}" for r in rows]
-    if not rows:
-        lines.append("(no design variables: changes: is empty)")
-    console.result({"variables": rows}, "\n".join(lines))
+    report = run_vars(design_file, overrides, cache_dir=cache_dir, progress=console.progress)
+    console.result(report.summary, report.text)

@@ -11,7 +11,10 @@ ratios to the baseline unless said otherwise. Every object has
 
 The kinds, one module each: :mod:`~ffdcli.constraints.thickness` (``thickness``,
 ``thickness_to_chord``), :mod:`~ffdcli.constraints.volume`, :mod:`~ffdcli.constraints.le_te`,
-:mod:`~ffdcli.constraints.fold_free`.
+:mod:`~ffdcli.constraints.fold_free`, :mod:`~ffdcli.constraints.mesh_quality`. Each declares itself
+as every extension kind does (:mod:`ffdcli.registry`): ``kind``, ``schema()`` (the fragment of its
+item, :func:`item_schema`), ``from_spec(spec, ctx)`` with ``ctx`` a :class:`ConstraintContext`,
+``default_bounds``, and one line ``CONSTRAINTS.register(Kind)`` at the end of its module.
 """
 
 from __future__ import annotations
@@ -23,9 +26,10 @@ from functools import cached_property
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.registry import Registry
 
-#: The kinds of ``constraints:`` items, in the order of the docs.
-CONSTRAINT_KINDS = ("thickness", "thickness_to_chord", "volume", "le_te", "fold_free", "mesh_quality")
+#: The kinds of ``constraints:`` items, each registered by its own module.
+CONSTRAINTS = Registry("constraint")
 #: A constraint value within this of a bound is satisfied (the values are ratios near 1).
 SATISFIED_TOL = 1e-9
 
@@ -139,13 +143,62 @@ def surface_triangles(faces) -> np.ndarray:
     return np.concatenate(out)
 
 
-
 def surface_segments(faces) -> np.ndarray:
     """(E, 2) local point indices of the line blocks (a 2D surface)."""
     out = [np.zeros((0, 2), dtype=np.int64)]
     out += [np.asarray(b.data, dtype=np.int64) for b in faces if b.type == "line"]
     return np.concatenate(out)
 
+
+@dataclass(frozen=True)
+class ConstraintContext:
+    """What every kind's ``from_spec(spec, ctx)`` is handed: the item's place, its bounds (read with the
+    kind's ``default_bounds``) and the baseline it is built on.
+
+    index, key
+        The item's position in ``constraints:`` and its key path (``constraints[2].volume``).
+    lower, upper
+        The item's bounds (``-inf``/``inf``: none).
+    box : ffdcli.box.box.Box
+    surface : ffdcli.geometry.surface.Surface
+        The baseline surface (points (S, 3) and faces).
+    changes : tuple of ffdcli.parameterization.changes.Change
+        The design's changes (``le_te`` reads which control points the shape variables move).
+    mesh : ffdcli.mesh.Mesh or None
+        The input mesh (``mesh_quality`` reads its cells).
+    error : callable (message, key) -> Exception, optional
+        Makes the error naming the design file's key and line; default :class:`InputError`.
+    progress : callable, optional
+        A progress factory (:mod:`ffdcli.progress`).
+    """
+
+    index: int
+    key: str
+    lower: float
+    upper: float
+    box: object
+    surface: object
+    changes: tuple = ()
+    mesh: object = None
+    error: Callable | None = None
+    progress: object = None
+
+    def fail(self, message: str, key: str | None = None) -> Exception:
+        """The exception for ``message`` at ``key`` (default: the item's own key)."""
+        key = self.key if key is None else key
+        return InputError(message, key=key) if self.error is None else self.error(message, key)
+
+
+def item_schema(description: str, props: dict | None = None, required=()) -> dict:
+    """The schema fragment of a constraint item: null (every default) or an object of ``props`` and the
+    bounds every kind has (``lower``, ``upper``: a number or null for none)."""
+    bound = {"type": ["number", "null"]}
+    common = {"lower": {**bound, "description": "smallest allowed value (null: none)"},
+              "upper": {**bound, "description": "largest allowed value (null: none)"}}
+    body = {"type": "object", "properties": {**(props or {}), **common}, "additionalProperties": False}
+    if required:
+        body["required"] = list(required)
+    return {"description": description, "anyOf": [{"type": "null"}, body]}
 
 
 @dataclass(frozen=True, eq=False)
@@ -157,6 +210,8 @@ class Constraint:
     upper: float
 
     kind = ""
+    #: (lower, upper) when the item gives none (None: no bound).
+    default_bounds = (None, None)
 
     @property
     def size(self) -> int:  # pragma: no cover
@@ -184,7 +239,6 @@ class Constraint:
         return self.value(inp), self.jacobian(inp)
 
 
-
 def read_bounds(spec: dict, lower=None, upper=None) -> tuple[float, float]:
     """(lower, upper) of an item's settings (absent: the defaults given; ``None``: no bound)."""
     return _bound(spec, "lower", lower), _bound(spec, "upper", upper)
@@ -193,7 +247,6 @@ def read_bounds(spec: dict, lower=None, upper=None) -> tuple[float, float]:
 def _bound(spec: dict, key: str, default):
     v = spec.get(key, default)
     return -np.inf if v is None and key == "lower" else np.inf if v is None else float(v)
-
 
 
 # --------------------------------------------------------------------------------------------------

@@ -1,19 +1,12 @@
-"""Building the constraint objects of a design file's ``constraints:`` list (one module per kind)."""
+"""Building the constraint objects of a design file's ``constraints:`` list: each item by its kind's
+``from_spec`` (the kinds register themselves in :data:`~ffdcli.constraints.base.CONSTRAINTS`)."""
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ffdcli.constraints.base import CONSTRAINT_KINDS, read_bounds
-from ffdcli.constraints.fold_free import FOLD_SAMPLES, build_fold_free
-from ffdcli.constraints.le_te import build_le_te
-from ffdcli.constraints.mesh_quality import MESH_QUALITY_LOWER, build_mesh_quality
-from ffdcli.constraints.thickness import build_thickness
-from ffdcli.constraints.volume import build_volume
+from ffdcli.constraints.base import CONSTRAINTS, ConstraintContext, read_bounds
 from ffdcli.errors import InputError
-
-#: Default (lower, upper) bounds of the kinds that have them (the others: no bound).
-DEFAULT_BOUNDS = {"le_te": (0.0, 0.0), "mesh_quality": (MESH_QUALITY_LOWER, None)}
 
 
 def build_constraints(specs: Sequence[dict], box, surface, changes, *, error=None, progress=None,
@@ -36,7 +29,6 @@ def build_constraints(specs: Sequence[dict], box, surface, changes, *, error=Non
     mesh : ffdcli.mesh.Mesh, optional
         The input mesh (``mesh_quality`` reads its cells and baseline points).
     """
-
     if error is None:
         def error(message, key):
             return InputError(message, key=key)
@@ -48,21 +40,13 @@ def build_constraints(specs: Sequence[dict], box, surface, changes, *, error=Non
         (kind, spec), = item.items()
         key = f"constraints[{index}].{kind}"
         spec = dict(spec or {})
-        if kind not in CONSTRAINT_KINDS:
-            raise error(f"unknown constraint '{kind}'; the kinds are {', '.join(CONSTRAINT_KINDS)}",
-                        f"constraints[{index}]")
-        lower, upper = read_bounds(spec, *DEFAULT_BOUNDS.get(kind, (None, None)))
+        cls = CONSTRAINTS.get(kind)
+        if cls is None:
+            raise error(CONSTRAINTS.unknown(kind), f"constraints[{index}]")
+        lower, upper = read_bounds(spec, *cls.default_bounds)
         if lower > upper:
             raise error(f"lower {lower:g} is above upper {upper:g}", key)
-        if kind in ("thickness", "thickness_to_chord"):
-            out.append(build_thickness(kind, spec, key, index, lower, upper, box, surface, error, progress))
-        elif kind == "volume":
-            out.append(build_volume(index, lower, upper, box, surface, key, error))
-        elif kind == "le_te":
-            out.append(build_le_te(index, lower, upper, box, changes))
-        elif kind == "mesh_quality":
-            out.append(build_mesh_quality(index, lower, upper, spec, mesh, key, error))
-        else:
-            out.append(build_fold_free(index, lower, upper, box, int(spec.get("samples", FOLD_SAMPLES)), key, error))
+        ctx = ConstraintContext(index=index, key=key, lower=lower, upper=upper, box=box, surface=surface,
+                                changes=tuple(changes), mesh=mesh, error=error, progress=progress)
+        out.append(cls.from_spec(spec, ctx))
     return out
-

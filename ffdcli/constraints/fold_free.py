@@ -17,9 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ffdcli.constraints.base import Constraint
+from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema
 from ffdcli.lattice.embedding import sample_grid
-from ffdcli.lattice.lattice import _axis_tables, derivatives
+from ffdcli.lattice.lattice import axis_tables, derivatives
 
 #: Samples per knot span and direction of ``fold_free`` by default.
 FOLD_SAMPLES = 4
@@ -43,6 +43,27 @@ class FoldFree(Constraint):
 
     kind = "fold_free"
 
+    @classmethod
+    def schema(cls) -> dict:
+        return item_schema("smallest Jacobian determinant of the lattice map over the box, as a ratio to "
+                           "the baseline (> 0: the box does not fold)",
+                           {"samples": {"type": "integer", "minimum": 1, "maximum": 64,
+                                        "description": "samples per knot span and direction (default 4)"}})
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx) -> FoldFree:
+        """The sample grid (``samples`` per knot span, default :data:`FOLD_SAMPLES`) and the baseline
+        determinants."""
+        samples = int(spec.get("samples", FOLD_SAMPLES))
+        if not 1 <= samples <= 64:
+            raise ctx.fail(f"samples per knot span must be 1 to 64, got {samples}", f"{ctx.key}.samples")
+        lat = ctx.box.lattice()
+        params = sample_grid(lat, samples)
+        det0 = np.linalg.det(derivatives(lat, params))
+        if not np.all(np.abs(det0) > 0) or not (np.all(det0 > 0) or np.all(det0 < 0)):
+            raise ctx.fail("the baseline lattice is already folded (its Jacobian determinant changes sign)")
+        return cls(index=ctx.index, lower=ctx.lower, upper=ctx.upper, box=ctx.box, params=params, det0=det0)
+
     @property
     def size(self) -> int:
         return 1
@@ -53,7 +74,6 @@ class FoldFree(Constraint):
 
     def ratios(self, P) -> np.ndarray:
         """(N,) det J'(u) / det J0(u) at the samples for control points ``P`` (n, m, l, 3)."""
-
         J = derivatives(self.box.lattice(P), self.params)
         return np.linalg.det(J) / self.det0
 
@@ -61,7 +81,6 @@ class FoldFree(Constraint):
         return np.array([self.ratios(inp.P).min()])
 
     def jacobian(self, inp):
-
         box = self.box
         r = self.ratios(inp.P)
         q = int(np.argmin(r))
@@ -69,7 +88,7 @@ class FoldFree(Constraint):
         J = derivatives(box.lattice(inp.P), u)[0]                        # (gdim, pdim)
         nv = inp.D.shape[1]
         D = inp.D.reshape(*inp.P.shape, nv)                               # (n, m, l, 3, nv)
-        t = _axis_tables(box.lattice(), u, 1)                             # per axis (2, 1, n_axis)
+        t = axis_tables(box.lattice(), u, 1)                             # per axis (2, 1, n_axis)
         if box.dim == 3:
             a, b, c = (t[k][:, 0] for k in range(3))
             dJ = np.stack([np.einsum("i,j,k,ijkdv->vd", a[1], b[0], c[0], D),
@@ -85,15 +104,4 @@ class FoldFree(Constraint):
         return out[None, :]
 
 
-
-def build_fold_free(index, lower, upper, box, samples, key, error) -> FoldFree:
-    """The :class:`FoldFree` of item ``index``: the sample grid and the baseline determinants."""
-    if not 1 <= samples <= 64:
-        raise error(f"samples per knot span must be 1 to 64, got {samples}", f"{key}.samples")
-    lat = box.lattice()
-    params = sample_grid(lat, samples)
-    det0 = np.linalg.det(derivatives(lat, params))
-    if not np.all(np.abs(det0) > 0) or not (np.all(det0 > 0) or np.all(det0 < 0)):
-        raise error("the baseline lattice is already folded (its Jacobian determinant changes sign)", key)
-    return FoldFree(index=index, lower=lower, upper=upper, box=box, params=params, det0=det0)
-
+CONSTRAINTS.register(FoldFree)

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ffdcli.constraints.base import Constraint
+from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema
 from ffdcli.parameterization.changes import Shape
 
 
@@ -31,6 +31,33 @@ class LeTe(Constraint):
     rows: np.ndarray = None
 
     kind = "le_te"
+    default_bounds = (0.0, 0.0)
+
+    @classmethod
+    def schema(cls) -> dict:
+        return item_schema("upper + lower shape move of the first and last chordwise control points of each "
+                           "section (mesh units); lower and upper default to 0")
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx) -> LeTe:
+        """The rows of the edges that some shape variable moves."""
+        P0 = ctx.box.control_points
+        frame = ctx.box.frame
+        n, m, l, _ = P0.shape
+        sizes = [c.size for c in ctx.changes]
+        nv = sum(sizes)
+        A = np.zeros((2, m, nv))              # (edge, section, variable)
+        at = 0
+        for change, size in zip(ctx.changes, sizes, strict=True):
+            if isinstance(change, Shape):
+                amounts = change.jacobian_own(P0, frame) @ frame.thickness_dir        # (size, n, m, l)
+                for e, i in enumerate((0, n - 1)):
+                    A[e, :, at:at + size] = (amounts[:, i, :, l - 1] + amounts[:, i, :, 0]).T
+            at += size
+        A = A.transpose(1, 0, 2).reshape(2 * m, nv)           # section-major, LE before TE
+        rows = np.stack(np.meshgrid(np.arange(m), np.arange(2), indexing="ij"), -1).reshape(-1, 2)
+        keep = np.abs(A).max(axis=1) > 0
+        return cls(index=ctx.index, lower=ctx.lower, upper=ctx.upper, A=A[keep], rows=rows[keep])
 
     @property
     def size(self) -> int:
@@ -43,24 +70,4 @@ class LeTe(Constraint):
         return self.A.copy()
 
 
-
-def build_le_te(index, lower, upper, box, changes) -> LeTe:
-    """The :class:`LeTe` of item ``index``: the rows of the edges that some shape variable moves."""
-    P0 = box.control_points
-    frame = box.frame
-    n, m, l, _ = P0.shape
-    sizes = [c.size for c in changes]
-    nv = sum(sizes)
-    A = np.zeros((2, m, nv))              # (edge, section, variable)
-    at = 0
-    for change, size in zip(changes, sizes, strict=True):
-        if isinstance(change, Shape):
-            amounts = change.jacobian_own(P0, frame) @ frame.thickness_dir        # (size, n, m, l)
-            for e, i in enumerate((0, n - 1)):
-                A[e, :, at:at + size] = (amounts[:, i, :, l - 1] + amounts[:, i, :, 0]).T
-        at += size
-    A = A.transpose(1, 0, 2).reshape(2 * m, nv)           # section-major, LE before TE
-    rows = np.stack(np.meshgrid(np.arange(m), np.arange(2), indexing="ij"), -1).reshape(-1, 2)
-    keep = np.abs(A).max(axis=1) > 0
-    return LeTe(index=index, lower=lower, upper=upper, A=A[keep], rows=rows[keep])
-
+CONSTRAINTS.register(LeTe)

@@ -53,8 +53,16 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
-from ffdcli.constraints.base import Constraint
-from ffdcli.quality.metrics import CHUNK, cell_orientation, cell_quality, check_types, corner_table
+from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema
+from ffdcli.quality.metrics import (
+    CHUNK,
+    cell_orientation,
+    cell_quality,
+    check_types,
+    corner_det_length,
+    corner_table,
+    in_one_plane,
+)
 
 #: The lower bound when the item gives none: no cell below 0.3 x its reference.
 MESH_QUALITY_LOWER = 0.3
@@ -78,28 +86,7 @@ def _corner_values_nb(points, data, corners, scale, plane, out):
     n_corners, width = corners.shape
     for c in prange(data.shape[0]):
         for k in range(n_corners):
-            p = data[c, corners[k, 0]]
-            a = data[c, corners[k, 1]]
-            b = data[c, corners[k, 2]]
-            e10 = points[a, 0] - points[p, 0]
-            e11 = points[a, 1] - points[p, 1]
-            e12 = points[a, 2] - points[p, 2]
-            e20 = points[b, 0] - points[p, 0]
-            e21 = points[b, 1] - points[p, 1]
-            e22 = points[b, 2] - points[p, 2]
-            x0 = e11 * e22 - e12 * e21
-            x1 = e12 * e20 - e10 * e22
-            x2 = e10 * e21 - e11 * e20
-            length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
-            if width == 4:
-                d = data[c, corners[k, 3]]
-                e30 = points[d, 0] - points[p, 0]
-                e31 = points[d, 1] - points[p, 1]
-                e32 = points[d, 2] - points[p, 2]
-                det = x0 * e30 + x1 * e31 + x2 * e32
-                length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
-            else:
-                det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+            det, length = corner_det_length(points, data, c, corners, k, width, plane)
             out[c, k] = scale * det / length if length > 0 else 0.0
 
 
@@ -290,6 +277,63 @@ class MeshQuality(Constraint):
     rho: float = 1.0
 
     kind = "mesh_quality"
+    default_bounds = (MESH_QUALITY_LOWER, None)
+
+    @classmethod
+    def schema(cls) -> dict:
+        return item_schema("smooth (KS) minimum over the volume cells of the scaled Jacobian after the design "
+                           "over the cell's input value capped at `good` (1: no cell got worse, < 0: a cell "
+                           "inverted); lower defaults to 0.3",
+                           {"gap": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                    "description": "the smooth minimum is at most this below the worst "
+                                                   "cell's ratio (default 0.05)"},
+                            "good": {"type": "number", "exclusiveMinimum": 0, "maximum": 1,
+                                     "description": "a cell's input quality counts as at most this "
+                                                    "(default 0.1; 1: the plain ratio to the input)"}})
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx) -> MeshQuality:
+        """Built on the input mesh ``ctx.mesh`` (its cells and points)."""
+        mesh = ctx.mesh
+        gap = spec.get("gap", KS_GAP)
+        good = spec.get("good", MESH_QUALITY_GOOD)
+        for name, v in (("gap", gap), ("good", good)):
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 < v <= 1:
+                raise ctx.fail(f"{name} must be a number in (0, 1], got {v!r}", f"{ctx.key}.{name}")
+        cells = [b for b in (mesh.cells if mesh is not None else []) if len(b)]
+        if mesh is None or not cells:
+            raise ctx.fail("needs a volume mesh: the mesh has no interior cells whose quality the design could "
+                           "spoil (a surface mesh?)")
+        if getattr(mesh, "partial", False):
+            raise ctx.fail("is evaluated on a whole mesh, not on one read by parts (mpirun ffd deform): evaluate "
+                           "it with ffd constraints or the API (under mpirun too), and deform without it")
+        try:
+            check_types(cells, mesh.dim)
+        except ValueError as e:
+            raise ctx.fail(f"has no quality measure for this mesh: {e}") from None
+        orientation = cell_orientation(mesh.points, cells, mesh.dim)
+        if mesh.dim == 2 and not in_one_plane(mesh.points, cells, orientation.normal):
+            raise ctx.fail("needs a volume mesh: the mesh's cells are a surface in space (2-D cells not in one "
+                           "plane), with no volume whose quality the design could spoil")
+        q0 = cell_quality(mesh.points, cells, mesh.dim, orientation=orientation)
+        types, data, signs, base = [], [], [], []
+        at = 0
+        for blk, sign in zip(cells, orientation.signs, strict=True):
+            q = q0[at:at + len(blk)]
+            at += len(blk)
+            ok = q > 0
+            if ok.any():
+                types.append(blk.type)
+                data.append(np.ascontiguousarray(blk.data[ok], dtype=np.int64))
+                signs.append(float(sign))
+                base.append(np.minimum(q[ok], float(good)))
+        if not data:
+            raise ctx.fail("every cell of the input mesh is inverted or degenerate: there is no quality to keep")
+        plane = np.zeros(3) if orientation.normal is None else np.asarray(orientation.normal, dtype=np.float64)
+        n = sum(len(d) * len(corner_table(t)[0]) for t, d in zip(types, data, strict=True))
+        rho = max(np.log(n), 1.0) / float(gap)
+        return cls(index=ctx.index, lower=ctx.lower, upper=ctx.upper, types=tuple(types), cells=tuple(data),
+                   signs=tuple(signs), base=tuple(base), plane=plane, rho=float(rho))
 
     @property
     def size(self) -> int:
@@ -399,41 +443,4 @@ class MeshQuality(Constraint):
         return np.array([value]), jac[None, :]
 
 
-def build_mesh_quality(index, lower, upper, spec, mesh, key, error) -> MeshQuality:
-    """The :class:`MeshQuality` of item ``index`` on the input ``mesh`` (its cells and points)."""
-    gap = spec.get("gap", KS_GAP)
-    good = spec.get("good", MESH_QUALITY_GOOD)
-    for name, v in (("gap", gap), ("good", good)):
-        if not isinstance(v, (int, float)) or isinstance(v, bool) or not 0 < v <= 1:
-            raise error(f"{name} must be a number in (0, 1], got {v!r}", f"{key}.{name}")
-    cells = [b for b in (mesh.cells if mesh is not None else []) if len(b)]
-    if mesh is None or not cells:
-        raise error("needs a volume mesh: the mesh has no interior cells whose quality the design could "
-                    "spoil (a surface mesh?)", key)
-    if getattr(mesh, "partial", False):
-        raise error("is evaluated on a whole mesh, not on one read by parts (mpirun ffd deform): evaluate it "
-                    "with ffd constraints or the API (under mpirun too), and deform without it", key)
-    try:
-        check_types(cells, mesh.dim)
-    except ValueError as e:
-        raise error(f"has no quality measure for this mesh: {e}", key) from None
-    orientation = cell_orientation(mesh.points, cells, mesh.dim)
-    q0 = cell_quality(mesh.points, cells, mesh.dim, orientation=orientation)
-    types, data, signs, base = [], [], [], []
-    at = 0
-    for blk, sign in zip(cells, orientation.signs, strict=True):
-        q = q0[at:at + len(blk)]
-        at += len(blk)
-        ok = q > 0
-        if ok.any():
-            types.append(blk.type)
-            data.append(np.ascontiguousarray(blk.data[ok], dtype=np.int64))
-            signs.append(float(sign))
-            base.append(np.minimum(q[ok], float(good)))
-    if not data:
-        raise error("every cell of the input mesh is inverted or degenerate: there is no quality to keep", key)
-    plane = np.zeros(3) if orientation.normal is None else np.asarray(orientation.normal, dtype=np.float64)
-    n = sum(len(d) * len(corner_table(t)[0]) for t, d in zip(types, data, strict=True))
-    rho = max(np.log(n), 1.0) / float(gap)
-    return MeshQuality(index=index, lower=lower, upper=upper, types=tuple(types), cells=tuple(data),
-                       signs=tuple(signs), base=tuple(base), plane=plane, rho=float(rho))
+CONSTRAINTS.register(MeshQuality)

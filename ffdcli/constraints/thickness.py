@@ -19,8 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ffdcli.constraints.base import Constraint, surface_segments, surface_triangles
+from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema, surface_segments, surface_triangles
 from ffdcli.lattice.pointset import PointSet
+from ffdcli.schema_parts import fraction
 
 #: Span fractions 0 and 1 (the root and tip edges of the surface) are read this far inside.
 END_INSET = 1e-6
@@ -108,7 +109,6 @@ def project_thickness(points, faces, box, Q) -> tuple[np.ndarray, np.ndarray, np
     return U, L, ok
 
 
-
 def _norm_jac(d: np.ndarray, Jd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(|d| (k,), d|d|/dv (k, nv)) for vectors d (k, 3) with derivatives Jd (k, 3, nv)."""
     r = np.linalg.norm(d, axis=1)
@@ -133,9 +133,26 @@ class Thickness(Constraint):
     base: np.ndarray = field(default=None)
     grid: np.ndarray = field(default=None)        # (G, 2) chord and span fraction of each item
 
-    @property
-    def kind(self):
-        return "thickness" if self.chords is None else "thickness_to_chord"
+    kind = "thickness"
+
+    @classmethod
+    def schema(cls) -> dict:
+        # chord stations strictly inside: at the leading edge (and a sharp trailing edge) the thickness
+        # is zero and a ratio to it has no meaning; span stations 0 and 1 are read just inside the ends
+        inner = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+        grid = {"chord": {"type": "array", "items": inner, "minItems": 1,
+                          "description": "chord fractions of the local section strictly between 0 (leading "
+                                         "edge) and 1 (trailing edge): the thickness is zero at the edges"},
+                "span": {"type": "array", "items": fraction(), "minItems": 1,
+                         "description": "span fractions, 0 = root, 1 = tip (3D only)"}}
+        what = ("thickness between the upper and lower surface along the thickness axis" if cls.kind == "thickness"
+                else "thickness over the local chord")
+        return item_schema(f"{what} at a chord x span grid, as a ratio to the baseline", grid, ["chord"])
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx) -> Thickness:
+        """Built on the baseline (see the module docstring)."""
+        return build_thickness(cls, spec, ctx)
 
     @property
     def size(self) -> int:
@@ -163,7 +180,6 @@ class Thickness(Constraint):
         return ((dt * c[:, None] - t[:, None] * dc) / (c * c)[:, None]) / self.base[:, None]
 
 
-
 def _fractions(spec, name, key, error) -> np.ndarray:
     """The stations of ``name`` (the schema's rule, for callers that skip the schema: the API): span
     in [0, 1], chord strictly inside (0, 1) (the thickness is zero at the leading edge)."""
@@ -178,8 +194,9 @@ def _fractions(spec, name, key, error) -> np.ndarray:
     return v
 
 
-def build_thickness(kind, spec, key, index, lower, upper, box, surface, error, progress=None) -> Thickness:
-    """The :class:`Thickness` of item ``index`` (``kind`` thickness or thickness_to_chord) on the baseline."""
+def build_thickness(cls, spec, ctx) -> Thickness:
+    """The :class:`Thickness` or :class:`ThicknessToChord` (``cls``) of an item on the baseline."""
+    kind, key, index, box, error = cls.kind, ctx.key, ctx.index, ctx.box, ctx.fail
     if "chord" not in spec:
         raise error("needs chord: [fractions of the local chord, 0 = leading edge, 1 = trailing edge]", key)
     xi = _fractions(spec, "chord", key, error)
@@ -200,7 +217,7 @@ def build_thickness(kind, spec, key, index, lower, upper, box, surface, error, p
     LE = np.repeat(le, nc, axis=0)
     TE = np.repeat(te, nc, axis=0)
     Q = LE + grid[:, :1] * (TE - LE)
-    U, L, ok = project_thickness(surface.points, surface.faces, box, Q)
+    U, L, ok = project_thickness(ctx.surface.points, ctx.surface.faces, box, Q)
     if not ok.all():
         j = int(np.flatnonzero(~ok)[0])
         where = f"chord {grid[j, 0]:g}" + ("" if box.dim == 2 else f", span {grid[j, 1]:g}")
@@ -209,10 +226,10 @@ def build_thickness(kind, spec, key, index, lower, upper, box, surface, error, p
                     f"axis does not cross an upper and a lower surface (is it too close to {edge}"
                     f"{'' if box.dim == 2 else ' or beyond a rounded tip'}?)", key)
     G = len(Q)
-    pairs = PointSet.embed(f"k{index}.{kind}", box, np.vstack([U, L]), progress=progress)
+    pairs = PointSet.embed(f"k{index}.{kind}", box, np.vstack([U, L]), progress=ctx.progress)
     chords = None
     if kind == "thickness_to_chord":
-        chords = PointSet.embed(f"k{index}.{kind}.chord", box, np.vstack([LE, TE]), progress=progress)
+        chords = PointSet.embed(f"k{index}.{kind}.chord", box, np.vstack([LE, TE]), progress=ctx.progress)
     for ps in (pairs, chords):
         if ps is not None and not ps.inside.all():
             j = int(np.flatnonzero(~ps.inside)[0]) % G
@@ -220,5 +237,16 @@ def build_thickness(kind, spec, key, index, lower, upper, box, surface, error, p
                         "(it would not move with the design)", key)
     t0 = np.linalg.norm(U - L, axis=1)
     base = t0 if chords is None else t0 / np.linalg.norm(LE - TE, axis=1)
-    return Thickness(index=index, lower=lower, upper=upper, pairs=pairs, chords=chords, base=base, grid=grid)
+    return cls(index=index, lower=ctx.lower, upper=ctx.upper, pairs=pairs, chords=chords, base=base, grid=grid)
+
+
+@dataclass(frozen=True, eq=False)
+class ThicknessToChord(Thickness):
+    """``thickness_to_chord``: :class:`Thickness` over the moved local chord (``chords`` is set)."""
+
+    kind = "thickness_to_chord"
+
+
+CONSTRAINTS.register(Thickness)
+CONSTRAINTS.register(ThicknessToChord)
 

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ffdcli.constraints.base import Constraint, surface_segments, surface_triangles
+from ffdcli.constraints.base import CONSTRAINTS, Constraint, item_schema, surface_segments, surface_triangles
 
 
 @njit(cache=True)
@@ -103,6 +103,32 @@ class Volume(Constraint):
 
     kind = "volume"
 
+    @classmethod
+    def schema(cls) -> dict:
+        return item_schema("volume enclosed by the surface (a half wing closed by its symmetry plane; 2D: the "
+                           "area), as a ratio to the baseline")
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx) -> Volume:
+        """Built on the baseline surface (its volume or area is the base)."""
+        box, X = ctx.box, ctx.surface.points
+        if box.dim == 3:
+            cells = surface_triangles(ctx.surface.faces)
+            plane = (0, 1)
+        else:
+            cells = surface_segments(ctx.surface.faces)
+            plane = (box.axes.chord, box.axes.thickness)
+        if not len(cells):
+            raise ctx.fail("the surface has no faces to enclose a volume")
+        origin = np.asarray(box.te_points[0], dtype=float).copy()     # on the root plane (3D)
+        made = dict(index=ctx.index, lower=ctx.lower, upper=ctx.upper, cells=cells, origin=origin, dim=box.dim,
+                    plane=plane)
+        v0 = cls(base=1.0, **made).measure(X)[0]
+        size = float(np.ptp(box.control_points.reshape(-1, 3), axis=0).max()) or 1.0
+        if not abs(v0) > 1e-12 * size ** box.dim:
+            raise ctx.fail("the surface encloses no volume (an open surface whose opening is not the root plane?)")
+        return cls(base=v0, **made)
+
     @property
     def size(self) -> int:
         return 1
@@ -129,25 +155,4 @@ class Volume(Constraint):
         return np.array([vol / self.base]), (gP @ inp.D)[None, :] / self.base
 
 
-
-def build_volume(index, lower, upper, box, surface, key, error) -> Volume:
-    """The :class:`Volume` of item ``index`` on the baseline surface (its volume or area is the base)."""
-    X = surface.points
-    if box.dim == 3:
-        cells = surface_triangles(surface.faces)
-        plane = (0, 1)
-    else:
-        cells = surface_segments(surface.faces)
-        plane = (box.axes.chord, box.axes.thickness)
-    if not len(cells):
-        raise error("the surface has no faces to enclose a volume", key)
-    origin = np.asarray(box.te_points[0], dtype=float).copy()     # on the root plane (3D)
-    vol = Volume(index=index, lower=lower, upper=upper, cells=cells, origin=origin, base=1.0, dim=box.dim,
-                 plane=plane)
-    v0 = vol.measure(X)[0]
-    size = float(np.ptp(box.control_points.reshape(-1, 3), axis=0).max()) or 1.0
-    if not abs(v0) > 1e-12 * size ** box.dim:
-        raise error("the surface encloses no volume (an open surface whose opening is not the root plane?)", key)
-    return Volume(index=index, lower=lower, upper=upper, cells=cells, origin=origin, base=v0, dim=box.dim,
-                  plane=plane)
-
+CONSTRAINTS.register(Volume)

@@ -35,7 +35,7 @@ from pathlib import Path
 import yaml
 
 from ffdcli.design.overrides import apply_overrides
-from ffdcli.design.schema import ADDABLE, CHANGE_KINDS, design_schema
+from ffdcli.design.schema import ADDABLE, design_schema
 from ffdcli.design.validate import validate
 from ffdcli.design.yamlmap import (
     MAX_YAML_DEPTH,
@@ -48,14 +48,14 @@ from ffdcli.design.yamlmap import (
     yaml_lines,
 )
 from ffdcli.errors import InputError
-from ffdcli.io.formats import FORMATS
+from ffdcli.io.formats import extensions
 from ffdcli.io.inputs import check_input_file, check_mesh_path, existing_kind
 from ffdcli.lattice.limits import check_lattice_size
 from ffdcli.parameterization.changes import Change, changes_from_spec
 from ffdcli.parameterization.components import ComponentSpec
 from ffdcli.settings import BoxSettings
 
-__all__ = ["ADDABLE", "CHANGE_KINDS", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "Design", "apply_overrides",
+__all__ = ["ADDABLE", "MAX_YAML_DEPTH", "MAX_YAML_VALUES", "Design", "apply_overrides",
            "build_changes", "changes_from_spec", "design_schema", "key_path", "load_design", "validate",
            "yaml_lines"]
 
@@ -151,7 +151,6 @@ def load_design(path, overrides=(), check_files: bool = True) -> Design:
     box = box_settings(data.get("box"))
     components = None
     if "components" in data:
-
         components = []
         for c, item in enumerate(data["components"]):
             names = item["surface"]
@@ -181,8 +180,7 @@ _MESH_MAGIC = ((b"\x89HDF", "CGNS/HDF5"), (b"# vtk DataFile", "legacy VTK"), (b"
 def _not_a_mesh(path: Path) -> None:
     """InputError when ``path`` is a mesh (by its extension or its first bytes): say so and how to
     start a design file, instead of quoting the mesh back as a YAML error."""
-
-    fmt = FORMATS.get(path.suffix.lower())
+    fmt = extensions().get(path.suffix.lower())
     if fmt is None:
         try:
             with open(path, "rb") as fh:
@@ -195,7 +193,7 @@ def _not_a_mesh(path: Path) -> None:
         if fmt == "VTK XML" and b"VTKFile" not in head:
             fmt = None
     if fmt is not None:
-        raise InputError(f"is a mesh ({fmt.upper() if fmt in FORMATS.values() else fmt}), not a design file",
+        raise InputError(f"is a mesh ({fmt.upper() if fmt in extensions().values() else fmt}), not a design file",
                          path=path, hint=f"start a design file for it with: ffd init {path.name} -o design.yaml; "
                                          "then ffd deform design.yaml")
 

@@ -2,24 +2,27 @@
 :class:`OptimizeSettings` (frozen), paths resolved relative to the design file, every problem an
 :class:`~ffdcli.errors.InputError` (exit 2) naming the key path and its line.
 
-The schema (what keys exist, their types) is :func:`ffdcli.design.schema.optimize_schema`; this
-module adds what a schema cannot say: the objective is not also a constrained function, a function
+The schema (what keys exist, their types) is :func:`ffdcli.design.schema.optimize_schema`: the driver's
+keys (:data:`~ffdcli.design.schema.OPTIMIZE_KEYS`) and every solver kind's own keys. The solver's keys
+are kept as written (:attr:`OptimizeSettings.solver_spec`) and parsed by the solver's ``from_spec``
+(:mod:`ffdcli.optimize.solvers`: SU2's ``adjoint`` and ``adjoint_residual``). This module adds what a
+schema cannot say: the objective is not also a constrained function, a function
 has a bound, ``lower <= upper``, a name appears once, ``launch:`` splits like a shell line, and the
 solver's configuration exists.
 
 Defaults (documented in docs/optimize.md): solver ``su2``, objective ``DRAG``, method ``SLSQP``,
-iterations 20, tolerance 1e-6, folder ``opt/`` beside the design file, adjoint ``None`` (the solver
-chooses: discrete where it is found), max_failures 3, feasibility 1e-4, step 0.1, line_search 4,
-warm_start true, screen 0.3, move_limit 0.1 (method ``SQP`` only), concurrent_adjoints 1, adjoint_residual
-None (the adjoints converge to the solver config's own target, as the flow).
+iterations 20, tolerance 1e-6, folder ``opt/`` beside the design file, max_failures 3, feasibility
+1e-4, step 0.1, line_search 4, warm_start true, screen 0.3, move_limit 0.1 (method ``SQP`` only),
+concurrent_adjoints 1.
 """
 
 from __future__ import annotations
 
 import shlex
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+from ffdcli.design.schema import OPTIMIZE_KEYS
 from ffdcli.errors import InputError
 from ffdcli.io.inputs import check_input_file, existing_kind
 
@@ -50,7 +53,6 @@ class OptimizeSettings:
     iterations: int = 20
     tolerance: float = 1e-6
     folder: Path = Path("opt")
-    adjoint: str | None = None
     max_failures: int = 3
     feasibility: float = 1e-4
     step: float = 0.1
@@ -59,7 +61,8 @@ class OptimizeSettings:
     screen: float | None = 0.3
     move_limit: float = 0.1
     concurrent_adjoints: int = 1
-    adjoint_residual: float | None = None
+    #: The solver's own keys of ``optimize:`` as written (its ``from_spec`` parses them).
+    solver_spec: dict = field(default_factory=dict, hash=False)
 
     @property
     def function_names(self) -> list[str]:
@@ -118,14 +121,14 @@ def optimize_settings(design, *, check_files: bool = True) -> OptimizeSettings:
         scale=None if data.get("scale") is None else float(data["scale"]), functions=tuple(functions),
         variables=None if variables is None else tuple(variables), method=data.get("method", "SLSQP"),
         iterations=int(data.get("iterations", 20)), tolerance=float(data.get("tolerance", 1e-6)),
-        folder=resolve(data.get("folder", "opt")), adjoint=data.get("adjoint"),
+        folder=resolve(data.get("folder", "opt")),
         max_failures=int(data.get("max_failures", 3)), feasibility=float(data.get("feasibility", 1e-4)),
         step=float(data.get("step", 0.1)), line_search=int(data.get("line_search", 4)),
         warm_start=bool(data.get("warm_start", True)),
         screen=None if "screen" in data and data["screen"] is None else float(data.get("screen", 0.3)),
         move_limit=float(data.get("move_limit", 0.1)),
         concurrent_adjoints=int(data.get("concurrent_adjoints", 1)),
-        adjoint_residual=None if data.get("adjoint_residual") is None else float(data["adjoint_residual"]))
+        solver_spec={k: v for k, v in data.items() if k not in OPTIMIZE_KEYS})
 
 
 def select_variables(names: list[str], patterns, *, error=None) -> list[int]:

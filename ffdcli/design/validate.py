@@ -8,9 +8,10 @@ from __future__ import annotations
 import math
 
 from ffdcli.deferred import deferred
-from ffdcli.design.schema import CHANGE_KINDS, design_schema
+from ffdcli.design.schema import design_schema
 from ffdcli.design.yamlmap import key_path, line_at
 from ffdcli.errors import InputError
+from ffdcli.parameterization.changes import CHANGES
 from ffdcli.settings import degree_problem
 
 jsonschema = deferred("jsonschema")   # 0.05 s of every start: imported when a file is validated
@@ -34,6 +35,33 @@ def _shown(value) -> str:
     return text if len(text) <= 40 else text[:36] + "...'"   # a few words, never a whole pasted file
 
 
+_BOUND_WORDS = (("exclusiveMinimum", "greater than"), ("minimum", "at least"),
+                ("exclusiveMaximum", "less than"), ("maximum", "at most"))
+
+
+def _number_range(branches, inst) -> str:
+    """The range of the branch of an anyOf/oneOf that takes a number, in words ("greater than 0 and less
+    than 1"), when ``inst`` is a number of its type out of it; else empty."""
+    if isinstance(inst, bool) or not isinstance(inst, (int, float)):
+        return ""
+    for b in branches:
+        if not isinstance(b, dict) or b.get("type") not in ("number", "integer"):
+            continue
+        if b["type"] == "integer" and not isinstance(inst, int):
+            continue
+        words = [f"{w} {b[k]:g}" for k, w in _BOUND_WORDS if k in b]
+        if words:
+            return " and ".join(words)
+    return ""
+
+
+def _percent(ranged: str, inst) -> str:
+    """For a fraction (at most 1) given as a percentage (75 for 0.75): the fraction meant."""
+    if ranged.endswith(("less than 1", "at most 1")) and isinstance(inst, (int, float)) and 5 <= inst <= 100:
+        return f" (a fraction: {inst / 100:g} for {inst:g} %)"
+    return ""
+
+
 def _describe(error) -> tuple[tuple, str]:
     """(key path parts, message) of one jsonschema error, in words a user reads."""
     parts = tuple(error.absolute_path)
@@ -44,6 +72,11 @@ def _describe(error) -> tuple[tuple, str]:
         inner = [e for e in inner if e.validator not in ("required",) or isinstance(inst, dict)]
         if inner and isinstance(inst, (dict, list)):
             return max((_describe(e) for e in inner), key=lambda d: len(d[0]))
+        ranged = _number_range(schema.get(v, []), inst)
+        if ranged:                    # a number out of the range of the form that takes a number
+            what = schema.get("description")
+            return parts, (f"expected a number {ranged}, got {_shown(inst)}{_percent(ranged, inst)}"
+                           + (f" ({what})" if what else ""))
         what = schema.get("description")
         if what is None and schema.get("anyOf", [{}])[0].get("required"):
             what = "one of: " + ", ".join(b["required"][0] for b in schema["anyOf"])
@@ -61,16 +94,12 @@ def _describe(error) -> tuple[tuple, str]:
         return parts, f"missing key '{missing[0]}'"
     if v in ("minProperties", "maxProperties") and len(parts) == 2 and parts[0] == "changes":
         keys = ", ".join(inst) or "none"
-        return parts, (f"each item of changes has exactly one key ({', '.join(CHANGE_KINDS)}); "
+        return parts, (f"each item of changes has exactly one key ({', '.join(CHANGES.kinds())}); "
                        f"got {len(inst)}: {keys}")
-    if v == "exclusiveMinimum":
-        return parts, f"must be greater than {error.validator_value}, got {_shown(inst)}"
-    if v == "exclusiveMaximum":
-        return parts, f"must be less than {error.validator_value}, got {_shown(inst)}"
-    if v == "maximum":
-        return parts, f"must be at most {error.validator_value}, got {_shown(inst)}"
-    if v == "minimum":
-        return parts, f"must be at least {error.validator_value}, got {_shown(inst)}"
+    if v in ("exclusiveMinimum", "minimum", "exclusiveMaximum", "maximum"):
+        ranged = (_number_range([schema], inst)          # the whole range, not only the bound passed
+                  or f"{dict(_BOUND_WORDS)[v]} {error.validator_value:g}")
+        return parts, f"must be {ranged}, got {_shown(inst)}{_percent(ranged, inst)}"
     if v in ("enum", "const"):
         allowed = error.validator_value if v == "enum" else [error.validator_value]
         return parts, f"must be one of {', '.join(map(str, allowed))}, got {_shown(inst)}"
@@ -103,7 +132,6 @@ def _walk_nonfinite(value, parts=()):
 
 def validate(data, path=None, lines: dict | None = None) -> None:
     """Raise :class:`InputError` for the first problem (in file order) of ``data``; None if valid."""
-
     lines = lines or {}
 
     def fail(parts, message):

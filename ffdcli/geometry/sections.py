@@ -233,7 +233,6 @@ class Cutter:
         return leading_edge_sign([q[:, [self.axes.chord, self.axes.thickness]] for q in probe])
 
 
-
 def _predict(sections, etas, j, toward):
     """Linear extrapolation of section ``j`` from its two neighbours on the ``toward`` side."""
     a, b = j + toward, j + 2 * toward
@@ -243,6 +242,8 @@ def _predict(sections, etas, j, toward):
     if not (0 <= b < len(sections)) or sections[b] is None:
         return sa.le, sa.te, sa.chord
     sb = sections[b]
+    if etas[a] == etas[b]:           # both clamped to the same end of the span: no slope to follow
+        return sa.le, sa.te, sa.chord
     f = (etas[j] - etas[a]) / (etas[a] - etas[b])
     le = sa.le + f * (sa.le - sb.le)
     te = sa.te + f * (sa.te - sb.te)

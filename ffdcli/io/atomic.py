@@ -33,7 +33,7 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
-from ffdcli.errors import FfdError, InputError, Terminated
+from ffdcli.errors import FfdError, InputError, Terminated, committed_outputs
 from ffdcli.io.inputs import existing_kind
 
 #: A temporary file of another host (or of the old naming) untouched this long is stale (seconds).
@@ -41,8 +41,6 @@ STALE_AGE = 3600.0
 
 #: Signals that end a write cleanly (temporary files removed) instead of killing the process.
 HANDLED_SIGNALS = tuple(getattr(signal, n) for n in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, n))
-
-
 
 
 def check_writable(path: str | Path, *, inputs: tuple[str | Path, ...] = ()) -> Path:
@@ -250,23 +248,45 @@ def _handlers(signals, handler, old: dict, *, keep_user: bool) -> Iterator[None]
         yield
     finally:
         for s, h in old.items():
+            if h == signal.SIG_DFL and s != signal.SIGINT and committed_outputs():
+                h = raise_terminated          # outputs are complete: a later signal must say so, not kill
             with contextlib.suppress(ValueError, OSError):
                 signal.signal(s, h)
+
+
+def raise_terminated(signum, frame):
+    """The handler of SIGTERM and SIGHUP once the command's outputs are complete
+    (:func:`ffdcli.errors.committed_outputs`): :class:`Terminated`, whose message names them, instead of
+    the default death without a word; :func:`ffdcli.errors.outputs_ledger` puts the default back."""
+    raise Terminated(signum)
 
 
 @contextlib.contextmanager
 def signals_raise() -> Iterator[None]:
     """During the block SIGTERM and SIGHUP raise :class:`Terminated` (SIGINT raises KeyboardInterrupt as
-    always), so the temporary files are removed on the way out. A handler set by the user's program
-    (not the default) is left alone. Outside the main thread: a no-op."""
+    always; under MPI, where ffd's recorder holds it, it raises here too), so the temporary files are
+    removed on the way out; once: a second signal while the first unwinds does not interrupt the
+    clean-up (under MPI it is recorded). A handler set by the user's program (not the default) is left
+    alone. Outside the main thread: a no-op."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
+    fired: list[int] = []
+    replaced: dict = {}
+
     def handler(signum, frame):
+        if fired:              # the run is already stopping: a second signal (mpiexec forwards Ctrl-C that a
+            outer = replaced.get(signum)      # terminal also delivers) must not raise again in the clean-up
+            if getattr(outer, "ffd_replaceable", False):
+                outer(signum, frame)          # or in the ranks' agreement: recorded, as outside a write
+            return
+        fired.append(signum)
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
         raise Terminated(signum)
 
-    with _handlers([s for s in HANDLED_SIGNALS if s != signal.SIGINT], handler, {}, keep_user=True):
+    with _handlers(HANDLED_SIGNALS, handler, replaced, keep_user=True):
         yield
 
 
@@ -366,7 +386,8 @@ def _umask() -> int:
 _WRITE_ERRORS = {
     errno.ENOSPC: (1, "no space left on the device", "free some space or write elsewhere"),
     errno.EDQUOT: (1, "disk quota exceeded", "free some space or write elsewhere"),
-    errno.EFBIG: (1, "the file is too large for this file system", None),
+    errno.EFBIG: (1, "the file is larger than this process may write (its file-size limit, `ulimit -f`) or than "
+                     "the file system allows", "raise the limit or write elsewhere"),
     errno.EIO: (1, "input/output error of the device", None),
     errno.ENAMETOOLONG: (2, "the file name is too long", "choose a shorter name"),
     errno.EACCES: (2, "permission denied", "choose a writable folder"),
@@ -379,8 +400,21 @@ _WRITE_ERRORS = {
 }
 
 
-def output_error(e: OSError, path: str | Path, what: str = "the output") -> FfdError:
-    """The one-line error of an OSError while writing ``what`` to ``path``; nothing was written."""
+def output_error(e: OSError, path: str | Path, what: str = "the output", done: str = "nothing was written") -> FfdError:
+    """The one-line error of an OSError while writing ``what`` to ``path``; ``done``: what the files are
+    now (by default: nothing was written)."""
     code, text, hint = _WRITE_ERRORS.get(e.errno, (1, e.strerror or str(e), None))
     cls = InputError if code == 2 else FfdError
-    return cls(f"cannot write {what}: {text}; nothing was written", path=path, hint=hint)
+    return cls(f"cannot write {what}: {text}; {done}", path=path, hint=hint)
+
+
+@contextlib.contextmanager
+def written_as(path: str | Path, what: str = "the output", done: str = "nothing was written") -> Iterator[None]:
+    """During the block an OSError (a full disk, a quota, an I/O error) of writing ``what`` to ``path``
+    becomes the one-line error of :func:`output_error`, naming the file (never a temporary one): for
+    writes outside an :class:`~ffdcli.io.outputs.OutputPlan` (``ffd optimize``'s evaluations and
+    results); ``done``: what the files are now."""
+    try:
+        yield
+    except OSError as e:
+        raise output_error(e, path, what, done) from None

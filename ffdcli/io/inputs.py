@@ -61,9 +61,10 @@ def check_input_file(path: str | Path, what: str = "file", *, key: str | None = 
     if kind is None:
         text = f"{what} not found" if design is not None else "no such file"
     elif kind == "folder":
-        text = f"is a folder, expected a {what}" if design is None else f"{what} {p} is a folder, expected a file"
+        text = (f"is a folder, expected {_article(what)}" if design is None
+                else f"{what} {p} is a folder, expected a file")
     else:
-        text = (f"is {kind}, expected a {what} (a regular file)" if design is None
+        text = (f"is {kind}, expected {_article(what)} (a regular file)" if design is None
                 else f"{what} {p} is {kind}, expected a regular file")
     if design is not None:
         if kind is None:
@@ -102,3 +103,8 @@ def check_mesh_path(path: str | Path, *, key: str | None = None, design: str | P
                              hint="give a mesh file or an OpenFOAM case folder")
         raise InputError(text, path=p, hint="give a mesh file or an OpenFOAM case folder")
     return p
+
+
+def _article(what: str) -> str:
+    """``what`` with its indefinite article: "a design file", "an airfoil file"."""
+    return f"{'an' if what[:1].lower() in 'aeiou' else 'a'} {what}"

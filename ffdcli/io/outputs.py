@@ -30,7 +30,7 @@ from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from ffdcli.errors import FfdError, InputError
+from ffdcli.errors import FfdError, InputError, note_committed
 from ffdcli.io.atomic import (
     check_not_input,
     check_writable,
@@ -42,7 +42,7 @@ from ffdcli.io.atomic import (
     signals_deferred,
     signals_raise,
 )
-from ffdcli.io.formats import FOLDER_FORMAT, FORMATS, format_of, mismatch_message
+from ffdcli.io.formats import FOLDER_FORMAT, extensions, format_of, mismatch_message
 from ffdcli.io.inputs import polymesh_folder_of
 
 
@@ -67,7 +67,7 @@ def register(kind: OutputKind) -> OutputKind:
     return kind
 
 
-register(OutputKind("mesh", "the deformed mesh", tuple(FORMATS)))
+register(OutputKind("mesh", "the deformed mesh", tuple(extensions())))
 register(OutputKind("lattice", "the lattice", (".vtk",),
                     "the lattice is written as legacy VTK: give it a .vtk name"))
 register(OutputKind("plot", "the picture", (".png",), "pictures are written as PNG: give it a .png name"))
@@ -78,6 +78,7 @@ register(OutputKind("grad", "the gradient"))
 register(OutputKind("jacobian", "the Jacobian"))
 register(OutputKind("design", "the design file", (".yaml", ".yml"),
                     "design files are YAML: give it a .yaml name"))
+register(OutputKind("history", "the optimisation history", (".csv",), "the history is CSV: give it a .csv name"))
 
 
 def kind_spec(kind: str) -> OutputKind:
@@ -163,6 +164,8 @@ class OutputPlan:
                             keep_mode(out.path, tmp)
                             os.replace(tmp, out.path)
                         written[out.kind] = str(out.path)
+                    # complete under their names: a signal held above, or any later, says so
+                    note_committed(written.values())
         except OSError as e:
             _remove(temps)
             raise output_error(e, current.path if current else "", current.what if current else "the output") \
@@ -258,6 +261,69 @@ def check_folder_output(p: Path, *, inputs: tuple = (), create_folder: bool = Fa
     return p
 
 
+def check_output_folder(folder: str | Path, *, key: str | None = None, design=None) -> Path:
+    """Check a folder that a run writes into (made when it first writes there), creating nothing:
+    :class:`InputError` (exit 2) naming the folder and why, before any work, when it exists and is not a
+    folder (a file, a FIFO, ...), a part of its path is not a folder, or it (or the folder it would be made
+    in) is on a read-only file system or cannot be written. ``key``: the design key that gave it
+    (``optimize.folder``); ``design``: the loaded design, whose file and line the message names."""
+    p = Path(folder)
+
+    def fail(message: str, hint: str | None = None):
+        text = f"{p}: {message}" + (f" ({hint})" if hint else "")
+        if design is not None and key is not None:
+            raise design.error(text, key)
+        raise InputError(message, path=p, key=key, hint=hint)
+
+    probe, missing = p, []
+    while True:
+        kind = existing_kind(probe)
+        if kind is not None:
+            break
+        if probe.parent == probe:
+            fail("no part of the path exists")
+        missing.append(probe.name)
+        probe = probe.parent
+    if kind != "folder":
+        if probe == p:
+            fail(f"is {'a file' if kind == 'regular file' else kind}, not a folder",
+                 "give a folder name, or move the file away")
+        fail(f"{probe} is {'a file' if kind == 'regular file' else kind}, not a folder, so the folder cannot "
+             "be made", "give a folder name")
+    if _read_only(probe):
+        fail(f"{'is' if probe == p else f'would be made in {probe}, which is'} on a read-only file system",
+             "choose a folder on a writable file system")
+    if not os.access(probe, os.W_OK | os.X_OK):
+        fail(f"{'cannot be written' if probe == p else f'cannot be made: {probe} cannot be written'} "
+             "(permission denied)", "choose a writable folder")
+    return p
+
+
+def _read_only(folder: Path) -> bool:
+    try:
+        return bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except OSError:
+        return False
+
+
+def plan_in_folder(folder: str | Path, requested: Iterable[tuple[str, str | Path]], *,
+                   inputs: Iterable[str | Path | None] = (), key: str | None = None, design=None) -> OutputPlan:
+    """The plan of outputs ``requested`` (``(kind, path)``) of a run that writes into ``folder`` and makes
+    it when missing (``ffd optimize``'s folder): the folder checked (:func:`check_output_folder`), and
+    every output checked as :func:`plan_outputs` does (never an input of the run, under any name) when
+    the folder exists; nothing is created."""
+    p = check_output_folder(folder, key=key, design=design)
+    items = list(requested)
+    if existing_kind(p) == "folder":
+        return plan_outputs([(kind, path, False, key) for kind, path in items], inputs=inputs)
+    ins = tuple(Path(x) for x in inputs if x is not None)
+    outs: list[Output] = []
+    for kind, path in items:                    # the folder does not exist yet: no input lies in it
+        check_not_input(Path(path), ins)
+        outs.append(Output(kind, Path(path)))
+    return OutputPlan(outputs=tuple(outs), inputs=ins)
+
+
 def _inside(inner: Path, outer: Path) -> bool:
     """True when ``inner`` is ``outer`` or lies inside it (resolved paths)."""
     try:
@@ -307,12 +373,12 @@ def plan_deform(design, *, mesh: str | Path | None = None, lattice: str | Path |
     ``mesh`` (``-o``) replaces ``output.mesh`` and carries the names of the lattice and the picture
     (:func:`carried_name`) unless ``lattice`` (``--lattice``) is given; without ``-o`` they are the
     design file's ``output:`` (defaults ``out/<design stem>...`` beside the design file, whose folder
-    is created). The picture is written with ``plot`` (``--plot``) or when the file has
-    ``output.plot``, with its 3D view ``<picture stem>_3d.png`` beside it (3D designs, when pyvista
-    can render). ``extra``: more ``(kind, path, ...)`` outputs (e.g. a surface file);
-    ``inputs``: more input files of the run."""
+    is created). The picture is written only with ``plot`` (``--plot``: a ``--set`` loop pays for no
+    picture it did not ask for), at ``output.plot`` when the file names it, with its 3D view
+    ``<picture stem>_3d.png`` beside it (3D designs, when pyvista can render). ``extra``: more
+    ``(kind, path, ...)`` outputs (e.g. a surface file); ``inputs``: more input files of the run."""
     given = set((design.data or {}).get("output") or {})
-    want_plot = plot or "plot" in given
+    want_plot = plot
     if mesh is not None:
         mesh_item = ("mesh", mesh, False, "-o")
         lat = lattice if lattice is not None else (None if str(mesh) == "" else carried_name(mesh, "lattice"))
@@ -360,8 +426,8 @@ def _box_inputs(design) -> tuple:
     return (f,) if f else ()
 
 
-__all__ = ["KINDS", "Output", "OutputKind", "kind_spec", "OutputPlan", "carried_name", "check_output", "plan_deform",
-           "plan_outputs", "plan_plot", "register"]
+__all__ = ["KINDS", "Output", "OutputKind", "kind_spec", "OutputPlan", "carried_name", "check_output",
+           "check_output_folder", "plan_deform", "plan_in_folder", "plan_outputs", "plan_plot", "register"]
 
 
 def component_lattice_path(lattice_path, name: str) -> Path:

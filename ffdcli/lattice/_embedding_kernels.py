@@ -272,7 +272,7 @@ def apply(axes, P, inside, use_mask, out):
 # ----------------------------------------------------------------------------------------------
 
 @njit(cache=True, parallel=True)
-def _basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, data):
+def basis_rows_nb(f0, V0, f1, V1, f2, V2, has_w, n1, n2, inside, indptr, cols, data):
     """The CSR rows of B: for each inside point, its (p+1)(q+1)(r+1) columns in increasing order
     and the products V0[a] * V1[b] * V2[c] of its basis values (in that order of multiplication)."""
     npts = f0.shape[0]

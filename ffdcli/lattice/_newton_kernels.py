@@ -347,7 +347,7 @@ def run_newton(args, points, params, residual, tol_abs, stop_abs, snap, max_iter
 # ----------------------------------------------------------------------------------------------
 
 @njit(cache=True)
-def _pinv_nb(J, out):
+def pinv_nb(J, out):
     """``out[c] = (J^T J)^-1 J^T`` of each (gdim, pdim) ``J[c]`` (zero where J^T J is singular)."""
     gdim = J.shape[1]
     pdim = J.shape[2]
@@ -393,6 +393,6 @@ def _start_point(X, i, lo, inv_h, dims, centers, params, jinv, u):
 
 
 @njit(cache=True, parallel=True)
-def _start_nb(X, lo, inv_h, dims, centers, params, jinv, out):
+def start_nb(X, lo, inv_h, dims, centers, params, jinv, out):
     for i in prange(X.shape[0]):
         _start_point(X, i, lo, inv_h, dims, centers, params, jinv, out[i])

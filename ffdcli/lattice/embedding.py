@@ -47,8 +47,8 @@ from scipy import sparse
 from scipy.spatial import cKDTree
 
 from ffdcli.errors import InputError
-from ffdcli.lattice._embedding_kernels import _basis_rows_nb, apply, basis_axes, rmatvec
-from ffdcli.lattice._newton_kernels import STATIONARY, _pinv_nb, _start_nb, run_newton  # noqa: F401  (STATIONARY:
+from ffdcli.lattice._embedding_kernels import apply, basis_axes, basis_rows_nb, rmatvec
+from ffdcli.lattice._newton_kernels import STATIONARY, pinv_nb, run_newton, start_nb  # noqa: F401  (STATIONARY:
 
 #   the Newton kernel's stopping rule for points outside, part of this module's documented behaviour)
 from ffdcli.lattice.lattice import DUMMY_KNOTS, Lattice, derivatives, evaluate, kernel_args
@@ -258,7 +258,7 @@ class Embedding:
         cols = np.empty(nnz, dtype=itype)
         data = np.empty(nnz)
         if nnz:
-            _basis_rows_nb(*self._kernel_axes(), self.inside, indptr, cols, data)
+            basis_rows_nb(*self._kernel_axes(), self.inside, indptr, cols, data)
         return sparse.csr_matrix((data, cols, indptr), shape=(self.n_points, self.n_ctrl))
 
     # ------------------------------------------------------------------ report
@@ -397,7 +397,7 @@ class StartTable:
         # the centres of a swept and twisted box, would otherwise take most of the build's time)
         run_newton(kernel_args(lattice), centers, params, residual, tol_abs, tol_abs, SNAP, center_iter)
         jinv = np.zeros((len(centers), lattice.pdim, gdim))
-        _pinv_nb(derivatives(lattice, params), jinv)
+        pinv_nb(derivatives(lattice, params), jinv)
         lo3, inv3, dims3 = np.zeros(3), np.zeros(3), np.ones(3, dtype=np.int64)
         lo3[:gdim], inv3[:gdim], dims3[:gdim] = lo, dims / ext, dims
         return cls(lo=lo3, inv_h=inv3, dims=dims3, centers=centers, params=params,
@@ -408,7 +408,7 @@ class StartTable:
         points = np.ascontiguousarray(points, dtype=np.float64)
         out = np.empty((points.shape[0], self.params.shape[1]))
         if points.shape[0]:
-            _start_nb(points, self.lo, self.inv_h, self.dims, self.centers, self.params, self.jinv, out)
+            start_nb(points, self.lo, self.inv_h, self.dims, self.centers, self.params, self.jinv, out)
         return out
 
 

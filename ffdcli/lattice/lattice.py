@@ -351,7 +351,7 @@ def derivatives(lattice: Lattice, params) -> np.ndarray:
     return jac
 
 
-def _axis_tables(lattice: Lattice, params, nder: int):
+def axis_tables(lattice: Lattice, params, nder: int):
     """Dense per-axis basis tables (N, n_axis) of the value and its derivatives (NumPy)."""
     tables = []
     npts = params.shape[0]
@@ -370,7 +370,7 @@ def _axis_tables(lattice: Lattice, params, nder: int):
 def evaluate_reference(lattice: Lattice, params) -> np.ndarray:
     """NumPy reference of :func:`evaluate`: dense tensor product (for tests and small N)."""
     params = _check_params(lattice, params)
-    t = _axis_tables(lattice, params, 0)
+    t = axis_tables(lattice, params, 0)
     P = lattice.control_points
     if lattice.pdim == 2:
         return np.einsum("ni,nk,ikd->nd", t[0][0], t[1][0], P)
@@ -380,7 +380,7 @@ def evaluate_reference(lattice: Lattice, params) -> np.ndarray:
 def derivatives_reference(lattice: Lattice, params) -> np.ndarray:
     """NumPy reference of :func:`derivatives` (dense tensor product)."""
     params = _check_params(lattice, params)
-    t = _axis_tables(lattice, params, 1)
+    t = axis_tables(lattice, params, 1)
     P = lattice.control_points
     if lattice.pdim == 2:
         du = np.einsum("ni,nk,ikd->nd", t[0][1], t[1][0], P)

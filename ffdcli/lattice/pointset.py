@@ -43,7 +43,6 @@ class PointSet:
 
         Raises :class:`InputError` if ``X`` is not (k, 3) finite numbers; points outside the lattice
         are kept (``inside`` False) and never move."""
-
         X = as_numbers(X, (None, 3), f"point set {name!r}: points")      # finite (k, 3)
         emb = embed(box.lattice(), box.core_points(X), progress=progress)
         B = emb.basis_matrix().tocsr()

@@ -19,7 +19,7 @@ import numpy as np
 
 from ffdcli.io.atomic import atomic_path, atomic_write
 from ffdcli.optimize.store import Evaluation
-from ffdcli.viz.plot import _pyplot
+from ffdcli.viz.plot import load_pyplot
 
 
 def history_rows(evaluations: list[Evaluation], *, objective: str, functions: list[str], constraint_names: list[str],
@@ -65,7 +65,7 @@ def write_picture(path: Path, evaluations: list[Evaluation], violations: dict[in
                   feasibility: float) -> None:
     """``history.png``: the objective (left) and the worst violation (right, log) of each iteration, every
     evaluation faint behind (failed ones as crosses)."""
-    plt = _pyplot()
+    plt = load_pyplot()
     its = iterates(evaluations)
     fig, ax = plt.subplots(figsize=(7, 4), dpi=110)
     ok = [e for e in evaluations if e.failed is None]

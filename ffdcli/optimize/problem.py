@@ -18,9 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ffdcli.app.pipeline import deform, write_outputs
 from ffdcli.errors import InputError, QualityError
-from ffdcli.io.outputs import plan_outputs
 from ffdcli.optimize.solvers.base import Solver, SolverFailure
 from ffdcli.optimize.store import Evaluation, EvaluationStore
 from ffdcli.quality import enforce
@@ -32,7 +30,7 @@ class OptimizationProblem:
     Parameters
     ----------
     model : ffdcli.api.DesignModel
-        Loaded once; its values are set per evaluation.
+        Loaded once; each evaluation hands it its values (:meth:`~ffdcli.api.DesignModel.evaluate`).
     solver : Solver
         Checked (:meth:`Solver.check`) before.
     store : EvaluationStore
@@ -62,7 +60,7 @@ class OptimizationProblem:
         self.iteration = 0
         self.counts = {"flow": 0, "adjoint": 0, "evaluations": 0, "reused": 0}
         self.seconds = {"solver": 0.0, "ffd": 0.0}
-        self.mesh_name = "mesh" + Path(model.run.design.mesh).suffix
+        self.mesh_name = "mesh" + Path(model.design.mesh).suffix
         self._seen: set[str] = set()        # keys of the evaluations this process has handed out
 
     # -- the public entry ---------------------------------------------------------------------
@@ -83,21 +81,21 @@ class OptimizationProblem:
 
     # -- the stages ------------------------------------------------------------------------------
     def _geometry(self, ev: Evaluation) -> tuple[Evaluation, float]:
-        """Set the values, deform, gate, write the mesh: (evaluation, seconds); failed on refusal."""
+        """Deform at the evaluation's values, gate, write the mesh: (evaluation, seconds); failed on refusal.
+        The values go down the chain (:meth:`ffdcli.api.DesignModel.evaluate`); none is set on the model."""
         t0 = time.perf_counter()
         model = self.model
         try:
-            model.set_values(ev.values)
+            at = model.evaluate(ev.values)
         except InputError as e:
             return ev.with_(failed=f"design refused: {e.message}"), time.perf_counter() - t0
-        result = deform(model.run, P=model.lattice(), recover=False)
+        result = at.deform(recover=False)
         try:
-            enforce(result.quality, mesh_path=model.run.design.mesh, design_path=model.run.design.path)
+            enforce(result.quality, mesh_path=model.design.mesh, design_path=model.design.path)
         except QualityError as e:
             return ev.with_(failed=f"mesh refused by the quality gate: {e.message}"), time.perf_counter() - t0
-        plan = plan_outputs([("mesh", ev.folder / self.mesh_name, False, "mesh")], inputs=(model.run.design.mesh,))
-        write_outputs(model.run, result, plan=plan)
-        cons = model.constraint_values() if model.constraints else np.zeros(0)
+        model.write_mesh(result, ev.folder / self.mesh_name)
+        cons = at.constraint_values() if model.constraints else np.zeros(0)
         return ev.with_(constraints=np.asarray(cons, dtype=float)), time.perf_counter() - t0
 
     def _flow(self, values: np.ndarray) -> Evaluation:
@@ -205,24 +203,21 @@ class OptimizationProblem:
         design ``values``: through the volume motion's exact transpose when the file covers volume
         nodes, else through the surface alone."""
         model = self.model
-        if not np.array_equal(model.values, values):
-            model.set_values(values)
-        n = model.run.prep.mesh.n_points
+        at = model.evaluate(values)
         surface = model.surface_ids
         volume_rows = np.setdiff1d(sens.ids, surface, assume_unique=False).size > 0
-        g = sens.dense(n)
+        g = sens.dense(model.n_points)
         if volume_rows and model.uses_volume():
-            return np.asarray(model.mesh_vjp(g), dtype=float)
-        return np.asarray(model.surface_vjp(g[surface]), dtype=float)
+            return np.asarray(at.mesh_vjp(g), dtype=float)
+        return np.asarray(at.surface_vjp(g[surface]), dtype=float)
 
     def geometric(self, values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(values (C,), Jacobian (C, n_vars)) of the design file's ``constraints:`` at ``values``: exact."""
         model = self.model
         if not model.constraints:
             return np.zeros(0), np.zeros((0, model.n_vars))
-        if not np.array_equal(model.values, values):
-            model.set_values(values)
+        at = model.evaluate(values)
         t0 = time.perf_counter()
-        out = np.asarray(model.constraint_values(), float), np.asarray(model.constraint_jacobian(), float)
+        out = np.asarray(at.constraint_values(), float), np.asarray(at.constraint_jacobian(), float)
         self.seconds["ffd"] += time.perf_counter() - t0
         return out

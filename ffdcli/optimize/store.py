@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
-from ffdcli.io.atomic import atomic_write
+from ffdcli.io.atomic import atomic_write, written_as
 
 
 @dataclass(frozen=True, eq=False)
@@ -132,17 +132,22 @@ class EvaluationStore:
         index = self.next_index
         self.next_index += 1
         folder = self.root / f"{index:04d}"
-        folder.mkdir(parents=True, exist_ok=True)
+        with written_as(folder, "an evaluation's folder", self._kept()):
+            folder.mkdir(parents=True, exist_ok=True)
         return Evaluation(index=index, key=self.key(values), values=np.array(values, dtype=float), folder=folder,
                           iteration=iteration)
 
     def save(self, ev: Evaluation) -> Evaluation:
         """Write ``result.json`` of ``ev`` whole (atomic) and keep it in the cache."""
         data = {**ev.to_json(), "inputs": self.inputs}
-        with atomic_write(ev.folder / "result.json", "w") as fh:
+        path = ev.folder / "result.json"
+        with written_as(path, "an evaluation's result", self._kept()), atomic_write(path, "w") as fh:
             fh.write(json.dumps(data, indent=1))
         self.by_key[ev.key] = ev
         return ev
+
+    def _kept(self) -> str:
+        return f"the finished evaluations are kept in {self.folder} (continue with --resume)"
 
     def all(self) -> list[Evaluation]:
         """Every evaluation known, in index order."""

@@ -10,6 +10,7 @@ best mesh.
 
 from __future__ import annotations
 
+import difflib
 import shutil
 import time
 from collections.abc import Callable
@@ -22,19 +23,15 @@ from ffdcli.app.pipeline import load_run
 from ffdcli.design import load_design
 from ffdcli.design.optimize import OptimizeSettings, optimize_settings, select_variables
 from ffdcli.errors import FfdError, InputError
-from ffdcli.io.atomic import Terminated, atomic_path, signals_raise
+from ffdcli.io.atomic import Terminated, atomic_path, signals_raise, written_as
+from ffdcli.io.outputs import OutputPlan, plan_in_folder
 from ffdcli.optimize.best import best_design_data, write_best
 from ffdcli.optimize.check import gradient_check
 from ffdcli.optimize.driver import Driver, Outcome, StopRun, violation
 from ffdcli.optimize.history import best_evaluation, history_rows, write_history, write_picture
 from ffdcli.optimize.problem import OptimizationProblem
-from ffdcli.optimize.solvers.analytic import AnalyticSolver
-from ffdcli.optimize.solvers.base import Solver
-from ffdcli.optimize.solvers.su2 import SU2
+from ffdcli.optimize.solvers import SOLVERS, Solver, SolverContext
 from ffdcli.optimize.store import EvaluationStore, inputs_hash
-
-#: The solvers ``optimize.solver`` names.
-SOLVERS: dict[str, type[Solver]] = {"su2": SU2, "analytic": AnalyticSolver}
 
 
 class Interrupted(FfdError):
@@ -42,9 +39,9 @@ class Interrupted(FfdError):
 
 
 def make_solver(settings: OptimizeSettings, search: tuple[Path, ...] = ()) -> Solver:
-    """The solver of ``optimize.solver`` for ``settings`` (not yet checked)."""
-    return SOLVERS[settings.solver](settings.config, settings.launch, settings.adjoint, search,
-                                    adjoint_residual=settings.adjoint_residual)
+    """The solver of ``optimize.solver`` for ``settings`` (not yet checked), made by its kind from its own keys."""
+    context = SolverContext(config=settings.config, launch=settings.launch, search=tuple(search))
+    return SOLVERS[settings.solver].from_spec(settings.solver_spec, context)
 
 
 def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list[str] | None = None,
@@ -69,11 +66,13 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
         if e.path is None and e.key:                    # a key of the design file: name the file and its line
             raise design.error(e.message, e.key) from None
         raise
+    check_function_names(settings, solver, design, info.name)
+    folder = settings.folder / "check" if check is not None else settings.folder
+    plan_run(design, settings, folder, check is not None)
     for w in info.warnings:
         warn(w)
     model = DesignModel(load_run(design, progress=progress))
     chosen = select_variables(model.names, settings.variables, error=design.error)
-    folder = settings.folder / "check" if check is not None else settings.folder
     store = EvaluationStore(folder, inputs_hash(design.mesh, solver.state(), design.data, model.names), resume=resume)
     if store.reused:
         report(f"resuming: {store.reused} finished evaluations in {folder}")
@@ -82,7 +81,8 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
     def on_evaluation(ev, stage: str) -> None:
         report(progress_line(ev, stage, settings, folder))
         if driver is not None:              # history.csv as the run goes (a long run can be watched)
-            write_history(folder / "history.csv", history_table(problem, driver, settings, folder)[0])
+            with written_as(folder / "history.csv", "the history", kept(folder)):
+                write_history(folder / "history.csv", history_table(problem, driver, settings, folder)[0])
 
     problem = OptimizationProblem(model, solver, store, settings.function_names, report=on_evaluation,
                                   warm_start=settings.warm_start, concurrent=settings.concurrent_adjoints)
@@ -121,6 +121,39 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
             "exit_code": 1 if status in ("failures", "baseline") else 0}
 
 
+def plan_run(design, settings: OptimizeSettings, folder: Path, check: bool) -> OutputPlan:
+    """The files ``ffd optimize`` writes at fixed names (``history.csv``, ``history.png``, ``best.yaml``,
+    ``best.<ext>``; the evaluations go in new numbered folders under ``evals/``), checked before any
+    work as every command's outputs are (:func:`ffdcli.io.outputs.plan_in_folder`): ``optimize.folder``
+    a folder, or one that can be made, on a writable file system (else exit 2 naming the design file's
+    line), and no output any input of the run (the mesh, the design file, the solver's configuration,
+    ``box.file``) under any name."""
+    box_file = getattr(getattr(design, "box", None), "file", None)
+    inputs = (design.mesh, design.path, settings.config, box_file)
+    files = [] if check else [("history", folder / "history.csv"), ("plot", folder / "history.png"),
+                              ("design", folder / "best.yaml"), ("mesh", folder / f"best{Path(design.mesh).suffix}")]
+    return plan_in_folder(folder, files, inputs=inputs, key="optimize.folder", design=design)
+
+
+def check_function_names(settings: OptimizeSettings, solver: Solver, design, solver_name: str) -> None:
+    """InputError (exit 2, the design file and line) for an ``optimize.objective`` or an
+    ``optimize.functions[i].name`` that is not in the solver's table of outputs (:meth:`Solver.outputs`),
+    with the nearest names: a misspelt objective is refused when the file is loaded, not after a
+    baseline flow solve (hours for a RANS case)."""
+    table = solver.outputs()
+    if table is None:
+        return
+    keys = [("optimize.objective", settings.objective)]
+    keys += [(f"optimize.functions[{i}].name", f.name) for i, f in enumerate(settings.functions)]
+    for key, name in keys:
+        if name in table:
+            continue
+        near = difflib.get_close_matches(str(name).upper(), table, n=3, cutoff=0.6)
+        hint = f"did you mean {' or '.join(near)}? " if near else ""
+        raise design.error(f"{name!r} is not a function that {solver_name} reports; {hint}"
+                           f"{solver_name}'s functions are {', '.join(table)}", key)
+
+
 def _seconds(problem: OptimizationProblem, t_start: float) -> dict:
     return {"solver": round(problem.seconds["solver"], 3), "ffd": round(problem.seconds["ffd"], 3),
             "wall": round(time.perf_counter() - t_start, 3)}
@@ -132,9 +165,11 @@ def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSetti
     model = problem.model
     names = model.constraint_names if model.constraints else []
     rows, worst = history_table(problem, driver, settings, folder)
-    write_history(folder / "history.csv", rows)
+    with written_as(folder / "history.csv", "the history", kept(folder)):
+        write_history(folder / "history.csv", rows)
     if evaluations and any(e.gradients for e in evaluations):
-        write_picture(folder / "history.png", evaluations, worst, settings.objective, settings.feasibility)
+        with written_as(folder / "history.png", "the history's picture", kept(folder)):
+            write_picture(folder / "history.png", evaluations, worst, settings.objective, settings.feasibility)
     best, feasible = best_evaluation(evaluations, worst, settings.objective, settings.feasibility)
     base = next((e for e in evaluations if np.array_equal(e.values, driver.v0)), None)
     out = {"evaluations": len(evaluations),
@@ -152,14 +187,20 @@ def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSetti
     if best is not None:
         mesh_src = best.folder / problem.mesh_name
         mesh_dst = folder / ("best" + Path(design.mesh).suffix)
-        with atomic_path(mesh_dst) as tmp:
+        with written_as(mesh_dst, "the best mesh", kept(folder)), atomic_path(mesh_dst) as tmp:
             shutil.copyfile(mesh_src, tmp)
         data = best_design_data(design, settings, model.names, best.values, folder / "best.yaml", mesh_dst)
         note = (f"the best {'feasible ' if feasible else '(INFEASIBLE: no feasible) '}design of ffd optimize: "
                 f"evaluation {best.index}, {settings.objective} {best.functions[settings.objective]:.6g}")
-        write_best(folder / "best.yaml", data, note)
+        with written_as(folder / "best.yaml", "the best design", kept(folder)):
+            write_best(folder / "best.yaml", data, note)
         out.update(best=str(folder / "best.yaml"), best_mesh=str(mesh_dst), best_evaluation=best.index)
     return out
+
+
+def kept(folder: Path) -> str:
+    """What a write failure of a run leaves: its finished evaluations."""
+    return f"the finished evaluations are kept in {folder} (continue with --resume)"
 
 
 def history_table(problem: OptimizationProblem, driver: Driver, settings: OptimizeSettings,

@@ -24,10 +24,18 @@ happen), so all ranks stop together, with the same exit status, and none waits f
 from __future__ import annotations
 
 import os
+import signal
 
 import numpy as np
 
-from ffdcli.errors import SIZE_VARIABLES, FfdError, InputError, SignalRecorder, Terminated  # noqa: F401
+from ffdcli.errors import (  # noqa: F401
+    SIZE_VARIABLES,
+    FfdError,
+    InputError,
+    SignalRecorder,
+    Terminated,
+    interrupt_message,
+)
 
 
 class RankError(FfdError):
@@ -47,9 +55,9 @@ def _describe(exc: BaseException) -> tuple[str, int, dict | None]:
     if isinstance(exc, FfdError):
         return str(exc), int(exc.exit_code), getattr(exc, "report", None)
     if isinstance(exc, KeyboardInterrupt):
-        return "interrupted; nothing was written", 130, None
+        return interrupt_message(exc), 130, None
     if isinstance(exc, Terminated):
-        return f"{exc}; nothing was written", 128 + exc.signum, None
+        return interrupt_message(exc), 128 + exc.signum, None
     if isinstance(exc, MemoryError):
         return "out of memory", 1, None
     return (f"internal error: {type(exc).__name__}: {exc} (this is a bug in ffd; -v shows where)", 1, None)
@@ -229,6 +237,10 @@ class MPIComm(SerialComm):
             return
         message, code, report, rank = failures[0]          # the lowest failing rank's, on every rank
         err = error if rank == self.rank else RankError(message, code, rank, report)
+        if isinstance(err, KeyboardInterrupt):
+            # click turns a KeyboardInterrupt into a new Abort, which has lost the agreement: this rank
+            # then waited in one more agreement than the others (the Ctrl-C deadlock of issue 43)
+            err = Terminated(signal.SIGINT)
         err.ffd_agreed = True
         raise err
 
@@ -268,7 +280,6 @@ def world(environ=None) -> SerialComm:
 
     Raises :class:`ffdcli.errors.InputError` when launched by ``mpiexec -n N`` (N > 1) without
     ``mpi4py``: N copies of the serial run would each write the same files."""
-
     if launched_size(environ) <= 1:
         return SerialComm()
     if not mpi_available():

@@ -133,7 +133,6 @@ class Component:
 
     def lattice_jacobian(self) -> np.ndarray:
         """dP'/dv (n_ctrl*3, n_vars) of this component's variables (zero rows for frozen sections)."""
-
         J = lattice_jacobian(self.P0, self.box.frame, list(self.changes))
         f = self.frozen
         if f:
@@ -258,7 +257,6 @@ def frozen_sections(knots, degree: int, v: np.ndarray, m: int) -> int:
     """How many root sections to freeze so that the motion and its first span derivative vanish at
     the span parameters ``v`` of the junction nodes (C1): one past the last section whose basis
     function or its derivative is non-zero at some ``v``."""
-
     first, ders = basis_derivs(knots, degree, np.asarray(v, dtype=float), nder=1)
     live = (np.abs(ders[0]) > 0) | (np.abs(ders[1]) > 0)          # (N, p + 1)
     last = first[:, None] + np.arange(degree + 1)[None, :]
@@ -268,7 +266,6 @@ def frozen_sections(knots, degree: int, v: np.ndarray, m: int) -> int:
 def check_body_changes(spec: ComponentSpec, changes, junction: Junction, error) -> list:
     """Refuse changes that move a frozen section; re-base ``{root, tip}`` laws on the first free
     section. ``error(message, key) -> Exception``. Returns the changes to use."""
-
     f = junction.frozen
     out = []
     for index, (change, item) in enumerate(zip(changes, spec.changes_spec, strict=True)):
@@ -314,9 +311,20 @@ def check_frozen_motion(comp: Component, error) -> None:
                 f"junction holds sections 0..{j.frozen - 1} of {m}")
         if j.at_tip:
             raise error(f"changes[{index}].{kind} {what}; the body is at the far end of the box's span, so the "
-                        "root is on the wrong side: give box.root the other end (or leave it out)", "box.root")
+                        f"root is on the wrong side: {root_advice(comp)}", "box.root")
         raise error(f"{what}, so nothing is free to move; give the lattice more spanwise sections (box.points[1] "
                     f"> {m}) or move sections beyond the junction", f"changes[{index}].{kind}")
+
+
+def root_advice(comp: Component) -> str:
+    """What to do when the root is at the end away from the body: give ``box.root`` the other end, or,
+    when the file gave it, that or leave it out (the detection then looks for the root plane)."""
+    given = getattr(getattr(comp.spec, "box", None), "root", None)
+    now = given or comp.box.axes.root
+    other = "max" if now == "min" else "min"
+    if given is not None:
+        return f"the file gives box.root: {given}; give box.root: {other}, or leave it out (detected)"
+    return f"the root was detected at the {now} end; give box.root: {other}"
 
 
 def rebase_law(law, first: int):
@@ -351,7 +359,6 @@ def check_shared_nodes(components: list[Component], *, path=None) -> None:
 
 def check_overlap(components: list[Component], *, path=None) -> None:
     """Two lattices overlap when a surface point of one lies inside the other's lattice: error."""
-
     for a, ca in enumerate(components):
         Pa = ca.P0.reshape(-1, 3)
         lo, hi = Pa.min(axis=0), Pa.max(axis=0)
@@ -393,7 +400,6 @@ def layout(components: list[Component]) -> Layout:
 
 def design_variables(components: list[Component]) -> tuple[list[str], np.ndarray]:
     """Names (``<component>.c<index>...``; single form ``c<index>...``) and values of every variable."""
-
     names, values = [], []
     for comp in components:
         n, v = change_variables(list(comp.changes))
@@ -425,7 +431,6 @@ def variable_bounds(components: list[Component], design) -> Bounds:
 
 
 def set_design_variables(components: list[Component], values) -> list[Component]:
-
     vals = np.asarray(values, dtype=float).reshape(-1)
     sizes = [sum(ch.size for ch in c.changes) for c in components]
     if vals.size != sum(sizes):

@@ -18,6 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+#: The zone near the wall, in mean chords, where the gate compares cells with the design's own map.
+DESIGN_ZONE = 0.15
+
 
 def linearised_map(X: np.ndarray, Xs: np.ndarray, b: np.ndarray, F: np.ndarray) -> np.ndarray:
     """(k, 3) ``Xs + b + F (X - Xs)``: points ``X`` (k, 3) moved by the map linearised at their surface

@@ -57,7 +57,7 @@ from ffdcli.quality.metrics import cell_quality, check_types
 from ffdcli.quality.orthogonality import node_orthogonality
 from ffdcli.quality.polyhedral import check_quality_poly
 from ffdcli.quality.reference import QualityReference, counted_blocks, part_reference
-from ffdcli.quality.report import QualityReport, _g, _xyz  # noqa: F401 - the report, named here too
+from ffdcli.quality.report import QualityReport, fmt_g, fmt_xyz  # noqa: F401 - the report, named here too
 from ffdcli.quality.rules import (  # noqa: F401 - the gate's rules, named here too
     DEFAULT_COLLAPSE,
     DEFAULT_ORTHO_LOSS,
@@ -131,7 +131,8 @@ def _with_minima(reference: QualityReference) -> QualityReference:
     q = reference.q
     valid = q[q > 0]
     return QualityReference(reference.orientation, q, reference.topology, reference.ortho,
-                            q_min=float(q.min()), q_min_valid=float(valid.min()) if len(valid) else None)
+                            q_min=float(q.min()), q_min_valid=float(valid.min()) if len(valid) else None,
+                            surface=reference.surface)
 
 
 @dataclass(frozen=True)
@@ -169,14 +170,13 @@ def enforce(report: QualityReport | None, *, mesh_path=None, design_path=None, f
     when the design fails the gate, with the counts, the rule and the worst place. With ``force``
     neither is raised and the warnings say what would have been.
     """
-
     if report is None:
         return []
     warnings = []
     if report.n_input_bad:
         w = report.input_bad[0]
         more = f" (and {report.n_input_bad - 1} more)" if report.n_input_bad > 1 else ""
-        msg = (f"cell {w['cell']} ({w['type']}) at {_xyz(w['centroid'])} is already "
+        msg = (f"cell {w['cell']} ({w['type']}) at {fmt_xyz(w['centroid'])} is already "
                f"{'inverted' if w['quality'] < 0 else 'degenerate'} in the input mesh (scaled Jacobian "
                f"{w['quality']:.3g}){more}: a problem of the mesh, not of the design; repair or regenerate "
                f"the mesh{remedies.list_cells}")
@@ -243,6 +243,9 @@ def check_quality_part(part, comm, points_after=None, points_before=None, thresh
         return QualityReport(0, 0, 0, min_before=None, min_after=None, **kw)
     if reference is None or (orthogonality and reference.ortho is None):
         reference = part_reference(part, comm, ref, orthogonality=orthogonality)
+    if reference.surface:        # 2-D cells of a surface in space: no volume cells, nothing to judge
+        return QualityReport(0, 0, 0, min_before=None, min_after=None, surface_cells=comm.allreduce_sum(
+            int(sum(int(c.sum()) for c in part.counted))), **kw)
     # the rank's own figures, agreed on (an error on one rank ends every rank), then gathered
     local_map = None if design_map is None else (lambda local: design_map(part.ids[local]))
     mine = comm.run(_part_figures, part, after, before, ref, reference, threshold, relative, collapse,
@@ -344,7 +347,6 @@ def _part_orthogonality(part, ref, after, reference, ortho_min, ortho_loss, n_wo
 def _merge_parts(parts: list[dict], has_before: bool, orthogonality: bool, reference, n_worst: int,
                  kw: dict) -> QualityReport:
     """The :class:`QualityReport` of the whole mesh from every rank's figures (same on every rank)."""
-
     def total(key):
         return sum(p[key] for p in parts)
 

@@ -31,10 +31,15 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit, prange
 
+from ffdcli.jit import inlined
 from ffdcli.mesh import CellBlock
 
 #: Cells evaluated per vectorised step (bounds the temporary arrays to ~100 MB).
 CHUNK = 200_000
+#: 2-D cells whose nodes lie farther than this (relative to the mesh's extent) from one plane are a
+#: surface in space (a wing's skin, a closed box's faces), not an airfoil mesh: they have no volume
+#: and no "inverted" (:func:`in_one_plane`).
+PLANAR_TOL = 1e-6
 
 # Corners: (corner node, edge-end a, edge-end b, edge-end c) with det[a-p, b-p, c-p] > 0 for a
 # cell in VTK order. 2D corners: (node, a, b) with n . ((a-p) x (b-p)) > 0.
@@ -94,6 +99,38 @@ def raw_quality(points: np.ndarray, data: np.ndarray, ctype: str, normal: np.nda
     return out
 
 
+@inlined
+def corner_det_length(points, data, c, corners, k, width, plane):
+    """``(det, length)`` of corner ``k`` of cell ``c``: the determinant of its edges ``[e1, e2, e3]``
+    (2D: ``(e1 x e2) . plane``) and the product of their lengths; the scaled Jacobian is ``scale * det /
+    length``. The one home of the corner of :func:`_raw_quality_nb` and of the constraint's
+    :func:`ffdcli.constraints.mesh_quality.corner_values` (no division: the callers keep their own
+    rounding)."""
+    p = data[c, corners[k, 0]]
+    a = data[c, corners[k, 1]]
+    b = data[c, corners[k, 2]]
+    e10 = points[a, 0] - points[p, 0]
+    e11 = points[a, 1] - points[p, 1]
+    e12 = points[a, 2] - points[p, 2]
+    e20 = points[b, 0] - points[p, 0]
+    e21 = points[b, 1] - points[p, 1]
+    e22 = points[b, 2] - points[p, 2]
+    x0 = e11 * e22 - e12 * e21
+    x1 = e12 * e20 - e10 * e22
+    x2 = e10 * e21 - e11 * e20
+    length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
+    if width == 4:
+        d = data[c, corners[k, 3]]
+        e30 = points[d, 0] - points[p, 0]
+        e31 = points[d, 1] - points[p, 1]
+        e32 = points[d, 2] - points[p, 2]
+        det = x0 * e30 + x1 * e31 + x2 * e32
+        length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
+    else:
+        det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+    return det, length
+
+
 @njit(cache=True, parallel=True)
 def _raw_quality_nb(points, data, corners, scale, plane, out):
     """Numba twin of the NumPy branch of :func:`raw_quality` (3 edges per corner in 3D, 2 in 2D)."""
@@ -101,28 +138,7 @@ def _raw_quality_nb(points, data, corners, scale, plane, out):
     for c in prange(data.shape[0]):
         best = np.inf
         for k in range(n_corners):
-            p = data[c, corners[k, 0]]
-            a = data[c, corners[k, 1]]
-            b = data[c, corners[k, 2]]
-            e10 = points[a, 0] - points[p, 0]
-            e11 = points[a, 1] - points[p, 1]
-            e12 = points[a, 2] - points[p, 2]
-            e20 = points[b, 0] - points[p, 0]
-            e21 = points[b, 1] - points[p, 1]
-            e22 = points[b, 2] - points[p, 2]
-            x0 = e11 * e22 - e12 * e21
-            x1 = e12 * e20 - e10 * e22
-            x2 = e10 * e21 - e11 * e20
-            length = np.sqrt(e10 * e10 + e11 * e11 + e12 * e12) * np.sqrt(e20 * e20 + e21 * e21 + e22 * e22)
-            if width == 4:
-                d = data[c, corners[k, 3]]
-                e30 = points[d, 0] - points[p, 0]
-                e31 = points[d, 1] - points[p, 1]
-                e32 = points[d, 2] - points[p, 2]
-                det = x0 * e30 + x1 * e31 + x2 * e32
-                length *= np.sqrt(e30 * e30 + e31 * e31 + e32 * e32)
-            else:
-                det = x0 * plane[0] + x1 * plane[1] + x2 * plane[2]
+            det, length = corner_det_length(points, data, c, corners, k, width, plane)
             q = det / length if length > 0 else 0.0
             if q < best:
                 best = q
@@ -194,6 +210,32 @@ def cell_quality(points: np.ndarray, cells: list[CellBlock], dim: int = 3, *,
     parts = [np.clip(orientation.signs[i] * raw_quality(pts, blk.data, blk.type, orientation.normal),
                      -1.0, 1.0) for i, blk in enumerate(cells)]
     return np.concatenate(parts) if parts else np.zeros(0)
+
+
+def plane_distance(points: np.ndarray, cells: list[CellBlock], normal: np.ndarray, origin: np.ndarray) -> float:
+    """The largest distance of the cells' nodes from the plane through ``origin`` (3,) with unit
+    ``normal`` (3,) (0 without cells)."""
+    out = 0.0
+    for blk in cells:
+        d = blk.data
+        for lo in range(0, len(d), CHUNK):
+            nodes = np.unique(d[lo:lo + CHUNK])
+            if len(nodes):
+                out = max(out, float(np.abs((points[nodes] - origin) @ normal).max()))
+    return out
+
+
+def in_one_plane(points: np.ndarray, cells: list[CellBlock], normal: np.ndarray) -> bool:
+    """True when 2-D ``cells`` lie in one plane (normal ``normal``, through their nodes' mean) to
+    :data:`PLANAR_TOL` of their extent: an airfoil mesh, judged as flat cells. False: a surface in
+    space, which has no volume cells to judge."""
+    used = [b for b in cells if len(b)]
+    if not used:
+        return True
+    nodes = np.unique(np.concatenate([b.data.reshape(-1) for b in used]))
+    pts = np.asarray(points, dtype=np.float64)[nodes]
+    size = float(np.linalg.norm(np.ptp(pts, axis=0)))
+    return plane_distance(points, used, normal, pts.mean(axis=0)) <= PLANAR_TOL * max(size, np.finfo(float).tiny)
 
 
 def plane_normal(total: np.ndarray, ext: np.ndarray) -> np.ndarray:

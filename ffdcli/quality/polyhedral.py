@@ -59,7 +59,6 @@ SKEW_MAX = 4.0
 SMALL = 1.0e-15
 
 
-
 @dataclass(frozen=True, eq=False)
 class PolyFigures:
     """The figures of a polyhedral mesh at one geometry (arrays of length C cells or F faces).
@@ -162,8 +161,6 @@ def skewness(points: np.ndarray, poly: Polyhedra, fc: np.ndarray, fa: np.ndarray
         along = np.abs(np.einsum("ij,ij->i", sv_hat[fid], points[poly.face_nodes[off[0]:off[-1]]] - fc[fid]))
         extent[a:b] = np.maximum.reduceat(along, off[:-1] - off[0])
     return sv_mag / np.maximum(fd, extent)
-
-
 
 
 # ----------------------------------------------------------------------------------------------

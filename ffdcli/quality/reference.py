@@ -16,7 +16,15 @@ import numpy as np
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.parallel.comm import SerialComm
 from ffdcli.parallel.partition import whole_part
-from ffdcli.quality.metrics import CHUNK, Orientation, check_types, plane_normal, raw_quality
+from ffdcli.quality.metrics import (
+    CHUNK,
+    PLANAR_TOL,
+    Orientation,
+    check_types,
+    plane_distance,
+    plane_normal,
+    raw_quality,
+)
 from ffdcli.quality.orthogonality import EdgeTopology, edge_topology, node_orthogonality
 from ffdcli.quality.polyhedral import poly_reference
 
@@ -36,6 +44,9 @@ class QualityReference:
     q_min, q_min_valid
         The smallest q, and the smallest q > 0, of the whole input mesh (None: no cell, no valid
         cell); the gate's collapse floor needs them.
+    surface
+        The mesh's 2-D cells do not lie in one plane (:func:`~ffdcli.quality.metrics.in_one_plane`):
+        a surface in space, whose cells have no volume to judge (the gate reports no volume cells).
     """
 
     orientation: Orientation
@@ -44,6 +55,7 @@ class QualityReference:
     ortho: np.ndarray | None = None
     q_min: float | None = None
     q_min_valid: float | None = None
+    surface: bool = False
 
 
 #: The reference of one rank's part: the same value (kept for the name of the MPI gate's API).
@@ -72,6 +84,23 @@ def _plane_normal(part, comm, pts: np.ndarray, counted: list[CellBlock]) -> np.n
     return plane_normal(total, ext)
 
 
+def _surface_in_space(part, comm, pts: np.ndarray, counted: list[CellBlock], normal: np.ndarray) -> bool:
+    """True when the whole mesh's 2-D cells do not lie in one plane (a collective; the rule of
+    :func:`ffdcli.quality.metrics.in_one_plane`, the plane through the mean of every rank's owned nodes)."""
+    own = pts if part.owned.all() else pts[part.owned]
+    sums = comm.allreduce_sum(np.concatenate([own.sum(axis=0), [len(own)]]))
+    if sums[3] == 0:
+        return False
+    origin = sums[:3] / sums[3]
+    lo = np.array([min(v) for v in zip(*comm.allgather(own.min(axis=0) if len(own) else np.full(3, np.inf)),
+                                       strict=True)])
+    hi = np.array([max(v) for v in zip(*comm.allgather(own.max(axis=0) if len(own) else np.full(3, -np.inf)),
+                                       strict=True)])
+    size = float(np.linalg.norm(hi - lo))
+    far = comm.allreduce_max(plane_distance(pts, counted, normal, origin))
+    return far > PLANAR_TOL * max(size, np.finfo(float).tiny)
+
+
 def part_reference(part, comm, points=None, *, orthogonality: bool = True) -> QualityReference:
     """The :class:`QualityReference` of a part at ``points`` (local rows; default its own): a
     collective (every rank calls it).
@@ -91,6 +120,7 @@ def part_reference(part, comm, points=None, *, orthogonality: bool = True) -> Qu
     counted = counted_blocks(part)
     check_types(counted, part.dim)
     normal = _plane_normal(part, comm, pts, counted) if part.dim == 2 else None
+    surface = part.dim == 2 and _surface_in_space(part, comm, pts, counted, normal)
     raws = comm.run(lambda: [raw_quality(pts, b.data, b.type, normal) for b in counted])
     if part.dim == 2:
         signs = np.ones(len(counted))
@@ -112,7 +142,7 @@ def part_reference(part, comm, points=None, *, orthogonality: bool = True) -> Qu
             return t, node_orthogonality(pts, list(part.cells), part.dim, orientation=orientation, topology=t)
 
         topo, ortho = comm.run(dual)
-    return QualityReference(orientation, q, topo, ortho, q_min=q_min, q_min_valid=q_valid)
+    return QualityReference(orientation, q, topo, ortho, q_min=q_min, q_min_valid=q_valid, surface=surface)
 
 
 def quality_reference(mesh: Mesh, points: np.ndarray | None = None, *, orthogonality: bool = True

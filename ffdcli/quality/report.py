@@ -49,6 +49,9 @@ class QualityReport:
     input_bad
         Up to ``n_worst`` cells inverted or degenerate in the input: ``{"cell", "type", "quality",
         "centroid"}`` (input coordinates).
+    surface_cells
+        2-D cells of a surface in space (not in one plane: a wing's skin read as a mesh), not judged:
+        they have no volume (``count`` is then 0).
     """
 
     count: int
@@ -82,6 +85,7 @@ class QualityReport:
     #: checkMesh's figures after and before (``{"after", "before", "faces_failed", "worst_faces"}``).
     n_faces_failed: int = 0
     polyhedral: dict | None = None
+    surface_cells: int = 0
 
     @property
     def relative_check(self) -> bool:
@@ -109,7 +113,7 @@ class QualityReport:
         """The gate's rule in words, for messages."""
         return (f"a cell fails when the design inverts it, or when its scaled Jacobian falls below "
                 f"{self.threshold:g}, below {self.relative:g} x its value before and below "
-                f"{_g(self.collapse_floor)} (the lower of {self.collapse:g} and the input mesh's worst); "
+                f"{fmt_g(self.collapse_floor)} (the lower of {self.collapse:g} and the input mesh's worst); "
                 f"a node fails when its orthogonality falls below "
                 f"{self.ortho_min:g} deg after losing more than {self.ortho_loss_max:g} deg; "
                 f"unless the design's own FFD map shapes the cell or node so (within {DESIGN_SLACK:g} x "
@@ -135,13 +139,13 @@ class QualityReport:
                                   "failed": self.n_ortho_failed, "min": self.ortho_min,
                                   "loss": self.ortho_loss_max},
                 "failed": self.n_failed, "ok": self.ok, "worst": self.worst, "worst_nodes": self.worst_nodes,
-                "input_bad": self.input_bad, **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
+                "input_bad": self.input_bad, "surface_cells": self.surface_cells, **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
 
     def summary(self) -> str:
         """One line for people: the same words for ``ffd deform`` and ``ffd check``."""
         rel = self.relative_check
-        before = f"{_g(self.min_before)} before, " if rel else ""
-        after = _g(self.min_after) + (" after" if rel else "")
+        before = f"{fmt_g(self.min_before)} before, " if rel else ""
+        after = fmt_g(self.min_after) + (" after" if rel else "")
         measure = "scaled Jacobian" if self.polyhedral is None else "face pyramids, cosine"
         text = (f"cell quality ({measure}): min {before}{after}; {self.count} cells: "
                 f"{self.n_inverted} inverted or degenerate, {self.n_below} below {self.threshold:g}")
@@ -149,12 +153,12 @@ class QualityReport:
             text += f" ({self.n_below_before} before); {self.n_new_inverted} inverted by the design, " \
                     f"{self.n_worse} made worse"
         if self.n_nodes:
-            ob = f"{_g(self.ortho_before, '.1f')} before, " if rel else ""
-            oa = _g(self.ortho_after, ".1f") + (" after" if rel else "")
+            ob = f"{fmt_g(self.ortho_before, '.1f')} before, " if rel else ""
+            oa = fmt_g(self.ortho_after, ".1f") + (" after" if rel else "")
             text += (f". orthogonality (SU2): min {ob}{oa} deg; {self.n_ortho_low} nodes below "
                      f"{self.ortho_min:g} deg")
             if rel:
-                text += (f" ({self.n_ortho_low_before} before), largest loss {_g(self.ortho_loss, '.1f')} deg, "
+                text += (f" ({self.n_ortho_low_before} before), largest loss {fmt_g(self.ortho_loss, '.1f')} deg, "
                          f"{self.n_ortho_failed} nodes lost orthogonality")
         if self.n_design_cells or self.n_design_nodes:
             text += (f"; shaped by the design's own map (accepted): {self.n_design_cells} cells, "
@@ -169,10 +173,10 @@ class QualityReport:
         for w in [w for w in self.worst if w["failed"]][:n]:
             before = "" if w["quality_before"] is None else f" (before {w['quality_before']:.3g})"
             lines.append(f"  cell {w['cell']} ({w['type']}): quality {w['quality']:.3g}{before} "
-                         f"at {_xyz(w['centroid'])}")
+                         f"at {fmt_xyz(w['centroid'])}")
         for w in [w for w in self.worst_nodes if w["failed"]][:n]:
             lines.append(f"  node {w['node']}: orthogonality {w['after']:.1f} deg (before {w['before']:.1f}) "
-                         f"at {_xyz(w['point'])}")
+                         f"at {fmt_xyz(w['point'])}")
         return "\n".join(lines)
 
     def failure_message(self) -> str:
@@ -207,9 +211,9 @@ def _polyhedral_words(p: dict) -> str:
     return text
 
 
-def _g(v, spec: str = ".3g") -> str:
+def fmt_g(v, spec: str = ".3g") -> str:
     return "n/a" if v is None else format(v, spec)
 
 
-def _xyz(p) -> str:
+def fmt_xyz(p) -> str:
     return "(" + ", ".join(f"{v:.6g}" for v in p) + ")"

@@ -15,7 +15,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from ffdcli.io.formats.cgns_nodes import _chars, _node, _str_attr
+from ffdcli.io.formats.cgns_nodes import char_array, new_node, str_attr
 
 NGON_N, NFACE_N = 22, 23
 
@@ -28,26 +28,26 @@ def write_ngon_cgns(path: str | Path, points: np.ndarray, poly, patches, *, sign
     nf, nc = poly.n_faces, poly.n_cells
     path = Path(path)
     with h5py.File(path, "w", track_order=True) as h5:
-        _str_attr(h5, "label", "Root Node of HDF5 File", 33)
-        _str_attr(h5, "name", "HDF5 MotherNode", 33)
-        _str_attr(h5, "type", "MT", 3)
-        h5.create_dataset(" format", data=_chars("IEEE_LITTLE_32\0"))
-        _node(h5, "CGNSLibraryVersion", "CGNSLibraryVersion_t", "R4", np.array([4.2], dtype=np.float32))
-        base = _node(h5, "Base", "CGNSBase_t", "I4", np.array([3, 3], dtype=np.int32))
-        zone = _node(base, "Zone", "Zone_t", "I8", np.array([[len(pts)], [nc], [0]], dtype=np.int64))
-        _node(zone, "ZoneType", "ZoneType_t", "C1", _chars("Unstructured"))
-        grid = _node(zone, "GridCoordinates", "GridCoordinates_t")
+        str_attr(h5, "label", "Root Node of HDF5 File", 33)
+        str_attr(h5, "name", "HDF5 MotherNode", 33)
+        str_attr(h5, "type", "MT", 3)
+        h5.create_dataset(" format", data=char_array("IEEE_LITTLE_32\0"))
+        new_node(h5, "CGNSLibraryVersion", "CGNSLibraryVersion_t", "R4", np.array([4.2], dtype=np.float32))
+        base = new_node(h5, "Base", "CGNSBase_t", "I4", np.array([3, 3], dtype=np.int32))
+        zone = new_node(base, "Zone", "Zone_t", "I8", np.array([[len(pts)], [nc], [0]], dtype=np.int64))
+        new_node(zone, "ZoneType", "ZoneType_t", "C1", char_array("Unstructured"))
+        grid = new_node(zone, "GridCoordinates", "GridCoordinates_t")
         for a, name in enumerate(["CoordinateX", "CoordinateY", "CoordinateZ"]):
-            _node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(pts[:, a]))
+            new_node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(pts[:, a]))
         _section(zone, "Faces", NGON_N, 1, nf, poly.face_nodes + 1, poly.face_offsets, counted)
         offsets, faces, signs = _cells(poly)
         values = (faces + 1) * (signs if signed else 1)
         _section(zone, "Cells", NFACE_N, nf + 1, nf + nc, values, offsets, counted)
-        zbc = _node(zone, "ZoneBC", "ZoneBC_t")
+        zbc = new_node(zone, "ZoneBC", "ZoneBC_t")
         for p in patches:
-            bc = _node(zbc, p.name, "BC_t", "C1", _chars("BCWall" if p.type == "wall" else "BCFarfield"))
-            _node(bc, "GridLocation", "GridLocation_t", "C1", _chars("FaceCenter"))
-            _node(bc, "PointList", "IndexArray_t", "I8",
+            bc = new_node(zbc, p.name, "BC_t", "C1", char_array("BCWall" if p.type == "wall" else "BCFarfield"))
+            new_node(bc, "GridLocation", "GridLocation_t", "C1", char_array("FaceCenter"))
+            new_node(bc, "PointList", "IndexArray_t", "I8",
                   (np.arange(p.start, p.start + p.n_faces, dtype=np.int64) + 1)[:, None])
     return path
 
@@ -65,12 +65,12 @@ def _cells(poly):
 
 
 def _section(zone, name, code, start, end, values, offsets, counted):
-    sec = _node(zone, name, "Elements_t", "I4", np.array([code, 0], dtype=np.int32))
-    _node(sec, "ElementRange", "IndexRange_t", "I8", np.array([start, end], dtype=np.int64))
+    sec = new_node(zone, name, "Elements_t", "I4", np.array([code, 0], dtype=np.int32))
+    new_node(sec, "ElementRange", "IndexRange_t", "I8", np.array([start, end], dtype=np.int64))
     if counted:
         size = np.diff(offsets)
         conn = np.insert(np.asarray(values, dtype=np.int64), offsets[:-1], size)
-        _node(sec, "ElementConnectivity", "DataArray_t", "I8", conn)
+        new_node(sec, "ElementConnectivity", "DataArray_t", "I8", conn)
     else:
-        _node(sec, "ElementStartOffset", "DataArray_t", "I8", np.asarray(offsets, dtype=np.int64))
-        _node(sec, "ElementConnectivity", "DataArray_t", "I8", np.asarray(values, dtype=np.int64))
+        new_node(sec, "ElementStartOffset", "DataArray_t", "I8", np.asarray(offsets, dtype=np.int64))
+        new_node(sec, "ElementConnectivity", "DataArray_t", "I8", np.asarray(values, dtype=np.int64))

@@ -382,6 +382,8 @@ def _cases() -> dict[str, WingCase]:
         WingCase("transport_zx_blunt_bl", crm_planform(semi_span=3.0, root_chord=1.0, kink_te_extension=0.3,
                                                        sections="zx", closed_te=False),
                  layers=4, farfield=8.0),
+        # a RANS wing: 32 prism layers from a first cell of 1e-6 chord (the wall layer's own benchmark)
+        WingCase("rect_z_rans32", rect, layers=32, first_layer=1e-6, growth=1.25),
     ]
     return {c.name: c for c in cases}
 

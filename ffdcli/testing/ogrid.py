@@ -18,7 +18,6 @@ def _resample_airfoil(coords: np.ndarray, n: int) -> np.ndarray:
     """``n`` points along the airfoil curve (Selig order, both trailing-edge ends kept), clustered at
     the leading and trailing edges: cosine spacing in arc length on each side of the leading edge
     (the point farthest from the trailing-edge mid-point), a cubic spline through the input."""
-
     xy = np.asarray(coords, dtype=np.float64)
     keep = np.r_[True, np.any(np.diff(xy, axis=0) != 0, axis=1)]   # drop repeated points
     xy = xy[keep]

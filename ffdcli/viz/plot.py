@@ -59,7 +59,6 @@ class Part:
 
 def run_parts(run, result) -> list[Part]:
     """The parts of a design run (``ffdcli.app.pipeline``): one per component, in file order."""
-
     Ps = [result.lattice] if run.single else list(result.lattice)
     out = []
     for comp, P1 in zip(run.components, Ps, strict=True):
@@ -337,7 +336,6 @@ def _section_panel(ax, part: Part, label: str, value: float, j: int, q0, q1, nam
 
 def _target_curve(box, target: np.ndarray) -> np.ndarray:
     """A unit-chord target airfoil (K, 2) placed on section 0's chord line, in (chord, thickness)."""
-
     c, t = box.axes.chord, box.axes.thickness
     le, te = box.le_points[0][[c, t]], box.te_points[0][[c, t]]
     chord = float(np.hypot(*(te - le)))
@@ -369,7 +367,7 @@ def plot_design(run, result, path, *, title: str | None = None, dpi: int = 110,
     return plot_parts(parts, path, title=title, dpi=dpi, target=target, note=note)
 
 
-def _pyplot():
+def load_pyplot():
     """matplotlib.pyplot on the Agg backend; an unusable ``MPLBACKEND`` in the environment (which
     matplotlib checks on import) is the user's environment, said so, not a bug."""
     try:
@@ -391,7 +389,7 @@ def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=No
                note: str | None = None) -> Path:
     """Write the PNG of ``parts`` (:class:`Part`): every part's outlines in the planform and front
     views (in the first part's axes), the first part's change panel and sections."""
-    plt = _pyplot()
+    plt = load_pyplot()
 
     part = parts[0]
     box = part.box
@@ -459,7 +457,6 @@ def plot_parts(parts: list[Part], path, *, title: str, dpi: int = 110, target=No
 
 def plot_3d(run, result, path) -> Path | None:
     """The 3D view (pyvista, off-screen, in a subprocess) of a 3D design; None when not possible."""
-
     if run.box.dim != 3 or not run.single:
         return None
     part = run_parts(run, result)[0]

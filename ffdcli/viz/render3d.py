@@ -26,7 +26,6 @@ VIEW = (-0.5, 0.5, 0.7)
 
 
 def pyvista_available() -> bool:
-
     return importlib.util.find_spec("pyvista") is not None
 
 

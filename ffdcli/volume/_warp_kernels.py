@@ -222,7 +222,7 @@ def _finish(res, W, x0, x1, x2, rot, out, i):
 
 
 @njit(parallel=True, cache=True)
-def _exact_kernel(tx, out, src_x, src_a, src_bm, l2, ha, hb, ab, fast, eps2, rho2, rot):
+def exact_kernel(tx, out, src_x, src_a, src_bm, l2, ha, hb, ab, fast, eps2, rho2, rot):
     """The direct sum over every source for targets tx (n, 3): displacements into out (n, 3)."""
     n = tx.shape[0]
     dummy = np.zeros((1, NM))
@@ -236,8 +236,8 @@ def _exact_kernel(tx, out, src_x, src_a, src_bm, l2, ha, hb, ab, fast, eps2, rho
 
 
 @njit(parallel=True, cache=True)
-def _exact_vjp_kernel(tx, g, acc_src, src_x, src_a, l2, ha, hb, ab, fast, eps2, rho2):
-    """The transpose of :func:`_exact_kernel` for the cotangents g (n, 3): per thread t into acc_src[t];
+def exact_vjp_kernel(tx, g, acc_src, src_x, src_a, l2, ha, hb, ab, fast, eps2, rho2):
+    """The transpose of :func:`exact_kernel` for the cotangents g (n, 3): per thread t into acc_src[t];
     thread t takes every T-th block of targets."""
     n = tx.shape[0]
     nthreads = acc_src.shape[0]
@@ -276,7 +276,7 @@ def weight_reference_kernel(tx, out, node_lo, node_hi, node_left, node_right, no
 
 
 @njit(cache=True)
-def _node_moments(src_bm, src_x, src_a, node_c, lo, hi, rot):
+def node_moments(src_bm, src_x, src_a, node_c, lo, hi, rot):
     """Per node, over its sources (A = area, v = the NV votes, delta = x_i - centroid):
 
     [0:NV] sum A v; [NV + NV k + p] sum A delta_k v_p.
@@ -297,7 +297,7 @@ def _node_moments(src_bm, src_x, src_a, node_c, lo, hi, rot):
 
 
 @njit(cache=True)
-def _push_down(acc_node, left, right):
+def push_down(acc_node, left, right):
     """Add every node's accumulator into its children's, parents first (ids grow downwards)."""
     for k in range(acc_node.shape[0]):
         if left[k] >= 0:

@@ -52,7 +52,6 @@ class Extrusion:
 def one_cell_thick(mesh: Mesh, surface) -> Extrusion | None:
     """The :class:`Extrusion` of a 3D volume mesh whose nodes nearly all lie on boundary markers,
     or None (a volume mesh with interior nodes, a surface mesh, a 2D mesh)."""
-
     if mesh.dim != 3 or not mesh.n_cells or not mesh.n_points:
         return None
     surface = [surface] if isinstance(surface, str) else list(surface)

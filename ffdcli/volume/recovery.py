@@ -1,6 +1,6 @@
 """Recovery before refusal: what an expert tries when the deformed volume mesh fails the gate.
 
-When :func:`ffdcli.app.pipeline.deform` finds cells that fail the quality gate (:mod:`ffdcli.quality.gate`)
+When :func:`ffdcli.app.deformation.deform` finds cells that fail the quality gate (:mod:`ffdcli.quality.gate`)
 with the design's own ``volume:`` settings, it tries, in this order, keeping the surface exactly
 where the FFD puts it (bit for bit) every time:
 
@@ -43,7 +43,13 @@ INCREMENTS = 4
 
 
 def attempts(settings: WarpSettings) -> list[tuple[str, WarpSettings, int]]:
-    """(description, settings, increments) of the recovery attempts, in order."""
+    """(description, settings, increments) of the recovery attempts, in order. With a rigid wall layer
+    (:mod:`ffdcli.volume.layer_motion`) the warp alone comes first, then the attempts without the layer:
+    a design the layer's frames fold (a deflected flap's hinge) is never refused where the warp alone
+    passes."""
+    if settings.wall_layer != "none":
+        alone = replace(settings, wall_layer="none")
+        return [("the warp alone near the wall (volume.wall_layer: none)", alone, 1)] + attempts(alone)
     longer = replace(settings, alpha=settings.alpha * REACH_FACTOR)
     out = [(f"longer reach (volume.alpha: {longer.alpha:g})", longer, 1)]
     if settings.carry != "rotation":
@@ -60,32 +66,33 @@ def attempts(settings: WarpSettings) -> list[tuple[str, WarpSettings, int]]:
     return out
 
 
-def incremental_warp(run, P1: np.ndarray, settings: WarpSettings, steps: int, *, progress=None
-                     ) -> np.ndarray:
+def incremental_warp(chain, P1, settings: WarpSettings, steps: int, *, progress=None) -> np.ndarray:
     """(N, 3) mesh points (a local mesh: its rows) after warping the volume through ``steps`` intermediate surfaces.
 
-    Step k moves the lattice to ``P0 + k/steps (P1 - P0)``; the warp of each step is prepared on
+    ``chain``: the design's :class:`ffdcli.chain.DesignChain` (its surface and frame stages, its mesh
+    share). Step k moves the lattice to ``P0 + k/steps (P1 - P0)``; the warp of each step is prepared on
     the points of the step before. Surface nodes end exactly at ``X0 + B (P1 - P0)``.
     """
-
     progress = progress or no_progress
-    mesh = run.prep.mesh
+    share = chain.share
+    mesh = share.mesh
     # every component's surface (a multi-component run moves them all, one lattice each)
-    names = [n for comp in run.components for n in comp.prep.surface.names]
-    sid = run.surface_ids
-    P0s = [comp.P0 for comp in run.components]
-    P1s = run._per_component(P1)
+    names = [n for comp in chain.components for n in comp.prep.surface.names]
+    sid = chain.surface_ids
+    P0s = [comp.P0 for comp in chain.components]
+    P1s = chain.per_component(P1)
+    frames = chain.frame_stage(settings.carry)
     pts = mesh.points.copy()
     b_prev = np.zeros((len(sid), 3))
     R_prev = None
     for k in range(1, steps + 1):
-        Pk = P1s if k == steps else [P0 + (k / steps) * (Q - P0) for P0, Q in zip(P0s, P1s, strict=True)]
-        bk = run.surface_displacement(Pk)
-        Rk = run.surface_frames(Pk, settings.carry)
+        Pk = P1s if k == steps else tuple(P0 + (k / steps) * (Q - P0) for P0, Q in zip(P0s, P1s, strict=True))
+        bk = chain.surface.forward(Pk)
+        Rk = frames.forward(Pk)
         dR = Rk if R_prev is None else Rk @ np.linalg.inv(R_prev)
         model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress,
-                                     size=run.mesh_diagonal(pts), targets=run.warp_targets())
-        pts = pts + run.warp_volume(model, bk - b_prev, dR, progress)
+                                     size=share.diagonal(pts), targets=share.targets())
+        pts = pts + share.warp(model, bk - b_prev, dR, progress)
         pts[sid] = mesh.points[sid] + bk
         b_prev, R_prev = bk, Rk
     return pts

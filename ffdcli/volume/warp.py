@@ -28,15 +28,10 @@ Settings (``volume:`` in the design file, :class:`WarpSettings`): ``a`` = 3, ``b
 ``alpha`` = 1 and ``ldef`` = L. Only the ratio of the two terms depends on L (the common factor
 cancels), so L sets where the short-range ``b`` term takes over: closer than ``alpha^(b/(b-a)) L``
 (L itself with the defaults: the whole wing's neighbourhood follows its nearest surface, the way
-IDWarp is run for planform changes with ``LdefFact`` 50-100; IDWarp's own default, the equivalent
-of alpha 0.25 here, hands over at 3 % of L and lets a far surface's average motion shear the cells
-behind a tip that moves, which inverted cells of swept wings). Default L: the diagonal of the
-bounding box of the surface nodes.
-Area weights are vertex areas: each boundary face (a line in 2D) gives an equal share of its area
-(length) to each of its nodes (:func:`vertex_areas`).
-
-**Marker rules**: :mod:`ffdcli.volume.roles` (which markers are fixed, which slide; docs/design-choices.md
-copies its list). **The source tree**: :mod:`ffdcli.volume.tree`.
+IDWarp is run for planform changes with ``LdefFact`` 50-100; IDWarp's own default, alpha 0.25 here,
+let a far surface's average motion shear the cells behind a moving tip of swept wings). Default L:
+the surface's bounding-box diagonal. Area weights: vertex areas (:func:`vertex_areas`).
+**Marker rules**: :mod:`ffdcli.volume.roles`. **The source tree**: :mod:`ffdcli.volume.tree`.
 
 **Tree approximation.** The exact sum costs O(N_targets x N_sources). Sources are held in a k-d
 tree (median splits on the widest coordinate, leaves of up to 16 sources; the surface sources and
@@ -62,10 +57,8 @@ the tree's one depth-first order, so a target's value does not depend on which o
 warped with it (an MPI rank's part, a row range, a chunk: bit for bit the whole run's). That is what
 lets nearby targets share the walk: blocks of 64 targets in Morton order walk the tree together
 (:mod:`ffdcli.volume._warp_blocks`), decide for all at once where the block's bounding sphere proves
-what each target would decide, and sum each aggregated group or leaf for all their targets in
-vectorised loops (``python -m benchmarks.versus``: the layered 1M-node warp 1.7-1.8x faster than one
-walk per target at a smaller error; ``ffd deform`` of a 1M-node mesh 1.65x, 1.8x with the reference
-weights read from :mod:`ffdcli.volume.cache` on every deform after the first). The decisions depend
+what each target would decide, and sum each group or leaf for all their targets in vectorised loops
+(``python -m benchmarks.versus``: 1.7-1.8x faster than one walk per target). The decisions depend
 on the undeformed geometry only, never on the motion: the approximate warp is one fixed linear map of (b, M), so
 :func:`warp_vjp` (its exact transpose) is the exact derivative, and ``ffd grad`` / ``mesh_vjp``
 match central differences of the written mesh at the default tolerance. This is a per-group
@@ -73,9 +66,12 @@ criterion, not a bound on the total: the error measured against the exact sum is
 ``tolerance x max |b|`` (``benchmarks/bench_warp.py``); the tests check
 ``<= tolerance x max |b|`` on small meshes.
 
-Numba kernels (:mod:`ffdcli.volume._warp_blocks`: ``prange`` over blocks of targets, the block walk;
-:mod:`ffdcli.volume._warp_kernels`: the reference walk, the exact sums, the moments) have NumPy
-references (:func:`idw_reference`) used by the tests.
+Kernels: :mod:`ffdcli.volume._warp_blocks` (the block walk), :mod:`ffdcli.volume._warp_kernels` (the
+reference walk, exact sums, moments); NumPy reference :mod:`ffdcli.volume.idw_reference`.
+
+**The wall layer.** A mesh with thin cells stacked on its wall (a RANS mesh) moves them rigidly with
+their wall (:mod:`ffdcli.volume.wall_layer`, :mod:`ffdcli.volume.layer_motion`; ``volume.wall_layer``):
+not linear in the frames, so :func:`warp_vjp` and the forward derivative take ``at=``, the frames.
 """
 
 from __future__ import annotations
@@ -96,13 +92,15 @@ from ffdcli.volume._warp_blocks import BT, vjp_blocks, warp_blocks
 from ffdcli.volume._warp_kernels import (
     NM,
     NV,
-    _exact_kernel,
-    _exact_vjp_kernel,
-    _node_moments,
-    _push_down,
+    exact_kernel,
+    exact_vjp_kernel,
+    node_moments,
+    push_down,
     weight_reference_kernel,
 )
 from ffdcli.volume.frames import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
+from ffdcli.volume.idw_reference import idw_reference  # noqa: F401  (re-exported)
+from ffdcli.volume.layer_motion import blend_layer, layer_transpose
 from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names of the warp)
     PLANE_TOLERANCE,
     MarkerRoles,
@@ -111,6 +109,7 @@ from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names 
     sliding_projectors,
 )
 from ffdcli.volume.tree import LEAF_SIZE, build_forest, node_geometry  # noqa: F401
+from ffdcli.volume.wall_layer import WallLayer, detect_wall_layer
 
 #: The tolerance (on the scale of ``tolerance / 2``) of the coarse per-target walk whose weight is each
 #: target's reference in the block walk's decisions (:meth:`WarpModel.tolerances`).
@@ -159,6 +158,8 @@ class WarpModel:
     node_area: np.ndarray
     #: each target's reference weight (:meth:`tolerances`), per row range, made on first use
     weight_refs: dict = field(default_factory=dict, repr=False)
+    #: the near-wall layer that moves rigidly with its wall (:mod:`ffdcli.volume.layer_motion`), or None
+    layer: WallLayer | None = field(default=None, repr=False)
 
     @property
     def n_surface(self) -> int:
@@ -375,6 +376,10 @@ def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, pr
     roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path, size=size)
     model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
                          faces=roles.faces, progress=progress, targets=targets)
+    if settings.wall_layer == "rigid" and settings.method != "none":
+        names = [surface] if isinstance(surface, str) else list(surface)
+        model.layer = detect_wall_layer(mesh.points, mesh.cells, mesh.marker_faces(names), model.surface_ids,
+                                        model.target_ids, roles.sliding)
     return model, roles
 
 
@@ -412,7 +417,8 @@ def _blocks(n: int, size: int = BT) -> np.ndarray:
 
 
 def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: np.ndarray | None = None,
-         *, exact: bool = False, progress=None, rows: tuple[int, int] | None = None, comm=None) -> np.ndarray:
+         *, exact: bool = False, progress=None, rows: tuple[int, int] | None = None, comm=None,
+         at: np.ndarray | None = None) -> np.ndarray:
     """Displacement (N, 3) of every mesh node given the motion of the surface nodes.
 
     Parameters
@@ -437,6 +443,10 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         :mod:`ffdcli.parallel.comm` communicator (a collective): each rank warps its block of the volume
         nodes (``rows``) and the blocks are gathered; every rank returns the whole result, equal bit
         for bit to the serial one.
+    at
+        With a wall layer (``model.layer``, :mod:`ffdcli.volume.layer_motion`; nonlinear in the frames): the
+        frames (Ns, 3, 3) at which to linearise it, ``surface_displacement`` and ``surface_rotation - I``
+        then being a direction: the forward derivative (``DesignModel.mesh_jvp``).
 
     Returns
     -------
@@ -447,7 +457,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     """
     if comm is not None and comm.size > 1 and rows is None:
         part = comm.run(warp, model, surface_displacement, surface_rotation, exact=exact, progress=progress,
-                        rows=comm.share(model.n_targets))
+                        rows=comm.share(model.n_targets), at=at)
         out = np.zeros((model.n_points, 3))
         out[model.target_ids] = comm.allgather_rows(part)
         out[model.surface_ids] = np.asarray(surface_displacement, dtype=np.float64)
@@ -466,7 +476,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         out[model.surface_ids] = b
         return out
     bm, use_rot = _source_motion(model, b, surface_rotation)
-    node_bm = _node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
+    node_bm = node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
     l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
     d = np.empty((t_hi - t_lo, 3))
@@ -475,7 +485,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
             tx = model.target_pos[t_lo + lo:t_lo + hi]
             if exact:
-                _exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
+                exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
                               rho2, use_rot)
             else:
                 warp_blocks(tx, tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
@@ -483,6 +493,7 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
                             model.node_area, node_bm, model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb,
                             ab, fast, eps2, rho2, use_rot, model.fixed_node)
             bar.update(hi - lo)
+    d = blend_layer(model.layer, d, b, surface_rotation, t_lo, t_hi, at=at)
     if len(model.slide_rows):
         mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)
         sr = model.slide_rows[mine] - t_lo
@@ -494,8 +505,8 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     return out
 
 
-def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
-             progress=None, comm=None) -> tuple[np.ndarray, np.ndarray]:
+def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False, progress=None, comm=None,
+             at: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Transpose of :func:`warp`: ``g`` (N, 3) = dJ/d(displacement) -> (dJ/db (Ns, 3), dJ/dM (Ns, 3, 3)).
 
     :func:`warp` is a fixed linear map of (b, M = R - I) (its tree decisions are made on the
@@ -509,7 +520,8 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     whole result (equal to the serial one to rounding: the sums are added in another order).
 
     With rotations that follow the design (R from the FFD's deformation gradient), chain ``g_M``
-    through dR/d(design) (:mod:`ffdcli.volume.frames`).
+    through dR/d(design) (:mod:`ffdcli.volume.frames`). With a wall layer (``model.layer``) the warp is
+    not linear in the frames: ``at`` (Ns, 3, 3) is required, the frames of the :func:`warp` differentiated.
     """
     progress = progress or no_progress
     g = np.asarray(g, dtype=np.float64)
@@ -523,6 +535,13 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     gt = g[model.target_ids]
     if len(model.slide_rows):
         gt[model.slide_rows] = np.einsum("nij,nj->ni", model.slide_proj, gt[model.slide_rows])
+    if model.layer is not None and len(model.layer.rows):
+        if at is None:
+            raise ValueError("warp_vjp: this model moves its wall layer rigidly (nonlinear in the frames): "
+                             "pass at=, the frames the warp was given")
+        layer_b, layer_M = layer_transpose(model.layer, gt, at)
+        g_b += layer_b
+        g_M += layer_M
     l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
     nthreads = numba.get_num_threads()
     nn, ms = len(model.node_lo), len(model.src_index)
@@ -536,7 +555,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
             for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
                 tx, gc = model.target_pos[lo + t_lo:hi + t_lo], np.ascontiguousarray(gt[lo + t_lo:hi + t_lo])
                 if exact:
-                    _exact_vjp_kernel(tx, gc, acc_src, model.src_pos, model.src_area, l2, ha, hb, ab, fast,
+                    exact_vjp_kernel(tx, gc, acc_src, model.src_pos, model.src_area, l2, ha, hb, ab, fast,
                                       eps2, rho2)
                 else:
                     vjp_blocks(tx, tolw[lo:hi], gc, acc_node, acc_src, model.node_lo, model.node_hi,
@@ -563,7 +582,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     for f, s in ((0, 3), (12, 15)):
         an[:, f:f + 3] -= np.einsum("npk,nk->np", an[:, s:s + 9].reshape(-1, 3, 3), c)
     an[:, 24:33] -= np.einsum("nk,nkpq->npq", c, an[:, 33:60].reshape(-1, 3, 3, 3)).reshape(-1, 9)
-    _push_down(an, model.node_left, model.node_right)
+    push_down(an, model.node_left, model.node_right)
     leaves = np.flatnonzero(model.node_left < 0)
     leaves = leaves[np.argsort(model.node_lo[leaves])]      # leaf ranges partition the sources
     leaf = an[np.repeat(leaves, model.node_hi[leaves] - model.node_lo[leaves])]
@@ -577,24 +596,5 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False,
     sid = model.src_index[moving]
     g_b[sid] += gb[moving]
     # c = -M x_i: its gradient reaches M as -g_c x_i^T
-    g_M[sid] = gx[moving] - gc[moving][:, :, None] * x[moving][:, None, :]
+    g_M[sid] += gx[moving] - gc[moving][:, :, None] * x[moving][:, None, :]
     return g_b, g_M
-
-
-def idw_reference(points_src: np.ndarray, areas: np.ndarray, disp: np.ndarray, rot: np.ndarray | None,
-                  targets: np.ndarray, settings: WarpSettings, ldef: float,
-                  rotation_length: float | None = None) -> np.ndarray:
-    """Plain NumPy direct sum (the formula of the module docstring) for checking the kernels.
-
-    ``rotation_length``: rho of the rotation fade (None: no fade)."""
-    s = settings
-    e = targets[:, None, :] - points_src[None, :, :]
-    r2raw = np.einsum("tsk,tsk->ts", e, e)
-    r2 = r2raw + (1e-12 * ldef) ** 2
-    q = ldef ** 2 / r2
-    w = areas[None, :] * (q ** (s.a / 2) + s.alpha ** s.b * q ** (s.b / 2))
-    v = np.broadcast_to(disp[None, :, :], e.shape).copy()
-    if rot is not None:
-        gf = 1.0 if rotation_length is None else 1.0 / (1.0 + (r2raw / rotation_length ** 2) ** 2)
-        v += np.broadcast_to(gf, w.shape)[:, :, None] * np.einsum("sij,tsj->tsi", rot - np.eye(3), e)
-    return np.einsum("ts,tsi->ti", w, v) / w.sum(axis=1)[:, None]

@@ -7,7 +7,8 @@ import shutil
 
 import numpy as np
 import pytest
-from conftest import REPO, run_ffd
+import yaml
+from conftest import REPO, run_ffd, shared_file
 from wingcase import write_design, write_surface_wing
 
 from ffdcli.app.deformation import deform
@@ -222,3 +223,30 @@ def test_a_refused_device_near_the_root_is_told_to_leave_its_blend_room(tmp_path
     assert not any(tmp_path.glob("out_*"))
     ok = run_ffd("deform", design, "--set", "changes.0.flap.span=[0.2, 0.4]")
     assert ok.returncode == 0, ok.stderr
+
+
+@pytest.mark.parametrize("changes", [[{"twist": 2}], [{"twist": -3.5}], [{"shape": {"random": 0.004, "seed": 3}}]])
+def test_volume_method_none_hands_the_volume_over_without_judging_it(tmp_path, changes):
+    """Issue 43, item 18: ``volume.method: none`` with ``--surface-file`` (docs/su2.md's path for SU2_DEF's
+    own volume motion): the unmoved volume's cells beside the moved surface are not the design's, so the
+    gate does not judge them (was: exit 3 blaming "108 cells inverted by the design" on a RANS mesh for
+    a 2 degree twist, and no surface file). The surface file is written, a warning says the volume was
+    not moved; the same design with the volume moved by ffd passes the gate."""
+    mesh = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
+    data = {"mesh": str(mesh), "surface": "AIRFOIL", "volume": {"method": "none"}, "changes": changes,
+            "output": {"mesh": "out.su2"}}
+    design = tmp_path / "d.yaml"
+    design.write_text(yaml.safe_dump(data))
+    proc = run_ffd("deform", design, "--surface-file", "surf.dat", "--cache-dir", tmp_path, cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "volume mesh was not moved" in proc.stderr and "SU2_DEF" in proc.stderr
+    rows = [ln.split() for ln in (tmp_path / "surf.dat").read_text().splitlines() if ln.strip()]
+    assert len(rows) == 192
+    out = read_mesh(tmp_path / "out.su2")
+    moved = np.array([[float(x) for x in r[1:3]] for r in rows])
+    ids = np.array([int(r[0]) for r in rows])
+    assert np.abs(out.points[ids, :2] - moved).max() < 1e-9
+    inp = read_mesh(mesh)
+    assert np.abs(out.points[ids] - inp.points[ids]).max() > 1e-4          # the surface moved
+    volume = np.setdiff1d(np.arange(len(inp.points)), ids)
+    np.testing.assert_array_equal(out.points[volume], inp.points[volume])  # the volume did not

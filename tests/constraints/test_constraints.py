@@ -149,9 +149,9 @@ def test_le_te_value(tmp_path):
 
 # set_constraints speaks as the command line does for a design file (issue 29: the schema's words)
 @pytest.mark.parametrize("spec, words", [
-    ({"thickness": {"chord": [0.5], "span": [1.2]}}, "span.0.: must be at most 1"),
+    ({"thickness": {"chord": [0.5], "span": [1.2]}}, "span.0.: must be at least 0 and at most 1"),
     ({"thickness": {"chord": [-0.1], "span": [0.5]}}, "chord.0.: must be greater than 0"),
-    ({"thickness": {"chord": [1.0], "span": [0.5]}}, "chord.0.: must be less than 1"),
+    ({"thickness": {"chord": [1.0], "span": [0.5]}}, "chord.0.: must be greater than 0 and less than 1"),
     ({"thickness": {"span": [0.5]}}, "missing key 'chord'"),
     ({"thickness": {"chord": [0.5]}}, "needs span"),
     ({"thickness": {"chord": [0.999999999], "span": [0.5]}}, "misses the surface"),

@@ -297,13 +297,55 @@ def test_ffd_schema_prints_the_schema():
     assert proc.returncode == 0 and json.loads(proc.stdout) == design_schema()
 
 
-def test_every_change_kind_of_the_schema_has_its_class():
-    """The schema's change kinds and the classes that build them from YAML are the same set."""
-    from ffdcli.design.schema import CHANGE_KINDS
-    from ffdcli.parameterization.changes import CHANGE_CLASSES
+def test_the_schema_is_assembled_from_the_registered_kinds():
+    """Every extension point's piece of the schema is its registered kinds' fragments, each kind's class
+    (or format) named by its own ``kind``; the solver enum is the registered solvers."""
+    from ffdcli.constraints import CONSTRAINTS
+    from ffdcli.io.formats import MESH_FORMATS
+    from ffdcli.optimize.solvers import SOLVERS
+    from ffdcli.parameterization.changes import CHANGES
 
-    assert set(CHANGE_KINDS) == set(CHANGE_CLASSES)
-    assert all(CHANGE_CLASSES[k].kind == k for k in CHANGE_KINDS)
+    schema = design_schema()["properties"]
+    assert set(schema["changes"]["items"]["properties"]) == set(CHANGES.kinds()) >= {"twist", "shape", "flap"}
+    assert set(schema["constraints"]["items"]["properties"]) == set(CONSTRAINTS.kinds()) >= {"volume", "le_te"}
+    assert schema["optimize"]["properties"]["solver"]["enum"] == list(SOLVERS.kinds()) == ["analytic", "su2"]
+    assert {"adjoint", "adjoint_residual"} <= set(schema["optimize"]["properties"])    # SU2's own keys
+    for registry in (CHANGES, CONSTRAINTS, SOLVERS, MESH_FORMATS):
+        assert all(registry[k].kind == k for k in registry.kinds())
+        assert all(callable(registry[k].from_spec) for k in registry.kinds())
+    assert all(ext in schema["mesh"]["description"] for ext in (".su2", ".cgns", ".vtu", ".vtk"))
+
+
+def test_a_registry_refuses_a_second_kind_of_a_name_and_a_kind_without_its_parts():
+    from ffdcli.registry import Registry
+
+    class A:
+        kind = "a"
+
+        @classmethod
+        def schema(cls):
+            return {}
+
+        @classmethod
+        def from_spec(cls, spec, ctx):
+            return cls()
+
+    class B(A):
+        pass
+
+    class NoSchema:
+        kind = "c"
+        from_spec = A.from_spec
+
+    reg = Registry("widget")
+    assert reg.register(A) is A and reg.register(A) is A and reg.kinds() == ("a",)
+    with pytest.raises(ValueError, match="second widget kind named 'a'"):
+        reg.register(B)
+    with pytest.raises(ValueError, match="has no schema"):
+        reg.register(NoSchema)
+    with pytest.raises(ValueError, match="non-empty str"):
+        reg.register(type("Nameless", (A,), {"kind": ""}))
+    assert reg.unknown("z") == "unknown widget 'z'; the kinds are a"
 
 
 def test_settings_module_is_light():

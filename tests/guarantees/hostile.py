@@ -53,27 +53,21 @@ def snapshot(folder: Path) -> dict[str, str]:
     return {str(p.relative_to(folder)): file_hash(p) for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-def error_line(proc, usage: bool = False) -> str:
-    prefix = "Error:" if usage else "ffd: error:"
-    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith(prefix)]
+def error_line(proc) -> str:
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("ffd: error:")]
     assert len(lines) == 1, proc.stderr
     return lines[0]
 
 
-def assert_hostile(ws: Path, args, code: int, *texts: str, names=(), subprocess_run: bool = False,
-                   usage: bool = False):
+def assert_hostile(ws: Path, args, code: int, *texts: str, names=(), subprocess_run: bool = False):
     """Run ``ffd ARGS`` in ``ws`` and check the clean failure and the untouched workspace.
 
     ``texts`` must appear in the error line; ``names`` are file names (or key paths / lines) that the
-    message must name. ``usage``: a command-line usage error, reported by click as its usage text and
-    one ``Error:`` line (exit 2) instead of ``ffd: error:``. Returns the error line."""
+    message must name (a usage error too: one ``ffd: error:`` line, exit 2). Returns the error line."""
     before = snapshot(ws)
     proc = ffd(*args, cwd=ws, subprocess_run=subprocess_run)
-    if usage:
-        assert proc.returncode == code and "Traceback" not in proc.stderr, (proc.returncode, proc.stderr)
-    else:
-        assert_clean_failure(proc, code)
-    line = error_line(proc, usage)
+    assert_clean_failure(proc, code)
+    line = error_line(proc)
     for t in (*texts, *names):
         assert t in line, (t, line)
     after = snapshot(ws)

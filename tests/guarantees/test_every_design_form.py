@@ -244,7 +244,7 @@ def test_the_incremental_recovery_moves_every_component(forms, form, seed, steps
     rng = np.random.default_rng(seed)
     P1 = [c.freeze(c.P0 + rng.normal(scale=0.01, size=c.P0.shape) * np.ptp(c.P0.reshape(-1, 3), axis=0))
           for c in run.components]
-    pts = incremental_warp(run, P1, run.warp_settings, steps)
+    pts = incremental_warp(run.chain, P1, run.warp_settings, steps)
     mesh = run.prep.mesh
     assert pts.shape == mesh.points.shape and np.all(np.isfinite(pts))
     ids = run.surface_ids

@@ -106,8 +106,7 @@ def test_output_symlink_to_input(ws):
 
 def test_output_is_a_folder(ws):
     (ws / "afolder.su2").mkdir(exist_ok=True)
-    assert_hostile(ws, ["deform", "good.yaml", "-o", "afolder.su2"], 2, "directory", names=["afolder.su2"],
-                   usage=True)
+    assert_hostile(ws, ["deform", "good.yaml", "-o", "afolder.su2"], 2, "is a folder", names=["afolder.su2"])
 
 
 def test_output_unknown_format(ws):

@@ -21,11 +21,11 @@ def main(n: int = 100) -> None:
     shape = (n, n, n)
     axes = [np.linspace(0, 1, s) for s in shape]
     pts = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3, order="F")
-    h = cgns._structured_cells(shape, 0).data
+    h = cgns.structured_cells(shape, 0).data
     tets = np.concatenate([h[:, [0, 1, 3, 4]], h[:, [1, 2, 3, 6]], h[:, [1, 3, 4, 6]],
                            h[:, [4, 6, 5, 1]], h[:, [3, 7, 6, 4]]])
-    bottom = cgns._range_faces(shape, 0, np.array([0, 0, 0]), np.array([n - 1, n - 1, 0])).data
-    top = cgns._range_faces(shape, 0, np.array([0, 0, n - 1]), np.array([n - 1, n - 1, n - 1]))
+    bottom = cgns.range_faces(shape, 0, np.array([0, 0, 0]), np.array([n - 1, n - 1, 0])).data
+    top = cgns.range_faces(shape, 0, np.array([0, 0, n - 1]), np.array([n - 1, n - 1, n - 1]))
     mesh = Mesh(points=pts, dim=3, cells=[CellBlock("tetra", tets)],
                 markers={"wing": [CellBlock("triangle", np.r_[bottom[:, [0, 1, 2]], bottom[:, [0, 2, 3]]])],
                          "farfield": [top]})

@@ -36,10 +36,10 @@ def _box_mesh() -> Mesh:
     shape = (3, 3, 3)
     g = np.stack(np.meshgrid(*[np.linspace(0, 1, s) for s in shape], indexing="ij"), axis=-1)
     pts = g.reshape(-1, 3, order="F") * [2.0, 1.0, 0.5] + [0.1, -0.2, 0.3]
-    hexa = cgns._structured_cells(shape, 0)
-    ids = cgns._structured_ids(shape, 0)
-    bottom = cgns._range_faces(shape, 0, np.array([0, 0, 0]), np.array([2, 2, 0]))
-    top = cgns._range_faces(shape, 0, np.array([0, 0, 2]), np.array([2, 2, 2]))
+    hexa = cgns.structured_cells(shape, 0)
+    ids = cgns.structured_ids(shape, 0)
+    bottom = cgns.range_faces(shape, 0, np.array([0, 0, 0]), np.array([2, 2, 0]))
+    top = cgns.range_faces(shape, 0, np.array([0, 0, 2]), np.array([2, 2, 2]))
     # split the first top quad into two triangles so the marker mixes types (a MIXED section)
     q = top.data[0]
     tris = CellBlock("triangle", [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
@@ -57,9 +57,9 @@ def _square_mesh() -> Mesh:
     g = np.stack(np.meshgrid(np.linspace(0, 3, 4), np.linspace(0, 1, 3), indexing="ij"), axis=-1)
     pts = np.zeros((12, 3))
     pts[:, :2] = g.reshape(-1, 2, order="F")
-    quad = cgns._structured_cells(shape, 0)
-    lower = cgns._range_faces(shape, 0, np.array([0, 0]), np.array([3, 0]))
-    upper = cgns._range_faces(shape, 0, np.array([0, 2]), np.array([3, 2]))
+    quad = cgns.structured_cells(shape, 0)
+    lower = cgns.range_faces(shape, 0, np.array([0, 0]), np.array([3, 0]))
+    upper = cgns.range_faces(shape, 0, np.array([0, 2]), np.array([3, 2]))
     return Mesh(points=pts, dim=2, cells=[quad], markers={"airfoil": [lower], "farfield": [upper]})
 
 
@@ -173,7 +173,7 @@ def test_writing_over_the_input_is_refused(tmp_path):
 
 
 def test_mixed_offsets_matches_reference():
-    table = cgns._nodes_per_type_table()
+    table = cgns.nodes_per_type_table()
     rng = np.random.default_rng(3)
     codes = rng.choice([3, 5, 7, 10, 12, 14, 17, 11], size=5000)
     conn = np.concatenate([np.r_[c, rng.integers(1, 50, table[c])] for c in codes])
@@ -194,9 +194,9 @@ def test_ngon_sections_without_cells_are_refused_naming_them(tmp_path):
     write_mesh(_box_mesh(), src)
     with h5py.File(src, "r+") as h5:
         zone = h5["Base/Zone"]
-        sec = cgns._node(zone, "Polygons", "Elements_t", "I4", np.array([cgns.NGON_N, 0], np.int32))
-        cgns._node(sec, "ElementRange", "IndexRange_t", "I4", np.array([1000, 1000], np.int32))
-        cgns._node(sec, "ElementConnectivity", "DataArray_t", "I4", np.array([3, 1, 2, 3], np.int32))
+        sec = cgns.new_node(zone, "Polygons", "Elements_t", "I4", np.array([cgns.NGON_N, 0], np.int32))
+        cgns.new_node(sec, "ElementRange", "IndexRange_t", "I4", np.array([1000, 1000], np.int32))
+        cgns.new_node(sec, "ElementConnectivity", "DataArray_t", "I4", np.array([3, 1, 2, 3], np.int32))
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         with pytest.raises(InputError, match="NGON_n faces without an NFACE_n") as e:
@@ -488,19 +488,19 @@ def _structured_file(path, x_sign: float, bcs: dict[str, tuple[str, list[list[in
     g = np.meshgrid(*[np.arange(s, dtype=float) for s in shape], indexing="ij")
     with h5py.File(path, "w", track_order=True) as h5:
         for k, v in (("label", "Root Node of HDF5 File"), ("name", "HDF5 MotherNode"), ("type", "MT")):
-            cgns._str_attr(h5, k, v, 33 if k != "type" else 3)
-        base = cgns._node(h5, "B", "CGNSBase_t", "I4", np.array([3, 3], np.int32))
-        zone = cgns._node(base, "blk", "Zone_t", "I4", np.array([shape, [3, 2, 1], [0, 0, 0]], np.int32))
-        cgns._node(zone, "ZoneType", "ZoneType_t", "C1", cgns._chars("Structured"))
-        grid = cgns._node(zone, "GridCoordinates", "GridCoordinates_t")
+            cgns.str_attr(h5, k, v, 33 if k != "type" else 3)
+        base = cgns.new_node(h5, "B", "CGNSBase_t", "I4", np.array([3, 3], np.int32))
+        zone = cgns.new_node(base, "blk", "Zone_t", "I4", np.array([shape, [3, 2, 1], [0, 0, 0]], np.int32))
+        cgns.new_node(zone, "ZoneType", "ZoneType_t", "C1", cgns.char_array("Structured"))
+        grid = cgns.new_node(zone, "GridCoordinates", "GridCoordinates_t")
         for a, name in enumerate(("CoordinateX", "CoordinateY", "CoordinateZ")):
             vals = g[a] * (x_sign if a == 0 else 1.0)
-            cgns._node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(vals.T))  # HDF5: reversed
-        zbc = cgns._node(zone, "ZoneBC", "ZoneBC_t")
+            cgns.new_node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(vals.T))  # HDF5: reversed
+        zbc = cgns.new_node(zone, "ZoneBC", "ZoneBC_t")
         for name, (loc, rng) in bcs.items():
-            bc = cgns._node(zbc, name, "BC_t", "C1", cgns._chars("BCWall"))
-            cgns._node(bc, "GridLocation", "GridLocation_t", "C1", cgns._chars(loc))
-            cgns._node(bc, "PointRange", "IndexRange_t", "I4", np.array(rng, np.int32))
+            bc = cgns.new_node(zbc, name, "BC_t", "C1", cgns.char_array("BCWall"))
+            cgns.new_node(bc, "GridLocation", "GridLocation_t", "C1", cgns.char_array(loc))
+            cgns.new_node(bc, "PointRange", "IndexRange_t", "I4", np.array(rng, np.int32))
     return path
 
 
@@ -583,9 +583,9 @@ def test_mixed_section_with_cells_and_faces(tmp_path):
             del zone[name]
         conn = np.concatenate([np.hstack([np.full((len(hexa), 1), 17), hexa + 1]).ravel(),
                                np.hstack([np.full((len(quads), 1), 7), quads + 1]).ravel()])
-        sec = cgns._node(zone, "All", "Elements_t", "I4", np.array([cgns.MIXED, 0], np.int32))
-        cgns._node(sec, "ElementRange", "IndexRange_t", "I4", np.array([1, 12], np.int32))
-        cgns._node(sec, "ElementConnectivity", "DataArray_t", "I4", conn.astype(np.int32))
+        sec = cgns.new_node(zone, "All", "Elements_t", "I4", np.array([cgns.MIXED, 0], np.int32))
+        cgns.new_node(sec, "ElementRange", "IndexRange_t", "I4", np.array([1, 12], np.int32))
+        cgns.new_node(sec, "ElementConnectivity", "DataArray_t", "I4", conn.astype(np.int32))
     mesh = read_mesh(_broken(tmp_path, edit))     # no ElementStartOffset: the offsets are scanned
     assert [b.type for b in mesh.cells] == ["hexahedron"]
     np.testing.assert_array_equal(mesh.cells[0].data, hexa)
@@ -646,9 +646,9 @@ def test_cgns_link_nodes_are_refused(tmp_path):
         del zone["GridCoordinates"]
         link = zone.create_group("GridCoordinates")
         for k, v, n in (("name", "GridCoordinates", 33), ("label", "", 33), ("type", "LK", 3)):
-            cgns._str_attr(link, k, v, n)
-        link.create_dataset(" file", data=cgns._chars("grid.cgns"))
-        link.create_dataset(" path", data=cgns._chars("/Base/Zone/GridCoordinates"))
+            cgns.str_attr(link, k, v, n)
+        link.create_dataset(" file", data=cgns.char_array("grid.cgns"))
+        link.create_dataset(" path", data=cgns.char_array("/Base/Zone/GridCoordinates"))
         link[" link"] = h5py.ExternalLink("grid.cgns", "/Base/Zone/GridCoordinates")
     with pytest.raises(InputError, match="CGNS link .grid.cgns /Base/Zone/GridCoordinates") as exc:
         read_mesh(_broken(tmp_path, edit))

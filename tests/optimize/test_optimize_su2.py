@@ -155,10 +155,13 @@ def test_adjoint_residual_in_the_design_file(tmp_path):
     base = {"mesh": "m.su2", "surface": "airfoil", "changes": [{"twist": 0}], "optimize": {"config": "flow.cfg"}}
     path = tmp_path / "d.yaml"
     path.write_text(yaml.safe_dump(base))
-    assert optimize_settings(load_design(path)).adjoint_residual is None
-    base["optimize"]["adjoint_residual"] = -6.5
+    from ffdcli.optimize.solvers.su2 import SU2
+    from ffdcli.optimize.workflow import make_solver
+    assert make_solver(optimize_settings(load_design(path))).adjoint_residual is None
+    base["optimize"]["adjoint_residual"] = -6.5           # SU2's own key, parsed by the SU2 adapter
     path.write_text(yaml.safe_dump(base))
-    assert optimize_settings(load_design(path)).adjoint_residual == -6.5
+    solver = make_solver(optimize_settings(load_design(path)))
+    assert isinstance(solver, SU2) and solver.adjoint_residual == -6.5
 
 
 def test_an_incompressible_cauchy_config_watches_the_adjoint_pressure():

@@ -29,13 +29,22 @@ def crm_design(tmp_path, changes, volume=None, name="d.yaml"):
 
 
 def test_attempts_are_a_longer_reach_then_the_rotation_then_increments():
-    got = attempts(WarpSettings(alpha=0.5))
+    got = attempts(WarpSettings(alpha=0.5, wall_layer="none"))
     assert [(st.alpha, st.carry, st.rotation_reach, n) for _, st, n in got] == [
         (2.0, "gradient", 0.5, 1), (0.5, "rotation", 0.5, 1), (0.5, "rotation", None, 1), (2.0, "gradient", 0.5, 4)]
     assert "alpha: 2" in got[0][0] and "carry: rotation" in got[1][0] and "rotation_reach: null" in got[2][0]
     assert "4 increments" in got[3][0]
-    assert len(attempts(WarpSettings(rotation_reach=None))) == 3
-    assert len(attempts(WarpSettings(carry="rotation", rotation_reach=None))) == 2
+    assert len(attempts(WarpSettings(rotation_reach=None, wall_layer="none"))) == 3
+    assert len(attempts(WarpSettings(carry="rotation", rotation_reach=None, wall_layer="none"))) == 2
+
+
+def test_with_a_wall_layer_the_warp_alone_comes_first_then_the_same_attempts_without_it():
+    for kw in ({}, {"rotation_reach": None}, {"carry": "rotation", "alpha": 2.0}):
+        got = attempts(WarpSettings(**kw))
+        assert "wall_layer: none" in got[0][0] and got[0][2] == 1
+        assert all(st.wall_layer == "none" for _, st, _ in got)
+        alone = attempts(WarpSettings(**kw, wall_layer="none"))
+        assert [(w, st, n) for w, st, n in got[1:]] == alone
 
 
 @pytest.mark.slow
@@ -45,9 +54,9 @@ def test_one_increment_is_the_plain_warp_and_the_surface_is_exact(tmp_path):
     st = WarpSettings()
     model, _ = prepare_mesh_warp(run.prep.mesh, "wing", st)
     plain = run.prep.mesh.points + warp(model, run.surface_displacement(P1), run.surface_frames(P1))
-    one = incremental_warp(run, P1, st, 1)
+    one = incremental_warp(run.chain, P1, st, 1)
     np.testing.assert_allclose(one, plain, rtol=0, atol=1e-13)
-    four = incremental_warp(run, P1, st, 4)
+    four = incremental_warp(run.chain, P1, st, 4)
     sid = run.prep.surface.ids
     assert np.array_equal(four[sid], run.prep.mesh.points[sid] + run.surface_displacement(P1))
     # the increments really move the volume differently (the warp is rebuilt on each step's mesh)

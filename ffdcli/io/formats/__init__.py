@@ -1,10 +1,12 @@
 """Mesh input and output: one reader/writer API, one module per format.
 
-``read_mesh(path)`` picks the reader from the extension (a folder, or a path without one, is an
-OpenFOAM case: :mod:`ffdcli.io.formats.openfoam`); ``write_mesh(mesh, path, points)`` writes a
-mesh with new point coordinates. When ``path`` has the format the mesh was read from, the writer
-patches a copy of the input file (only coordinates change, everything else byte for byte);
-otherwise it writes the mesh from scratch in the new format, markers included.
+Each format module registers its :class:`~ffdcli.io.formats.common.MeshFormat` at its end
+(:data:`MESH_FORMATS`; this face imports them all). ``read_mesh(path)`` picks the reader from the
+extension (a folder, or a path without one, is an OpenFOAM case: :mod:`ffdcli.io.formats.openfoam`);
+``write_mesh(mesh, path, points)`` writes a mesh with new point coordinates. When ``path`` has the
+format the mesh was read from, the writer patches a copy of the input file (only coordinates change,
+everything else byte for byte); otherwise it writes the mesh from scratch in the new format, markers
+included.
 """
 
 from __future__ import annotations
@@ -15,25 +17,20 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import check_writable
-from ffdcli.io.formats import cgns, openfoam, su2, vtk
+from ffdcli.io.formats import cgns, openfoam, su2, vtk  # noqa: F401  (each registers its format)
 from ffdcli.io.formats.common import (  # noqa: F401
     FOLDER_FORMAT,
-    FORMATS,
+    MESH_FORMATS,
+    MeshFormat,
     check_finite_points,
     check_finite_rows,
+    extensions,
     format_of,
     mismatch_message,
 )
 from ffdcli.io.inputs import check_mesh_path
 from ffdcli.mesh import Mesh
 from ffdcli.parallel.partition import localize, node_owners
-
-#: format name -> the module that reads and writes it
-MODULES = {"su2": su2, "cgns": cgns, "vtu": vtk, "vtk": vtk, FOLDER_FORMAT: openfoam}
-
-
-def _module(fmt: str):
-    return MODULES[fmt]
 
 
 def read_mesh(path: str | Path, *, progress=None) -> Mesh:
@@ -42,13 +39,9 @@ def read_mesh(path: str | Path, *, progress=None) -> Mesh:
     p = Path(path)
     fmt = format_of(p)
     check_mesh_path(p)                         # a FIFO or a device would block or never end in open()
-    mesh = _module(fmt).read(p, progress=progress)
+    mesh = MESH_FORMATS[fmt].from_spec(p, progress)
     check_finite_points(mesh)
     return mesh
-
-
-#: Formats whose reader reads one MPI rank's part itself (:func:`read_part`).
-READ_BY_PARTS = ("su2", "cgns")
 
 
 def read_part(path: str | Path, comm, *, progress=None):
@@ -70,8 +63,8 @@ def read_part(path: str | Path, comm, *, progress=None):
     comm.run(check_mesh_path, p)
     if fmt == FOLDER_FORMAT:
         return comm.root_then_bcast(read_mesh, p, progress=progress), None
-    if fmt in READ_BY_PARTS:
-        mesh, part = _module(fmt).read_part(p, comm, progress=progress)
+    if MESH_FORMATS[fmt].read_part is not None:         # read by parts: SU2, CGNS
+        mesh, part = MESH_FORMATS[fmt].read_part(p, comm, progress=progress)
         comm.run(check_finite_points, mesh)
         return mesh, part
     mesh = comm.root_then_bcast(read_mesh, p, progress=progress)      # transiently whole on every rank
@@ -96,5 +89,5 @@ def write_mesh(mesh: Mesh, path: str | Path, points: np.ndarray | None = None, *
     pts = mesh.points if points is None else np.asarray(points, dtype=np.float64)
     if pts.shape != mesh.points.shape:
         raise ValueError(f"points {pts.shape} do not match the mesh {mesh.points.shape}")
-    return _module(fmt).write(mesh, p, pts, progress=progress) or {}
+    return MESH_FORMATS[fmt].write(mesh, p, pts, progress=progress) or {}
 

@@ -36,7 +36,7 @@ _DIM_BY_ID = np.full(16, -1, dtype=np.int64)
 for _name, _vtk in VTK_ID.items():
     _DIM_BY_ID[_vtk] = CELL_DIM[_name]
 
-_KEY_RE = re.compile(rb"^([A-Z][A-Z0-9_]*)\s*=\s*(.*)$", re.S)
+KEY_RE = re.compile(rb"^([A-Z][A-Z0-9_]*)\s*=\s*(.*)$", re.S)
 
 
 @dataclass
@@ -72,7 +72,6 @@ class Su2Source:
     @property
     def block_end(self) -> int:
         return int(self.row_start[-1]) if self.block is None else int(self.block[1])
-
 
 
 class _Scanner:
@@ -134,7 +133,7 @@ class _Scanner:
             s = text.strip()
             if not s or s.startswith(b"%"):
                 continue
-            m = _KEY_RE.match(s)
+            m = KEY_RE.match(s)
             if m is None:
                 raise self.unexpected(s, lineno)
             return m.group(1), m.group(2).strip(), lineno
@@ -194,7 +193,7 @@ class _Scanner:
             starts[0] = 0
             starts[1:] = ends[:-1] + 1
             yield pos, buf, starts, ends, line
-            _release(self.mm, pos, len(buf))
+            release_pages(self.mm, pos, len(buf))
             n = len(ends)
             if advance:
                 self.bar.update(len(buf))
@@ -237,7 +236,7 @@ class _Scanner:
                     conv(tok)
                 except ValueError:
                     lineno = first_line + i
-                    if _KEY_RE.match(row.strip()):
+                    if KEY_RE.match(row.strip()):
                         got = lineno - b.first_line
                         return self.error(f"found {_show(row.strip())} after {got} of the {b.rows} "
                                           f"rows of {b.key}= (line {b.key_line}); the block is "
@@ -261,7 +260,7 @@ class _Scanner:
         return values, first, count
 
 
-class _Parser(_Scanner):
+class Parser(_Scanner):
     """The statements of an SU2 file read into a :class:`~ffdcli.mesh.Mesh` (the scanning is
     :class:`_Scanner`'s)."""
 
@@ -457,7 +456,7 @@ class _Parser(_Scanner):
             s = text.strip()
             if not s or s.startswith(b"%"):
                 continue
-            m = _KEY_RE.match(s)
+            m = KEY_RE.match(s)
             if m is None:
                 if b is not None and lineno == b.first_line + b.rows:
                     raise self.unexpected(s, lineno)
@@ -489,7 +488,7 @@ class _Parser(_Scanner):
                     path=self.path, format="su2", source=source)
 
 
-def _release(mm: mmap.mmap, start: int, length: int) -> None:
+def release_pages(mm: mmap.mmap, start: int, length: int) -> None:
     """Drop parsed pages of the read-only map from this process's resident set (they stay in the
     page cache and fault back in if read again), so peak memory does not include the whole file."""
     page = mmap.PAGESIZE

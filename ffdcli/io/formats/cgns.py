@@ -62,53 +62,53 @@ from ffdcli.errors import InputError
 from ffdcli.io.formats import cgns_ngon
 from ffdcli.io.formats.cgns_bc import (  # noqa: F401
     PLACEHOLDER_FAMILIES,
-    _bc_marker_name,
-    _MarkerSet,
-    _structured_bc,
-    _unstructured_bc,
+    MarkerSet,
+    bc_marker_name,
     markers_by_bc,
+    structured_bc,
+    unstructured_bc,
 )
 from ffdcli.io.formats.cgns_cells import (  # noqa: F401  (the cell readers; tests reach them here too)
-    _TYPE_ORDER,
     CGNS_CODE,
     ELEMENT_TYPES,
     MIXED,
     NFACE_N,
     NGON_N,
+    TYPE_ORDER,
     WEDGE_CGNS_TO_VTK,
-    _handedness,
-    _nodes_per_type_table,
-    _orient_structured,
-    _range_faces,
-    _read_section,
-    _Section,
-    _sections_cells,
-    _structured_cells,
-    _structured_ids,
+    Section,
+    handedness,
     mixed_offsets,
     mixed_offsets_reference,
+    nodes_per_type_table,
+    orient_structured,
+    range_faces,
+    read_element_section,
+    sections_cells,
+    structured_cells,
+    structured_ids,
 )
 from ffdcli.io.formats.cgns_nodes import (  # noqa: F401
     ADF_MARK,
     HDF5_SIGNATURE,
     CgnsSource,
     CgnsZone,
-    _adf_message,
-    _chars,
-    _check_no_links,
-    _child_text,
-    _children,
-    _data,
-    _index_data,
-    _label,
-    _node,
-    _str_attr,
-    _text,
+    adf_message,
+    char_array,
+    check_no_links,
+    child_text,
+    children_of,
     container_of,
     convert_adf,
+    data_of,
+    index_data,
+    label_of,
+    new_node,
+    str_attr,
+    text_of,
 )
 from ffdcli.io.formats.cgns_write import write  # noqa: F401  (the format's writer: formats.write_mesh calls cgns.write)
-from ffdcli.io.formats.common import check_finite_rows
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat, check_finite_rows
 from ffdcli.mesh import CELL_DIM, CELL_NODES, CellBlock, Mesh
 from ffdcli.mesh.polyhedra import concat_polyhedra, polyhedra_from_cells
 from ffdcli.parallel.partition import local_mesh_of_blocks, localize, node_owners
@@ -118,10 +118,10 @@ h5py = deferred("h5py")
 
 def _zone_size(base, zn, file: Path) -> tuple[int, int, bool, tuple[int, ...], int]:
     """(cell dimension, physical dimension, structured, vertex shape, point count) of a zone."""
-    bdata = np.asarray(_data(base)).ravel() if _data(base) is not None else np.array([3, 3])
+    bdata = np.asarray(data_of(base)).ravel() if data_of(base) is not None else np.array([3, 3])
     cell_dim, phys_dim = int(bdata[0]), int(bdata[-1])
-    ztype = _child_text(zn, "ZoneType_t") or "Unstructured"
-    zsize = _data(zn)
+    ztype = child_text(zn, "ZoneType_t") or "Unstructured"
+    zsize = data_of(zn)
     if zsize is None:
         raise InputError("zone without its size data", path=file, key=zn.name)
     zsize = np.asarray(zsize, dtype=np.int64)
@@ -140,16 +140,16 @@ def _read_coordinates(zone_node, n_points: int, vertex_shape, phys_dim: int, fil
                       structured: bool, span: tuple[int, int] | None = None) -> tuple[np.ndarray, CgnsZone]:
     """The zone's (n_points, 3) coordinates, or only rows ``span = (a, b)`` of an unstructured zone
     (a hyperslab of each coordinate array), and its :class:`CgnsZone`."""
-    grids = _children(zone_node, "GridCoordinates_t")
+    grids = children_of(zone_node, "GridCoordinates_t")
     if not grids:
         raise InputError("zone has no GridCoordinates_t node (no point coordinates)", path=file,
                          key=zone_node.name)
     grid = next((g for g in grids if g.name.rsplit("/", 1)[-1] == "GridCoordinates"), grids[0])
-    rind = _children(grid, "Rind_t")
-    if rind and np.any(np.asarray(_data(rind[0])) != 0):
+    rind = children_of(grid, "Rind_t")
+    if rind and np.any(np.asarray(data_of(rind[0])) != 0):
         raise InputError("grid coordinates with rind (ghost) planes are not supported", path=file,
                          key=rind[0].name)
-    arrays = {c.name.rsplit("/", 1)[-1]: c for c in _children(grid, "DataArray_t")}
+    arrays = {c.name.rsplit("/", 1)[-1]: c for c in children_of(grid, "DataArray_t")}
     names = ["CoordinateX", "CoordinateY", "CoordinateZ"]
     need = names[:max(phys_dim, 2)]
     missing = [n for n in need if n not in arrays or " data" not in arrays[n]]
@@ -189,22 +189,22 @@ def _unstructured_zone(zn, pts, zone, offset, n_points, cell_dim, phys_dim, file
     sections that no BC names into ``section_markers`` (markers named after the section)."""
     zone_blocks: list = []
     sections, in_order = [], []      # in_order: per Elements_t, its _Rows or its index in sections
-    for sec in _children(zn, "Elements_t"):
+    for sec in children_of(zn, "Elements_t"):
         rows = _interior_rows(sec, offset, n_points, cell_dim, file, share) \
             if share is not None and cell_dim in (phys_dim, 3) else None
         if rows is not None:        # one rank's rows of a volume section (BCs never name them)
             in_order.append(rows)
             continue
         in_order.append(len(sections))
-        sections.append(_read_section(sec, offset, n_points, file))
+        sections.append(read_element_section(sec, offset, n_points, file))
     poly = cgns_ngon.zone_polyhedra(sections, pts, offset, cell_dim, file)
     if poly is not None:
         polys.append(poly)
     used: set[int] = set()
-    for zbc in _children(zn, "ZoneBC_t"):
-        for bc in _children(zbc, "BC_t"):
-            bc_name, name = _bc_marker_name(bc)
-            ms.add_bc(bc_name, name, _unstructured_bc(bc, zone, sections, cell_dim, file, used))
+    for zbc in children_of(zn, "ZoneBC_t"):
+        for bc in children_of(zbc, "BC_t"):
+            bc_name, name = bc_marker_name(bc)
+            ms.add_bc(bc_name, name, unstructured_bc(bc, zone, sections, cell_dim, file, used))
     for si in in_order:
         if isinstance(si, _Rows):
             zone_blocks.append(si)
@@ -213,9 +213,9 @@ def _unstructured_zone(zn, pts, zone, offset, n_points, cell_dim, phys_dim, file
         if isinstance(s, cgns_ngon.PolySection):       # polyhedra: read above, never a marker
             continue
         # a MIXED section may hold both volume cells and boundary faces: split by dimension
-        inner = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
+        inner = [CellBlock(t, s.blocks[t]) for t in TYPE_ORDER
                  if t in s.blocks and CELL_DIM[t] >= cell_dim]
-        outer = [CellBlock(t, s.blocks[t]) for t in _TYPE_ORDER
+        outer = [CellBlock(t, s.blocks[t]) for t in TYPE_ORDER
                  if t in s.blocks and CELL_DIM[t] < cell_dim]
         zone_blocks.extend(inner)
         if outer and si not in used:
@@ -245,15 +245,15 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
     ``mesh.cells`` is then a list of :class:`_Rows`, and the result is ``(mesh, rows)``: ``rows`` the
     rank's block ``(a, b)`` of the points when ``mesh.points`` holds only those (unstructured volume
     zones only), else None (every point; see :func:`read_part`)."""
-    bases = _children(h5, "CGNSBase_t")
+    bases = children_of(h5, "CGNSBase_t")
     if not bases:
         raise InputError("no CGNSBase_t node: not a CGNS file", path=file, key="/")
-    zones_nodes = [(b, z) for b in bases for z in _children(b, "Zone_t")]
+    zones_nodes = [(b, z) for b in bases for z in children_of(b, "Zone_t")]
     if not zones_nodes:
         raise InputError("the CGNS file has no Zone_t node", path=file, key=bases[0].name)
     points: list[np.ndarray] = []
     cells: dict[str, list[np.ndarray]] = {}
-    ms = _MarkerSet()
+    ms = MarkerSet()
     zones: list[CgnsZone] = []
     skipped: list[str] = []
     polys: list = []
@@ -265,8 +265,8 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
     sizes = [_zone_size(base, zn, file) for base, zn in zones_nodes]
     if share is not None:        # polyhedral cells need the whole mesh (every rank sees the same tree)
         for _, zn in zones_nodes:
-            for sec in _children(zn, "Elements_t"):
-                head = _data(sec)
+            for sec in children_of(zn, "Elements_t"):
+                head = data_of(sec)
                 if head is not None and int(np.asarray(head).ravel()[0]) in (cgns_ngon.NGON_N, cgns_ngon.NFACE_N):
                     raise WholeMeshNeeded(zn.name)
     if share is not None and all(not z[2] and z[0] >= z[1] for z in sizes):
@@ -277,22 +277,22 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
         point_rows = None
     for (base, zn), (cell_dim, phys_dim, structured, vshape, n_points) in zip(zones_nodes, sizes, strict=True):
         dim = max(dim, cell_dim)
-        _check_no_links(zn, file)
-        for grid in _children(zn, "GridCoordinates_t"):
-            _check_no_links(grid, file)
+        check_no_links(zn, file)
+        for grid in children_of(zn, "GridCoordinates_t"):
+            check_no_links(grid, file)
         span = None if point_rows is None else tuple(min(max(e - offset, 0), n_points) for e in point_rows)
         pts, zone = _read_coordinates(zn, n_points, vshape, phys_dim, file, offset, structured, span)
         zone_blocks: list[CellBlock] = []
         if structured:
-            blk = _structured_cells(vshape, offset)
+            blk = structured_cells(vshape, offset)
             handed = 0
             if blk is not None:
-                handed = _handedness(blk, pts, offset)
-                zone_blocks.append(_orient_structured(blk, pts, offset))
-            for zbc in _children(zn, "ZoneBC_t"):
-                for bc in _children(zbc, "BC_t"):
-                    bc_name, name = _bc_marker_name(bc)
-                    ms.add_bc(bc_name, name, _structured_bc(bc, zone, file, handed))
+                handed = handedness(blk, pts, offset)
+                zone_blocks.append(orient_structured(blk, pts, offset))
+            for zbc in children_of(zn, "ZoneBC_t"):
+                for bc in children_of(zbc, "BC_t"):
+                    bc_name, name = bc_marker_name(bc)
+                    ms.add_bc(bc_name, name, structured_bc(bc, zone, file, handed))
         else:
             zone_blocks = _unstructured_zone(zn, pts, zone, offset, n_points, cell_dim, phys_dim, file, share, ms,
                                              polys, section_markers)
@@ -311,8 +311,8 @@ def _read_tree(h5: h5py.File, file: Path, container: str, progress, share=None) 
     if bar:
         bar.close()
     markers = _markers(ms, section_markers, surface_cells)
-    cell_blocks = ([CellBlock(t, np.vstack(cells[t])) for t in _TYPE_ORDER if t in cells] if share is None
-                   else [r for t in _TYPE_ORDER for r in cells.get(t, [])])
+    cell_blocks = ([CellBlock(t, np.vstack(cells[t])) for t in TYPE_ORDER if t in cells] if share is None
+                   else [r for t in TYPE_ORDER for r in cells.get(t, [])])
     polyhedra = None
     if polys:           # one cell model for the mesh: the other zones' volume cells become polyhedra too
         volume = [b for b in cell_blocks if CELL_DIM[b.type] == 3]
@@ -344,8 +344,8 @@ class _Rows:
 def _interior_rows(sec, offset: int, n_points: int, cell_dim: int, file: Path, share) -> _Rows | None:
     """This rank's rows of an Elements_t node of volume cells of one type, read as a hyperslab of
     its connectivity; None for anything else (MIXED, faces, polyhedra, unknown types: read whole)."""
-    head = _data(sec)
-    rng = _index_data(sec, "ElementRange")
+    head = data_of(sec)
+    rng = index_data(sec, "ElementRange")
     node = sec.get("ElementConnectivity")
     ds = node.get(" data") if isinstance(node, h5py.Group) else None
     if head is None or rng is None or rng.size != 2 or ds is None:
@@ -391,7 +391,6 @@ def read_part(path: str | Path, comm, progress=None):
     (polyhedral) zones is read by rank 0 and broadcast, and stays whole on every rank: ``part`` is
     then None (as for an OpenFOAM case, :func:`ffdcli.io.formats.read_part`).
     """
-
     p = Path(path)
     if comm.run(container_of, p) == "adf":
         mesh = comm.root_then_bcast(read, p, progress)
@@ -420,7 +419,7 @@ def read_part(path: str | Path, comm, progress=None):
     check_finite_rows(comm, block, a, p)         # before the owners (Morton codes of finite points)
     rows = mesh.cells
     types, blocks, ids, start = [], [], [], 0
-    for t in _TYPE_ORDER:                   # the serial blocks: one per type, sections in file order
+    for t in TYPE_ORDER:                   # the serial blocks: one per type, sections in file order
         mine = [r for r in rows if r.type == t]
         if not mine or not sum(r.n for r in mine):
             continue
@@ -444,7 +443,7 @@ def _merge(blocks: list[CellBlock]) -> list[CellBlock]:
     by: dict[str, list[np.ndarray]] = {}
     for b in blocks:
         by.setdefault(b.type, []).append(b.data)
-    return [CellBlock(t, np.vstack(by[t])) for t in _TYPE_ORDER if t in by]
+    return [CellBlock(t, np.vstack(by[t])) for t in TYPE_ORDER if t in by]
 
 
 def read(path: str | Path, progress=None) -> Mesh:
@@ -479,3 +478,4 @@ def _read_file(h5path: Path, file: Path, container: str, progress) -> Mesh:
 # -- from scratch ------------------------------------------------------------------------------
 
 
+MESH_FORMATS.register(MeshFormat("cgns", (".cgns",), "a CGNS/HDF5 mesh", read, write, read_part))

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
-from ffdcli.io.formats.cgns_cells import _TYPE_ORDER, _outward_faces, _range_faces, _Section, _sections_cells
-from ffdcli.io.formats.cgns_nodes import CgnsSource, CgnsZone, _child_text, _index_data
+from ffdcli.io.formats.cgns_cells import TYPE_ORDER, Section, outward_faces, range_faces, sections_cells
+from ffdcli.io.formats.cgns_nodes import CgnsSource, CgnsZone, child_text, index_data
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
 
@@ -20,7 +20,7 @@ PLACEHOLDER_FAMILIES = frozenset({"", "unspecified", "unspecifiedbc", "null"})
 
 
 @dataclass
-class _MarkerSet:
+class MarkerSet:
     """Markers being collected: primary names (family or BC), BC names, and where each came from."""
 
     markers: dict[str, list[CellBlock]] = field(default_factory=dict)
@@ -36,24 +36,24 @@ class _MarkerSet:
 
 
 def _bc_location(bc) -> str:
-    return (_child_text(bc, "GridLocation_t") or "Vertex").strip()
+    return (child_text(bc, "GridLocation_t") or "Vertex").strip()
 
 
-def _bc_marker_name(bc) -> tuple[str, str]:
+def bc_marker_name(bc) -> tuple[str, str]:
     bc_name = bc.name.rsplit("/", 1)[-1]
-    fam = _child_text(bc, "FamilyName_t")
+    fam = child_text(bc, "FamilyName_t")
     if fam is not None and fam.lower() not in PLACEHOLDER_FAMILIES:
         return bc_name, fam
     return bc_name, bc_name
 
 
-def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int, file: Path,
+def unstructured_bc(bc, zone: CgnsZone, sections: list[Section], cell_dim: int, file: Path,
                      used: set[int]) -> list[CellBlock]:
     loc = _bc_location(bc)
-    plist = _index_data(bc, "PointList")
-    prange = _index_data(bc, "PointRange")
-    elist = _index_data(bc, "ElementList")
-    erange = _index_data(bc, "ElementRange")
+    plist = index_data(bc, "PointList")
+    prange = index_data(bc, "PointRange")
+    elist = index_data(bc, "ElementList")
+    erange = index_data(bc, "ElementRange")
 
     def expand(lst, rng):
         if lst is not None:
@@ -68,9 +68,9 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
     else:
         ids = None
     if ids is not None:
-        cells, touched = _sections_cells(sections, ids, file, bc.name)
+        cells, touched = sections_cells(sections, ids, file, bc.name)
         used |= touched
-        return [CellBlock(t, np.vstack(cells[t])) for t in _TYPE_ORDER if t in cells]
+        return [CellBlock(t, np.vstack(cells[t])) for t in TYPE_ORDER if t in cells]
     if plist is None and prange is None:
         raise InputError("boundary condition has no PointList, PointRange, ElementList or ElementRange",
                          path=file, key=bc.name)
@@ -99,16 +99,16 @@ def _unstructured_bc(bc, zone: CgnsZone, sections: list[_Section], cell_dim: int
         covered = unique_ids(*[np.vstack(v) for v in faces.values()])
         if len(covered) == len(gids):
             used |= hit
-            return [CellBlock(t, np.vstack(faces[t])) for t in _TYPE_ORDER if t in faces]
+            return [CellBlock(t, np.vstack(faces[t])) for t in TYPE_ORDER if t in faces]
     return [CellBlock("vertex", gids[:, None])]
 
 
-def _structured_bc(bc, zone: CgnsZone, file: Path, handed: int = 0) -> list[CellBlock]:
+def structured_bc(bc, zone: CgnsZone, file: Path, handed: int = 0) -> list[CellBlock]:
     loc = _bc_location(bc)
     shape = np.asarray(zone.vertex_shape)
     idim = len(shape)
-    prange = _index_data(bc, "PointRange")
-    plist = _index_data(bc, "PointList")
+    prange = index_data(bc, "PointRange")
+    plist = index_data(bc, "PointList")
     if prange is not None:
         pr = prange.reshape(2, idim)
         lo, hi = np.minimum(pr[0], pr[1]) - 1, np.maximum(pr[0], pr[1]) - 1
@@ -129,10 +129,10 @@ def _structured_bc(bc, zone: CgnsZone, file: Path, handed: int = 0) -> list[Cell
         if lo.min() < 0 or np.any(hi >= shape):
             raise InputError(f"PointRange {pr.tolist()} is outside the zone's {shape.tolist()} vertices",
                              path=file, key=bc.name)
-        faces = _range_faces(tuple(shape), zone.offset, lo, hi, axis)
+        faces = range_faces(tuple(shape), zone.offset, lo, hi, axis)
         if faces.type == "quad" and axis is None:
             axis = int(np.flatnonzero(lo == hi)[0])
-        return [_outward_faces(faces, tuple(shape), lo, axis, handed)]
+        return [outward_faces(faces, tuple(shape), lo, axis, handed)]
     if plist is not None:
         ijk = plist.reshape(-1, idim) - 1
         if loc != "Vertex":

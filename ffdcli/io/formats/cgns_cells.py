@@ -12,7 +12,7 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.io.formats import cgns_ngon
-from ffdcli.io.formats.cgns_nodes import _data, _index_data
+from ffdcli.io.formats.cgns_nodes import data_of, index_data
 from ffdcli.mesh import CELL_NODES, CellBlock
 
 #: CGNS element type codes of the mixed and polyhedral sections.
@@ -40,7 +40,7 @@ CGNS_CODE = {"vertex": 2, "line": 3, "triangle": 5, "quad": 7, "tetra": 10, "pyr
              "wedge": 14, "hexahedron": 17}
 
 
-_TYPE_ORDER = ["vertex", "line", "triangle", "quad", "tetra", "pyramid", "wedge", "hexahedron"]
+TYPE_ORDER = ["vertex", "line", "triangle", "quad", "tetra", "pyramid", "wedge", "hexahedron"]
 
 
 #: CGNS PENTA_6 lists the bottom triangle with its normal towards the top one, VTK (and SU2) the
@@ -98,7 +98,7 @@ def mixed_offsets(conn: np.ndarray, nodes_per_type: np.ndarray) -> np.ndarray:
     return np.append(pos[:first_out], end)
 
 
-def _nodes_per_type_table() -> np.ndarray:
+def nodes_per_type_table() -> np.ndarray:
     table = np.zeros(max(ELEMENT_TYPES) + 1, dtype=np.int64)
     for code, (_, npe) in ELEMENT_TYPES.items():
         table[code] = npe
@@ -106,14 +106,14 @@ def _nodes_per_type_table() -> np.ndarray:
 
 
 @dataclass
-class _Section:
+class Section:
     """One Elements_t node: element ids start..end, each with a type and a row in ``blocks``."""
 
     name: str
     path: str
     start: int
     end: int
-    kinds: np.ndarray               # (n,) index into _TYPE_ORDER, -1 for skipped elements
+    kinds: np.ndarray               # (n,) index into TYPE_ORDER, -1 for skipped elements
     rows: np.ndarray                # (n,) row of the element in blocks[type]
     blocks: dict[str, np.ndarray]   # type -> (m, nodes) global 0-based point ids
 
@@ -122,16 +122,16 @@ class _Section:
         kinds = self.kinds[local]
         out = {}
         for t, conn in self.blocks.items():
-            sel = local[kinds == _TYPE_ORDER.index(t)]
+            sel = local[kinds == TYPE_ORDER.index(t)]
             if len(sel):
                 out[t] = conn[self.rows[sel]]
         return out
 
 
-def _read_section(sec, offset: int, n_points: int, file: Path):
-    head = _data(sec)
-    rng = _index_data(sec, "ElementRange")
-    conn = _index_data(sec, "ElementConnectivity")
+def read_element_section(sec, offset: int, n_points: int, file: Path):
+    head = data_of(sec)
+    rng = index_data(sec, "ElementRange")
+    conn = index_data(sec, "ElementConnectivity")
     if head is None or rng is None or conn is None or rng.size != 2:
         raise InputError("element section without type, ElementRange or ElementConnectivity",
                          path=file, key=sec.name)
@@ -140,11 +140,11 @@ def _read_section(sec, offset: int, n_points: int, file: Path):
     n = end - start + 1
     conn = conn.ravel()
     if code in (NGON_N, NFACE_N):          # polyhedra: faces and cells (one model with OpenFOAM)
-        return cgns_ngon.read_section(sec, code, start, end, conn, _index_data(sec, "ElementStartOffset"),
+        return cgns_ngon.read_section(sec, code, start, end, conn, index_data(sec, "ElementStartOffset"),
                                       offset, n_points, file)
     if code == MIXED:
-        table = _nodes_per_type_table()
-        starts = _index_data(sec, "ElementStartOffset")
+        table = nodes_per_type_table()
+        starts = index_data(sec, "ElementStartOffset")
         try:
             offsets = starts.ravel() if starts is not None else mixed_offsets(conn, table)
         except ValueError as exc:
@@ -183,16 +183,16 @@ def _read_section(sec, offset: int, n_points: int, file: Path):
         if len(ids) and (ids.min() < 0 or ids.max() >= n_points):
             raise InputError(f"element connectivity refers to point ids outside 1..{n_points}",
                              path=file, key=sec.name)
-        ti = _TYPE_ORDER.index(t)
+        ti = TYPE_ORDER.index(t)
         prev = blocks.get(t)
         base = 0 if prev is None else len(prev)
         blocks[t] = (ids + offset) if prev is None else np.vstack([prev, ids + offset])
         kinds[which] = ti
         rows[which] = base + np.arange(len(which))
-    return _Section(sec.name.rsplit("/", 1)[-1], sec.name, start, end, kinds, rows, blocks)
+    return Section(sec.name.rsplit("/", 1)[-1], sec.name, start, end, kinds, rows, blocks)
 
 
-def _sections_cells(sections: list[_Section], ids: np.ndarray, file: Path, key: str
+def sections_cells(sections: list[Section], ids: np.ndarray, file: Path, key: str
                     ) -> tuple[dict[str, list[np.ndarray]], set[int]]:
     """Cells of the elements with CGNS ids ``ids`` (1-based, zone numbering) and sections touched."""
     out: dict[str, list[np.ndarray]] = {}
@@ -214,15 +214,15 @@ def _sections_cells(sections: list[_Section], ids: np.ndarray, file: Path, key: 
     return out, touched
 
 
-def _structured_ids(shape: tuple[int, ...], offset: int) -> np.ndarray:
+def structured_ids(shape: tuple[int, ...], offset: int) -> np.ndarray:
     """Point ids laid out as an array indexed [i, j(, k)] (i fastest in the numbering)."""
     n = int(np.prod(shape))
     return (offset + np.arange(n, dtype=np.int64)).reshape(shape[::-1]).T
 
 
-def _structured_cells(shape: tuple[int, ...], offset: int) -> CellBlock | None:
+def structured_cells(shape: tuple[int, ...], offset: int) -> CellBlock | None:
     """Hexahedra (3 indices) or quads (2) of a structured block, or lines (1)."""
-    ids = _structured_ids(shape, offset)
+    ids = structured_ids(shape, offset)
     if any(s < 2 for s in shape):
         return None
     if len(shape) == 3:
@@ -235,12 +235,12 @@ def _structured_cells(shape: tuple[int, ...], offset: int) -> CellBlock | None:
     return CellBlock("line", np.stack([ids[:-1], ids[1:]], axis=1))
 
 
-def _range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.ndarray,
+def range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.ndarray,
                  axis: int | None = None) -> CellBlock:
     """The boundary faces (quads in 3D, lines in 2D) of the vertex range lo..hi (0-based, inclusive)
     of a structured block, ``axis`` being the constant index (found when None); a range that is not
     a face is returned as its points (``vertex``)."""
-    ids = _structured_ids(shape, offset)
+    ids = structured_ids(shape, offset)
     sub = ids[tuple(slice(a, b + 1) for a, b in zip(lo, hi, strict=True))]
     flat = [a for a in range(len(shape)) if lo[a] == hi[a]]
     if axis is not None and axis in flat:
@@ -255,11 +255,11 @@ def _range_faces(shape: tuple[int, ...], offset: int, lo: np.ndarray, hi: np.nda
     return CellBlock("vertex", sub.ravel(order="F")[:, None])
 
 
-def _outward_faces(faces: CellBlock, shape: tuple[int, ...], lo: np.ndarray, axis: int | None,
+def outward_faces(faces: CellBlock, shape: tuple[int, ...], lo: np.ndarray, axis: int | None,
                    handed: int) -> CellBlock:
     """Make the quads of a structured 3D block's side face point out of the block.
 
-    :func:`_range_faces` numbers a quad on the constant-``axis`` face along the two other index
+    :func:`range_faces` numbers a quad on the constant-``axis`` face along the two other index
     axes in increasing order, so its normal points along +i, -j, +k in index space for axis i, j, k;
     ``handed`` (+1 or -1) carries index space to physical space. Faces on an interior plane are
     left as they are.
@@ -277,7 +277,7 @@ def _outward_faces(faces: CellBlock, shape: tuple[int, ...], lo: np.ndarray, axi
     return faces
 
 
-def _handedness(block: CellBlock, pts: np.ndarray, offset: int) -> int:
+def handedness(block: CellBlock, pts: np.ndarray, offset: int) -> int:
     """+1 if most hexahedra of a structured block are right-handed in index order, -1 if left, 0 else."""
     if block.type != "hexahedron":
         return 0
@@ -287,7 +287,7 @@ def _handedness(block: CellBlock, pts: np.ndarray, offset: int) -> int:
     return 1 if pos > neg else -1 if neg > pos else 0
 
 
-def _orient_structured(block: CellBlock, pts: np.ndarray, offset: int) -> CellBlock:
+def orient_structured(block: CellBlock, pts: np.ndarray, offset: int) -> CellBlock:
     """Mirror the cells of a left-handed block so that they have positive volume (VTK order).
 
     Hexahedra: by the sign of the corner triple product (p1-p0, p3-p0, p4-p0), majority vote.

@@ -42,36 +42,36 @@ class CgnsSource:
     skipped: list[str] = field(default_factory=list)          #: what was not read, and why
 
 
-def _label(node) -> str:
+def label_of(node) -> str:
     lab = node.attrs.get("label")
     if lab is None:
         return ""
     return bytes(lab).split(b"\0", 1)[0].decode("ascii", "replace").strip()
 
 
-def _children(node, label: str) -> list:
+def children_of(node, label: str) -> list:
     """Child groups of ``node`` with CGNS label ``label``, in file order."""
-    return [c for c in node.values() if isinstance(c, h5py.Group) and _label(c) == label]
+    return [c for c in node.values() if isinstance(c, h5py.Group) and label_of(c) == label]
 
 
-def _data(node):
+def data_of(node):
     d = node.get(" data")
     return None if d is None else d[()]
 
 
-def _text(node) -> str:
-    d = _data(node)
+def text_of(node) -> str:
+    d = data_of(node)
     if d is None:
         return ""
     return np.asarray(d, dtype=np.int8).tobytes().split(b"\0", 1)[0].decode("ascii", "replace").strip()
 
 
-def _child_text(node, label: str) -> str | None:
-    kids = _children(node, label)
-    return _text(kids[0]) if kids else None
+def child_text(node, label: str) -> str | None:
+    kids = children_of(node, label)
+    return text_of(kids[0]) if kids else None
 
 
-def _check_no_links(node, file: Path) -> None:
+def check_no_links(node, file: Path) -> None:
     """InputError if a child of ``node`` is a CGNS link (node type LK) to another file or node."""
     for child in node.values():
         if isinstance(child, h5py.Group) and bytes(child.attrs.get("type", b"")).startswith(b"LK"):
@@ -82,16 +82,16 @@ def _check_no_links(node, file: Path) -> None:
                              path=file, key=child.name)
 
 
-def _index_data(node, name: str):
+def index_data(node, name: str):
     """The integer array of a standard-named child (PointList, ElementRange, ...), or None."""
     child = node.get(name)
     if not isinstance(child, h5py.Group):
         return None
-    d = _data(child)
+    d = data_of(child)
     return None if d is None else np.asarray(d, dtype=np.int64)
 
 
-def _str_attr(node, name: str, value: str, size: int) -> None:
+def str_attr(node, name: str, value: str, size: int) -> None:
     raw = value.encode("ascii")
     if len(raw) >= size:
         raise InputError(f"name {value!r} is too long for CGNS (at most {size - 1} characters)")
@@ -102,13 +102,13 @@ def _str_attr(node, name: str, value: str, size: int) -> None:
     attr.write(np.array(raw, dtype=f"S{size}"), mtype=tid)
 
 
-def _node(parent, name: str, label: str, dtype: str = "MT", data=None):
+def new_node(parent, name: str, label: str, dtype: str = "MT", data=None):
     if "/" in name or name in (".", ".."):
         raise InputError(f"name {name!r} cannot be a CGNS node name")
     g = parent.create_group(name, track_order=True)
-    _str_attr(g, "name", name, 33)
-    _str_attr(g, "label", label, 33)
-    _str_attr(g, "type", dtype, 3)
+    str_attr(g, "name", name, 33)
+    str_attr(g, "label", label, 33)
+    str_attr(g, "type", dtype, 3)
     g.attrs.create("flags", np.array([1], dtype=np.int32))
     if data is not None:
         arr = np.asarray(data)
@@ -117,7 +117,7 @@ def _node(parent, name: str, label: str, dtype: str = "MT", data=None):
     return g
 
 
-def _chars(text: str) -> np.ndarray:
+def char_array(text: str) -> np.ndarray:
     return np.frombuffer(text.encode("ascii"), dtype=np.int8)
 
 
@@ -146,7 +146,7 @@ def container_of(path: str | Path) -> str:
     raise InputError("not a CGNS file: neither an HDF5 nor an ADF container", path=p)
 
 
-def _adf_message() -> str:
+def adf_message() -> str:
     return ("this is a CGNS file in the old ADF container, which h5py cannot read; install the Debian "
             "package cgns-convert (it provides adf2hdf) or convert it with `adf2hdf IN.cgns OUT.cgns`")
 
@@ -155,7 +155,7 @@ def convert_adf(src: Path, dest: Path) -> None:
     """Convert the ADF CGNS file ``src`` to CGNS/HDF5 ``dest`` with ``adf2hdf``; InputError if absent."""
     exe = shutil.which("adf2hdf")
     if exe is None:
-        raise InputError(_adf_message(), path=src)
+        raise InputError(adf_message(), path=src)
     # adf2hdf is a shell script that passes its arguments unquoted to cgnsconvert: work on a link
     # and an output with plain names in a private folder, so paths with spaces are safe.
     with tempfile.TemporaryDirectory(prefix="ffd-adf2hdf-") as tmp:

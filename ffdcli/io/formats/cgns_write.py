@@ -13,7 +13,8 @@ from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
 from ffdcli.io.formats.cgns_cells import CGNS_CODE, MIXED, WEDGE_CGNS_TO_VTK
-from ffdcli.io.formats.cgns_nodes import CgnsSource, _chars, _node, _str_attr, convert_adf
+from ffdcli.io.formats.cgns_nodes import CgnsSource, char_array, convert_adf, new_node, str_attr
+from ffdcli.io.room import check_room
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.mesh.idsets import unique_ids
 
@@ -61,6 +62,20 @@ def _write_patched(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
                     ds[...] = block[:, axis].astype(ds.dtype).reshape(ds.shape)
 
 
+#: HDF5's own bytes per CGNS node (a group, its attributes, its data set), and of the file: twice what
+#: the files this writer makes hold (about 430 bytes an HDF5 object, two objects a node).
+NODE_BYTES = 2048
+FILE_BYTES = 16384
+
+
+def new_file_bytes(mesh: Mesh, phys: int, int_size: int) -> int:
+    """An upper estimate of the size of the new CGNS file of ``mesh``: its arrays and HDF5's overhead."""
+    cells = [b for b in mesh.cells] + [b for v in mesh.markers.values() for b in v]
+    ints = sum(b.data.size + len(b) for b in cells)          # connectivity, and MIXED's type codes
+    nodes = 12 + 3 * len(mesh.cells) + 6 * len(mesh.markers)
+    return len(mesh.points) * phys * 8 + ints * int_size + nodes * NODE_BYTES + FILE_BYTES
+
+
 def _check_names(mesh: Mesh, path: Path) -> None:
     for name in mesh.markers:
         if not name or len(name.encode("ascii", "replace")) > 32 or "/" in name or name in (".", ".."):
@@ -79,23 +94,26 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
     total_cells = mesh.n_cells + sum(len(b) for v in mesh.markers.values() for b in v
                                      if b.type != "vertex")
     itype, idt = ("I8", np.int64) if max(n, total_cells) >= 2**31 - 1 else ("I4", np.int32)
+    # checked before: a write that fails inside HDF5 leaves its objects in a state that crashes the
+    # interpreter at exit, so the failure (the output plan's one line) must come first
+    check_room(path, new_file_bytes(mesh, phys, np.dtype(idt).itemsize))
     with atomic_path(path) as tmp, h5py.File(tmp, "w", track_order=True) as h5:
-        _str_attr(h5, "label", "Root Node of HDF5 File", 33)
-        _str_attr(h5, "name", "HDF5 MotherNode", 33)
-        _str_attr(h5, "type", "MT", 3)
-        h5.create_dataset(" format", data=_chars("IEEE_LITTLE_32\0"))
+        str_attr(h5, "label", "Root Node of HDF5 File", 33)
+        str_attr(h5, "name", "HDF5 MotherNode", 33)
+        str_attr(h5, "type", "MT", 3)
+        h5.create_dataset(" format", data=char_array("IEEE_LITTLE_32\0"))
         h5.create_dataset(" hdf5version", data=np.frombuffer(
             f"HDF5 Version {'.'.join(map(str, h5py.version.hdf5_version_tuple))}".encode().ljust(33, b"\0"),
             dtype=np.int8))
         # version 3.4: what Debian's CGNS (cgnscheck, cgnsview) still reads; CGNS 4 reads it too. So
         # MIXED sections carry no ElementStartOffset (a CGNS 4 node): readers scan the type codes.
-        _node(h5, "CGNSLibraryVersion", "CGNSLibraryVersion_t", "R4", np.array([3.4], dtype=np.float32))
-        base = _node(h5, "Base", "CGNSBase_t", "I4", np.array([cell_dim, phys], dtype=np.int32))
-        zone = _node(base, "Zone", "Zone_t", itype, np.array([[n], [mesh.n_cells], [0]], dtype=idt))
-        _node(zone, "ZoneType", "ZoneType_t", "C1", _chars("Unstructured"))
-        grid = _node(zone, "GridCoordinates", "GridCoordinates_t")
+        new_node(h5, "CGNSLibraryVersion", "CGNSLibraryVersion_t", "R4", np.array([3.4], dtype=np.float32))
+        base = new_node(h5, "Base", "CGNSBase_t", "I4", np.array([cell_dim, phys], dtype=np.int32))
+        zone = new_node(base, "Zone", "Zone_t", itype, np.array([[n], [mesh.n_cells], [0]], dtype=idt))
+        new_node(zone, "ZoneType", "ZoneType_t", "C1", char_array("Unstructured"))
+        grid = new_node(zone, "GridCoordinates", "GridCoordinates_t")
         for a, name in enumerate(["CoordinateX", "CoordinateY", "CoordinateZ"][:phys]):
-            _node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(pts[:, a]))
+            new_node(grid, name, "DataArray_t", "R8", np.ascontiguousarray(pts[:, a]))
         next_id = 1
         used_names = {"ZoneType", "GridCoordinates", "ZoneBC"}
 
@@ -118,10 +136,10 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
                 conn = np.concatenate([np.hstack([np.full((len(b), 1), CGNS_CODE[b.type]), d + 1]).ravel()
                                        for b, d in zip(blocks, datas, strict=True)])
             name = unique(name)
-            sec = _node(zone, name, "Elements_t", "I4", np.array([code, 0], dtype=np.int32))
+            sec = new_node(zone, name, "Elements_t", "I4", np.array([code, 0], dtype=np.int32))
             start, end = next_id, next_id + count - 1
-            _node(sec, "ElementRange", "IndexRange_t", itype, np.array([start, end], dtype=idt))
-            _node(sec, "ElementConnectivity", "DataArray_t", itype, conn.astype(idt))
+            new_node(sec, "ElementRange", "IndexRange_t", itype, np.array([start, end], dtype=idt))
+            new_node(sec, "ElementConnectivity", "DataArray_t", itype, conn.astype(idt))
             next_id = end + 1
             used_names.add(name)
             return start, end
@@ -141,8 +159,8 @@ def _write_new(mesh: Mesh, path: Path, pts: np.ndarray) -> None:
                 ids = unique_ids(*[b.data for b in verts]) + 1
                 bcs.append((mname, "Vertex", ids))
         if bcs:
-            zbc = _node(zone, "ZoneBC", "ZoneBC_t")
+            zbc = new_node(zone, "ZoneBC", "ZoneBC_t")
             for mname, loc, ids in bcs:
-                bc = _node(zbc, mname, "BC_t", "C1", _chars("UserDefined"))
-                _node(bc, "GridLocation", "GridLocation_t", "C1", _chars(loc))
-                _node(bc, "PointList", "IndexArray_t", itype, ids.astype(idt)[:, None])
+                bc = new_node(zbc, mname, "BC_t", "C1", char_array("UserDefined"))
+                new_node(bc, "GridLocation", "GridLocation_t", "C1", char_array(loc))
+                new_node(bc, "PointList", "IndexArray_t", itype, ids.astype(idt)[:, None])

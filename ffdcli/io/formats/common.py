@@ -1,18 +1,50 @@
-"""What every format module shares: the extension table and the check of finite coordinates."""
+"""What every format module shares: the registry of formats (each format module registers itself
+at its end, meshio's ``register_format``), the format of a path, and the check of finite coordinates."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.mesh import Mesh
+from ffdcli.registry import Registry
 
-#: extension -> format name
-FORMATS = {".su2": "su2", ".cgns": "cgns", ".vtu": "vtu", ".vtk": "vtk"}
+#: The mesh formats, each registered by its own module (:mod:`ffdcli.registry`).
+MESH_FORMATS = Registry("mesh format")
 #: The format of a folder (an OpenFOAM case or its constant/polyMesh), and of a path without extension.
 FOLDER_FORMAT = "openfoam"
+
+
+@dataclass(frozen=True)
+class MeshFormat:
+    """A mesh format as a registered kind: ``kind`` its name, the ``extensions`` it is chosen by (none:
+    a folder, :data:`FOLDER_FORMAT`), its module's ``read(path, progress)``, ``write(mesh, path, points,
+    progress)`` and, for a format read by MPI ranks in parts, ``read_part(path, comm, progress)``."""
+
+    kind: str
+    extensions: tuple[str, ...]
+    description: str
+    read: Callable
+    write: Callable
+    read_part: Callable | None = None
+
+    def schema(self) -> dict:
+        """The fragment of a mesh path in this format (``mesh:``, ``output.mesh``)."""
+        named = ", ".join(self.extensions) or "a case folder, a path without extension"
+        return {"type": "string", "minLength": 1, "description": f"{self.description} ({named})"}
+
+    def from_spec(self, spec, context=None) -> Mesh:
+        """The mesh at path ``spec``; ``context``: a progress factory (:mod:`ffdcli.progress`) or None."""
+        return self.read(Path(spec), progress=context)
+
+
+def extensions() -> dict[str, str]:
+    """{extension: format name} of every registered format (``.su2``: ``su2``), sorted by extension."""
+    return dict(sorted((ext, kind) for kind in MESH_FORMATS for ext in MESH_FORMATS[kind].extensions))
 
 
 def format_of(path: str | Path, *, key: str | None = None) -> str:
@@ -20,12 +52,13 @@ def format_of(path: str | Path, *, key: str | None = None) -> str:
     without extension (an OpenFOAM case folder, or one to be written); InputError if unsupported."""
     p = Path(path)
     ext = p.suffix.lower()
-    if ext in FORMATS:
-        return FORMATS[ext]
+    known = extensions()
+    if ext in known:
+        return known[ext]
     if str(path) and (ext in ("", ".part") or p.is_dir()):     # .part: the output plan's temporary folder
         return FOLDER_FORMAT
     raise InputError(f"unsupported mesh extension {ext or '(none)'!r}; expected one of "
-                     f"{', '.join(FORMATS)}, or an OpenFOAM case folder", path=path, key=key)
+                     f"{', '.join(known)}, or an OpenFOAM case folder", path=path, key=key)
 
 
 def mismatch_message(read: str, written: str) -> str:
@@ -37,10 +70,9 @@ def mismatch_message(read: str, written: str) -> str:
                 "output folder name without extension, e.g. out/wing_case)")
     if written == FOLDER_FORMAT:
         return (f"an output without extension is an OpenFOAM case folder, written only from an OpenFOAM input; "
-                f"the input is {read or 'not from a file'}: give the output an extension ({', '.join(FORMATS)})")
+                f"the input is {read or 'not from a file'}: give the output an extension ({', '.join(extensions())})")
     return (f"a mesh of polyhedral cells (NGON_n/NFACE_n) read from {read} can only be written as {read} (a copy of "
             f"the input with new coordinates): give the output the .{read} extension")
-
 
 
 def check_finite_points(mesh: Mesh) -> None:

@@ -34,7 +34,6 @@ def find(folder: Path, name: str) -> Path | None:
     return None
 
 
-
 @dataclass(frozen=True)
 class FoamHeader:
     """What the ``FoamFile`` dictionary of a file says: ``format`` (ascii/binary), the label and

@@ -37,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.io.formats.common import FOLDER_FORMAT, MESH_FORMATS, MeshFormat
 from ffdcli.io.formats.foamfile import (
     COMMENT,
     ENTRY,
@@ -313,3 +314,6 @@ def points_bytes(src: FoamSource, points: np.ndarray) -> bytes:
     if ff.compressed:
         return gzip.compress(body, compresslevel=6, mtime=0)
     return body
+
+
+MESH_FORMATS.register(MeshFormat(FOLDER_FORMAT, (), "an OpenFOAM case", read, write))

@@ -7,6 +7,8 @@ over any number of lines.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from ffdcli.errors import InputError
@@ -18,7 +20,7 @@ def read_plot3d(path) -> list[np.ndarray]:
     """Blocks of a multi-block ASCII Plot3D file, each (ni, nj, nk, 3)."""
     check_input_file(path, "Plot3D file")
     try:
-        text = open(path).read()
+        text = Path(path).read_text()
     except (OSError, UnicodeDecodeError) as e:
         raise InputError(f"cannot read the Plot3D file: {e}", path=path) from None
     try:

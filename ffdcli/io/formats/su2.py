@@ -44,7 +44,8 @@ import numpy as np
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_write
 from ffdcli.io.formats import su2_ffd
-from ffdcli.io.formats._su2_parser import _KEY_RE, Su2Source, _Parser, _release  # noqa: F401  (Su2Source: the layout the writers read)
+from ffdcli.io.formats._su2_parser import Parser, Su2Source, release_pages  # noqa: F401  (Su2Source: the layout the writers read)
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat
 from ffdcli.mesh import CELL_DIM, CELL_NODES, VTK_ID, Mesh
 from ffdcli.parallel.partition import local_mesh_of_blocks
 from ffdcli.progress import no_progress
@@ -96,6 +97,18 @@ def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
     """
     path = Path(path)
     progress = progress or no_progress
+    mm, st = _map_file(path)
+    try:
+        with progress(f"reading {path.name}", st.st_size) as bar:
+            parser = Parser(mm, path, bar, fast_ints=fast_ints, **_knobs())
+            parser.parse()
+    finally:
+        mm.close()
+    return parser.mesh(st)
+
+
+def _map_file(path: Path) -> tuple[mmap.mmap, os.stat_result]:
+    """The SU2 file mapped for reading, and its stat; InputError when it cannot be opened or is empty."""
     try:
         fh = open(path, "rb")
     except OSError as e:
@@ -105,14 +118,7 @@ def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
         if st.st_size == 0:
             raise InputError("the file is empty; expected an SU2 mesh (NDIME=, NELEM=, NPOIN=, NMARK=)",
                              path=path)
-        mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
-    try:
-        with progress(f"reading {path.name}", st.st_size) as bar:
-            parser = _Parser(mm, path, bar, fast_ints=fast_ints, **_knobs())
-            parser.parse()
-    finally:
-        mm.close()
-    return parser.mesh(st)
+        return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ), st
 
 
 def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
@@ -130,24 +136,14 @@ def read_part(path: str | Path, comm, progress=None, *, fast_ints: bool = True):
     rank prints the new text of its own rows (:func:`render_rows`). Errors (a bad line in one rank's
     share) are agreed on: every rank raises the lowest failing rank's.
     """
-
     path = Path(path)
     progress = progress or no_progress
 
     def parse():
-        try:
-            fh = open(path, "rb")
-        except OSError as e:
-            raise InputError(f"cannot open: {e.strerror or e}", path=path) from None
-        with fh:
-            st = os.fstat(fh.fileno())
-            if st.st_size == 0:
-                raise InputError("the file is empty; expected an SU2 mesh (NDIME=, NELEM=, NPOIN=, NMARK=)",
-                                 path=path)
-            mm = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+        mm, st = _map_file(path)
         try:
             with progress(f"reading {path.name}", st.st_size) as bar:
-                parser = _Parser(mm, path, bar, fast_ints=fast_ints, share=comm.share, **_knobs())
+                parser = Parser(mm, path, bar, fast_ints=fast_ints, share=comm.share, **_knobs())
                 parser.parse()
         finally:
             mm.close()
@@ -267,7 +263,6 @@ def render_rows(original: str | Path, src: Su2Source, points: np.ndarray) -> np.
 def has_ffd_section(original: str | Path, src: Su2Source) -> bool:
     """Whether the file has SU2's own FFD section after its markers (the writer then needs every
     node's coordinates to bring it up to date: no :class:`Su2Rendered` write)."""
-
     mm = _open_source(Path(original), src.size, src.mtime_ns)
     try:
         return su2_ffd.find_section(mm[src.block_end:]) is not None
@@ -326,7 +321,7 @@ def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points3: np.ndarray, 
             for a in range(0, n, WRITE_ROWS):
                 b = min(n, a + WRITE_ROWS)
                 out.write(_patch_rows(mm, src, points, a, b))
-                _release(mm, int(src.row_start[a]), int(src.row_start[b] - src.row_start[a]))
+                release_pages(mm, int(src.row_start[a]), int(src.row_start[b] - src.row_start[a]))
                 bar.update(b - a)
             if ffd is None:
                 _copy(mm, src.block_end, len(mm), out)
@@ -341,7 +336,7 @@ def _write_patched(mesh: Mesh, src: Su2Source, path: Path, points3: np.ndarray, 
 def _copy(mm: mmap.mmap, start: int, stop: int, out, step: int = 1 << 26) -> None:
     for a in range(start, stop, step):
         out.write(mm[a:min(stop, a + step)])
-        _release(mm, a, min(stop, a + step) - a)
+        release_pages(mm, a, min(stop, a + step) - a)
 
 
 def _patch_rows(mm: mmap.mmap, src: Su2Source, points: np.ndarray, a: int, b: int) -> bytes:
@@ -467,3 +462,6 @@ def _check_marker_name(name: str, path: Path) -> None:
     if not name.strip() or name != name.strip() or "\n" in name or "\r" in name:
         raise InputError(f"marker name {name!r} cannot be written as an SU2 MARKER_TAG "
                          "(empty, surrounding blanks or a line break)", path=path)
+
+
+MESH_FORMATS.register(MeshFormat("su2", (".su2",), "an SU2 native mesh", read, write, read_part))

@@ -32,6 +32,7 @@ import contextlib
 import io
 import logging
 import re
+import sys
 import warnings
 from pathlib import Path
 
@@ -40,6 +41,9 @@ import numpy as np
 from ffdcli.deferred import deferred
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_path
+from ffdcli.io.formats.common import MESH_FORMATS, MeshFormat
+from ffdcli.io.formats.vtk_check import problem as file_problem
+from ffdcli.io.room import diagnosed
 from ffdcli.mesh import CELL_DIM, CellBlock, Mesh
 from ffdcli.progress import no_progress
 
@@ -49,6 +53,10 @@ meshio = deferred("meshio")     # 0.1 s with its xml imports: imported when a VT
 #: Cell-data array with the marker id of each cell (0 = interior).
 MARKER_ARRAY = "ffd_marker"
 _GMSH_ARRAY = "gmsh:physical"
+
+
+#: What a file of each format is expected to be, in messages.
+_KIND = {"vtu": "a VTK XML unstructured grid (.vtu)", "vtk": "a legacy VTK unstructured grid (.vtk)"}
 
 
 def _format(path: Path) -> str:
@@ -70,13 +78,19 @@ def _quiet_meshio(path: Path, action: str):
                 logging.disable(logging.NOTSET)
     except InputError:
         raise
+    except OSError:
+        if action == "write":                     # a full disk, a file-size limit: the output plan's words
+            raise
+        raise InputError(f"cannot read this {_format(path).upper()} file: {sys.exc_info()[1]}", path=path) from None
     except (Exception, SystemExit) as e:          # meshio calls sys.exit(1) on some bad files
-        said = " ".join(err.getvalue().split())
-        detail = f"{type(e).__name__}: {e}" if str(e) else type(e).__name__
-        if said:
-            detail += f" ({said[:200]})"
-        raise InputError(f"cannot {action} this {_format(path).upper()} file: {detail}",
-                         path=path) from None
+        found = file_problem(path) if action == "read" else None
+        if found is not None:                     # the first problem, on its line, in words
+            line, text = found
+            raise InputError(f"{text}; expected {_KIND[_format(path)]}", path=path, line=line) from None
+        said = " ".join(err.getvalue().split()).removeprefix("Error: ")
+        detail = said or (str(e) if not isinstance(e, SystemExit) else "")
+        raise InputError(f"cannot {action} this {_format(path).upper()} file" + (f" ({detail[:200]})" if detail else "")
+                         + (f"; expected {_KIND[_format(path)]}" if action == "read" else ""), path=path) from None
 
 
 # ----------------------------------------------------------------------------------------------
@@ -91,7 +105,6 @@ def read(path: str | Path, progress=None) -> Mesh:
     the interior cells (of all cells when the file has no marker array). Raises InputError naming
     the file when it is empty, not a VTK unstructured grid, or meshio cannot read it.
     """
-
     path = Path(path)
     progress = progress or no_progress
     try:
@@ -233,7 +246,6 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     gives the same floats; the legacy ASCII writer prints 16 significant digits (meshio's choice),
     which round-trips to about 1e-16 relative, not always to the last bit.
     """
-
     path = Path(path)
     progress = progress or no_progress
     points = np.asarray(points, dtype=np.float64)
@@ -255,11 +267,14 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> No
     m = meshio.Mesh(points, cells, cell_data={MARKER_ARRAY: tags} if cells else {})
     fmt = _format(path)
     with progress(f"writing {path.name}", 1) as bar, atomic_path(path) as tmp:
-        with _quiet_meshio(path, "write"):
-            if fmt == "vtu":
-                meshio.write(tmp, m, file_format="vtu")
-            else:
-                meshio.write(tmp, m, file_format="vtk42", binary=False)
+        try:
+            with _quiet_meshio(path, "write"):
+                if fmt == "vtu":
+                    meshio.write(tmp, m, file_format="vtu")
+                else:
+                    meshio.write(tmp, m, file_format="vtk42", binary=False)
+        except OSError as e:                      # NumPy's tofile says no errno: find why again
+            raise diagnosed(e, tmp) from None
         if field:
             _add_field_data(tmp, field, fmt)
         bar.update(1)
@@ -286,3 +301,7 @@ def _add_field_data(tmp: Path, field: dict[str, np.ndarray], fmt: str) -> None:
             raise RuntimeError("meshio wrote a legacy VTK file without DATASET")
         data = data[:m.end()] + block + data[m.end():]
     tmp.write_bytes(data)
+
+
+MESH_FORMATS.register(MeshFormat("vtu", (".vtu",), "a VTK XML unstructured grid", read, write))
+MESH_FORMATS.register(MeshFormat("vtk", (".vtk",), "a legacy VTK unstructured grid", read, write))

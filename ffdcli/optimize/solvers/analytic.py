@@ -28,7 +28,15 @@ import yaml
 
 from ffdcli.errors import InputError
 from ffdcli.io.formats import read_mesh
-from ffdcli.optimize.solvers.base import FlowResult, Sensitivity, Solver, SolverFailure, SolverInfo
+from ffdcli.optimize.solvers.base import (
+    SOLVERS,
+    FlowResult,
+    Sensitivity,
+    Solver,
+    SolverContext,
+    SolverFailure,
+    SolverInfo,
+)
 
 FUNCTIONS = ("DRAG", "LIFT", "MOMENT_Z")
 
@@ -48,12 +56,21 @@ def _values_and_gradients(X: np.ndarray) -> tuple[dict[str, float], dict[str, np
 
 
 class AnalyticSolver(Solver):
-    """The stand-in solver (see the module docstring). ``flows`` and ``adjoints`` count its runs; it takes
-    the solvers' common arguments and has no residuals (``adjoint_residual`` is accepted and unused)."""
+    """The stand-in solver (see the module docstring). ``flows`` and ``adjoints`` count its runs; its
+    settings are in its own configuration file, it has no keys of ``optimize:``."""
 
     adjoint_kind = "discrete"
+    kind = "analytic"
 
-    def __init__(self, config: Path, launch=(), adjoint=None, search=(), adjoint_residual=None):
+    @classmethod
+    def schema(cls) -> dict:
+        return {"description": "ffd's stand-in solver for tests", "properties": {}}
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx: SolverContext) -> AnalyticSolver:
+        return cls(ctx.config)
+
+    def __init__(self, config: Path):
         self.config = Path(config)
         self.settings: dict = {}
         self.flows = 0
@@ -72,6 +89,9 @@ class AnalyticSolver(Solver):
 
     def state(self) -> str:
         return yaml.safe_dump(self.settings, sort_keys=True)
+
+    def outputs(self) -> tuple[str, ...]:
+        return FUNCTIONS
 
     def _wall(self, mesh_path: Path):
         mesh = read_mesh(mesh_path)
@@ -112,3 +132,6 @@ class AnalyticSolver(Solver):
         log = folder / f"adjoint_{function.lower()}.log"
         log.write_text(f"analytic stand-in adjoint of {function}: exact dJ/dX at {len(ids)} wall nodes\n")
         return Sensitivity(ids=ids, values=grads[function], seconds=time.perf_counter() - t0, log=log)
+
+
+SOLVERS.register(AnalyticSolver)

@@ -12,12 +12,20 @@ An evaluation of a design is a folder that holds the deformed mesh. The driver c
 
 A run that fails (non-zero exit, NaN, residual not converged) raises :class:`SolverFailure` with the
 reason and the path of its log; the driver records it and steps back.
+
+A solver kind declares itself as every extension kind does (:mod:`ffdcli.registry`): ``kind`` (the
+name ``optimize.solver`` gives), ``schema()`` (``{"description": ..., "properties": {its own keys of
+optimize:}}``: SU2's ``adjoint`` and ``adjoint_residual`` are SU2's), ``from_spec(spec, ctx)`` (its own
+keys as written, parsed by the solver; ``ctx`` a :class:`SolverContext`), and one line
+``SOLVERS.register(Kind)`` at the end of its module. The design file's ``optimize:`` schema is the
+driver's keys and every solver's own keys (:func:`ffdcli.design.schema.optimize_schema`).
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import threading
 import time
@@ -26,6 +34,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from ffdcli.registry import Registry
+
+#: The flow solvers ``optimize.solver`` names, each registered by its own module.
+SOLVERS = Registry("solver")
+
+
+@dataclass(frozen=True)
+class SolverContext:
+    """What every solver kind's ``from_spec`` is handed besides its own keys: ``config`` the solver's
+    configuration (``optimize.config``, resolved), ``launch`` a prefix of its commands (``optimize.launch``,
+    split like a shell line), ``search`` more folders to look for its programs in."""
+
+    config: Path
+    launch: tuple[str, ...] = ()
+    search: tuple[Path, ...] = ()
 
 
 class SolverFailure(Exception):
@@ -101,6 +125,12 @@ class Solver(ABC):
         """The solver's inputs as text (its configuration): part of the key of a cached evaluation."""
         return ""
 
+    def outputs(self) -> tuple[str, ...] | None:
+        """The names of the functions this solver reports (its table of outputs), which
+        ``optimize.objective`` and ``optimize.functions`` are checked against when the design file is
+        loaded, before any work; None: the solver does not say (no check)."""
+        return None
+
     @property
     def running(self) -> RunningProcesses:
         """This solver's processes running now (:func:`run_logged`'s ``running``): what Ctrl-C or SIGTERM
@@ -138,24 +168,53 @@ class RunningProcesses:
             return len(self._procs)
 
     def stop(self, grace: float = STOP_GRACE) -> None:
-        """SIGTERM to every running process, SIGKILL to those still running ``grace`` seconds later."""
+        """SIGTERM to every running process's group, SIGKILL to those still running ``grace`` seconds later."""
         with self._lock:
             procs = list(self._procs)
         stop_processes(procs, grace)
 
 
 def stop_processes(procs: list[subprocess.Popen], grace: float = STOP_GRACE) -> None:
-    """SIGTERM to each of ``procs`` still running, then SIGKILL to those still running after ``grace`` s."""
+    """SIGTERM to the process group of each of ``procs`` (:func:`run_logged` starts each in its own),
+    then SIGKILL to the groups with a process still running after ``grace`` s: a solver started through a
+    wrapper script (``launch:``, a site's ``SU2_CFD`` script) is stopped with its children, not only the
+    process ffd started."""
     for p in procs:
-        if p.poll() is None:
-            p.terminate()
+        _signal_group(p, signal.SIGTERM)
     end = time.monotonic() + grace
     for p in procs:
         try:
             p.wait(timeout=max(0.0, end - time.monotonic()))
         except subprocess.TimeoutExpired:
-            p.kill()
-            p.wait()
+            pass
+    while time.monotonic() < end and any(_group_alive(p) for p in procs):
+        time.sleep(0.05)                   # the children of a wrapper that has ended already
+    for p in procs:
+        if _group_alive(p):
+            _signal_group(p, signal.SIGKILL)
+        p.wait()
+
+
+def _signal_group(proc: subprocess.Popen, signum: int) -> None:
+    """``signum`` to the process group that ``proc`` leads (its own session), else to ``proc`` alone."""
+    try:
+        if getattr(proc, "ffd_group", False):
+            os.killpg(proc.pid, signum)
+        elif proc.poll() is None:
+            proc.send_signal(signum)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
+def _group_alive(proc: subprocess.Popen) -> bool:
+    """Whether a process of ``proc``'s own group still runs (``proc`` itself reaped or not)."""
+    if not getattr(proc, "ffd_group", False):
+        return proc.poll() is None
+    try:
+        os.killpg(proc.pid, 0)
+    except (ProcessLookupError, PermissionError):
+        return False
+    return True
 
 
 def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None = None,
@@ -163,17 +222,22 @@ def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None 
     """Run ``command`` in ``folder`` with stdout and stderr into ``log``; returns (exit status, seconds).
 
     A missing program is a :class:`SolverFailure` naming it (the checks before the run should have
-    caught it). Ctrl-C or SIGTERM raised in this thread while it waits stops the process (SIGTERM,
-    then SIGKILL after :data:`STOP_GRACE` s) before the exception goes on; ``running`` holds it while
+    caught it). The process runs in its own session and process group, so that everything it starts
+    (a wrapper script's solver, ``mpirun``'s ranks) is stopped with it: Ctrl-C or SIGTERM raised in this
+    thread while it waits stops the group (SIGTERM, then SIGKILL after :data:`STOP_GRACE` s) before the
+    exception goes on; ``running`` holds it while
     it runs, so that the main thread can stop it when this is another thread
     (:meth:`RunningProcesses.stop`)."""
     t0 = time.perf_counter()
     try:
         with open(log, "wb") as out:
             proc = subprocess.Popen(command, cwd=folder, stdout=out, stderr=subprocess.STDOUT,
-                                    env={**os.environ, **(env or {})})
+                                    env={**os.environ, **(env or {})}, start_new_session=True)
     except FileNotFoundError as e:
         raise SolverFailure(f"cannot start {command[0]}: {e.strerror}", log) from None
+    except PermissionError as e:
+        raise SolverFailure(f"cannot start {command[0]}: {e.strerror} (is it executable?)", log) from None
+    proc.ffd_group = True             # its own session and process group: stopped as a group
     if running is not None:
         running.add(proc)
     try:
@@ -185,6 +249,20 @@ def run_logged(command: list[str], folder: Path, log: Path, *, env: dict | None 
         if running is not None:
             running.discard(proc)
     return rc, time.perf_counter() - t0
+
+
+def missing_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> str:
+    """Why :func:`find_program` found no ``name``, in words: a file of that name that cannot be run (not
+    executable, a folder) where it looked, else "not found"."""
+    folders = [Path(os.environ[env_var])] if env_var and os.environ.get(env_var) else []
+    folders += [Path(p) for p in os.environ.get("PATH", "").split(os.pathsep) if p] + list(extra)
+    for f in folders:
+        p = f / name
+        if p.is_dir():
+            return f"{p} is a folder, not the program"
+        if p.exists() and not os.access(p, os.X_OK):
+            return f"{p} is there but not executable (chmod +x {p})"
+    return "not found"
 
 
 def find_program(name: str, env_var: str | None = None, extra: tuple[Path, ...] = ()) -> Path | None:

@@ -21,8 +21,11 @@ the physics and numerics, is the user's file as written):
 
 Functions are read from the final row of ``history.csv`` under SU2's column names (DRAG -> ``CD``,
 LIFT -> ``CL``, MOMENT_Z -> ``CMz``: :data:`HISTORY_COLUMNS`). A run fails (:class:`SolverFailure`,
-with its log) when SU2 exits non-zero, a function is NaN, or the run stopped without SU2's "All
-convergence criteria satisfied." and its residual above ``CONV_RESIDUAL_MINVAL``.
+with its log, and SU2's own error message or the signal that killed it) when SU2 exits non-zero, a
+function is NaN, or the final row of its history misses a convergence criterion of the config
+(``CONV_FIELD``, ``CONV_RESIDUAL_MINVAL``, ``CONV_CAUCHY_EPS``: :mod:`ffdcli.optimize.solvers.su2_convergence`):
+SU2 stopped by a signal prints "All convergence criteria satisfied." and exits 0, so no message is
+believed. The flow's ``HISTORY_OUTPUT`` gets the ``CAUCHY`` group when ``CONV_FIELD`` names a coefficient.
 
 The discrete adjoint's ``restart_adj_<suffix>.csv`` gives ``Sensitivity_x/y(/z)`` at every mesh node
 (dJ/dX, volume included); the continuous adjoint's ``surface_adjoint_<suffix>.csv`` a scalar S per wall
@@ -41,15 +44,20 @@ from pathlib import Path
 import numpy as np
 
 from ffdcli.errors import InputError
+from ffdcli.io.atomic import written_as
 from ffdcli.io.formats import read_mesh
 from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
+from ffdcli.optimize.solvers.su2_convergence import criteria, exit_reason, shortfalls, start_iteration
 from ffdcli.optimize.solvers.base import (
+    SOLVERS,
     FlowResult,
     Sensitivity,
     Solver,
+    SolverContext,
     SolverFailure,
     SolverInfo,
     find_program,
+    missing_program,
     run_logged,
 )
 
@@ -130,15 +138,12 @@ def read_history(path: Path) -> dict[str, list[float]]:
     return cols
 
 
-def _error_line(log: Path) -> str:
-    """The line of SU2's log that says what went wrong (its ``Error`` line), else its last line."""
+def _log_text(log: Path) -> str:
+    """A run's log as text ("" when it cannot be read)."""
     try:
-        text = log.read_text(errors="replace").splitlines()
+        return log.read_text(errors="replace")
     except OSError:
         return ""
-    hits = [ln.strip() for ln in text if "error" in ln.lower() and ln.strip()]
-    last = [ln.strip() for ln in text if ln.strip()]
-    return (hits or last or [""])[-1][:200]
 
 
 class SU2(Solver):
@@ -170,6 +175,26 @@ class SU2(Solver):
         self.lines: list[str] = []
         self.adjoint_kind = adjoint or "discrete"
 
+    kind = "su2"
+
+    @classmethod
+    def schema(cls) -> dict:
+        """SU2's own keys of ``optimize:``."""
+        return {"description": "SU2 (SU2_CFD; the discrete adjoint SU2_CFD_AD)", "properties": {
+            "adjoint": {"enum": ["discrete", "continuous"],
+                        "description": "discrete (SU2_CFD_AD, the default where found) | continuous (SU2_CFD)"},
+            "adjoint_residual": {"type": "number",
+                                 "description": "the adjoints' convergence target, log10 of the rms residual as "
+                                                "SU2's CONV_RESIDUAL_MINVAL (default: the config's, as the flow); "
+                                                "a transonic adjoint often converges more slowly than its flow"}}}
+
+    @classmethod
+    def from_spec(cls, spec: dict, ctx: SolverContext) -> SU2:
+        """SU2 of ``optimize.config`` with its own keys ``adjoint`` and ``adjoint_residual`` (schema-checked)."""
+        residual = spec.get("adjoint_residual")
+        return cls(ctx.config, launch=ctx.launch, adjoint=spec.get("adjoint"), search=ctx.search,
+                   adjoint_residual=None if residual is None else float(residual))
+
     def check(self) -> SolverInfo:
         """Find SU2_CFD (and SU2_CFD_AD) and read the configuration; InputError (exit 2) when missing."""
         self.lines = read_config(self.config)
@@ -181,9 +206,13 @@ class SU2(Solver):
                              f"{config_value(self.lines, 'CONV_FIELD')}), which SU2's adjoints ignore: they need a "
                              "residual target; set optimize.adjoint_residual (e.g. -8: the adjoints' rms residual, "
                              f"log10) or CONV_RESIDUAL_MINVAL in {self.config.name}", key="optimize.adjoint_residual")
+        self._criteria(adjoint=False)                  # the convergence criteria ffd judges by, before any work
+        self._criteria(adjoint=True)
         cfd = find_program("SU2_CFD", "SU2_RUN", self.search)
         if cfd is None:
-            raise InputError("SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
+            why = missing_program("SU2_CFD", "SU2_RUN", self.search)
+            raise InputError(f"SU2_CFD {why}" if why != "not found" else
+                             "SU2_CFD not found: set SU2_RUN to SU2's bin folder or put it on PATH",
                              key="optimize.solver")
         self.programs["SU2_CFD"] = cfd
         ad = find_program("SU2_CFD_AD", "SU2_RUN", (cfd.parent, *self.search))
@@ -205,6 +234,10 @@ class SU2(Solver):
         return ("\n".join(self.lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
                 + ("" if self.adjoint_residual is None else f"\nadjoint_residual={self.adjoint_residual!r}"))
 
+    def outputs(self) -> tuple[str, ...]:
+        """SU2's functions that ffd reads from its history (:data:`HISTORY_COLUMNS`: SU2's objective names)."""
+        return tuple(HISTORY_COLUMNS)
+
     # -- runs ---------------------------------------------------------------------------------
     def _common(self, mesh: Path, warm: bool) -> dict[str, str]:
         return {"MESH_FILENAME": mesh.name, "MESH_FORMAT": "SU2", "TABULAR_FORMAT": "CSV",
@@ -214,42 +247,70 @@ class SU2(Solver):
 
     def _run(self, program: str, folder: Path, name: str, changes: dict[str, str]) -> tuple[Path, float]:
         cfg = folder / f"{name}.cfg"
-        cfg.write_text(with_keys(self.lines, changes))
+        with written_as(cfg, "the solver's configuration", "the finished evaluations are kept"):
+            cfg.write_text(with_keys(self.lines, changes))
         log = folder / f"{name}.log"
         rc, seconds = run_logged([*self.launch, str(self.programs[program]), cfg.name], folder, log,
                                  running=self.running)
         if rc != 0:
-            raise SolverFailure(f"{program} exited with status {rc}: {_error_line(log)}", log)
+            raise SolverFailure(exit_reason(program, rc, _log_text(log)), log)
         return log, seconds
 
     def _converged(self, log: Path, history: dict, what: str, minval: str | None = None) -> None:
-        """SolverFailure unless SU2 said "All convergence criteria satisfied" or the first residual
-        column reached ``minval`` (default the config's ``CONV_RESIDUAL_MINVAL``); the message says
-        what to change."""
-        try:
-            if "All convergence criteria satisfied" in log.read_text(errors="replace"):
-                return
-        except OSError:
-            pass
-        res = [h for h in history if h.startswith("rms[")]
-        minval = config_value(self.lines, "CONV_RESIDUAL_MINVAL") if minval is None else minval
+        """SolverFailure unless the final row of ``history`` meets every convergence criterion of the run's
+        configuration (:mod:`ffdcli.optimize.solvers.su2_convergence`; ``minval``: the adjoints' own
+        residual target); never SU2's message, which an interrupted SU2 prints too. The message says
+        what was reached, the target and what to change."""
         adjoint = what.startswith("adjoint")
-        if res and minval is not None:
-            final = history[res[0]][-1]
-            if final <= float(minval):
-                return
-            iters = history.get("Inner_Iter") or history.get("Iteration") or []
-            at = f" after {int(iters[-1]) + 1} iterations" if iters and math.isfinite(iters[-1]) else ""
-            asks = (f"optimize.adjoint_residual {minval}" if self.adjoint_residual is not None and adjoint
-                    else f"{self.config.name}'s CONV_RESIDUAL_MINVAL {minval}")
-            hint = (f"raise ITER in {self.config.name}" + (
-                ", or set optimize.adjoint_residual (the adjoints' own target, e.g. "
-                f"{math.ceil(final * 2) / 2:g}) if that residual is enough for its gradient (ffd optimize "
-                "--check-gradient compares it with finite differences)" if adjoint else
-                ", or loosen its CONV_RESIDUAL_MINVAL"))
-            raise SolverFailure(f"the {what} did not converge: {res[0]} reached {final:.3g}{at}, {asks} is "
-                                f"the target; {hint}", log)
-        raise SolverFailure(f"the {what} stopped without SU2's 'All convergence criteria satisfied'", log)
+        rules = self._criteria(adjoint, minval)
+        missed = shortfalls(history, rules, start_iteration(self._value, self.config.name))
+        if missed:
+            raise SolverFailure(self._not_converged(missed[0], history, what, adjoint), log)
+
+    def _value(self, key: str) -> str | None:
+        return config_value(self.lines, key)
+
+    def _criteria(self, adjoint: bool, minval: str | None = None):
+        """The convergence criteria of the flow or of an adjoint (InputError for a field ffd cannot judge)."""
+        given = config_value(self.lines, "CONV_FIELD")
+        conv = adjoint_convergence(self.lines).get("CONV_FIELD", given) if adjoint else given
+        if minval is None and adjoint and self.adjoint_residual is not None:
+            minval = f"{self.adjoint_residual:g}"
+        source = None
+        if minval is not None:
+            source = (f"optimize.adjoint_residual {minval}" if adjoint and self.adjoint_residual is not None
+                      else f"{self.config.name}'s CONV_RESIDUAL_MINVAL {minval}")
+        return criteria(self._value, self.config.name, conv_field=conv, adjoint=adjoint,
+                        coefficients=HISTORY_COLUMNS, minval=None if minval is None else float(minval),
+                        minval_source=source, path=self.config)
+
+    def _not_converged(self, miss, history: dict, what: str, adjoint: bool) -> str:
+        """The message of a run that missed criterion ``miss`` (a :class:`Shortfall`)."""
+        rule, final = miss.criterion, miss.reached
+        if final is None:
+            return (f"the {what} did not converge: its history has no {miss.column} column"
+                    + (f" (CONV_FIELD {rule.field})" if rule.field else "") + "; ffd cannot tell that it converged")
+        iters = history.get("Inner_Iter") or history.get("Iteration") or []
+        done = int(iters[-1]) + 1 if iters and math.isfinite(iters[-1]) else None
+        at = f" after {done} iterations" if done is not None else ""
+        head = f"the {what} did not converge: {miss.column} reached {final:.3g}{at}, {rule.source} is the target"
+        limit = config_value(self.lines, "ITER")
+        try:
+            limit = int(float(limit)) if limit is not None else None
+        except ValueError:
+            limit = None
+        if done is not None and limit is not None and done < limit:
+            return (f"{head}; SU2 stopped after {done} of its ITER {limit} iterations: it was interrupted "
+                    "(a signal or a limit of the machine), and its 'All convergence criteria satisfied' is not "
+                    "believed; the evaluation failed")
+        if rule.kind == "cauchy":
+            return f"{head}; raise ITER in {self.config.name}, or loosen its CONV_CAUCHY_EPS"
+        hint = (f"raise ITER in {self.config.name}" + (
+            ", or set optimize.adjoint_residual (the adjoints' own target, e.g. "
+            f"{math.ceil(final * 2) / 2:g}) if that residual is enough for its gradient (ffd optimize "
+            "--check-gradient compares it with finite differences)" if adjoint else
+            ", or loosen its CONV_RESIDUAL_MINVAL"))
+        return f"{head}; {hint}"
 
     def _adjoint_target(self) -> dict[str, str]:
         """``CONV_RESIDUAL_MINVAL`` of the adjoints' configs when ``optimize.adjoint_residual`` is given."""
@@ -261,6 +322,9 @@ class SU2(Solver):
         items = [t for t in re.split(r"[\s,()]+", given or "") if t] or ["ITER", "RMS_RES"]
         if "AERO_COEFF" not in [t.upper() for t in items]:
             items.append("AERO_COEFF")
+        if cauchy_only(self.lines) or any(r.kind == "cauchy" for r in self._criteria(False)):
+            if "CAUCHY" not in [t.upper() for t in items]:
+                items.append("CAUCHY")          # the Cauchy[CD] columns the convergence is judged by
         return "(" + ", ".join(items) + ")"
 
     def flow(self, folder: Path, mesh: Path, start: Path | None = None) -> FlowResult:
@@ -372,3 +436,6 @@ def _read_surface_sensitivity(path: Path, mesh: Path, log: Path) -> tuple[np.nda
     ids = data[:, head.index("pointid")].astype(np.int64)
     m = read_mesh(mesh)
     return ids, surface_sensitivity_gradient(m, m.points, ids, data[:, head.index("surface_sensitivity")])
+
+
+SOLVERS.register(SU2)

@@ -3,7 +3,9 @@
 One module per concept: :mod:`.base` (the :class:`Change` protocol, homogeneous coordinates, section
 laws), :mod:`.twist`, :mod:`.chord`, :mod:`.span`, :mod:`.sweep_dihedral` (the shears), :mod:`.shape`,
 :mod:`.control_surfaces` (flap and slat; where they sit in the lattice: :mod:`.devices`) and
-:mod:`.pipeline` (a list of changes, built from the design file).
+:mod:`.pipeline` (a list of changes, built from the design file). Each kind registers itself in
+:data:`CHANGES` at the end of its module (:mod:`ffdcli.registry`: ``kind``, ``schema()``,
+``from_spec(spec, ctx)``); this package face imports every kind module, so that they are all registered.
 
 A lattice ``P`` has shape ``(n, m, l, 3)``: ``i`` chordwise (0 = leading-edge side), ``j`` spanwise
 (0 = root section), ``k`` thickness (0 = lower side), in mesh coordinates. A 2D lattice has
@@ -36,6 +38,7 @@ All derivatives are analytic. :func:`apply_changes`, :func:`design_variables` an
 
 from ffdcli.box.frame import LatticeFrame
 from ffdcli.parameterization.changes.base import (
+    CHANGES,
     DEG,
     MAX_SHEAR_ANGLE,
     Change,
@@ -53,7 +56,6 @@ from ffdcli.parameterization.changes.base import (
 from ffdcli.parameterization.changes.chord import Chord
 from ffdcli.parameterization.changes.control_surfaces import ControlSurface, Flap, Slat
 from ffdcli.parameterization.changes.pipeline import (
-    CHANGE_CLASSES,
     apply_changes,
     changes_from_spec,
     design_bounds,
@@ -67,7 +69,7 @@ from ffdcli.parameterization.changes.sweep_dihedral import Dihedral, Shear, Swee
 from ffdcli.parameterization.changes.twist import Twist
 
 __all__ = [
-    "CHANGE_CLASSES", "DEG", "MAX_SHEAR_ANGLE", "Change", "Chord", "ControlSurface", "Dihedral", "Flap",
+    "CHANGES", "DEG", "MAX_SHEAR_ANGLE", "Change", "Chord", "ControlSurface", "Dihedral", "Flap",
     "LatticeFrame", "SectionLaw", "SectionMap", "Shape", "Shear", "Slat", "Span", "SpecContext", "Sweep",
     "Twist", "about", "apply_changes", "apply_homogeneous", "changes_from_spec", "design_bounds",
     "design_units", "design_variables", "homogeneous", "not_in_2d", "rotation", "rotation_derivative",

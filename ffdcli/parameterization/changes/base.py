@@ -15,9 +15,12 @@ import numpy as np
 
 from ffdcli.box.frame import LatticeFrame
 from ffdcli.errors import InputError
+from ffdcli.registry import Registry
 
 #: Radians per degree: angles are given and differentiated in degrees.
 DEG = math.pi / 180.0
+#: The change kinds of ``changes:``, each registered by its own module (:mod:`ffdcli.registry`).
+CHANGES = Registry("change")
 #: Largest leading-edge sweep/dihedral angle a change may produce (tan grows without bound at 90).
 MAX_SHEAR_ANGLE = 85.0
 
@@ -181,6 +184,16 @@ class SpecContext:
         st = self.box.stations
         return (st - st[0]) / (st[-1] - st[0])
 
+    @property
+    def sections_words(self) -> str:
+        """"8 sections (box.points[1])", or where knots were inserted (box.refine, a flap or slat) how
+        the box came to have more sections than box.points[1] says."""
+        base = getattr(self.box, "base_sections", None)
+        if base is None or len(base) == self.m:
+            return f"{self.m} sections (box.points[1])"
+        return (f"{self.m} sections ({len(base)} of box.points[1] and {self.m - len(base)} inserted by box.refine "
+                f"or a flap/slat)")
+
     def fail(self, message: str, key: str | None = None) -> Exception:
         """The exception for ``message`` at ``key`` (default: the change's own key)."""
         key = self.key if key is None else key
@@ -243,7 +256,6 @@ class Change:
         return len(self.variables())
 
 
-
 def check_sections(P: np.ndarray, m: int, what: str):
     if P.ndim != 4 or P.shape[-1] != 3:
         raise ValueError(f"a lattice must have shape (n, m, l, 3), got {P.shape}")
@@ -273,8 +285,8 @@ class SectionMap(Change):
             raise ctx.fail(f"in 2D {kind} takes one number (the whole airfoil, about its trailing edge)")
         if isinstance(spec, list):
             if len(spec) != m:
-                raise ctx.fail(f"has {len(spec)} values but the box has {m} sections (box.points[1]); "
-                               "give one value per section, root first")
+                raise ctx.fail(f"has {len(spec)} values but the box has {ctx.sections_words}; give one value "
+                               "per section, root first, or {tip: value} / {root: value, tip: value}")
             return cls(SectionLaw.listed(spec))
         if isinstance(spec, dict):
             return cls(SectionLaw.root_tip(m, tip=spec["tip"], root=spec.get("root"),

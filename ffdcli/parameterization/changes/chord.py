@@ -7,11 +7,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ffdcli.parameterization.changes.base import (
+    CHANGES,
     SectionMap,
     about,
     check_sections,
     per_section,
 )
+from ffdcli.schema_parts import positive, positive_list, root_tip
 
 
 @dataclass(frozen=True, eq=False)
@@ -25,6 +27,12 @@ class Chord(SectionMap):
     kind = "chord"
     default_root = 1.0
     unit = "factor"
+
+    @classmethod
+    def schema(cls) -> dict:
+        return {"description": "scale factors > 0: a list (one per section, root first), {tip: F} or "
+                               "{root: F, tip: F} (root default 1); in 2D one number",
+                "anyOf": [positive(), positive_list(), root_tip(positive())]}
 
     def bounds(self, P, frame):
         """Every factor of the written law (list item, root, tip) must be > 0 (a section of no or
@@ -49,3 +57,6 @@ class Chord(SectionMap):
         S = self._scales(frame)
         dp = per_section(frame.ref_points(dP))
         return np.einsum("jab,...ijkb->...ijka", S, dP - dp) + dp
+
+
+CHANGES.register(Chord)

@@ -14,9 +14,14 @@ its blends, a straight ramp across each blend: :func:`.devices.section_weights`)
 hinge point, ``omega`` the unit hinge direction
 signed so that a positive angle moves the trailing edge (flap) or leading edge (slat) down, and
 ``R`` Rodrigues' rotation. The hinge points are basis rows applied to the input lattice, so the
-device follows the changes before it; a hinge fraction given as a list of two is a design
-variable (the hinge point moves along the local chord; the rows that turn stay those the knots
-were made for).
+device follows the changes before it.
+
+A hinge given as a list (two fractions; one in 2D) is a design variable. Its lattice is made from its
+``hinge_range`` and never from its value (:mod:`.hinge_ramp`), so that ``ffd deform`` at any value and
+the derivatives at any value see one lattice: the hinge point moves along the local chord, and row
+``i`` of section ``j`` turns by ``theta_ij = angle * w_ij(hinge) * weights[j]``, ``w`` the ramp's share
+(:meth:`.hinge_ramp.HingeRamp.weights`: none ahead of the hinge, all of it behind the transition).
+A fixed hinge (one number) keeps its knots at the hinge (``w`` is 1 on the rows behind it).
 """
 
 from __future__ import annotations
@@ -28,10 +33,11 @@ import numpy as np
 
 from ffdcli.box.refine import refine_box, refine_embedding
 from ffdcli.errors import InputError
-from ffdcli.parameterization.changes.base import DEG, Change, SpecContext
+from ffdcli.parameterization.changes.base import CHANGES, DEG, Change, SpecContext
 from ffdcli.parameterization.changes.devices import (
     DEFAULT_BLEND,
     DEFAULT_TRANSITION,
+    HINGE_RANGE,
     MAX_ANGLE,
     DeviceGeometry,
     DeviceSpec,
@@ -39,6 +45,7 @@ from ffdcli.parameterization.changes.devices import (
     device_geometry,
     device_knots,
 )
+from ffdcli.schema_parts import number
 
 
 def skew(w: np.ndarray) -> np.ndarray:
@@ -127,9 +134,9 @@ class ControlSurface(Change):
 
     def bounds(self, P, frame):
         """The angle within +-:data:`MAX_ANGLE` degrees (what a design file may give), a hinge fraction
-        within (0, 1)."""
-        out = np.array([[-MAX_ANGLE, MAX_ANGLE]] + [[0.0, 1.0]] * (self.size - 1))
-        return out
+        within its ``hinge_range`` (the lattice has knots there only)."""
+        lo, hi = self.spec.hinge_range if self.spec.hinge_range is not None else (0.0, 1.0)
+        return np.array([[-MAX_ANGLE, MAX_ANGLE]] + [[lo, hi]] * (self.size - 1))
 
     # ------------------------------------------------------------------ the map
     def _hinges(self, P) -> tuple[np.ndarray, np.ndarray]:
@@ -156,19 +163,27 @@ class ControlSurface(Change):
         sign = -down * math.copysign(1.0, along)
         return sign * d, sign, v
 
-    def _theta(self) -> np.ndarray:
-        return self.angle * DEG * self.geometry.weights
+    def _shares(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """(n, m) the share of the angle each row and section turns by and (E, n, m) its derivative by
+        the hinge fractions (None: a fixed hinge)."""
+        g = self.geometry
+        if g.ramp is None:
+            return g.rows[:, None] * g.weights[None, :], None
+        w, dw = g.ramp.weights(self.hinge)
+        return w * g.weights, dw * g.weights
 
     def apply(self, P, frame):
         H, _ = self._hinges(P)
         omega, _, _ = self._axis(H, frame)
-        theta = self._theta()
+        theta = self.angle * DEG * self._shares()[0]
         out = np.array(P, dtype=float, copy=True)
-        # only the turning rows of the sections that turn (a 0 degree device is no change, bit for bit)
-        i, j = np.flatnonzero(self.geometry.rows), np.flatnonzero(theta != 0.0)
-        R = rodrigues(omega, theta[j])
+        # only the rows and sections that turn (a 0 degree device is no change, bit for bit)
+        turn = theta != 0.0
+        i, j = np.flatnonzero(turn.any(axis=1)), np.flatnonzero(turn.any(axis=0))
+        th = theta[np.ix_(i, j)]
+        R = rodrigues(omega, th.reshape(-1)).reshape(th.shape + (3, 3))
         Y = P[np.ix_(i, j)] - H[0]
-        out[np.ix_(i, j)] = H[0] + np.einsum("jab,ijkb->ijka", R, Y)
+        out[np.ix_(i, j)] = H[0] + np.einsum("ijab,ijkb->ijka", R, Y)
         return out
 
     def _domega(self, H, v, sign, dH):
@@ -177,40 +192,49 @@ class ControlSurface(Change):
         dv = dH[..., 1, :] - dH[..., 0, :]
         return sign * (dv - (dv @ d)[..., None] * d) / np.linalg.norm(v)
 
-    def _hinge_motion(self, P, frame, dH, dY):
-        """dP' of the turning rows for hinge-point changes dH (..., E, 3) and point changes dY
-        (..., rows, m, l, 3): (I - R) dH0 + R dY + dR[domega] (x - H0)."""
+    def _hinge_motion(self, P, frame, rows, theta, dH, dY):
+        """dP' of the turning ``rows`` (turning by ``theta`` (rows, m)) for hinge-point changes dH
+        (..., E, 3) and point changes dY (..., rows, m, l, 3): (I - R) dH0 + R dY + dR[domega] (x - H0)."""
         H, _ = self._hinges(P)
         omega, sign, v = self._axis(H, frame)
-        theta = self._theta()
-        R = rodrigues(omega, theta)
-        out = np.einsum("jab,...ijkb->...ijka", R, dY - dH[..., 0, None, None, None, :]) \
+        R = rodrigues(omega, theta.reshape(-1)).reshape(theta.shape + (3, 3))
+        out = np.einsum("ijab,...ijkb->...ijka", R, dY - dH[..., 0, None, None, None, :]) \
             + dH[..., 0, None, None, None, :]
         if frame.dim == 3 and len(H) == 2:
-            dR = rodrigues_domega(omega, theta, self._domega(H, v, sign, dH))
-            out = out + np.einsum("...jab,ijkb->...ijka", dR, P[self.geometry.rows] - H[0])
+            dw = self._domega(H, v, sign, dH)
+            dR = rodrigues_domega(omega, theta.reshape(-1), dw).reshape(dw.shape[:-1] + theta.shape + (3, 3))
+            out = out + np.einsum("...ijab,ijkb->...ijka", dR, P[rows] - H[0])
         return out
 
     def jacobian_own(self, P, frame):
         H, D = self._hinges(P)
         omega, _, _ = self._axis(H, frame)
-        rows = self.geometry.rows
+        W, dW = self._shares()
+        rows = W.any(axis=1)
+        theta = self.angle * DEG * W[rows]
         J = np.zeros((self.size,) + P.shape)
-        dR = rodrigues_dtheta(omega, self._theta()) * (DEG * self.geometry.weights)[:, None, None]
-        J[0][rows] = np.einsum("jab,ijkb->ijka", dR, P[rows] - H[0])
+        th = theta.reshape(-1)
+        dR = rodrigues_dtheta(omega, th).reshape(theta.shape + (3, 3))
+        X = P[rows] - H[0]
+        J[0][rows] = np.einsum("ijab,ijkb->ijka", dR * (DEG * W[rows])[..., None, None], X)
         if self.hinge_variable:
             for e in range(len(self.hinge)):
                 dH = np.zeros(H.shape)
                 dH[e] = D[e]
-                J[1 + e][rows] = self._hinge_motion(P, frame, dH, np.zeros(P[rows].shape))
+                J[1 + e][rows] = self._hinge_motion(P, frame, rows, theta, dH, np.zeros(P[rows].shape))
+                if dW is not None:     # the share of the angle moves with the hinge
+                    J[1 + e][rows] += np.einsum("ijab,ijkb->ijka",
+                                                dR * (self.angle * DEG * dW[e][rows])[..., None, None], X)
         return J
 
     def jvp_P(self, P, frame, dP):
         dP = np.asarray(dP, dtype=float)
         out = np.array(dP, copy=True)
         dH, _ = self._hinges(dP)          # the hinge points are linear in the lattice
-        rows = self.geometry.rows
-        out[..., rows, :, :, :] = self._hinge_motion(P, frame, dH, dP[..., rows, :, :, :])
+        W, _ = self._shares()
+        rows = W.any(axis=1)
+        out[..., rows, :, :, :] = self._hinge_motion(P, frame, rows, self.angle * DEG * W[rows], dH,
+                                                     dP[..., rows, :, :, :])
         return out
 
     def describe(self) -> dict:
@@ -221,6 +245,7 @@ class ControlSurface(Change):
                 "blend": None if self.spec.span is None else self.spec.blend,
                 "blends": None if self.spec.span is None else list(blend_widths(self.spec)),
                 "transition": float(self.geometry.transition.max()),
+                "hinge_range": None if self.spec.hinge_range is None else list(self.spec.hinge_range),
                 "turning_rows": int(self.geometry.rows.sum()),
                 "turning_sections": int(np.count_nonzero(self.geometry.weights))}
 
@@ -235,12 +260,44 @@ class Flap(ControlSurface):
 
     kind = "flap"
 
+    @classmethod
+    def schema(cls) -> dict:
+        return device_schema("trailing-edge", "trailing edge")
+
 
 @dataclass(frozen=True, eq=False)
 class Slat(ControlSurface):
     """A leading-edge device: the part ahead of the hinge turns; positive: leading edge down."""
 
     kind = "slat"
+
+    @classmethod
+    def schema(cls) -> dict:
+        return device_schema("leading-edge", "leading edge")
+
+
+def device_schema(part: str, down: str) -> dict:
+    """The YAML of a flap or slat (``part``: trailing-edge or leading-edge)."""
+    fraction = {"type": "number", "exclusiveMinimum": 0, "exclusiveMaximum": 1}
+    return {"description": f"a {part} device that turns about its hinge line (morphing: the surface stays "
+                           f"one piece): {{span: [inner, outer], hinge: h | [h_inner, h_outer], angle: A, "
+                           f"blend: w, transition: c}}; angle in degrees, positive: {down} down; hinge: "
+                           "chord fraction of the local chord at each end (a list of two: design "
+                           "variables); blend: span width over which the rotation fades at each end "
+                           "(default 0.2); transition: chord width behind the hinge where the surface "
+                           "bends (default 0.1); hinge_range: [lo, hi] the chord fractions a variable "
+                           "hinge may take (the lattice is made for them; default flap [0.6, 0.85], slat "
+                           "[0.1, 0.3]); in 2D no span and no blend",
+            "type": "object", "additionalProperties": False, "required": ["hinge", "angle"],
+            "properties": {
+                "span": {"type": "array", "items": {"type": "number", "minimum": 0, "maximum": 1},
+                         "minItems": 2, "maxItems": 2},
+                "hinge": {"anyOf": [fraction, {"type": "array", "items": fraction, "minItems": 1,
+                                               "maxItems": 2}]},
+                "angle": number(),
+                "blend": {"type": "number", "minimum": 0},
+                "transition": {"type": "number", "exclusiveMinimum": 0},
+                "hinge_range": {"type": "array", "items": fraction, "minItems": 2, "maxItems": 2}}}
 
 
 def parse_device(kind: str, spec, ctx: SpecContext) -> DeviceSpec:
@@ -271,18 +328,44 @@ def parse_device(kind: str, spec, ctx: SpecContext) -> DeviceSpec:
         raise ctx.fail(f"hinge {hinge}: chord fractions between 0.02 and 0.98", f"{key}.hinge")
     if ctx.dim == 3 and len(hinge) == 1:
         hinge = hinge * 2
+    variable = isinstance(spec["hinge"], list)
+    hinge_range = None
+    if "hinge_range" in spec and not variable:
+        raise ctx.fail("hinge_range is where a variable hinge may go: give hinge as a list "
+                       f"({'[h_inner, h_outer]' if ctx.dim == 3 else '[h]'}) or leave hinge_range out",
+                       f"{key}.hinge_range")
+    if variable:
+        lo, hi = (float(x) for x in spec.get("hinge_range", HINGE_RANGE[kind]))
+        if not 0.02 <= lo < hi <= 0.98:
+            raise ctx.fail(f"hinge_range [{lo:g}, {hi:g}]: two chord fractions with 0.02 <= lo < hi <= 0.98",
+                           f"{key}.hinge_range")
+        if any(not lo < h < hi for h in hinge):
+            where = "hinge_range" if "hinge_range" in spec else f"the default hinge_range of a {kind}"
+            raise ctx.fail(f"hinge {hinge}: a variable hinge lies strictly inside {where} ({lo:g}, {hi:g}) "
+                           "(the lattice has its knots there, and it is the variable's bounds); give "
+                           "hinge_range: [lo, hi] around it", f"{key}.hinge")
+        hinge_range = (lo, hi)
     blend = float(spec.get("blend", DEFAULT_BLEND))
     if not 0.0 <= blend <= 0.5:
         raise ctx.fail(f"blend {blend:g}: a span width in [0, 0.5]", f"{key}.blend")
-    part = (1.0 - min(hinge)) if kind == "flap" else max(hinge)
-    transition = float(spec.get("transition", min(DEFAULT_TRANSITION, 0.5 * part)))
+    # the device's chord; a variable hinge's default transition is read at the middle of its range, and
+    # the transition must fit the least device chord over the range (its lattice cannot depend on the value)
+    if hinge_range is None:
+        part = (1.0 - min(hinge)) if kind == "flap" else max(hinge)
+        default = min(DEFAULT_TRANSITION, 0.5 * part)
+    else:
+        middle = 0.5 * (hinge_range[0] + hinge_range[1])
+        part = (1.0 - hinge_range[1]) if kind == "flap" else hinge_range[0]
+        default = min(DEFAULT_TRANSITION, 0.5 * ((1.0 - middle) if kind == "flap" else middle), 0.9 * part)
+    transition = float(spec.get("transition", default))
     if not 0.0 < transition <= 0.9 * part:
         raise ctx.fail(f"transition {transition:g}: a chord width in (0, {0.9 * part:.3g}] (inside the "
                        f"{kind})", f"{key}.transition")
     angle = float(spec["angle"])
     if not -MAX_ANGLE <= angle <= MAX_ANGLE:
         raise ctx.fail(f"angle {angle:g}: degrees within [-{MAX_ANGLE:g}, {MAX_ANGLE:g}]", f"{key}.angle")
-    return DeviceSpec(kind=kind, span=span, hinge=tuple(hinge), blend=blend, transition=transition)
+    return DeviceSpec(kind=kind, span=span, hinge=tuple(hinge), blend=blend, transition=transition,
+                      hinge_range=hinge_range)
 
 
 def refine_for_devices(box, emb, surface, specs, error=None, key: str = "changes"):
@@ -308,3 +391,7 @@ def refine_for_devices(box, emb, surface, specs, error=None, key: str = "changes
         return box, emb
     out, _ = refine_box(box, chord=chord, span=span)
     return out, refine_embedding(out, emb)
+
+
+CHANGES.register(Flap)
+CHANGES.register(Slat)

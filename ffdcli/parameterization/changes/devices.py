@@ -16,6 +16,17 @@ hinge chord fractions and widths; this module turns them into lattice facts, in 
    blend, so a point outside the device and its blends does not move, a straight ramp between), and
    the basis rows of the hinge points at the device's ends.
 
+A hinge given as a list (a design variable) cannot have knots at its value: ``ffd deform`` and the
+derivatives must see one lattice whatever the value, or the derivative of what ``deform`` writes
+would need the derivative of every basis function by its knots. Such a device gets its lattice from
+its ``hinge_range`` (the fractions the hinge may take, :data:`HINGE_RANGE` by default), never from
+the value: chordwise knots evenly spaced across every place its hinge and transition can be
+(:func:`ramp_knots`), and its rows turn by a share of the angle that is a function of the hinge
+(:class:`HingeRamp`): none for a row whose basis function reaches ahead of the hinge, all of it for
+one reaching behind the transition, a smooth step between. So a point ahead of the hinge still
+does not move and one behind the transition still turns rigidly, and the share, hence the mesh, is a
+smooth function of the hinge with an exact derivative.
+
 Span fraction ``f`` is the station ``stations[0] + f (stations[-1] - stations[0])`` (root 0, tip 1);
 the local baseline chord there is interpolated linearly between the box's sections, and the hinge
 point lies at chord fraction ``h`` of it, at mid-thickness (halfway between the upper and lower
@@ -34,6 +45,7 @@ from ffdcli.box.refine import edges_at, lattice_params, span_fractions
 from ffdcli.errors import InputError
 from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.lattice import evaluate
+from ffdcli.parameterization.changes.hinge_ramp import HingeRamp, make_ramp
 
 #: Default span width (span fraction) over which a device's rotation fades at each end.
 DEFAULT_BLEND = 0.2
@@ -44,6 +56,8 @@ MAX_ANGLE = 60.0
 #: Knot intervals across each blend per spanwise degree ``q``: ``2 q`` intervals leave ``q`` sections
 #: whose basis functions lie inside the blend, which turn by a share of the angle (:func:`section_weights`).
 BLEND_INTERVALS = 2
+#: The chord fractions a hinge given as a list (a design variable) may take unless ``hinge_range`` says.
+HINGE_RANGE = {"flap": (0.6, 0.85), "slat": (0.1, 0.3)}
 #: Tolerance (parameter) when reading which knots are a device's.
 KNOT_TOL = 1e-9
 #: A parameter this close to a knot is that knot (:func:`snap`).
@@ -54,13 +68,23 @@ SNAP = 1e-6
 class DeviceSpec:
     """A device as written: ``kind`` ``flap`` or ``slat``; ``span`` (a, b) span fractions (None in
     2D); ``hinge`` chord fractions at the inner and outer end (one in 2D); ``blend`` span fraction;
-    ``transition`` local chords."""
+    ``transition`` local chords; ``hinge_range`` (lo, hi) the fractions a variable hinge may take (None:
+    the hinge is fixed)."""
 
     kind: str
     span: tuple[float, float] | None
     hinge: tuple[float, ...]
     blend: float
     transition: float
+    hinge_range: tuple[float, float] | None = None
+
+    @property
+    def reference_hinge(self) -> tuple[float, ...]:
+        """The fractions the device's lattice facts are read at: the hinge when fixed, the middle of
+        ``hinge_range`` at every end when variable (never the value)."""
+        if self.hinge_range is None:
+            return self.hinge
+        return (0.5 * (self.hinge_range[0] + self.hinge_range[1]),) * len(self.hinge)
 
     @property
     def sign(self) -> float:
@@ -92,7 +116,7 @@ def end_points(box: Box, surface, spec: DeviceSpec) -> np.ndarray:
     out = []
     for e, f in enumerate(fractions):
         le, te = edges_at(box, f)
-        h = spec.hinge[e]
+        h = spec.reference_hinge[e]
         chord = float(np.linalg.norm(te - le))
         out.append([le, te, _mid_thickness(box, surface, le + h * (te - le), chord)])
     return np.array(out)
@@ -154,7 +178,7 @@ def _span_params(box: Box, surface, spec: DeviceSpec, *, ends: bool = False) -> 
         pts = []
         for x in (f, g):
             le, te = edges_at(box, x)
-            pts.append(le + spec.hinge[0 if f == a else 1] * (te - le))
+            pts.append(le + spec.reference_hinge[0 if f == a else 1] * (te - le))
         v = _params(box, np.array(pts))[:, 1]
         v[1] = 0.0 if g <= 0.0 else 1.0 if g >= 1.0 else v[1]
         out.append((min(v), max(v)))
@@ -207,11 +231,15 @@ def section_weights(v: np.ndarray, q: int, device: tuple[float, float],
 
 def device_knots(box: Box, surface, spec: DeviceSpec) -> tuple[np.ndarray, np.ndarray]:
     """(chordwise knots, spanwise knots) the device needs in ``box`` (empty spanwise in 2D)."""
-    uh, ut, _, _ = _hinge_params(box, surface, spec)
-    if not spec.sign * (ut - uh) > 0:
-        raise InputError(f"the {spec.kind}'s transition ({spec.transition:g} chords) leaves the box")
     p = box.degree[0]
-    chord = uh + (ut - uh) * np.arange(p + 1) / p
+    if spec.hinge_range is not None:
+        ends = end_points(box, surface, spec)
+        chord = _ramp(box, ends, spec, np.zeros(1)).knots()
+    else:
+        uh, ut, _, _ = _hinge_params(box, surface, spec)
+        if not spec.sign * (ut - uh) > 0:
+            raise InputError(f"the {spec.kind}'s transition ({spec.transition:g} chords) leaves the box")
+        chord = uh + (ut - uh) * np.arange(p + 1) / p
     span = []
     if box.dim == 3:
         q = box.degree[1]
@@ -235,6 +263,9 @@ class DeviceGeometry:
         device's ends (E = 2; 1 in 2D): ``M @ P.reshape(-1, 3)`` are the hinge points of lattice ``P``.
     hinge0
         (E,) the hinge fractions the rows were made for (the hinge moves along ``T - L`` from them).
+    ramp
+        A variable hinge's :class:`HingeRamp` (the rows' share of the angle as a function of the
+        hinge; ``rows`` are then those that may turn); None for a fixed hinge.
     transition
         (k,) chord width from the hinge line to where the device turns rigidly, in local chords, at
         points along the hinge line (the largest is printed).
@@ -247,6 +278,20 @@ class DeviceGeometry:
     M: np.ndarray
     hinge0: np.ndarray
     transition: np.ndarray
+    ramp: HingeRamp | None = None
+
+
+def _ramp(box: Box, ends: np.ndarray, spec: DeviceSpec, sigma: np.ndarray) -> HingeRamp:
+    return make_ramp(box, ends, spec.sign, spec.transition, spec.reference_hinge, spec.hinge_range, sigma)
+
+
+def _section_positions(box: Box, ends: np.ndarray) -> np.ndarray:
+    """(m,) where each section's station lies along the hinge line (0 inner end, 1 outer end,
+    clipped); (1,) zero in 2D."""
+    if len(ends) == 1:
+        return np.zeros(1)
+    a, b = ends[:, 2, box.axes.span]
+    return np.clip((np.asarray(box.stations) - a) / (b - a), 0.0, 1.0)
 
 
 def _rows_of(points: np.ndarray, box: Box) -> np.ndarray:
@@ -268,7 +313,11 @@ def device_geometry(box: Box, surface, spec: DeviceSpec) -> DeviceGeometry:
     t = box.knots[0]
     uh, ut = snap(t, uh), snap(t, ut)
     p = box.degree[0]
-    if spec.sign > 0:
+    ramp = None
+    if spec.hinge_range is not None:
+        ramp = _ramp(box, ends, spec, _section_positions(box, ends))
+        rows = ramp.reachable()
+    elif spec.sign > 0:
         rows = t[:n] >= uh - KNOT_TOL
     else:
         rows = t[p + 1:n + p + 1] <= uh + KNOT_TOL
@@ -287,8 +336,10 @@ def device_geometry(box: Box, surface, spec: DeviceSpec) -> DeviceGeometry:
     hp[:, 0] = ut
     lengths = np.linalg.norm(chords, axis=1)
     width = np.abs(np.einsum("kd,kd->k", _lattice_points(box.lattice(), hp, box) - H, chords)) / lengths ** 2
+    if ramp is not None:
+        width = np.array([spec.transition])
     return DeviceGeometry(rows=rows, weights=weights, L=B[:, 0], T=B[:, 1], M=B[:, 2],
-                          hinge0=np.array(spec.hinge, dtype=float), transition=width)
+                          hinge0=np.array(spec.reference_hinge, dtype=float), transition=width, ramp=ramp)
 
 
 def _lattice_points(lat, params, box: Box) -> np.ndarray:

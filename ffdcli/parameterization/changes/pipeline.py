@@ -8,13 +8,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ffdcli.box.frame import LatticeFrame
-from ffdcli.parameterization.changes.base import Change, SpecContext
-from ffdcli.parameterization.changes.chord import Chord
-from ffdcli.parameterization.changes.control_surfaces import Flap, Slat
-from ffdcli.parameterization.changes.shape import Shape
-from ffdcli.parameterization.changes.span import Span
-from ffdcli.parameterization.changes.sweep_dihedral import Dihedral, Sweep
-from ffdcli.parameterization.changes.twist import Twist
+from ffdcli.parameterization.changes.base import CHANGES, Change, SpecContext
 
 
 def apply_changes(P0: np.ndarray, frame: LatticeFrame, changes: Sequence[Change]) -> np.ndarray:
@@ -66,11 +60,6 @@ def set_design_variables(changes: Sequence[Change], values) -> list[Change]:
     return out
 
 
-#: The change class of each kind of the design file (``changes: - twist: ...``).
-CHANGE_CLASSES: dict[str, type[Change]] = {c.kind: c for c in (Twist, Span, Sweep, Dihedral, Chord, Shape, Flap,
-                                                                  Slat)}
-
-
 def changes_from_spec(specs, n: int, m: int, l: int, dim: int, error=None, *, box=None,
                       surface=None) -> list[Change]:
     """The change objects of a ``changes`` list (as written in a design file) for a lattice of
@@ -85,8 +74,8 @@ def changes_from_spec(specs, n: int, m: int, l: int, dim: int, error=None, *, bo
         (kind, spec), = item.items()
         ctx = SpecContext(n=n, m=m, l=l, dim=dim, key=f"changes[{index}].{kind}", error=error,
                           box=box, surface=surface)
-        cls = CHANGE_CLASSES.get(kind)
+        cls = CHANGES.get(kind)
         if cls is None:                         # pragma: no cover (the schema rejects it)
-            raise ctx.fail(f"unknown change '{kind}'")
+            raise ctx.fail(CHANGES.unknown(kind))
         out.append(cls.from_spec(spec, ctx))
     return out

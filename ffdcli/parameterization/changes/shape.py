@@ -8,9 +8,11 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.parameterization.changes.base import (
+    CHANGES,
     Change,
     SpecContext,
 )
+from ffdcli.schema_parts import number_list
 
 
 @dataclass(frozen=True, eq=False)
@@ -44,6 +46,26 @@ class Shape(Change):
     sections: tuple[int, ...] | None = None
     rows: np.ndarray | None = None
     kind = "shape"
+
+    @classmethod
+    def schema(cls) -> dict:
+        return {"description": "{upper: [one per chordwise point], lower: [...], sections: all | [j, ...]}"
+                               " or {random: A, seed: S}",
+                "type": "object",
+                "properties": {
+                    "upper": number_list(), "lower": number_list(),
+                    "rows": {"description": "extension: one list per thickness row (lower first, "
+                                            "l lists of n values), instead of upper/lower",
+                             "type": "array", "items": number_list(), "minItems": 2},
+                    "sections": {"description": "all, or a list of section indices",
+                                 "anyOf": [{"const": "all"},
+                                           {"type": "array", "items": {"type": "integer", "minimum": 0},
+                                            "minItems": 1}]},
+                    "random": {"type": "number", "minimum": 0},
+                    "seed": {"type": "integer", "minimum": 0}},
+                "additionalProperties": False,
+                "anyOf": [{"required": ["upper"]}, {"required": ["lower"]}, {"required": ["random"]},
+                          {"required": ["rows"]}]}
 
     @classmethod
     def from_spec(cls, spec, ctx: SpecContext) -> Shape:
@@ -226,3 +248,6 @@ def section_normals_jvp(P: np.ndarray, frame, dP: np.ndarray) -> np.ndarray:
 def per_point(t: np.ndarray) -> np.ndarray:
     """(1, m, 1, 3): per-section vectors (m, 3) broadcast over a lattice."""
     return t[None, :, None, :]
+
+
+CHANGES.register(Shape)

@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ffdcli.parameterization.changes.base import (
+    CHANGES,
     Change,
     SpecContext,
     about,
@@ -14,6 +15,7 @@ from ffdcli.parameterization.changes.base import (
     not_in_2d,
     refuse_2d,
 )
+from ffdcli.schema_parts import positive
 
 
 @dataclass(frozen=True, eq=False)
@@ -27,6 +29,10 @@ class Span(Change):
     scale: float
     kind = "span"
     unit = "factor"
+
+    @classmethod
+    def schema(cls) -> dict:
+        return {"description": "a span scale factor > 0 about the root section", **positive()}
 
     @classmethod
     def from_spec(cls, spec, ctx: SpecContext) -> Span:
@@ -65,3 +71,6 @@ class Span(Change):
         dp0 = frame.ref_points(dP)[..., 0, :]
         dd = (dP - dp0[..., None, None, None, :]) @ e
         return dP + (self.scale - 1.0) * dd[..., None] * e
+
+
+CHANGES.register(Span)

@@ -9,6 +9,7 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.parameterization.changes.base import (
+    CHANGES,
     DEG,
     MAX_SHEAR_ANGLE,
     Change,
@@ -22,6 +23,7 @@ from ffdcli.parameterization.changes.base import (
     refuse_2d,
     translation,
 )
+from ffdcli.schema_parts import number, number_list
 
 
 @dataclass(frozen=True, eq=False)
@@ -54,7 +56,7 @@ class Shear(Change):
         if isinstance(spec, dict):
             offsets = spec["offsets"]
             if len(offsets) != ctx.m:
-                raise ctx.fail(f"has {len(offsets)} values but the box has {ctx.m} sections (box.points[1])",
+                raise ctx.fail(f"has {len(offsets)} values but the box has {ctx.sections_words}",
                                ctx.key + ".offsets")
             return cls(offsets=SectionLaw.listed(offsets))
         return cls(delta=float(spec))
@@ -151,6 +153,10 @@ class Sweep(Shear):
 
     kind = "sweep"
 
+    @classmethod
+    def schema(cls) -> dict:
+        return shear_schema("leading-edge sweep")
+
     def _dir(self, frame):
         return frame.chord_dir
 
@@ -162,5 +168,21 @@ class Dihedral(Shear):
 
     kind = "dihedral"
 
+    @classmethod
+    def schema(cls) -> dict:
+        return shear_schema("dihedral (tip up positive)")
+
     def _dir(self, frame):
         return frame.thickness_dir
+
+
+def shear_schema(what: str) -> dict:
+    """The YAML of a sweep or dihedral: degrees added to the angle, or ``{offsets: [...]}``."""
+    return {"description": f"degrees added to the {what} angle, or {{offsets: [one per section]}}"
+                           " (mesh length units)",
+            "anyOf": [number(), {"type": "object", "properties": {"offsets": number_list()},
+                                 "required": ["offsets"], "additionalProperties": False}]}
+
+
+CHANGES.register(Sweep)
+CHANGES.register(Dihedral)

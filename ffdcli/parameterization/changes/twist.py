@@ -9,6 +9,7 @@ import numpy as np
 
 from ffdcli.errors import InputError
 from ffdcli.parameterization.changes.base import (
+    CHANGES,
     DEG,
     SectionMap,
     SpecContext,
@@ -18,6 +19,7 @@ from ffdcli.parameterization.changes.base import (
     rotation,
     rotation_derivative,
 )
+from ffdcli.schema_parts import number, number_list
 
 
 @dataclass(frozen=True, eq=False)
@@ -33,6 +35,21 @@ class Twist(SectionMap):
 
     axis: float = 1.0
     kind = "twist"
+
+    @classmethod
+    def schema(cls) -> dict:
+        axis = {"type": "number", "description": "chord fraction of the twist axis on each section's chord "
+                                                 "line: 1 trailing edge (default), 0.25 quarter chord, 0 "
+                                                 "leading edge"}
+        # one object form; which keys go together ({root, tip} | values | angle) is checked by validate
+        form = {"type": "object", "additionalProperties": False,
+                "properties": {"root": number(), "tip": number(), "values": number_list(), "angle": number(),
+                               "axis": axis}}
+        return {"description": "degrees: a list (one per section, root first), {tip: T} or "
+                               "{root: R, tip: T}; in 2D one number. About another axis than the trailing "
+                               "edge: {tip: T, axis: 0.25}, {values: [...], axis: 0.25}, 2D {angle: A, "
+                               "axis: 0.25}",
+                "anyOf": [number(), number_list(), form]}
     unit = "deg"
 
     @classmethod
@@ -76,3 +93,6 @@ class Twist(SectionMap):
         R = rotation(frame, self.values * DEG)
         dp = per_section(frame.chord_points(dP, self.axis))
         return np.einsum("jab,...ijkb->...ijka", R, dP - dp) + dp
+
+
+CHANGES.register(Twist)

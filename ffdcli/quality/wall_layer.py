@@ -1,0 +1,127 @@
+"""The gate's figures of the wall layer: the first-cell height and the off-wall angle at every wall node.
+
+A RANS mesh's first cell sets y+; a design that stretches it changes the skin friction an optimiser
+minimises, and the scaled Jacobian does not see it (a 1:5,000 rectangle stretched in height keeps its
+scaled Jacobian). At each wall node the *off-wall edge* (:func:`ffdcli.volume.wall_layer.off_wall_edges`:
+the input mesh's edge from the node into the volume most normal to the wall) gives the first-cell
+height (its projection on the wall normal) and the off-wall angle (its angle to the normal).
+
+``ffd deform`` reports the ratio after / before of every first-cell height (min and max) and the
+largest change of the off-wall angle, and warns of a design that changes a first cell by more than 1 %
+(counted, as the cells below 0.05 are). A design file that sets ``volume.first_cell`` (a tolerance)
+makes it a rule: a design outside 1 +- that tolerance is refused as an inverted cell is (exit 3;
+``--force`` writes it with a warning). ``ffd check`` reports the heights and angles of the mesh as it is.
+The wall nodes on a sharp edge (a sharp trailing edge, a flat tip's rim: faces turning by more than
+60 degrees, :func:`ffdcli.volume.wall_layer.sharp_nodes`) have no wall normal and their off-wall edge
+is the wake's or the tip's: they are left out. Only meshes with a boundary layer are judged (median first-cell aspect ratio at least
+:data:`ffdcli.volume.wall_layer.MIN_ASPECT`): on an Euler mesh the first cell is not a y+ and the
+cell rules serve.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from ffdcli.errors import QualityError
+from ffdcli.mesh import Mesh
+from ffdcli.volume.wall_layer import MIN_ASPECT, off_wall_edges, sharp_nodes
+
+#: The default tolerance on a first cell's height change (``volume.first_cell``).
+DEFAULT_FIRST_CELL = 0.01
+
+
+@dataclass(frozen=True)
+class WallLayerReport:
+    """The wall layer's figures (module docstring); ``ratio_*`` and ``angle_change`` are None without a
+    mesh before (``ffd check``)."""
+
+    n_wall: int
+    height_min: float
+    height_max: float
+    angle_max: float
+    ratio_min: float | None = None
+    ratio_max: float | None = None
+    angle_change: float | None = None
+    tolerance: float = DEFAULT_FIRST_CELL
+    n_failed: int = 0
+    worst_node: int = -1
+    worst_at: tuple | None = None
+
+    @property
+    def ok(self) -> bool:
+        return self.n_failed == 0
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    def summary(self) -> str:
+        """One line for people."""
+        if self.ratio_min is None:
+            return (f"first cell {self.height_min:.3g} to {self.height_max:.3g} at {self.n_wall} wall nodes, "
+                    f"off-wall angle up to {self.angle_max:.2f} deg")
+        text = (f"first cell after / before {self.ratio_min:.4f} to {self.ratio_max:.4f} at {self.n_wall} wall "
+                f"nodes (tolerance {100 * self.tolerance:g} %), off-wall angle changed by up to "
+                f"{self.angle_change:.2f} deg")
+        if self.n_failed:
+            text += f"; {self.n_failed} first cells changed by more than {100 * self.tolerance:g} %"
+        return text
+
+
+def wall_layer_report(mesh: Mesh, walls, points_after: np.ndarray | None = None,
+                      points_before: np.ndarray | None = None, tolerance: float = DEFAULT_FIRST_CELL
+                      ) -> WallLayerReport | None:
+    """The figures of the markers ``walls`` (names) of ``mesh``; None when the mesh has no boundary
+    layer there (or no volume cells). ``points_after`` (N, 3) default the mesh's points; with
+    ``points_before`` (N, 3) the ratios, the angle changes and the rule."""
+    if not mesh.cells or not walls:
+        return None
+    names = [walls] if isinstance(walls, str) else list(walls)
+    faces = mesh.marker_faces(names)
+    ids = mesh.marker_point_ids(names)
+    after = mesh.points if points_after is None else np.asarray(points_after, dtype=np.float64)
+    ref = after if points_before is None else np.asarray(points_before, dtype=np.float64)
+    e0 = off_wall_edges(ref, mesh.cells, faces, ids)
+    ok = (e0.node >= 0) & (e0.height > 0) & (e0.spacing > 0)
+    ok[sharp_nodes(ref, faces, ids)] = False        # no wall normal: the edge's first cell is the wake's
+    if not ok.any() or np.median(e0.spacing[ok] / e0.height[ok]) < MIN_ASPECT:
+        return None
+    e1 = e0 if points_before is None else off_wall_edges(after, mesh.cells, faces, ids, edge_nodes=e0.node)
+    fig = {"n_wall": int(ok.sum()), "height_min": float(e1.height[ok].min()),
+           "height_max": float(e1.height[ok].max()), "angle_max": float(e1.angle[ok].max()),
+           "tolerance": float(tolerance)}
+    if points_before is None:
+        return WallLayerReport(**fig)
+    ratio = e1.height[ok] / e0.height[ok]
+    change = np.abs(e1.angle[ok] - e0.angle[ok])
+    off = np.abs(ratio - 1.0)
+    worst = int(np.argmax(off))
+    node = int(ids[np.flatnonzero(ok)[worst]])
+    return WallLayerReport(**fig, ratio_min=float(ratio.min()), ratio_max=float(ratio.max()),
+                           angle_change=float(change.max()), n_failed=int((off > tolerance).sum()),
+                           worst_node=node, worst_at=tuple(float(v) for v in ref[node]))
+
+
+def enforce_wall_layer(report: WallLayerReport | None, *, design_path=None, force: bool = False, refuse: bool = False,
+                       write_anyway: str = " (--force writes it anyway)", forced: str = " (--force)") -> list[str]:
+    """The gate's rule on the first cells: a first cell changed by more than the tolerance is a warning
+    (returned); with ``refuse`` (the design sets ``volume.first_cell``: a requirement) it raises
+    :class:`QualityError` (exit 3, nothing written), unless ``force``."""
+    if report is None or report.ok:
+        return []
+    if not refuse:
+        where = ", ".join(f"{v:.6g}" for v in report.worst_at)
+        return [f"the design changes {report.n_failed} first cells on the wall by more than "
+                f"{100 * report.tolerance:g} % ({report.ratio_min:.4f} to {report.ratio_max:.4f}; worst at node "
+                f"{report.worst_node}, ({where})): y+ changes with them (volume.first_cell: a tolerance "
+                "makes it a refusal)"]
+    where = ", ".join(f"{v:.6g}" for v in report.worst_at)
+    message = (f"the design changes {report.n_failed} first cells on the wall by more than "
+               f"{100 * report.tolerance:g} % ({report.ratio_min:.4f} to {report.ratio_max:.4f}; worst at node "
+               f"{report.worst_node}, ({where})): y+ changes with them")
+    if force:
+        return [message + "; written anyway" + forced]
+    raise QualityError(message + "; nothing was written" + write_anyway + " (volume.wall_layer: rigid keeps "
+                       "the first cells; volume.first_cell sets the tolerance)",
+                       path=design_path, report={"wall_layer": report.to_dict()})

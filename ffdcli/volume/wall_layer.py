@@ -1,0 +1,294 @@
+"""The near-wall layer of a mesh, found from the mesh itself: which nodes move rigidly with their wall.
+
+A RANS mesh stacks thin cells on its walls (first cell 1e-6 to 1e-5 chord, aspect ratios of 1e3 to
+1e4). Each wall node ``k`` of the deforming surface has one *off-wall edge*: the edge of a cell on
+the wall from ``k`` to a node off the wall that is best aligned with the wall normal ``n_k`` (the
+quad or prism stacked on the wall; in a tetrahedral mesh the most normal edge).
+Its projection on the normal is the first-cell height ``h_k`` (:func:`off_wall_edges`).
+
+The mesh *has* a boundary layer when its first cells are thin against the wall's own spacing
+``s_k`` (the shortest wall edge at ``k``): the median aspect ratio ``s_k / h_k`` is at
+least :data:`MIN_ASPECT` (50). An Euler mesh (aspect about 1) has none and its volume moves as
+before. The layer's thickness ``delta_k`` at a wall node is its stack's height
+(:mod:`ffdcli.volume.wall_stacks`: the stacked quads or prisms, as long as they are thinner than wide:
+a prism layer's thickness, or where a structured mesh's cells become isotropic); where a node is, the
+thickness is the blend ``delta = sum_k psi_k delta_k`` of its wall nodes' (the weights below).
+A node at distance ``d`` from its nearest wall
+node has the weight
+
+    s(d) = 1 for d <= delta;  1 - 3 t^2 + 2 t^3,  t = (d - delta) / (BLEND x delta)  up to
+    delta (1 + BLEND);  0 beyond,
+
+with which it follows the wall rigidly (:mod:`ffdcli.volume.layer_motion`); the rest of its motion is
+the warp's. ``BLEND`` (4): the warp's thickness-wise stretch ``f`` of the first cells (0.4 to 1.6 for
+shape moves of 5 % chord) is taken up over the blend, which stays monotone for ``BLEND > (1 - f) / f``.
+
+Which wall: the node's ``K + 1`` nearest wall nodes (``K`` = :data:`NEIGHBOURS`: 4 in 2D, 8 in 3D) give
+the Franke-Little weights ``psi_k = ((R - d_k)_+ / (R d_k))^3``, ``R`` the distance to the last of them,
+normalised (:attr:`WallLayer.partition`): a node on an off-wall edge 1e-6 above its wall node and a
+wall spacing of 1e-2 gives that node all but 1e-18 of the weight (its first cell is that node's
+alone), while between wall nodes, and in the wedge behind a sharp trailing edge, the weights vary
+continuously (a node leaving the ``K`` nearest has weight 0 as it leaves): no jump between stacks.
+A wall node on a sharp edge (faces turning by more than 60 degrees: :func:`sharp_nodes`) has no
+normal; it carries the FFD map's gradient itself (:mod:`ffdcli.volume.layer_motion`).
+
+Everything here depends on the undeformed mesh only (a fixed assignment: the layer motion is then
+differentiable exactly, its derivative taken at the frames of the design).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.spatial import cKDTree
+
+from ffdcli.geometry.surface import face_vectors, vertex_normals
+from ffdcli.mesh import CellBlock
+from ffdcli.volume.wall_stacks import stack_heights
+
+#: The median first-cell aspect ratio (shortest wall spacing / first-cell height) from which a mesh has
+#: a boundary layer that moves with its wall: a RANS mesh's first cell (1e-6 to 1e-5 chord) against a
+#: wall spacing of 1e-3 to 1e-2 chord is 100 to 1e4; an Euler mesh's about 1, a coarse mesh with a
+#: first cell of 5e-3 chord (y+ in the hundreds) about 10.
+MIN_ASPECT = 50.0
+#: The blend from the rigid layer into the warp's motion, in layer thicknesses.
+BLEND = 4.0
+#: A wall node is on a sharp edge (a sharp trailing edge, a flat tip's rim) when the faces around it
+#: turn by more than 60 degrees: |sum of their vector areas| < cos(30 deg) x the sum of their areas.
+SHARP_COS = float(np.cos(np.radians(30.0)))
+#: The wall nodes whose rigid motions a layer node blends (2D, 3D).
+NEIGHBOURS = {2: 4, 3: 8}
+
+
+@dataclass(frozen=True)
+class WallLayer:
+    """The nodes that follow their wall point rigidly, and how much (from :func:`detect_wall_layer`).
+
+    rows
+        (n,) rows of the warp's targets (``WarpModel.target_ids``) in the layer or its blend.
+    partition
+        (n, Ns) sparse: each one's weights of the wall nodes (rows sum to 1).
+    position
+        (n, 3) the nodes' undeformed positions, relative to ``origin``.
+    wall_position
+        (Ns, 3) the wall nodes' positions relative to ``origin``.
+    weight
+        (n,) ``s`` in (0, 1]: 1 in the layer, falling to 0 over the blend.
+    normals
+        (Ns, 3) unit wall normals of the surface nodes (zero where a node is on no face or on a sharp edge).
+    planes
+        (Ns, 3) the unit normal of the plane a wall node slides in (a wing's root on a symmetry plane),
+        zero for the others.
+    thickness
+        the median of the stacks' heights (mesh units; the blend ends at ``delta (1 + BLEND)`` of each node's).
+    """
+
+    rows: np.ndarray
+    partition: csr_matrix
+    position: np.ndarray
+    wall_position: np.ndarray
+    weight: np.ndarray
+    normals: np.ndarray
+    thickness: float
+    planes: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class OffWallEdges:
+    """Each wall node's off-wall edge (:func:`off_wall_edges`).
+
+    node
+        (Ns,) the node at the edge's far end (-1 where the wall node is in no volume cell).
+    height
+        (Ns,) first-cell height ``(x_node - x_wall) . n`` (positive; 0 where ``node`` is -1).
+    angle
+        (Ns,) angle (degrees) between the edge and the wall normal.
+    spacing
+        (Ns,) the shortest wall edge at the node (0 where it is on none).
+    """
+
+    node: np.ndarray
+    height: np.ndarray
+    angle: np.ndarray
+    spacing: np.ndarray
+
+
+def wall_normals(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray) -> np.ndarray:
+    """(Ns, 3) area-weighted unit normals of the wall nodes ``wall_ids`` from the wall ``faces``
+    (global node ids; lines of a 2D mesh give in-plane normals)."""
+    return vertex_normals(points, [b for b in faces if b.type != "vertex"])[wall_ids]
+
+
+def _cell_pairs(cells: list[CellBlock], on_wall: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every (wall node, off-wall node) pair sharing a cell touching the wall: (a, b) int64 arrays."""
+    a_all, b_all = [], []
+    for blk in cells:
+        data = blk.data
+        if not len(data):
+            continue
+        touch = on_wall[data].any(axis=1)
+        d = data[touch]
+        w = on_wall[d]
+        k = d.shape[1]
+        for i in range(k):           # column pairs of one cell type: at most 8 x 7
+            for j in range(k):
+                if i == j:
+                    continue
+                m = w[:, i] & ~w[:, j]
+                a_all.append(d[m, i])
+                b_all.append(d[m, j])
+    if not a_all:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    return np.concatenate(a_all), np.concatenate(b_all)
+
+
+def _wall_spacing(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray) -> np.ndarray:
+    """(Ns,) the shortest wall face edge at each wall node (0 on none): a first cell is thin when it
+    is thin against the wall's spacing in every direction along it."""
+    n = len(points)
+    short = np.full(n, np.inf)
+    for b in faces:
+        if b.type == "vertex" or not len(b.data):
+            continue
+        k = b.data.shape[1]
+        for i in range(k if k > 2 else 1):
+            p, q = b.data[:, i], b.data[:, (i + 1) % k]
+            ln = np.linalg.norm(points[q] - points[p], axis=1)
+            np.minimum.at(short, p, ln)
+            np.minimum.at(short, q, ln)
+    sel = short[wall_ids]
+    return np.where(np.isfinite(sel), sel, 0.0)
+
+
+def off_wall_edges(points: np.ndarray, cells: list[CellBlock], faces: list[CellBlock], wall_ids: np.ndarray,
+                   normals: np.ndarray | None = None, edge_nodes: np.ndarray | None = None) -> OffWallEdges:
+    """Each wall node's off-wall edge: among the nodes off the wall sharing a cell with it, the one
+    whose direction is closest to the wall normal (the stacked quad's or prism's; ``edge_nodes``
+    (Ns,): take these instead, e.g. the undeformed mesh's choice to measure a deformed one).
+
+    Parameters
+    ----------
+    points
+        (N, 3) mesh points.
+    cells
+        The volume cells (global ids).
+    faces
+        The wall's boundary faces (global ids).
+    wall_ids
+        (Ns,) sorted wall node ids.
+    normals
+        (Ns, 3) unit normals (default: :func:`wall_normals` of ``points``).
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    wall_ids = np.asarray(wall_ids, dtype=np.int64)
+    ns = len(wall_ids)
+    nrm = wall_normals(pts, faces, wall_ids) if normals is None else normals
+    if edge_nodes is None:
+        on_wall = np.zeros(len(pts), bool)
+        on_wall[wall_ids] = True
+        a, b = _cell_pairs(cells, on_wall)
+        node = np.full(ns, -1, np.int64)
+        if len(a):
+            ka = np.searchsorted(wall_ids, a)
+            e = pts[b] - pts[a]
+            ln = np.linalg.norm(e, axis=1)
+            cos = np.abs(np.einsum("ij,ij->i", e, nrm[ka])) / np.where(ln > 0, ln, 1.0)
+            order = np.lexsort((-cos, ka))          # per wall node, the most normal first
+            first = np.r_[True, ka[order][1:] != ka[order][:-1]]
+            node[ka[order][first]] = b[order][first]
+    else:
+        node = np.asarray(edge_nodes, dtype=np.int64)
+    ok = node >= 0
+    e = np.zeros((ns, 3))
+    e[ok] = pts[node[ok]] - pts[wall_ids[ok]]
+    ln = np.linalg.norm(e, axis=1)
+    dot = np.einsum("ij,ij->i", e, nrm)
+    height = np.abs(dot)
+    cosang = np.clip(height / np.where(ln > 0, ln, 1.0), 0.0, 1.0)
+    angle = np.where(ok, np.degrees(np.arccos(cosang)), 0.0)
+    return OffWallEdges(node, np.where(ok, height, 0.0), angle, _wall_spacing(pts, faces, wall_ids))
+
+
+def sharp_nodes(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray) -> np.ndarray:
+    """(k,) the wall nodes (rows of ``wall_ids``) on a sharp edge (:data:`SHARP_COS`)."""
+    n = len(points)
+    blocks = [b for b in faces if b.type != "vertex" and len(b.data)]
+    if not blocks:
+        return np.zeros(0, np.int64)
+    vec = face_vectors(points, blocks)
+    idx = np.concatenate([b.data.ravel() for b in blocks])
+    rep = np.concatenate([np.repeat(np.arange(len(b.data)), b.data.shape[1]) for b in blocks])
+    off = np.cumsum([0] + [len(b.data) for b in blocks])[:-1]
+    rep = rep + np.repeat(off, [b.data.size for b in blocks])
+    v = vec[rep]
+    tot = np.column_stack([np.bincount(idx, v[:, c], n) for c in range(3)])[wall_ids]
+    area = np.bincount(idx, np.linalg.norm(v, axis=1), n)[wall_ids]
+    return np.flatnonzero((area > 0) & (np.linalg.norm(tot, axis=1) < SHARP_COS * area))
+
+
+def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[CellBlock], wall_ids: np.ndarray,
+                      target_ids: np.ndarray, sliding=()) -> WallLayer | None:
+    """The wall layer of a mesh (module docstring), or None when its first cells are not thin.
+
+    ``faces``: the deforming surface's faces (global ids); ``wall_ids`` (Ns,): its sorted nodes (the
+    warp's surface nodes); ``target_ids`` (Nt,): the warp's targets, in its order; ``sliding``: the warp's
+    :class:`~ffdcli.volume.roles.SlidingPlane` s (the wall nodes in one slide with it)."""
+    pts = np.asarray(points, dtype=np.float64)
+    wall_ids = np.asarray(wall_ids, dtype=np.int64)
+    target_ids = np.asarray(target_ids, dtype=np.int64)
+    if not len(wall_ids) or not len(target_ids) or not cells:
+        return None
+    nrm = wall_normals(pts, faces, wall_ids)
+    edges = off_wall_edges(pts, cells, faces, wall_ids, nrm)
+    ok = (edges.height > 0) & (edges.spacing > 0)
+    if not ok.any():
+        return None
+    aspect = edges.spacing[ok] / edges.height[ok]
+    if np.median(aspect) < MIN_ASPECT:
+        return None
+    thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node)
+    thick = np.maximum(thick, edges.height)
+    reach = float(thick.max()) * (1.0 + BLEND)
+    wall = pts[wall_ids]
+    tree = cKDTree(wall)
+    dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
+    rows = np.flatnonzero(np.isfinite(dist))
+    flat = np.ptp(pts, axis=0).min() <= 1e-12 * max(float(np.ptp(pts, axis=0).max()), 1e-300)
+    k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
+    x = pts[target_ids[rows]]
+    part = _partition(tree, x, k, len(wall_ids))
+    delta = part @ thick                        # the layer's thickness where each node is (continuous)
+    t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
+    weight = 1.0 - t * t * (3.0 - 2.0 * t)
+    keep = weight > 0
+    rows, weight, x, part = rows[keep], weight[keep], x[keep], part[keep]
+    nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
+    origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
+    planes = np.zeros((len(wall_ids), 3))
+    size = float(np.linalg.norm(np.ptp(wall, axis=0)))
+    for plane in sliding:               # the wall nodes on a sliding plane (a root on a symmetry plane)
+        normal = np.asarray(plane[1], dtype=np.float64)
+        on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= 1e-9 * size
+        on &= np.abs(nrm @ normal) < 0.05          # the wall meets the plane nearly square (within 3 degrees)
+        planes[on] = normal
+    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, nrm, float(np.median(thick)),
+                     planes)
+
+
+def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
+    """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module docstring)."""
+    n = len(x)
+    if k < 1:
+        return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns))
+    d, j = tree.query(x, k=k + 1)
+    R = d[:, -1:]
+    d, j = d[:, :-1], j[:, :-1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        psi = (np.maximum(R - d, 0.0) / (R * np.maximum(d, 1e-300))) ** 3
+    bad = ~np.isfinite(psi).all(axis=1) | (psi.sum(axis=1) <= 0)
+    psi[bad] = 0.0
+    psi[bad, 0] = 1.0                   # on a wall node, or every neighbour as far: the nearest
+    psi /= psi.sum(axis=1, keepdims=True)
+    return csr_matrix((psi.ravel(), (np.repeat(np.arange(n), k), j.ravel())), shape=(n, ns))
