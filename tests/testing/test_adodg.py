@@ -116,8 +116,8 @@ def test_add_material_refuses_a_chordwise_move(small):
 
 @pytest.mark.parametrize(("name", "n_vars"), [("case1_v8.yaml", 8), ("case1.yaml", 16), ("case1_v32.yaml", 32)])
 def test_design_files_load_and_their_constraints_hold_at_the_baseline(tmp_path, small, name, n_vars):
-    """The three lattices' design files, on the coarsest mesh: the variables the case asks for, the 99
-    thickness stations and both edges, every one met by the baseline (``ffd constraints``)."""
+    """The three lattices' design files, on the coarsest mesh: the variables the case asks for, the
+    add-material rule at every wall node and both edges, every one met by the baseline (``ffd constraints``)."""
     src = REPO / "configs" / "adodg" / name
     design = yaml.safe_load(src.read_text())
     variables = design["optimize"]["variables"]
@@ -130,5 +130,8 @@ def test_design_files_load_and_their_constraints_hold_at_the_baseline(tmp_path, 
     res = run_ffd("constraints", tmp_path / name, "--json")
     assert res.returncode == 0, res.stderr
     rows = json.loads(res.stdout)["constraints"]
-    assert [r["name"] for r in rows] == [f"k0.thickness[{j}]" for j in range(99)] + ["k1.le_te[0]", "k1.le_te[1]"]
+    # every wall node but the leading- and trailing-edge points (their normals lie along the chord)
+    n_wall = small[0].cells_around
+    assert [r["name"] for r in rows] == [f"k0.add_material[{j}]" for j in range(n_wall - 2)] + ["k1.le_te[0]",
+                                                                                                 "k1.le_te[1]"]
     assert all(r["satisfied"] for r in rows)
