@@ -107,3 +107,13 @@ def assert_clean_failure(proc: subprocess.CompletedProcess, code: int = 2, *must
     assert "ffd: error:" in proc.stderr, proc.stderr
     for text in must_contain:
         assert text in proc.stderr, (text, proc.stderr)
+
+
+@pytest.fixture
+def default_sigint():
+    """SIGINT as Python's default (KeyboardInterrupt) for the test, restored after: a pytest-xdist
+    worker runs with SIGINT ignored, and ffd leaves an ignored signal ignored (as a program started in
+    the background must), so a test that sends itself Ctrl-C needs the default back."""
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, old)

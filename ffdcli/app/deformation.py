@@ -152,10 +152,10 @@ def _deform(run: DesignRun, *, progress, P, check, recover) -> Deformation:
         _, points, quality, used = best
         t["recovery"] = time.perf_counter() - t3
     wall = None
-    if quality is not None and not chain.share.local:
+    if quality is not None:
         tol = (run.design.volume or {}).get("first_cell", DEFAULT_FIRST_CELL)
         wall = wall_layer_report(mesh, [n for c in run.components for n in c.prep.surface.names], points,
-                                 mesh.points, float(tol))
+                                 mesh.points, float(tol), share=chain.share)
     lattice = P1[0] if chain.single else list(P1)
     return Deformation(points=points, lattice=lattice, surface_displacement=disp, volume_method=method,
                        quality=quality, seconds=t, recovery=tried, recovered_with=used, wall_layer=wall)

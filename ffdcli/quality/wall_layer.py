@@ -70,37 +70,70 @@ class WallLayerReport:
 
 
 def wall_layer_report(mesh: Mesh, walls, points_after: np.ndarray | None = None,
-                      points_before: np.ndarray | None = None, tolerance: float = DEFAULT_FIRST_CELL
-                      ) -> WallLayerReport | None:
+                      points_before: np.ndarray | None = None, tolerance: float = DEFAULT_FIRST_CELL,
+                      *, share=None) -> WallLayerReport | None:
     """The figures of the markers ``walls`` (names) of ``mesh``; None when the mesh has no boundary
     layer there (or no volume cells). ``points_after`` (N, 3) default the mesh's points; with
-    ``points_before`` (N, 3) the ratios, the angle changes and the rule."""
-    if not mesh.cells or not walls:
+    ``points_before`` (N, 3) the ratios, the angle changes and the rule.
+
+    ``share`` (:class:`ffdcli.chain.share.MeshShare`-like: ``local``, ``part()``, ``comm``): of one MPI
+    rank's local mesh, each rank measures the wall nodes it owns (their cells are all local) and the
+    rows are gathered, so every rank returns the serial report."""
+    if not walls:
         return None
+    local = share is not None and share.local
+    if not local and not mesh.cells:
+        return None
+    rows = wall_node_rows(mesh, walls, points_after, points_before)
+    if local:
+        part = share.part()
+        owned = np.zeros(len(mesh.points), dtype=bool)
+        owned[part.ids[part.owned] if part.rows is None else part.rows[part.owned]] = True
+        mine = owned[rows[:, 0].astype(np.int64)]
+        gid = mesh.global_ids[rows[mine, 0].astype(np.int64)]
+        rows = share.comm.allgather_rows(np.column_stack([gid.astype(np.float64), rows[mine, 1:]]))
+    return report_from_rows(rows, tolerance, points_before is not None)
+
+
+def wall_node_rows(mesh: Mesh, walls, points_after=None, points_before=None) -> np.ndarray:
+    """(k, 9) one row per measurable wall node of ``walls`` (not on a sharp edge): node (a row of
+    ``mesh``), first-cell height and wall spacing before, height after, off-wall angle before and after
+    (degrees), the node's coordinates before."""
     names = [walls] if isinstance(walls, str) else list(walls)
     faces = mesh.marker_faces(names)
     ids = mesh.marker_point_ids(names)
     after = mesh.points if points_after is None else np.asarray(points_after, dtype=np.float64)
     ref = after if points_before is None else np.asarray(points_before, dtype=np.float64)
+    if not mesh.cells or not len(ids):
+        return np.empty((0, 9))
     e0 = off_wall_edges(ref, mesh.cells, faces, ids)
     ok = (e0.node >= 0) & (e0.height > 0) & (e0.spacing > 0)
     ok[sharp_nodes(ref, faces, ids)] = False        # no wall normal: the edge's first cell is the wake's
-    if not ok.any() or np.median(e0.spacing[ok] / e0.height[ok]) < MIN_ASPECT:
-        return None
     e1 = e0 if points_before is None else off_wall_edges(after, mesh.cells, faces, ids, edge_nodes=e0.node)
-    fig = {"n_wall": int(ok.sum()), "height_min": float(e1.height[ok].min()),
-           "height_max": float(e1.height[ok].max()), "angle_max": float(e1.angle[ok].max()),
-           "tolerance": float(tolerance)}
-    if points_before is None:
+    node = np.asarray(ids)[ok]
+    return np.column_stack([node.astype(np.float64), e0.height[ok], e0.spacing[ok], e1.height[ok],
+                            e0.angle[ok], e1.angle[ok], ref[node]])
+
+
+def report_from_rows(rows: np.ndarray, tolerance: float, before: bool) -> WallLayerReport | None:
+    """The report of :func:`wall_node_rows`' rows (every rank's, gathered): ordered by node first, so
+    that the figures and the worst node do not depend on how the nodes were split."""
+    if not len(rows):
+        return None
+    rows = rows[np.argsort(rows[:, 0], kind="stable")]
+    node, h0, s0, h1, a0, a1 = (rows[:, j] for j in range(6))
+    if np.median(s0 / h0) < MIN_ASPECT:
+        return None
+    fig = {"n_wall": int(len(rows)), "height_min": float(h1.min()), "height_max": float(h1.max()),
+           "angle_max": float(a1.max()), "tolerance": float(tolerance)}
+    if not before:
         return WallLayerReport(**fig)
-    ratio = e1.height[ok] / e0.height[ok]
-    change = np.abs(e1.angle[ok] - e0.angle[ok])
+    ratio = h1 / h0
     off = np.abs(ratio - 1.0)
     worst = int(np.argmax(off))
-    node = int(ids[np.flatnonzero(ok)[worst]])
     return WallLayerReport(**fig, ratio_min=float(ratio.min()), ratio_max=float(ratio.max()),
-                           angle_change=float(change.max()), n_failed=int((off > tolerance).sum()),
-                           worst_node=node, worst_at=tuple(float(v) for v in ref[node]))
+                           angle_change=float(np.abs(a1 - a0).max()), n_failed=int((off > tolerance).sum()),
+                           worst_node=int(node[worst]), worst_at=tuple(float(v) for v in rows[worst, 6:9]))
 
 
 def enforce_wall_layer(report: WallLayerReport | None, *, design_path=None, force: bool = False, refuse: bool = False,

@@ -17,6 +17,8 @@ from wingcase import write_design, write_volume_wing
 import ffdcli.cli.console as console_module
 import ffdcli.io.outputs as outputs_module
 
+pytestmark = pytest.mark.usefixtures("default_sigint")   # Ctrl-C as in a terminal, also in an xdist worker
+
 SIGNALS = [signal.SIGINT, signal.SIGTERM, signal.SIGHUP]
 #: when the signal comes: inside a writer (before any rename), at the first rename, at the last one,
 #: after the write returned (as the summary is printed)

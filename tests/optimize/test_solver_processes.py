@@ -19,6 +19,8 @@ from ffdcli.io.atomic import signals_raise
 from ffdcli.optimize.problem import OptimizationProblem
 from ffdcli.optimize.solvers.base import RunningProcesses, run_logged, stop_processes
 
+pytestmark = pytest.mark.usefixtures("default_sigint")   # Ctrl-C as in a terminal, also in an xdist worker
+
 SLEEP = [sys.executable, "-c", "import time; time.sleep(60)"]
 #: ignores SIGTERM, as SU2_CFD_AD was seen to for 8 s
 STUBBORN = [sys.executable, "-c",

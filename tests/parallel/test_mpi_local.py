@@ -112,7 +112,7 @@ def test_a_design_that_needs_recovery_gives_the_serial_rows_report_and_files(win
                                 "changes": [{"dihedral": 40}], "volume": {"alpha": 0.25}})
     outputs = {"mesh_path": "out.su2", "lattice_path": "out_lattice.vtk", "surface_file": "surface.dat"}
     (run, res, written), ranks = _serial_and_ranks(design, tmp_path, outputs)
-    assert len(res.recovery) == 5 and any("increments" in a["attempt"] for a in res.recovery)
+    assert len(res.recovery) >= 5 and any("increments" in a["attempt"] for a in res.recovery)
     seen = np.zeros(run.prep.mesh.n_points, dtype=int)
     for local, moved, pts, q, recovery, used, _, w in ranks:
         g = local.global_ids

@@ -76,9 +76,11 @@ CASES = {
     # (mesh source, surface, changes, ranks, input format, output suffix, volume)
     "span_y_right_prisms_round_tip": ("gen:right_dihedral_zx_bl", "wing",
                                       [{"twist": {"tip": 8}}, {"span": 1.1}, {"sweep": 5}, {"dihedral": 3}],
-                                      2, ".su2", ".su2", None),
+                                      2, ".su2", ".su2", {"wall_layer": "none"}),
+    # these two wings' first cells are thin (a boundary layer): under MPI its rigid motion is refused
+    # (test_a_boundary_layer_under_mpi_is_refused_on_every_rank), so they run with the warp alone
     "span_neg_y_left_round_tip_cgns_3_ranks": ("gen:left_swept_round", "wing", [{"twist": {"tip": 10}}],
-                                               3, ".cgns", ".cgns", None),
+                                               3, ".cgns", ".cgns", {"wall_layer": "none"}),
     "span_x_far_field_50_vtu_in_su2_out": ("gen:transport_x_ff50", "wing",
                                            [{"chord": {"tip": 0.7}}, {"sweep": -5}], 2, ".vtu", ".su2", None),
     "airfoil_2d": ("samples/naca0012_2d.su2", "airfoil",
@@ -111,3 +113,22 @@ def test_mpi_deform_equals_the_serial_run_on_meshes_with_variety(case, tmp_path)
     _same_files(tmp_path)
     if "recovered" in case:
         assert a["recovered_with"] and a["recovery"][0]["failed"] > 0
+
+
+def test_a_boundary_layer_under_mpi_is_refused_on_every_rank(tmp_path):
+    """A boundary-layer mesh's rigid wall layer is walked through cells one rank's part does not hold
+    whole: under mpiexec the ranks refuse together (exit 2, one line naming the key and what to do),
+    nothing written; serially the same design is deformed."""
+    mesh = _generated("right_dihedral_zx_bl", tmp_path / "meshes")
+    design = _design(tmp_path, mesh, "wing", [{"twist": {"tip": 8}}], points=(6, 8, 2), suffix=".su2",
+                     volume=None)
+    out = tmp_path / "mpi"
+    out.mkdir()
+    proc = mpi_ffd(2, "deform", design, "-o", out / "mesh.su2", "--cache-dir", tmp_path / "cache", cwd=tmp_path)
+    assert proc.returncode == 2, proc.stderr[-2000:]
+    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("ffd: error:")]
+    assert len(errors) == 1 and "volume.wall_layer" in errors[0] and "mpiexec" in errors[0], proc.stderr
+    assert not any(out.iterdir())
+    serial = run_ffd("deform", design, "-o", tmp_path / "serial.su2", "--cache-dir", tmp_path / "cache",
+                     cwd=tmp_path)
+    assert serial.returncode == 0, serial.stderr[-2000:]
