@@ -194,10 +194,12 @@ def test_plot_draws_the_target_airfoil(tmp_path):
 def test_plot_says_when_the_gate_would_refuse(tmp_path):
     import json
 
-    design = REPO / "configs" / "rect_twist_sections.yaml"
-    # the surface moved and the volume not (volume.method: none): cells at the wall invert, no recovery
+    design = REPO / "configs" / "rect_twist_linear.yaml"
+    # the tip section turned by 150 degrees over one section's span: the design's own map folds the
+    # cells at the tip, which no recovery of the volume can undo (with volume.method: none the gate does
+    # not judge the volume at all: another tool moves it)
     proc = run_ffd("plot", design, "-o", tmp_path / "r.png", "--no-3d", "--json",
-                   "--set", "volume.method=none")
+                   "--set", "changes.0.twist=[0, 0, 0, 0, 0, 0, 0, 150]")
     assert proc.returncode == 0, proc.stderr
     assert "quality gate would refuse" in proc.stderr
     assert json.loads(proc.stdout)["refused"] is True
