@@ -234,13 +234,15 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
             self._note(f"{outside} points of {name!r} are outside the box: they never move")
 
     # -- evaluation -------------------------------------------------------------------------------------
-    def _sync(self, inputs) -> None:
+    def _design(self, inputs):
+        """The design at the component's inputs (the variables it does not expose at the design file's
+        values): a :class:`~ffdcli.api.model.DesignPoint`, nothing set on the model (the values arrive
+        on every call, as OpenMDAO hands them)."""
         m = self.model
         v = m.values.copy()
         for name, names in self._dvs.items():
             v[self._indices(names)] = np.asarray(inputs[name]).reshape(-1)
-        if not np.array_equal(v, m.values):
-            m.set_values(v)
+        return m.evaluate(v)
 
     def _update_points(self, inputs) -> None:
         for name, info in self._sets.items():
@@ -256,20 +258,20 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
         self._update_points(inputs)
         self._require_model("compute")
         try:
-            self._sync(inputs)
+            at = self._design(inputs)
         except InputError as e:              # a value out of its bounds: the driver may step back
             raise om.AnalysisError(str(e)) from None
         for name in self._sets:
-            outputs[name] = self.model.points(name).reshape(-1)
+            outputs[name] = at.points(name).reshape(-1)
         if self._cons:
-            vals = self.model.constraint_values()
+            vals = at.constraint_values()
             for name, rows in self._constraint_rows().items():
                 outputs[name] = vals[rows]
 
     def compute_jacvec_product(self, inputs, d_inputs, d_outputs, mode):
         self._update_points(inputs)
-        self._sync(inputs)
         m = self.model
+        at = self._design(inputs)
         sets = [n for n in self._sets if n in d_outputs]
         cons = {n: r for n, r in self._constraint_rows().items() if n in d_outputs} if self._cons else {}
         if mode == "fwd":
@@ -278,17 +280,17 @@ class FFDGeometry(PyGeoMethods, VariablesAndConstraints, om.ExplicitComponent):
                 if name in d_inputs:
                     dv[self._indices(names)] += np.asarray(d_inputs[name]).reshape(-1)
             for name in sets:
-                d_outputs[name] += m.points_jvp(name, dv).reshape(-1)
+                d_outputs[name] += at.points_jvp(name, dv).reshape(-1)
             if cons:
-                Jdv = m.constraint_jacobian() @ dv
+                Jdv = at.constraint_jacobian() @ dv
                 for name, rows in cons.items():
                     d_outputs[name] += Jdv[rows]
         else:
             g = np.zeros(m.n_vars)
             for name in sets:        # a collective under MPI: every rank, every set, in one order
-                g += m.points_vjp(name, np.asarray(d_outputs[name]).reshape(-1, 3))
+                g += at.points_vjp(name, np.asarray(d_outputs[name]).reshape(-1, 3))
             if cons:
-                J = m.constraint_jacobian()
+                J = at.constraint_jacobian()
                 for name, rows in cons.items():
                     g += np.asarray(d_outputs[name]) @ J[rows]
             for name, names in self._dvs.items():
