@@ -129,7 +129,8 @@ def orient_block(blk: np.ndarray, axes, chord_sign: float, dim: int, pts: np.nda
     order = {}
     left = [0, 1, 2]
     for name in ("span", "chord", "thickness"):
-        score = [abs(mean_edge[a] @ dirs[name]) for a in left]
+        # a single layer is the span of a 2D lattice (ffd's own export: one section, (n, 1, l))
+        score = [np.inf if name == "span" and blk.shape[a] < 2 else abs(mean_edge[a] @ dirs[name]) for a in left]
         a = left[int(np.argmax(score))]
         order[name] = a
         left.remove(a)

@@ -29,6 +29,30 @@ def test_export_then_import_plot3d_gives_the_same_lattice(tmp_path):
     assert s["outside"] == 0 and s["lattice"] == [6, 8, 2]
 
 
+@pytest.mark.parametrize("points", [(5, 2), (9, 2), (6, 3)])
+def test_a_2d_lattice_exported_then_imported_is_the_same_lattice(tmp_path, points):
+    """A 2D box written with --export-plot3d (one section: an (n, 1, l) block) read back with --from is
+    the same lattice, every surface point inside: so a design made on one mesh can be applied to
+    another mesh of the same airfoil with the same lattice (ADODG Case 1's evaluation on a finer
+    level). Before the fix the single layer was taken for the chord (box.points [1, 2])."""
+    mesh = shared_file("su2/optimization_euler__steady_naca0012__mesh_NACA0012_inv.su2")
+    xyz = tmp_path / "airfoil.xyz"
+    pts = ",".join(map(str, points))
+    proc = run_ffd("box", str(mesh), "--points", pts, "--export-plot3d", str(xyz), "--json",
+                   "--cache-dir", str(tmp_path), "--lattice", str(tmp_path / "a.vtk"))
+    assert proc.returncode == 0, proc.stderr
+    block = read_plot3d(xyz)[0]
+    assert block.shape == (points[0], 1, points[1], 3)
+    auto = prepare_box(mesh, ["airfoil"], BoxSettings(points=points), cache_dir=tmp_path)
+    imported = prepare_box(mesh, ["airfoil"], BoxSettings(file=str(xyz)), cache_dir=tmp_path)
+    np.testing.assert_allclose(imported.box.control_points, auto.box.control_points, rtol=0, atol=1e-15)
+    proc = run_ffd("box", str(mesh), "--from", str(xyz), "--json", "--cache-dir", str(tmp_path),
+                   "--lattice", str(tmp_path / "b.vtk"))
+    assert proc.returncode == 0, proc.stderr
+    s = json.loads(proc.stdout)
+    assert s["outside"] == 0 and s["lattice"] == list(points)
+
+
 def test_imported_lattice_point_outside_is_reported_not_snapped(tmp_path):
     mesh = write_surface_wing(tmp_path)
     auto = prepare_box(mesh, ["wing"], BoxSettings(points=(6, 8, 2)))
