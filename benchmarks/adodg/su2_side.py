@@ -1,0 +1,303 @@
+"""SU2's own optimiser on ADODG Case 1, beside ``ffd optimize``: same mesh, same flow settings.
+
+``shape_optimization.py`` (SU2 8.1's script: SLSQP, discrete adjoint ``SU2_CFD_AD``, mesh moved by
+``SU2_DEF``'s linear elasticity) on the optimisation mesh L2 with ``configs/adodg/case1.cfg``'s flow
+settings (JST, implicit Euler, multigrid, every flow and adjoint solve to an rms residual of 1e-12:
+``CONV_FIELD= (RMS_DENSITY, RMS_ADJ_DENSITY)``, each program ignores the other's field) and the
+optimiser settings of SU2's own ``inv_NACA0012_basic`` tutorial (objective ``DRAG * 0.001``, its
+mesh-deformation keys), at most 30 SLSQP iterations like ffd's design files, with
+
+* ``ffd``: SU2's FFD box (``FFD_SETTING`` embedded by ``SU2_DEF``): ffd's 16-variable lattice's
+  rectangle (2 % of the chord around the airfoil: x -0.02 ... 1.02, y -0.08 ... 0.08), Bezier, degree
+  (8, 1): 9 x 2 control points; the 16 ``FFD_CONTROL_POINT_2D`` variables move the control points of
+  the 8 columns ahead of the trailing edge in y (the trailing-edge column stays put, as in ffd's
+  file), bounds +-0.1 chord as ffd's. SU2 cannot state the add-material rule for it: the closest it
+  can state are SU2_GEO's 2-D functions, ``AIRFOIL_THICKNESS`` (the maximum thickness) and
+  ``AIRFOIL_AREA`` at least the baseline's (SU2_GEO in 2-D has no thickness at given stations: its
+  functions are AREA, THICKNESS, CHORD, LE_RADIUS, TOC and ALPHA). Both are necessary, not sufficient.
+* ``hh``: 18 Hicks-Henne bumps (``HICKS_HENNE``, 9 on each surface at x = 0.1 ... 0.9, SU2's bump
+  width exponent), amplitudes bounded to [0, 0.1] chord. A Hicks-Henne bump is non-negative and
+  SU2 moves the upper surface up and the lower down for a positive amplitude (checked with SU2_DEF),
+  so these bounds state the add-material rule exactly (a sufficient condition: designs that add
+  material with a bump of negative amplitude are excluded); no geometric constraint is needed.
+
+    python -m benchmarks.adodg.su2_side setup ffd --mesh out/adodg/adodg_L2.su2 --folder out/adodg/su2_ffd
+    python -m benchmarks.adodg.su2_side run out/adodg/su2_ffd          # hours on L2; nice -n 5
+    python -m benchmarks.adodg.su2_side report out/adodg/su2_ffd --baseline out/adodg/adodg_L2.su2
+
+``setup`` writes ``config.cfg`` and the mesh into the folder (for ``ffd`` it runs ``SU2_DEF`` to embed
+the box: ``mesh_ffd.su2``); ``run`` starts SU2's script there (``optimizer.log``, ``run.json`` with the
+wall time when it ends); ``report`` reads ``history_project.csv`` and the ``DESIGNS`` folders: flow and
+adjoint solves, CD, SU2_GEO's functions, the best feasible design, and the add-material rule checked at
+every wall node of that design's mesh (:mod:`benchmarks.adodg.surface`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.adodg.surface import add_material, wall_nodes
+from ffdcli.io.formats import read_mesh
+from ffdcli.optimize.solvers.base import find_program
+from ffdcli.optimize.solvers.su2 import read_config, with_keys
+
+ROOT = Path(__file__).resolve().parents[2]
+CONFIG = ROOT / "configs" / "adodg" / "case1.cfg"
+SEARCH = (ROOT.parent / "shared" / "su2" / "bin",)
+ITERATIONS = 30
+BOUND = 0.1
+BOX = (-0.02, 1.02, -0.08, 0.08)          # ffd's automatic 2-D lattice on these meshes (margin 0.02 chord)
+FFD_COLUMNS, FFD_FREE = 9, 8              # Bezier degree 8: 9 columns, the trailing-edge one fixed
+HH_STATIONS = tuple(round(0.1 * k, 1) for k in range(1, 10))
+TOLERANCE = 1e-6                          # the case's constraint tolerance, chords
+
+
+def su2_bin() -> Path:
+    """The folder of SU2's programs and scripts (``SU2_RUN``, ``PATH``, ``../shared/su2/bin``)."""
+    program = find_program("SU2_CFD", "SU2_RUN", SEARCH)
+    if program is None:
+        raise RuntimeError("SU2 not found: set SU2_RUN or put SU2_CFD on PATH")
+    return Path(program).resolve().parent
+
+
+def su2_env() -> dict:
+    """Environment for SU2's programs and its Python scripts."""
+    b = str(su2_bin())
+    return {**os.environ, "SU2_RUN": b, "PATH": f"{b}:{os.environ.get('PATH', '')}", "PYTHONPATH": b,
+            "OMP_NUM_THREADS": "1"}
+
+
+def ffd_definition(box: tuple[float, float, float, float] = BOX) -> str:
+    """``FFD_DEFINITION`` of the 2-D box: corners counter-clockwise from (x0, y0), z = 0."""
+    x0, x1, y0, y1 = box
+    corners = [(x0, y0), (x1, y0), (x1, y1), (x0, y1)]
+    return "(BOX, " + ", ".join(f"{x:g}, {y:g}, 0.0" for x, y in corners) + ", " + ", ".join(["0.0"] * 12) + ")"
+
+
+def ffd_variables() -> str:
+    """``DEFINITION_DV``: the control points of the free columns, lower row then upper, moving in y."""
+    return "; ".join(f"( 19, 1.0 | airfoil | BOX, {i}, {j}, 0.0, 1.0 )" for j in (0, 1) for i in range(FFD_FREE))
+
+
+def hh_variables() -> str:
+    """``DEFINITION_DV``: Hicks-Henne bumps, lower surface (0) then upper (1), at ``HH_STATIONS``."""
+    return "; ".join(f"( 30, 1.0 | airfoil | {side}, {x:g} )" for side in (0, 1) for x in HH_STATIONS)
+
+
+def config_keys(param: str, mesh_name: str, thickness: float, area: float) -> dict[str, str]:
+    """The keys added to (or replaced in) ``case1.cfg`` for SU2's optimiser with ``param``."""
+    keys = {
+        "MESH_FILENAME": mesh_name,
+        "CONV_FIELD": "(RMS_DENSITY, RMS_ADJ_DENSITY)",
+        "OUTPUT_FILES": "(RESTART, SURFACE_CSV)",
+        "DV_MARKER": "( airfoil )",
+        "GEO_MARKER": "( airfoil )", "GEO_DESCRIPTION": "AIRFOIL", "GEO_MODE": "FUNCTION",
+        "DEFORM_LINEAR_SOLVER_ITER": "500", "DEFORM_NONLINEAR_ITER": "1", "DEFORM_CONSOLE_OUTPUT": "YES",
+        "DEFORM_LINEAR_SOLVER_ERROR": "1E-14", "DEFORM_STIFFNESS_TYPE": "INVERSE_VOLUME",
+        "OPT_OBJECTIVE": "DRAG * 0.001",
+        "OPT_ITERATIONS": str(ITERATIONS), "OPT_ACCURACY": "1E-10",
+    }
+    if param == "ffd":
+        keys.update({
+            "DV_KIND": "FFD_SETTING", "DV_PARAM": "( 1.0 )", "DV_VALUE": "0.0",
+            "FFD_DEFINITION": ffd_definition(), "FFD_DEGREE": f"({FFD_COLUMNS - 1}, 1, 0)",
+            "FFD_CONTINUITY": "USER_INPUT", "FFD_TOLERANCE": "1E-10", "FFD_ITERATIONS": "500",
+            "OPT_CONSTRAINT": f"( AIRFOIL_THICKNESS > {thickness:.6g} ) * 1.0; ( AIRFOIL_AREA > {area:.6g} ) * 1.0",
+            "OPT_BOUND_UPPER": f"{BOUND:g}", "OPT_BOUND_LOWER": f"{-BOUND:g}",
+            "DEFINITION_DV": ffd_variables(),
+        })
+    elif param == "hh":
+        keys.update({
+            "DV_KIND": "HICKS_HENNE", "DV_PARAM": "( 1, 0.5 )", "DV_VALUE": "0.0",
+            "OPT_CONSTRAINT": "NONE",
+            "OPT_BOUND_UPPER": f"{BOUND:g}", "OPT_BOUND_LOWER": "0.0",
+            "DEFINITION_DV": hh_variables(),
+        })
+    else:
+        raise ValueError(f"parameterization {param!r}: expected 'ffd' or 'hh'")
+    return keys
+
+
+def run_program(args: list[str], folder: Path, log: str) -> None:
+    """Run an SU2 program in ``folder`` under nice -n 5; raise with the log's path on failure."""
+    with open(folder / log, "w") as fh:
+        rc = subprocess.run(["nice", "-n", "5", *args], cwd=folder, stdout=fh, stderr=subprocess.STDOUT,
+                            env=su2_env()).returncode
+    if rc != 0:
+        raise RuntimeError(f"{args[0]} failed (exit {rc}): see {folder / log}")
+
+
+def geometry(folder: Path, mesh_name: str) -> dict[str, float]:
+    """SU2_GEO's 2-D functions of ``folder/mesh_name`` (AIRFOIL_AREA, AIRFOIL_THICKNESS, ...)."""
+    text = with_keys(read_config(CONFIG), {"MESH_FILENAME": mesh_name, "GEO_MARKER": "( airfoil )",
+                                           "GEO_DESCRIPTION": "AIRFOIL", "GEO_MODE": "FUNCTION",
+                                           "VALUE_OBJFUNC_FILENAME": "of_func.csv"})
+    (folder / "geo.cfg").write_text(text)
+    run_program([str(su2_bin() / "SU2_GEO"), "geo.cfg"], folder, "geo.log")
+    with open(folder / "of_func.csv") as fh:
+        rows = list(csv.reader(fh))
+    return {k.strip().strip('"'): float(v) for k, v in zip(rows[0], rows[1])}
+
+
+def setup(param: str, mesh: Path, folder: Path) -> Path:
+    """Write ``folder/config.cfg`` (and the mesh; for ``ffd`` the mesh with SU2's box embedded)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(mesh, folder / "mesh.su2")
+    geo = geometry(folder, "mesh.su2")
+    mesh_name = "mesh.su2"
+    keys = config_keys(param, mesh_name, geo["AIRFOIL_THICKNESS"], geo["AIRFOIL_AREA"])
+    if param == "ffd":
+        box = with_keys(read_config(CONFIG), {**keys, "MESH_OUT_FILENAME": "mesh_ffd.su2"})
+        (folder / "box.cfg").write_text(box)
+        run_program([str(su2_bin() / "SU2_DEF"), "box.cfg"], folder, "box.log")
+        keys["MESH_FILENAME"] = mesh_name = "mesh_ffd.su2"
+    (folder / "config.cfg").write_text(with_keys(read_config(CONFIG), keys))
+    (folder / "baseline_geometry.json").write_text(json.dumps(geo, indent=1))
+    return folder / "config.cfg"
+
+
+def run(folder: Path) -> float:
+    """``shape_optimization.py -g DISCRETE_ADJOINT -o SLSQP -f config.cfg`` in ``folder``; wall seconds."""
+    cmd = [sys.executable, str(su2_bin() / "shape_optimization.py"), "-g", "DISCRETE_ADJOINT", "-o", "SLSQP",
+           "-f", "config.cfg"]
+    t0 = time.time()
+    (folder / "run.json").unlink(missing_ok=True)
+    with open(folder / "optimizer.log", "w") as fh:
+        rc = subprocess.run(["nice", "-n", "5", *cmd], cwd=folder, stdout=fh, stderr=subprocess.STDOUT,
+                            env=su2_env()).returncode
+    wall = time.time() - t0
+    (folder / "run.json").write_text(json.dumps({"rc": rc, "wall": wall, "start": t0, "command": cmd[1:]}))
+    return wall
+
+
+def _dsn_number(p: Path) -> int:
+    m = re.search(r"(\d+)$", p.name)
+    return int(m.group(1)) if m else -1
+
+
+def designs(folder: Path) -> list[Path]:
+    """The run's ``DESIGNS/DSN_*`` folders in creation order."""
+    return sorted((folder / "DESIGNS").glob("DSN_*"), key=_dsn_number)
+
+
+def project_rows(folder: Path) -> list[dict[str, float]]:
+    """``history_project.csv``: one row per design whose flow finished, in order."""
+    path = folder / "history_project.csv"
+    if not path.is_file():
+        return []
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    head = [h.strip().strip('"') for h in rows[0]]
+    return [{h: float(v) for h, v in zip(head, r)} for r in rows[1:] if r]
+
+
+def design_mesh(dsn: Path) -> Path | None:
+    """The mesh a design's flow ran on: ``DIRECT/``'s mesh (the deformed one), else the design folder's."""
+    for sub in (dsn / "DIRECT", dsn):
+        found = sorted(sub.glob("*.su2"))
+        if found:
+            return found[0]
+    return None
+
+
+def report(folder: Path, baseline: Path) -> dict:
+    """What a (finished or running) run reached: solves, designs with CD and SU2_GEO's functions, the
+    rule at every wall node of each design's mesh, the best design by SU2's constraints and by the rule."""
+    folder = Path(folder)
+    cfg = read_config(folder / "config.cfg")
+    geo = json.loads((folder / "baseline_geometry.json").read_text())
+    constrained = "AIRFOIL_THICKNESS" in (next((ln for ln in cfg if ln.startswith("OPT_CONSTRAINT")), ""))
+    base = read_mesh(baseline)
+    ids = wall_nodes(base)
+    adjoints = 0
+    rows = []
+    table = project_rows(folder)
+    flows = len(table)
+    for dsn in designs(folder):        # finished solves only: a flow's row in history_project.csv, an adjoint's gradient
+        adjoints += sum(1 for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+    for k, row in enumerate(table):
+        dsn = folder / "DESIGNS" / f"DSN_{k + 1:03d}"
+        mesh = design_mesh(dsn)
+        margin = None
+        if mesh is not None:
+            m = add_material(base.points[ids, :2], read_mesh(mesh).points[ids, :2])
+            margin = {"upper": m.upper, "lower": m.lower, "thickness": m.thickness}
+        tc, area = row.get("AIRFOIL_THICKNESS", np.nan), row.get("AIRFOIL_AREA", np.nan)
+        su2_ok = (not constrained) or (tc >= geo["AIRFOIL_THICKNESS"] - TOLERANCE and area >= geo["AIRFOIL_AREA"] - TOLERANCE)
+        rows.append({"design": dsn.name, "CD": row["DRAG"], "CL": row["LIFT"], "thickness": tc, "area": area,
+                     "su2_constraints_met": bool(su2_ok), "rule": margin,
+                     "rule_met": margin is not None and min(margin["upper"], margin["lower"]) >= -TOLERANCE})
+
+    def best(key: str):
+        ok = [r for r in rows if r[key]]
+        return min(ok, key=lambda r: r["CD"]) if ok else None
+
+    meta = folder / "run.json"
+    state = json.loads(meta.read_text()) if meta.is_file() else None
+    log = folder / "optimizer.log"
+    start = os.path.getmtime(folder / "config.cfg")
+    wall = state["wall"] if state else (max(os.path.getmtime(p) for p in [log, *designs(folder)]) - start
+                                        if log.is_file() else 0.0)
+    b0 = rows[0]["CD"] if rows else None
+    out = {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
+           "flow_solves": flows, "adjoint_solves": adjoints, "designs": rows, "wall": wall, "baseline_CD": b0,
+           "best_su2": best("su2_constraints_met"), "best_rule": best("rule_met"),
+           "baseline_geometry": {"AIRFOIL_THICKNESS": geo["AIRFOIL_THICKNESS"], "AIRFOIL_AREA": geo["AIRFOIL_AREA"]}}
+    return out
+
+
+def summary(rep: dict) -> str:
+    """Plain-text lines of a report."""
+    lines = [f"{rep['folder']}: {'finished (exit ' + str(rep['rc']) + ')' if rep['finished'] else 'RUNNING'}, "
+             f"{rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves, {rep['wall']:.0f} s wall"]
+    for r in rep["designs"]:
+        m = r["rule"]
+        rule = "-" if m is None else f"{min(m['upper'], m['lower']):+.2e}"
+        lines.append(f"  {r['design']}: CD {r['CD']:.6f}  t {r['thickness']:.6f}  area {r['area']:.7f}  "
+                     f"SU2 constraints {'met' if r['su2_constraints_met'] else 'NOT met'}  "
+                     f"rule margin {rule} ({'met' if r['rule_met'] else 'VIOLATED'})")
+    b0 = rep["baseline_CD"]
+    for key, what in (("best_su2", "by SU2's own constraints"), ("best_rule", "meeting the add-material rule")):
+        r = rep[key]
+        lines.append(f"best {what}: " + ("none" if r is None else
+                     f"{r['design']} CD {r['CD']:.6f} ({100 * (1 - r['CD'] / b0):.1f} % below {b0:.6f})"))
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.su2_side", description=__doc__.split("\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    s = sub.add_parser("setup", help="write config.cfg and the mesh into FOLDER")
+    s.add_argument("param", choices=["ffd", "hh"])
+    s.add_argument("--mesh", type=Path, required=True)
+    s.add_argument("--folder", type=Path, required=True)
+    r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
+    r.add_argument("folder", type=Path)
+    p = sub.add_parser("report", help="solves, CD, constraints and the add-material rule of a run")
+    p.add_argument("folder", type=Path)
+    p.add_argument("--baseline", type=Path, required=True, help="the baseline mesh the run started from")
+    p.add_argument("--json", action="store_true")
+    args = ap.parse_args(argv)
+    if args.command == "setup":
+        print(setup(args.param, args.mesh, args.folder))
+    elif args.command == "run":
+        print(f"{run(args.folder):.0f} s")
+    else:
+        rep = report(args.folder, args.baseline)
+        print(json.dumps(rep, indent=1) if args.json else summary(rep))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,124 @@
+"""ADODG Case 1's evaluation of an optimum on a finer level (benchmarks/adodg/evaluate.py) without a
+solver: a run made on L0 of a small nested family (its history and evaluation folders written here,
+the design's mesh by ``ffd deform`` with the run level's automatic box), evaluated on L1 with the run's
+lattice written to a Plot3D file (``box.file``). The run level rebuilt from the file equals the run's
+mesh, the finer wall equals the optimum at the nodes the levels share, and the add-material rule is
+judged at every finer wall node (met by designs that thicken the section, broken by ones that thin it).
+The run level's box fitted afresh to the finer mesh is a different shape: the reason for the file."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from benchmarks.adodg.evaluate import (
+    best_row,
+    common_nodes,
+    design_data,
+    evaluate,
+    ffd,
+    wall_xy,
+    write_yaml,
+)
+from benchmarks.adodg.meshes import family, level_mesh
+from benchmarks.adodg.surface import add_material
+from ffdcli.io.formats import write_mesh
+
+ROOT = Path(__file__).resolve().parents[2]
+DESIGN = ROOT / "configs" / "adodg" / "case1_v8.yaml"
+NAMES = [f"c0.shape.{side}[{i}]" for side in ("upper", "lower") for i in range(5)]
+
+
+@pytest.fixture(scope="module")
+def levels(tmp_path_factory):
+    """L0 (64 x 16) and L1 (128 x 32) of a nested family, written as SU2 files."""
+    folder = tmp_path_factory.mktemp("meshes")
+    paths = []
+    for lev in family(levels=2, finest=(128, 32)):
+        write_mesh(level_mesh(lev), folder / f"adodg_{lev.name}.su2")
+        paths.append(folder / f"adodg_{lev.name}.su2")
+    return paths
+
+
+def design_file(folder: Path, mesh: Path) -> Path:
+    """case1_v8.yaml on ``mesh`` (its run folder ``opt``)."""
+    data = yaml.safe_load(DESIGN.read_text())
+    data.update(mesh=str(mesh), output={"mesh": str(folder / "unused.su2")})
+    data["optimize"].update(folder=str(folder / "opt"))
+    return write_yaml(folder / "design.yaml", data)
+
+
+def fake_run(folder: Path, design: Path, mesh: Path, designs: list[tuple[list[float], float, float]]) -> Path:
+    """A run folder as ``ffd optimize`` writes it: history.csv and evals/NNNN/{result.json, mesh.su2}
+    (each mesh made by ``ffd deform`` with the automatic box, as the run's evaluations are)."""
+    run = folder / "opt"
+    rows = []
+    for k, (values, cd, violation) in enumerate(designs, start=1):
+        ev = run / "evals" / f"{k:04d}"
+        ev.mkdir(parents=True)
+        yml = write_yaml(ev / "design.yaml", design_data(design, mesh, values=values, names=NAMES, box_file=None,
+                                                          output=ev / "mesh.su2"))
+        ffd("deform", str(yml), "--cache-dir", str(folder / "cache"))
+        (ev / "result.json").write_text(json.dumps({"index": k, "values": values}))
+        rows.append({"evaluation": k, "iteration": k - 1, "objective": cd, "violation": violation,
+                     "folder": f"evals/{k:04d}", "failed": ""})
+    with open(run / "history.csv", "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    return run
+
+
+def symmetric(a: np.ndarray) -> list[float]:
+    """Upper row +a, lower row -a (the trailing-edge column fixed): thickens the section where a > 0."""
+    a = np.append(np.asarray(a, float), 0.0)
+    return [*a.tolist(), *(-a).tolist()]
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_optimum_on_the_finer_level_is_the_same_shape_and_keeps_the_rule(tmp_path, levels, seed):
+    l0, l1 = levels
+    rng = np.random.default_rng(seed)
+    design = design_file(tmp_path, l0)
+    thick = symmetric(rng.uniform(0.0, 0.01, 4))              # outward: the rule holds
+    thin = symmetric(-rng.uniform(0.002, 0.01, 4))            # inward: broken
+    # the thin design has the lower CD but is infeasible: the thick one is the run's best
+    run = fake_run(tmp_path, design, l0, [([0.0] * 10, 0.04, 0.0), (thick, 0.03, 0.0), (thin, 0.02, 1e-3)])
+    assert int(best_row(run, 1e-4)["evaluation"]) == 2
+    out = evaluate(design, run, l1, tmp_path / "eval", run_solve=False)
+    assert out["evaluation"] == 2 and out["feasible"]
+    assert out["lattice_error"] <= 1e-12                  # the file is the run's lattice
+    assert out["common_nodes"] == 64                      # every L0 wall node is an L1 wall node
+    assert out["shape_error"] <= 1e-12                    # ... where the finer shape is the optimum's
+    assert out["rule"]["nodes"] == 128 and out["rule"]["met"]
+    assert min(out["rule"]["upper"], out["rule"]["lower"]) >= -1e-12
+    assert out["reduction_run"] == pytest.approx(1 - 0.03 / 0.039897)
+    assert "cd" not in out                                # no solver asked
+
+    # the thin design on L1 breaks the rule, and the check says so
+    yml = write_yaml(tmp_path / "thin_L1.yaml", design_data(design, l1, values=thin, names=NAMES,
+                                                            box_file=tmp_path / "eval" / "lattice.xyz",
+                                                            output=tmp_path / "thin_L1.su2"))
+    ffd("deform", str(yml), "--cache-dir", str(tmp_path / "cache"))
+    m = add_material(wall_xy(l1), wall_xy(tmp_path / "thin_L1.su2"))
+    assert m.margin < -1e-4
+
+
+def test_a_box_fitted_to_the_finer_level_is_another_shape(tmp_path, levels):
+    l0, l1 = levels
+    design = design_file(tmp_path, l0)
+    values = symmetric([0.004, 0.008, 0.006, 0.002])
+    own = tmp_path / "L0.su2"
+    fresh = tmp_path / "L1_auto.su2"
+    for mesh, out in ((l0, own), (l1, fresh)):
+        ffd("deform", str(write_yaml(tmp_path / f"{out.stem}.yaml",
+                                     design_data(design, mesh, values=values, names=NAMES, box_file=None, output=out))),
+            "--cache-dir", str(tmp_path / "cache"))
+    ic, jf = common_nodes(wall_xy(l0), wall_xy(l1))
+    gap = np.abs(wall_xy(own)[ic] - wall_xy(fresh)[jf]).max()
+    assert gap > 1e-8                                     # not the optimum's shape: hence box.file
