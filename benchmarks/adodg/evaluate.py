@@ -21,8 +21,10 @@ extent comes from the surface's sampling), so the shape would not be the optimum
 
 ``--no-solve`` stops after the lattice and rule checks (no SU2). ``--baseline-run FOLDER`` solves the
 undeformed finer mesh there first when it has no converged solve yet (reused by every design);
-``--restart FILE`` starts from another converged solution on the same mesh instead (a warm start: the
-same residual target, so the same CD to the convergence level). Run it without an outer ``nice``:
+``--restart FILE`` starts from another converged solution on the same mesh instead; without either,
+the solve starts from the run's own converged solution of the design prolonged to the finer mesh
+(each node the inverse-distance average of its 4 nearest coarse nodes). A warm start only: the same
+residual target, so the same CD to the convergence level. Run it without an outer ``nice``:
 SU2 is started under ``nice -n 5`` here.
 """
 
@@ -140,6 +142,48 @@ def common_nodes(coarse: np.ndarray, fine: np.ndarray, tol: float = MATCH) -> tu
     return np.flatnonzero(hit), idx[hit]
 
 
+RESTART_MAGIC = 535532     # SU2's binary restart: int32 magic, fields, points, 0, 0; 33-byte names; float64 rows
+NAME_BYTES = 33
+
+
+def read_restart(path: Path) -> tuple[list[str], np.ndarray]:
+    """(field names, (points, fields) values) of an SU2 binary restart file."""
+    raw = Path(path).read_bytes()
+    head = np.frombuffer(raw[:20], dtype=np.int32)
+    if head[0] != RESTART_MAGIC:
+        raise ValueError(f"{path}: not an SU2 binary restart (magic {head[0]})")
+    nf, npt = int(head[1]), int(head[2])
+    names = [raw[20 + NAME_BYTES * k:20 + NAME_BYTES * (k + 1)].split(b"\0")[0].decode() for k in range(nf)]
+    off = 20 + NAME_BYTES * nf
+    return names, np.frombuffer(raw[off:off + 8 * nf * npt], dtype=np.float64).reshape(npt, nf).copy()
+
+
+def write_restart(path: Path, names: list[str], values: np.ndarray) -> None:
+    """Write an SU2 binary restart file (the layout :func:`read_restart` reads)."""
+    head = np.array([RESTART_MAGIC, len(names), len(values), 0, 0], dtype=np.int32).tobytes()
+    labels = b"".join(n.encode().ljust(NAME_BYTES, b"\0") for n in names)
+    Path(path).write_bytes(head + labels + np.ascontiguousarray(values, dtype=np.float64).tobytes())
+
+
+def prolong_restart(coarse: Path, fine_mesh: Path, out: Path, k: int = 4) -> Path:
+    """A starting solution for ``fine_mesh`` from a converged one on a coarser mesh of the family: each
+    fine node gets the inverse-distance average of its ``k`` nearest coarse nodes (a shared node its
+    coarse value exactly). Only a warm start: the fine solve converges to its own residual target."""
+    names, values = read_restart(coarse)
+    xy_c = values[:, [names.index("x"), names.index("y")]]
+    xy_f = read_mesh(fine_mesh).points[:, :2]
+    dist, idx = cKDTree(xy_c).query(xy_f, k=k)
+    w = 1.0 / np.maximum(dist, 1e-300)
+    exact = dist[:, 0] <= 1e-12
+    w[exact] = 0.0
+    w[exact, 0] = 1.0
+    w /= w.sum(axis=1, keepdims=True)
+    fine = np.einsum("nk,nkf->nf", w, values[idx])
+    fine[:, names.index("x")], fine[:, names.index("y")] = xy_f[:, 0], xy_f[:, 1]
+    write_restart(out, names, fine)
+    return out
+
+
 def solve(mesh: Path, folder: Path, restart: Path | None = None) -> dict:
     """SU2_CFD (case1.cfg, ``mesh``) in ``folder`` under nice -n 5, warm-started from ``restart``
     (a converged solution on a mesh of the same nodes) when given; CD, iterations, residual, times."""
@@ -231,6 +275,10 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, baseline_run: P
             b = reuse_or_solve(Path(mesh).resolve(), baseline_run)
             out["baseline"] = b
             restart = baseline_run / "restart_flow.dat"
+        elif restart is None and (run / best["folder"] / "restart_flow.dat").is_file():
+            (work / "su2").mkdir(parents=True, exist_ok=True)
+            restart = prolong_restart(run / best["folder"] / "restart_flow.dat", fine, work / "su2" / "prolonged.dat")
+        out["warm_start"] = None if restart is None else str(restart)
         s = reuse_or_solve(fine.resolve(), work / "su2", restart)
         out["solve"] = s
         out["cd"] = s["cd"]

@@ -73,10 +73,10 @@ def sections(baseline: Path, bests: list[tuple[str, Path, float]], path: Path) -
             bx.plot(base[sel, 0][o], sign * (xy[sel, 1][o] - base[sel, 1][o]), c, lw=1.0,
                     ls="-" if sign > 0 else "--")
     ax.set_aspect("equal")
-    ax.set_ylim(-0.12, 0.12)
+    ax.set_ylim(-0.08, 0.15)
     ax.set_ylabel("y / c")
     ax.set_title(TITLE + ": best sections", fontsize=10)
-    ax.legend(fontsize=7, loc="lower center", ncol=2)
+    ax.legend(fontsize=7, loc="upper center", ncol=3)
     ax.grid(alpha=0.3)
     bx.axhline(0.0, color="k", lw=0.8)
     bx.set_xlabel("x / c")

@@ -22,12 +22,15 @@ from benchmarks.adodg.evaluate import (
     design_data,
     evaluate,
     ffd,
+    prolong_restart,
+    read_restart,
     wall_xy,
+    write_restart,
     write_yaml,
 )
 from benchmarks.adodg.meshes import family, level_mesh
 from benchmarks.adodg.surface import add_material
-from ffdcli.io.formats import write_mesh
+from ffdcli.io.formats import read_mesh, write_mesh
 
 ROOT = Path(__file__).resolve().parents[2]
 DESIGN = ROOT / "configs" / "adodg" / "case1_v8.yaml"
@@ -122,3 +125,26 @@ def test_a_box_fitted_to_the_finer_level_is_another_shape(tmp_path, levels):
     ic, jf = common_nodes(wall_xy(l0), wall_xy(l1))
     gap = np.abs(wall_xy(own)[ic] - wall_xy(fresh)[jf]).max()
     assert gap > 1e-8                                     # not the optimum's shape: hence box.file
+
+
+def test_prolonged_restart_keeps_the_shared_nodes_and_stays_within_the_coarse_values(tmp_path, levels):
+    """The finer solve's warm start: SU2's binary restart layout read and written back byte for byte,
+    every node the two levels share gets its coarse value exactly, the others a convex average."""
+    l0, l1 = levels
+    xy0 = read_mesh(l0).points[:, :2]
+    rng = np.random.default_rng(7)
+    names = ["x", "y", "Density", "Momentum_x", "Momentum_y", "Energy"]
+    values = np.column_stack([xy0, rng.uniform(0.5, 1.5, (len(xy0), 4))])
+    coarse = tmp_path / "coarse.dat"
+    write_restart(coarse, names, values)
+    got_names, got = read_restart(coarse)
+    assert got_names == names and np.array_equal(got, values)
+    write_restart(tmp_path / "again.dat", got_names, got)
+    assert (tmp_path / "again.dat").read_bytes() == coarse.read_bytes()
+    fine = read_restart(prolong_restart(coarse, l1, tmp_path / "fine.dat"))[1]
+    xy1 = read_mesh(l1).points[:, :2]
+    assert fine.shape == (len(xy1), 6) and np.array_equal(fine[:, :2], xy1)
+    ic, jf = common_nodes(xy0, xy1)
+    assert len(ic) == len(xy0)                                # nested: every coarse node is a fine node
+    np.testing.assert_array_equal(fine[jf, 2:], values[ic, 2:])
+    assert fine[:, 2:].min() >= values[:, 2:].min() and fine[:, 2:].max() <= values[:, 2:].max()
