@@ -296,15 +296,18 @@ def summary(out: dict) -> str:
     lines = [f"{out['design']}: evaluation {out['evaluation']} of {out['run']} "
              f"({'feasible' if out['feasible'] else 'INFEASIBLE'}, worst violation {out['violation']:.1e})",
              f"lattice: the run's {out['run_level']} wall rebuilt from the lattice file to {out['lattice_error']:.1e}; "
-             f"{out['level']} at the {out['common_nodes']} shared wall nodes equal to the optimum to {out['shape_error']:.1e}",
+             f"{out['level']} at the {out['common_nodes']} shared wall nodes equal to the optimum to "
+             f"{out['shape_error']:.1e}",
              f"add-material rule on {out['level']}: {r['nodes']} wall nodes, upper y - y0 >= {r['upper']:.3e}, "
              f"lower y0 - y >= {r['lower']:.3e}, thickness - t0 >= {r['thickness']:.3e} (chords): "
              f"{'met' if r['met'] else 'VIOLATED'} to 1e-6 chord",
-             f"CD on {out['run_level']} {out['cd_run']:.6f} (reduction {100 * out.get('reduction_run', float('nan')):.1f} % "
+             f"CD on {out['run_level']} {out['cd_run']:.6f} "
+             f"(reduction {100 * out.get('reduction_run', float('nan')):.1f} % "
              f"from {BASELINE_CD.get(out['run_level'], float('nan')):.6f})"]
     if "cd" in out:
         s = out["solve"]
-        lines.append(f"CD on {out['level']} {out['cd']:.6f} (reduction {100 * out.get('reduction', float('nan')):.1f} % "
+        lines.append(f"CD on {out['level']} {out['cd']:.6f} "
+                     f"(reduction {100 * out.get('reduction', float('nan')):.1f} % "
                      f"from {BASELINE_CD.get(out['level'], float('nan')):.6f}); {s['iterations']} iterations, "
                      f"rms[Rho] {s['residual']:.1f}, {s['wall']:.0f} s wall, {s['cpu']:.0f} s CPU")
     return "\n".join(lines)

@@ -121,7 +121,8 @@ def ffd_history(run: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     with open(run / "history.csv", newline="") as fh:
         rows = [r for r in csv.DictReader(fh) if not r.get("failed")]
     flows = np.cumsum([int(r["flow_solves"]) for r in rows])
-    return flows, np.array([float(r["objective"]) for r in rows]), np.array([float(r["violation"]) <= 1e-4 for r in rows])
+    cd = np.array([float(r["objective"]) for r in rows])
+    return flows, cd, np.array([float(r["violation"]) <= 1e-4 for r in rows])
 
 
 def su2_history(run: Path, baseline: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -185,7 +186,8 @@ def main(argv: list[str] | None = None) -> int:
     panels = [("L2 (the optimisation mesh)", l2_cp)]
     if args.eval:
         fine = [("baseline", args.eval_baseline)] if args.eval_baseline else []
-        fine += [(label, folder / "su2") for label, folder in args.eval if (folder / "su2" / "surface_flow.csv").is_file()]
+        fine += [(label, folder / "su2") for label, folder in args.eval
+                 if (folder / "su2" / "surface_flow.csv").is_file()]
         panels.append(("L3 (the finest mesh): the same designs", fine))
     cp_plot(panels, args.out / "adodg_case1_cp.png")
     history_plot(hist, args.out / "adodg_case1_history.png")

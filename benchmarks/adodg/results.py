@@ -29,18 +29,23 @@ HEAD = ("| run | variables | L2 CD | L2 reduction | flow + adjoint solves | wall
 
 def ffd_row(label: str, run: Path, summary: Path | None, evaluation: Path | None) -> str:
     """A table row of an ffd run (finished when ``summary``, its ``--json`` output, is given)."""
+    if not (run / "history.csv").is_file():
+        return f"| {label} | - | - | - | - | - | - | - | - | - | - | not run yet ({run} has no history.csv) |"
     with open(run / "history.csv", newline="") as fh:
         rows = [r for r in csv.DictReader(fh)]
     ok = [r for r in rows if not r.get("failed")]
     feasible = [r for r in ok if float(r["violation"]) <= 1e-4]
+    if not feasible:
+        return f"| {label} | - | - | - | - | - | - | - | - | - | - | no feasible evaluation yet |"
     best = min(feasible, key=lambda r: float(r["objective"]))
     flows = sum(int(r["flow_solves"]) for r in rows)
     adjoints = sum(int(r["adjoint_solves"]) for r in rows)
     solver = sum(float(r["solver_seconds"]) for r in rows)
     ffd = sum(float(r["ffd_seconds"]) for r in rows)
     wall, state, n_vars = "-", f"running ({len(rows)} evaluations)", None
-    if summary is not None and summary.is_file():
-        s = json.loads(summary.read_text())
+    text = summary.read_text().strip() if summary is not None and summary.is_file() else ""
+    if text:                                  # the --json summary is written when the run ends
+        s = json.loads(text)
         wall = f"{s['seconds']['wall']:.0f}"
         state = f"{s['status']}: {s['iterations']} iterations"
         flows, adjoints = s["flow_solves"], s["adjoint_solves"]
@@ -79,7 +84,8 @@ def su2_row(label: str, run: Path, baseline: Path) -> str:
     m = best["rule"]
     margin = min(m["upper"], m["lower"])
     state = (f"finished (exit {rep['rc']})" if rep["finished"] else f"running ({len(rep['designs'])} designs)")
-    cells = [label, str(n_vars), f"{best['CD']:.6f} ({best['design']})", f"{100 * (1 - best['CD'] / BASELINE_CD['L2']):.1f} %",
+    cells = [label, str(n_vars), f"{best['CD']:.6f} ({best['design']})",
+             f"{100 * (1 - best['CD'] / BASELINE_CD['L2']):.1f} %",
              f"{rep['flow_solves']} + {rep['adjoint_solves']}", f"{rep['wall']:.0f}", "-", "-", "-", "-",
              f"L2: {margin:+.1e} ({'met' if margin >= -TOLERANCE else 'broken'})", state]
     return "| " + " | ".join(cells) + " |"

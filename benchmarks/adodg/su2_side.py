@@ -224,7 +224,7 @@ def report(folder: Path, baseline: Path) -> dict:
     rows = []
     table = project_rows(folder)
     flows = len(table)
-    for dsn in designs(folder):        # finished solves only: a flow's row in history_project.csv, an adjoint's gradient
+    for dsn in designs(folder):        # finished only: a flow's row in history_project.csv, an adjoint's gradient
         adjoints += sum(1 for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
     for k, row in enumerate(table):
         dsn = folder / "DESIGNS" / f"DSN_{k + 1:03d}"
@@ -234,7 +234,8 @@ def report(folder: Path, baseline: Path) -> dict:
             m = add_material(base.points[ids, :2], read_mesh(mesh).points[ids, :2])
             margin = {"upper": m.upper, "lower": m.lower, "thickness": m.thickness}
         tc, area = row.get("AIRFOIL_THICKNESS", np.nan), row.get("AIRFOIL_AREA", np.nan)
-        su2_ok = (not constrained) or (tc >= geo["AIRFOIL_THICKNESS"] - TOLERANCE and area >= geo["AIRFOIL_AREA"] - TOLERANCE)
+        su2_ok = (not constrained) or (tc >= geo["AIRFOIL_THICKNESS"] - TOLERANCE
+                                       and area >= geo["AIRFOIL_AREA"] - TOLERANCE)
         rows.append({"design": dsn.name, "CD": row["DRAG"], "CL": row["LIFT"], "thickness": tc, "area": area,
                      "su2_constraints_met": bool(su2_ok), "rule": margin,
                      "rule_met": margin is not None and min(margin["upper"], margin["lower"]) >= -TOLERANCE})
