@@ -300,3 +300,49 @@ def test_a_boundary_layer_moves_on_local_meshes_as_in_the_serial_run(mesh, ranks
         np.testing.assert_array_equal(pts[moved], res.points[g[moved]])
         assert q == res.quality.to_dict() and wall == res.wall_layer
     _same_files(written, got[0][5])
+
+
+@pytest.mark.parametrize("ranks, seed", [(2, 0), (3, 1), (4, 2), (5, 3), (5, -1)])
+def test_the_wall_layer_of_any_split_is_the_serial_layers_rows(ranks, seed, rans_ogrid):
+    """Any owner of each node (random splits, and node ids dealt round the ranks: every step of a stack on
+    another rank than the one before; the Morton split is the other tests'): each rank's
+    wall layer (off-wall edges from the owners, stacks walked step by step by the owners of their tops)
+    is the serial layer's rows of its targets, bit for bit."""
+    from ffdcli.parallel.distributed import RankNodes
+    from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp
+
+    mesh = formats.read_mesh(rans_ogrid)
+    serial, _ = prepare_mesh_warp(mesh, "airfoil", WarpSettings())
+    ser = serial.layer
+    assert ser is not None
+    if seed < 0:            # dealt round: ring k of 96 nodes, node i on rank (k + i) % 5: each ring on another
+        owner = np.arange(mesh.n_points) % ranks
+    else:
+        owner = np.random.default_rng(seed).integers(0, ranks, mesh.n_points)
+
+    def one(comm):
+        local, part = localize(mesh, owner, comm.rank)
+        owned = np.zeros(len(local.points), dtype=bool)
+        owned[part.rows[part.owned]] = True
+        nodes = RankNodes(comm, local.global_ids, owned)
+        model, _ = prepare_mesh_warp(local, "airfoil", WarpSettings(), targets=part.rows, nodes=nodes,
+                                     size=serial_diagonal(mesh.points))
+        return local.global_ids, model
+
+    where = {int(t): i for i, t in enumerate(serial.target_ids[ser.rows])}
+    covered = set()
+    for g, model in run_ranks(ranks, one):
+        lay = model.layer
+        if lay is None:
+            assert not len(model.target_ids)
+            continue
+        gid = g[model.target_ids[lay.rows]]
+        idx = np.array([where[int(t)] for t in gid], dtype=np.int64)
+        np.testing.assert_array_equal(lay.weight, ser.weight[idx])
+        np.testing.assert_array_equal(lay.position, ser.position[idx])
+        assert (lay.partition != ser.partition[idx]).nnz == 0
+        np.testing.assert_array_equal(lay.partition[np.argsort(idx)].indices, ser.partition[np.sort(idx)].indices)
+        np.testing.assert_array_equal(lay.normals, ser.normals)
+        assert lay.thickness == ser.thickness
+        covered |= set(gid.tolist())
+    assert covered == set(where)
