@@ -93,20 +93,19 @@ def surface_cp(folder: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return d["x"], d["y"], d["Pressure_Coefficient"]
 
 
-def cp_plot(panels: list[tuple[str, list[tuple[str, Path]]]], path: Path) -> None:
-    """-Cp over the upper surface (solid) and the lower (dashed) of each curve of each panel."""
+def cp_plot(panels: list[tuple[str, list[tuple[str, Path, str, str]]]], path: Path) -> None:
+    """-Cp over the upper surface of each curve (label, folder, colour, line style) of each panel (the
+    flow is symmetric: alpha 0 and symmetric designs, so the lower surface is the same curve)."""
     fig, axes = plt.subplots(1, len(panels), figsize=(6.2 * len(panels), 4.4), squeeze=False)
     for ax, (title, curves) in zip(axes[0], panels):
-        for k, (label, folder) in enumerate(curves):
+        for label, folder, color, ls in curves:
             x, y, cp = surface_cp(folder)
-            c = "k" if k == 0 else f"C{k - 1}"
-            for sel, ls in ((y >= 0, "-"), (y <= 0, "--")):
-                o = np.argsort(x[sel])
-                ax.plot(x[sel][o], -cp[sel][o], color=c, ls=ls, lw=1.1 if k else 1.5,
-                        label=label if ls == "-" else None)
+            up = y >= 0
+            o = np.argsort(x[up])
+            ax.plot(x[up][o], -cp[up][o], color=color, ls=ls, lw=1.5 if color == "k" else 1.1, label=label)
         ax.axhline(0.0, color="0.6", lw=0.5)
         ax.set_xlabel("x / c")
-        ax.set_ylabel("-Cp (upper -, lower --)")
+        ax.set_ylabel("-Cp (upper surface)")
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
@@ -164,31 +163,36 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, required=True, help="folder for the PNGs")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
-    bests, l2_cp, hist = [], [], []
-    for label, run in args.run:
+    bests, l2_cp, hist, l2_best = [], [], [], {}
+    for k, (label, run) in enumerate(args.run):
+        if not (run / "history.csv").is_file():
+            continue
         folder, cd = ffd_best(run)
         bests.append((label, folder / "mesh.su2", cd))
         if not l2_cp:
-            l2_cp.append(("baseline", run / "evals" / "0001"))
-        l2_cp.append((f"{label} (CD {cd:.5f})", folder))
+            l2_cp.append(("baseline", run / "evals" / "0001", "k", "-"))
+        l2_cp.append((f"{label} (CD {cd:.5f})", folder, f"C{k}", "-"))
+        l2_best[label] = (folder, f"C{k}")
         hist.append((label, *ffd_history(run)))
-    for label, run in args.su2:
+    for k, (label, run) in enumerate(args.su2, start=len(args.run)):
         got = su2_best(run, args.baseline)
         if got is not None:
             folder, cd = got
             mesh = design_mesh(folder.parent)
             if mesh is not None:
                 bests.append((label, mesh, cd))
-            l2_cp.append((f"{label} (CD {cd:.5f})", folder))
+            l2_cp.append((f"{label} (CD {cd:.5f})", folder, f"C{k}", "-"))
         if designs(run) and project_rows(run):
             hist.append((label, *su2_history(run, args.baseline)))
     sections(args.baseline, bests, args.out / "adodg_case1_sections.png")
     panels = [("L2 (the optimisation mesh)", l2_cp)]
-    if args.eval:
-        fine = [("baseline", args.eval_baseline)] if args.eval_baseline else []
-        fine += [(label, folder / "su2") for label, folder in args.eval
-                 if (folder / "su2" / "surface_flow.csv").is_file()]
-        panels.append(("L3 (the finest mesh): the same designs", fine))
+    fine = [("baseline on L3", args.eval_baseline, "k", "-")] if args.eval_baseline else []
+    for label, folder in args.eval:
+        if (folder / "su2" / "surface_flow.csv").is_file() and label in l2_best:
+            l2_folder, color = l2_best[label]
+            fine += [(f"{label} on L2", l2_folder, color, ":"), (f"{label} on L3", folder / "su2", color, "-")]
+    if fine:
+        panels.append(("the same design on L2 (dotted) and on L3 (the finest mesh)", fine))
     cp_plot(panels, args.out / "adodg_case1_cp.png")
     history_plot(hist, args.out / "adodg_case1_history.png")
     for name in ("sections", "cp", "history"):
