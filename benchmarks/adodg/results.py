@@ -44,8 +44,10 @@ def ffd_row(label: str, run: Path, summary: Path | None, evaluation: Path | None
     ffd = sum(float(r["ffd_seconds"]) for r in rows)
     wall, state, n_vars = "-", f"running ({len(rows)} evaluations)", None
     text = summary.read_text().strip() if summary is not None and summary.is_file() else ""
-    if text:                                  # the --json summary is written when the run ends
-        s = json.loads(text)
+    s = json.loads(text) if text else {}      # the --json summary is written when the run ends
+    if s and "seconds" not in s:              # stopped (Ctrl-C, SIGTERM): its message says so
+        state = f"stopped after {len(rows)} evaluations ({s.get('error', 'no summary').split(';')[0]})"
+    elif s:
         wall = f"{s['seconds']['wall']:.0f}"
         state = f"{s['status']}: {s['iterations']} iterations"
         flows, adjoints = s["flow_solves"], s["adjoint_solves"]

@@ -51,22 +51,24 @@ def levels(tmp_path_factory):
 def design_file(folder: Path, mesh: Path) -> Path:
     """case1_v8.yaml on ``mesh`` (its run folder ``opt``)."""
     data = yaml.safe_load(DESIGN.read_text())
-    data.update(mesh=str(mesh), output={"mesh": str(folder / "unused.su2")})
+    data.update(mesh=str(mesh), output={"mesh": str(folder / "unused.su2")}, volume={"method": "none"})
     data["optimize"].update(folder=str(folder / "opt"))
     return write_yaml(folder / "design.yaml", data)
 
 
-def fake_run(folder: Path, design: Path, mesh: Path, designs: list[tuple[list[float], float, float]]) -> Path:
-    """A run folder as ``ffd optimize`` writes it: history.csv and evals/NNNN/{result.json, mesh.su2}
-    (each mesh made by ``ffd deform`` with the automatic box, as the run's evaluations are)."""
+def fake_run(folder: Path, design: Path, mesh: Path, designs: list[tuple[list[float], float, float]],
+             best: int) -> Path:
+    """A run folder as ``ffd optimize`` writes it: history.csv and evals/NNNN/result.json, and the mesh
+    of evaluation ``best`` made by ``ffd deform`` with the automatic box, as the run's evaluations are."""
     run = folder / "opt"
     rows = []
     for k, (values, cd, violation) in enumerate(designs, start=1):
         ev = run / "evals" / f"{k:04d}"
         ev.mkdir(parents=True)
-        yml = write_yaml(ev / "design.yaml", design_data(design, mesh, values=values, names=NAMES, box_file=None,
-                                                          output=ev / "mesh.su2"))
-        ffd("deform", str(yml), "--cache-dir", str(folder / "cache"))
+        if k == best:
+            yml = write_yaml(ev / "design.yaml", design_data(design, mesh, values=values, names=NAMES,
+                                                              box_file=None, output=ev / "mesh.su2"))
+            ffd("deform", str(yml), "--cache-dir", str(folder / "cache"))
         (ev / "result.json").write_text(json.dumps({"index": k, "values": values}))
         rows.append({"evaluation": k, "iteration": k - 1, "objective": cd, "violation": violation,
                      "folder": f"evals/{k:04d}", "failed": ""})
@@ -83,7 +85,7 @@ def symmetric(a: np.ndarray) -> list[float]:
     return [*a.tolist(), *(-a).tolist()]
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1])
 def test_optimum_on_the_finer_level_is_the_same_shape_and_keeps_the_rule(tmp_path, levels, seed):
     l0, l1 = levels
     rng = np.random.default_rng(seed)
@@ -91,7 +93,7 @@ def test_optimum_on_the_finer_level_is_the_same_shape_and_keeps_the_rule(tmp_pat
     thick = symmetric(rng.uniform(0.0, 0.01, 4))              # outward: the rule holds
     thin = symmetric(-rng.uniform(0.002, 0.01, 4))            # inward: broken
     # the thin design has the lower CD but is infeasible: the thick one is the run's best
-    run = fake_run(tmp_path, design, l0, [([0.0] * 10, 0.04, 0.0), (thick, 0.03, 0.0), (thin, 0.02, 1e-3)])
+    run = fake_run(tmp_path, design, l0, [([0.0] * 10, 0.04, 0.0), (thick, 0.03, 0.0), (thin, 0.02, 1e-3)], best=2)
     assert int(best_row(run, 1e-4)["evaluation"]) == 2
     out = evaluate(design, run, l1, tmp_path / "eval", run_solve=False)
     assert out["evaluation"] == 2 and out["feasible"]
