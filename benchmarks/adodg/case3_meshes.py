@@ -61,7 +61,7 @@ def levels() -> list[Level]:
     """L0 (coarsest, CI) ... L2; each level's sizes are the previous one's divided by :data:`RATIO`."""
     out = []
     for i in range(3):
-        f = RATIO ** i
+        f = RATIO ** (i - 1)
         out.append(Level(f"L{i}", h_wing=0.05 / f, h_edge=0.012 / f, h_far=10.0 / f,
                          edge_grow=2.0 * (0.05 - 0.012) / f, n_side=121))
     return out
