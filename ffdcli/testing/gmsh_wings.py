@@ -112,9 +112,9 @@ def fluid_tets(solids: dict[str, SolidBuilder], lo, hi, *, symmetry_axis: int, s
         Distance from the solids over which the size grows from ``h_solid`` to ``h_far``
         (default 0.6 of the box's smallest extent).
     edge_grow
-        Distance from the solids' curves over which the size grows from ``h_edge`` to ``h_solid``
-        (a graded band along leading and trailing edges, resolving a leading-edge radius); default
-        None: from ``h_edge`` toward ``h_far`` over 20 ``h_solid`` (a thin band).
+        Distance from the solids' curves at which the size has grown linearly from ``h_edge`` to
+        ``h_solid`` (a graded band along leading and trailing edges, resolving a leading-edge radius);
+        default None: from ``h_edge`` toward ``h_far`` over 20 ``h_solid`` (a thin band).
     fuse
         The solids intersect (a wing through a fuselage) and are fused first, sharing the junction.
 
@@ -208,7 +208,7 @@ def _classify(gmsh, vols, boxes, names: list[str], lo, hi, axis: int, at: float)
 def _size_fields(gmsh, faces: list[int], h_solid: float, h_edge: float, h_far: float, grow: float,
                  edge_grow: float | None = None) -> None:
     """Background size: ``h_solid`` on ``faces`` growing to ``h_far`` over ``grow``, ``h_edge`` near
-    their curves growing over 20 ``h_solid`` toward ``h_far`` (or over ``edge_grow`` to ``h_solid``);
+    their curves growing toward ``h_far`` over 20 ``h_solid`` (or reaching ``h_solid`` at ``edge_grow``);
     sizes from the boundary, points and curvature off."""
     curves = sorted({abs(c[1]) for s in faces for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
     f = gmsh.model.mesh.field
@@ -227,9 +227,11 @@ def _size_fields(gmsh, faces: list[int], h_solid: float, h_edge: float, h_far: f
     t_c = f.add("Threshold")
     f.setNumber(t_c, "InField", d_c)
     f.setNumber(t_c, "SizeMin", h_edge)
-    f.setNumber(t_c, "SizeMax", h_far if edge_grow is None else h_solid)
+    f.setNumber(t_c, "SizeMax", h_far)
     f.setNumber(t_c, "DistMin", 0.5 * h_edge)
-    f.setNumber(t_c, "DistMax", 20 * h_solid if edge_grow is None else edge_grow)
+    # edge_grow: the same ramp toward h_far, steep enough to reach h_solid at edge_grow
+    f.setNumber(t_c, "DistMax", 20 * h_solid if edge_grow is None
+                else 0.5 * h_edge + edge_grow * (h_far - h_edge) / max(h_solid - h_edge, 1e-12 * h_far))
     m = f.add("Min")
     f.setNumbers(m, "FieldsList", [t_s, t_c])
     f.setAsBackgroundMesh(m)
