@@ -5,6 +5,7 @@ the mesh the flow ran on, against the ellipse of the same lift.
 ::
 
     python -m benchmarks.adodg.case3_report RUN_FOLDER --mesh MESH.su2 [--cd0 CD0] [--strips 24] [--json]
+    python -m benchmarks.adodg.case3_report BASE_FOLDER BEST_FOLDER --plot spanload.png   # loads vs ellipse
 
 ``RUN_FOLDER`` holds ``surface_flow.csv`` and ``history.csv`` (CL, CD); the mesh default is the folder's
 ``*.su2`` (an evaluation's deformed mesh). ``--cd0`` is the same mesh's zero-lift drag (the alpha-0
@@ -20,6 +21,7 @@ import json
 import sys
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 
 from benchmarks.adodg.spanload import (ellipse_difference, fourier_coefficients, load_efficiency,
@@ -61,7 +63,8 @@ def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, a
     cp = read_surface_cp(folder / "surface_flow.csv", len(mesh.points))
     if np.isnan(cp[np.unique(tris)]).any():
         raise SystemExit(f"{folder}: surface_flow.csv does not cover the wall of {mesh_path}")
-    load = strip_loads(mesh.points, tris, cp, n_strips=n_strips, alpha_deg=alpha)
+    # strips over [0, 3]; the tip cap (y > 3) is counted in the last strip
+    load = strip_loads(mesh.points, tris, cp, n_strips=n_strips, alpha_deg=alpha, span=SEMISPAN)
     diff = ellipse_difference(load, SEMISPAN)
     coef = fourier_coefficients(load, SEMISPAN)
     hist = last_history(folder / "history.csv")
@@ -76,33 +79,64 @@ def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, a
     return out
 
 
+def plot(reports: list[dict], path: Path) -> None:
+    """Each report's strip loads (steps) and the ellipse of the first one's lift, against eta."""
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # noqa: PLC0415 (after the backend is chosen)
+
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    for r in reports:
+        ax.plot(r["eta"], r["ccl"], "o-", ms=3, label=f"{Path(r['folder']).name}: CL {r['CL']:.4f}, "
+                f"RMS {r['rms_pct']:.2f} %, e_load {r['e_load']:.4f}")
+    eta = np.linspace(0, 1, 400)
+    c0 = 4.0 * reports[-1]["CL"] * S_HALF / (np.pi * SEMISPAN)
+    ax.plot(eta, c0 * np.sqrt(1 - eta ** 2), "k--", label="ellipse of the last one's lift")
+    ax.set_xlabel("eta = y / 3")
+    ax.set_ylabel("c cl")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("folder", type=Path)
+    ap.add_argument("folder", type=Path, nargs="+")
+    ap.add_argument("--plot", type=Path, default=None, help="write the loads against the ellipse here")
     ap.add_argument("--mesh", type=Path, default=None)
     ap.add_argument("--cd0", type=float, default=None)
     ap.add_argument("--strips", type=int, default=24)
     ap.add_argument("--alpha", type=float, default=None)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
-    mesh = a.mesh or next(iter(sorted(a.folder.glob("*.su2"))), None)
-    if mesh is None:
-        print(f"ffd: error: {a.folder}: no .su2 mesh; give --mesh", file=sys.stderr)
-        return 2
-    alpha = a.alpha if a.alpha is not None else config_alpha(a.folder)
-    if alpha is None:
-        print(f"ffd: error: {a.folder}: no flow.cfg with AOA; give --alpha", file=sys.stderr)
-        return 2
-    r = report(a.folder, mesh, cd0=a.cd0, n_strips=a.strips, alpha=alpha)
+    reports = []
+    for folder in a.folder:
+        mesh = a.mesh or next(iter(sorted(folder.glob("*.su2"))), None)
+        if mesh is None:
+            print(f"ffd: error: {folder}: no .su2 mesh; give --mesh", file=sys.stderr)
+            return 2
+        alpha = a.alpha if a.alpha is not None else config_alpha(folder)
+        if alpha is None:
+            print(f"ffd: error: {folder}: no flow.cfg with AOA; give --alpha", file=sys.stderr)
+            return 2
+        reports.append(report(folder, mesh, cd0=a.cd0, n_strips=a.strips, alpha=alpha))
+    if a.plot is not None:
+        plot(reports, a.plot)
     if a.json:
-        print(json.dumps(r))
+        print(json.dumps(reports if len(reports) > 1 else reports[0]))
         return 0
+    for r in reports:
+        show(r)
+    return 0
+
+
+def show(r: dict) -> None:
     e_drag = f", e (CD - CD0) {r['e_drag']:.4f}" if "e_drag" in r else ""
     print(f"CL {r['CL']:.6f} (strips {r['CL_strips']:.6f}), CD {r['CD']:.6f}; load - ellipse: RMS {r['rms_pct']:.2f} %,"
           f" max {r['max_pct']:.2f} % of the root load; e (load, Trefftz) {r['e_load']:.4f}{e_drag}")
     for eta, c, e in zip(r["eta"], r["ccl"], r["ellipse"], strict=True):
         print(f"  eta {eta:.3f}  c*cl {c:.5f}  ellipse {e:.5f}")
-    return 0
 
 
 if __name__ == "__main__":

@@ -80,7 +80,8 @@ def triangle_forces(points: np.ndarray, tris: np.ndarray, cp: np.ndarray) -> tup
 def strip_loads(points: np.ndarray, tris: np.ndarray, cp: np.ndarray, *, n_strips: int, alpha_deg: float,
                 span_axis: int = 1, span: float | None = None) -> SpanLoad:
     """Span load ``c cl`` in ``n_strips`` equal strips from the root to ``span`` (default: the wall's
-    largest span coordinate), each triangle's lift counted in the strip of its centroid.
+    largest span coordinate), each triangle's lift counted in the strip of its centroid (a centroid
+    beyond ``span``, on a tip cap, in the last strip: the total is every triangle's lift).
 
     Parameters as :func:`triangle_forces`; ``alpha_deg`` sets the lift direction
     ``(-sin a, 0, cos a)``.
