@@ -1,6 +1,6 @@
 """ADODG Case 3 through ``ffd optimize`` with the REAL SU2 (Euler, discrete adjoints of DRAG and LIFT):
 one SQP iteration of configs/adodg/case3.yaml (twist of 9 sections about the trailing edge, CL = 0.375 as
-an equality) on the coarsest level of the case's half-wing family, flow residual 1e-8. Skipped, with the
+an equality) on the coarsest level of the case's half-wing family, flow and adjoint residuals 1e-7. Skipped, with the
 reason, when SU2 or gmsh is absent."""
 
 from __future__ import annotations
@@ -38,7 +38,7 @@ def missing() -> str | None:
 def test_case3_one_sqp_iteration_on_the_coarsest_level(tmp_path):
     write_mesh(make_level(levels()[0]), tmp_path / "case3_L0.su2")
     lines = read_config(ROOT / "configs" / "adodg" / "case3.cfg")
-    (tmp_path / "case3.cfg").write_text(with_keys(lines, {"CONV_RESIDUAL_MINVAL": "-8"}))
+    (tmp_path / "case3.cfg").write_text(with_keys(lines, {"CONV_RESIDUAL_MINVAL": "-7"}))
     design = yaml.safe_load((ROOT / "configs" / "adodg" / "case3.yaml").read_text())
     design.update(mesh="case3_L0.su2", output={"mesh": "out/best.su2"})
     design["optimize"].update(config="case3.cfg", folder="opt", iterations=1)
@@ -58,5 +58,15 @@ def test_case3_one_sqp_iteration_on_the_coarsest_level(tmp_path):
     # the baseline's lift from the strip loads is SU2's CL (the same pressures, the same wall)
     base = report(first, tmp_path / "case3_L0.su2", cd0=None, n_strips=12, alpha=float(config_value(cfg, "AOA")))
     assert base["CL_strips"] == pytest.approx(base["CL"], rel=1e-4)
-    # the step moved the design toward CL = 0.375 (linearised) and did not raise the drag at equal lift
+    # the baseline's CL (0.39 on L0 at the config's alpha) is off the equality; the accepted step moves
+    # it toward 0.375 (the linearised constraint is met as far as the move limit allows)
+    lift0 = float(read_history_lift(first))
+    assert abs(out["functions"]["LIFT"] - 0.375) < abs(lift0 - 0.375)
     assert np.isfinite(out["objective"]["best"])
+
+
+def read_history_lift(folder: Path) -> float:
+    with open(folder / "history.csv") as fh:
+        rows = list(csv.reader(fh))
+    names = [h.strip().strip('"') for h in rows[0]]
+    return float(rows[-1][names.index("CL")])
