@@ -24,8 +24,13 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 
-from benchmarks.adodg.spanload import (ellipse_difference, fourier_coefficients, load_efficiency,
-                                       span_efficiency, strip_loads)
+from benchmarks.adodg.spanload import (
+    ellipse_difference,
+    fourier_coefficients,
+    load_efficiency,
+    span_efficiency,
+    strip_loads,
+)
 from ffdcli.io.formats import read_mesh
 
 SEMISPAN, S_HALF, ASPECT_RATIO = 3.0, 3.0, 6.0

@@ -8,8 +8,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from benchmarks.adodg.spanload import (SpanLoad, ellipse_difference, ellipse_strips, fourier_coefficients,
-                                       load_efficiency, span_efficiency, strip_loads)
+from benchmarks.adodg.spanload import (
+    SpanLoad,
+    ellipse_difference,
+    ellipse_strips,
+    fourier_coefficients,
+    load_efficiency,
+    span_efficiency,
+    strip_loads,
+)
 
 
 def exact_strips(edges: np.ndarray, s: float, coef) -> np.ndarray:
