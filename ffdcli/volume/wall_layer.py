@@ -58,6 +58,10 @@ BLEND = 4.0
 #: A wall node is on a sharp edge (a sharp trailing edge, a flat tip's rim) when the faces around it
 #: turn by more than 60 degrees: |sum of their vector areas| < cos(30 deg) x the sum of their areas.
 SHARP_COS = float(np.cos(np.radians(30.0)))
+#: A wall node is on a sliding plane within this fraction of the wall's size (the warp's own tolerance).
+PLANE_TOL = 1e-9
+#: ... and when its wall meets the plane at more than this many degrees (a wing's root: about 90).
+PLANE_MIN_ANGLE = 30.0
 #: The wall nodes whose rigid motions a layer node blends (2D, 3D).
 NEIGHBOURS = {2: 4, 3: 8}
 
@@ -81,6 +85,11 @@ class WallLayer:
     planes
         (Ns, 3) the unit normal of the plane a wall node slides in (a wing's root on a symmetry plane),
         zero for the others.
+    stacked
+        (n,) how much each node is on one wall node's stack alone, in [0, 1]: ``(K sum_k psi_k^2 - 1) /
+        (K - 1)`` (1: one wall node has all the weight, as the first cells' nodes have; 0: ``K`` share
+        it evenly). That share of its offset from the wall turns with the wall's rotation unstretched
+        (the stack's lean kept); the rest follows the wall's frame (:mod:`ffdcli.volume.layer_motion`).
     thickness
         the median of the stacks' heights (mesh units; the blend ends at ``delta (1 + BLEND)`` of each node's).
     """
@@ -93,6 +102,7 @@ class WallLayer:
     normals: np.ndarray
     thickness: float
     planes: np.ndarray | None = None
+    stacked: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -211,6 +221,46 @@ def off_wall_edges(points: np.ndarray, cells: list[CellBlock], faces: list[CellB
     return OffWallEdges(node, np.where(ok, height, 0.0), angle, _wall_spacing(pts, faces, wall_ids))
 
 
+def wall_planes(wall: np.ndarray, normals: np.ndarray, sliding=()) -> np.ndarray:
+    """(Ns, 3) the unit normal of the sliding plane each wall node lies in (zero for the others).
+
+    ``wall`` (Ns, 3) the wall nodes' positions, ``normals`` (Ns, 3) their wall normals, ``sliding`` the
+    warp's :class:`~ffdcli.volume.roles.SlidingPlane` s (or ``(ids, normal, point)``). A wall node is on a
+    plane when it lies in it (to :data:`PLANE_TOL` of the wall's size) and its wall meets the plane at
+    more than :data:`PLANE_MIN_ANGLE` (a wing's root on a symmetry plane; a wall lying in the plane is
+    not one)."""
+    planes = np.zeros((len(wall), 3))
+    if not len(wall):
+        return planes
+    size = float(np.linalg.norm(np.ptp(wall, axis=0)))
+    for plane in sliding:
+        normal = np.asarray(plane[1], dtype=np.float64)
+        on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= PLANE_TOL * size
+        on &= np.abs(normals @ normal) < np.sin(np.radians(90.0 - PLANE_MIN_ANGLE)) * np.linalg.norm(normals, axis=1)
+        planes[on] = normal
+    return planes
+
+
+def in_plane(normals: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the wall normals of the nodes on a plane (``planes``, :func:`wall_planes`) projected into
+    it and made unit again; the others as they are.
+
+    A symmetry plane mirrors the wall: a root node's faces are half of its faces, the mirror image the
+    other half, and the normal of the whole (the wall and its image) lies in the plane. The one-sided
+    normal of a triangulated leading edge leans out of the plane by several degrees (7 on the generated
+    wings), and a twist or a sweep that grows along the span tilts it further; the mirrored wall's
+    normal does not lean, and it is the direction a mesh generator stacks the root's layers in (in the
+    plane)."""
+    on = np.einsum("ij,ij->i", planes, planes) > 0
+    if not on.any():
+        return normals
+    out = np.array(normals, dtype=np.float64, copy=True)
+    v = out[on] - planes[on] * np.einsum("ij,ij->i", out[on], planes[on])[:, None]
+    ln = np.linalg.norm(v, axis=1)
+    out[on] = np.where(ln[:, None] > 0, v / np.where(ln > 0, ln, 1.0)[:, None], 0.0)
+    return out
+
+
 def sharp_nodes(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray) -> np.ndarray:
     """(k,) the wall nodes (rows of ``wall_ids``) on a sharp edge (:data:`SHARP_COS`)."""
     n = len(points)
@@ -240,7 +290,10 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     target_ids = np.asarray(target_ids, dtype=np.int64)
     if not len(wall_ids) or not len(target_ids) or not cells:
         return None
+    wall = pts[wall_ids]
     nrm = wall_normals(pts, faces, wall_ids)
+    planes = wall_planes(wall, nrm, sliding)
+    nrm = in_plane(nrm, planes)                 # a root's layer stacks in its symmetry plane
     edges = off_wall_edges(pts, cells, faces, wall_ids, nrm)
     ok = (edges.height > 0) & (edges.spacing > 0)
     if not ok.any():
@@ -251,7 +304,6 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node)
     thick = np.maximum(thick, edges.height)
     reach = float(thick.max()) * (1.0 + BLEND)
-    wall = pts[wall_ids]
     tree = cKDTree(wall)
     dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
     rows = np.flatnonzero(np.isfinite(dist))
@@ -266,15 +318,10 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     rows, weight, x, part = rows[keep], weight[keep], x[keep], part[keep]
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
-    planes = np.zeros((len(wall_ids), 3))
-    size = float(np.linalg.norm(np.ptp(wall, axis=0)))
-    for plane in sliding:               # the wall nodes on a sliding plane (a root on a symmetry plane)
-        normal = np.asarray(plane[1], dtype=np.float64)
-        on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= 1e-9 * size
-        on &= np.abs(nrm @ normal) < 0.05          # the wall meets the plane nearly square (within 3 degrees)
-        planes[on] = normal
+    psi2 = np.asarray(part.multiply(part).sum(axis=1)).ravel()
+    stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
     return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, nrm, float(np.median(thick)),
-                     planes)
+                     planes, stacked)
 
 
 def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:

@@ -179,8 +179,8 @@ def test_design_model_products_through_the_layer_match_central_differences(tmp_p
 
 
 def test_a_sliding_wall_node_keeps_its_first_cell_in_its_plane():
-    """A root node on a symmetry plane: G n stays in the plane and as far from the tilted wall as n was;
-    forward and transposed products exact."""
+    """A root node on a symmetry plane: G n is the mirrored wall's unit normal (the one-sided normal
+    projected into the plane), the turn R takes n there too; forward and transposed products exact."""
     rng = np.random.default_rng(4)
     n = 40
     nrm = rng.normal(size=(n, 3))
@@ -193,11 +193,18 @@ def test_a_sliding_wall_node_keeps_its_first_cell_in_its_plane():
     n1 = np.einsum("nij,nj->ni", wall_frames(F, nrm), nrm)     # the deformed normal, out of the plane
     assert np.abs(n1[:, 2]).max() > 0.05
     assert np.abs(Gn[:, 2]).max() < 1e-14
-    assert np.allclose(np.einsum("ni,ni->n", Gn, n1), 1.0)
+    mirrored = n1 * [1.0, 1.0, 0.0]
+    assert np.allclose(Gn, mirrored / np.linalg.norm(mirrored, axis=1)[:, None])
+    _, R = wall_frames(F, nrm, planes, turns=True)
+    assert np.allclose(np.einsum("nij,nj->ni", R, nrm), Gn)
+    assert np.allclose(np.einsum("nij,nkj->nik", R, R), np.eye(3)) and np.allclose(np.linalg.det(R), 1.0)
     dF = rng.normal(size=(n, 3, 3))
     h = 1e-6
-    fd = (wall_frames(F + h * dF, nrm, planes) - wall_frames(F - h * dF, nrm, planes)) / (2 * h)
-    jv = wall_frames_jvp(F, nrm, dF, planes)
-    assert np.abs(fd - jv).max() < 1e-7
-    gG = rng.normal(size=(n, 3, 3))
-    assert np.isclose(np.sum(gG * jv), np.sum(wall_frames_vjp(F, nrm, gG, planes) * dF))
+    for turns in (0, 1):
+        fd = (wall_frames(F + h * dF, nrm, planes, turns=True)[turns]
+              - wall_frames(F - h * dF, nrm, planes, turns=True)[turns]) / (2 * h)
+        jv = wall_frames_jvp(F, nrm, dF, planes, turns=True)[turns]
+        assert np.abs(fd - jv).max() < 1e-7
+    jG, jR = wall_frames_jvp(F, nrm, dF, planes, turns=True)
+    gG, gR = rng.normal(size=(2, n, 3, 3))
+    assert np.isclose(np.sum(gG * jG) + np.sum(gR * jR), np.sum(wall_frames_vjp(F, nrm, gG, planes, gR) * dF))
