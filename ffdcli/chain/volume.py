@@ -100,8 +100,8 @@ class VolumeStage(Stage):
     def jvp(self, x, dx, progress=None) -> np.ndarray:
         db, dF = dx
         db = np.asarray(db, dtype=float)
-        if self.moves:       # a wall layer is not linear in the frames: linearised at x's (at=)
-            out = warp(self.model(progress), db, np.eye(3) + dF, progress=progress, at=x[1])
+        if self.moves:       # a wall layer is not linear in the frames: linearised at x (at=)
+            out = warp(self.model(progress), db, np.eye(3) + dF, progress=progress, at=(x[0], x[1]))
         else:
             out = np.zeros((len(self.points0), 3))
         out[self.surface_ids] = db
@@ -114,5 +114,5 @@ class VolumeStage(Stage):
             return g[ids].copy(), np.zeros((len(ids), 3, 3))
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
-        g_b, g_M = warp_vjp(self.model(progress), gs, progress=progress, comm=self.share.reduction_comm(), at=x[1])
+        g_b, g_M = warp_vjp(self.model(progress), gs, progress=progress, comm=self.share.reduction_comm(), at=(x[0], x[1]))
         return g_b + g[ids], g_M

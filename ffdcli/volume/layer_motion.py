@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ffdcli.volume.frames import surface_frame_gradient, surface_frame_gradient_jvp
-from ffdcli.volume.wall_layer import WallLayer
+from ffdcli.geometry.surface import face_vectors
+from ffdcli.mesh import CellBlock
+from ffdcli.volume.wall_layer import WallLayer, layer_normals
 
 _EYE = np.eye(3)
 
@@ -47,10 +48,6 @@ def _frames(frames, ns: int) -> np.ndarray:
 
 def _with_normal(normals: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", normals, normals) > 0
-
-
-def _planes(planes, ns: int) -> np.ndarray:
-    return np.zeros((ns, 3)) if planes is None else planes
 
 
 def _cross_matrix(v):
@@ -77,84 +74,147 @@ def _turn_jvp(n, n2, dn2):
     return dc * _EYE + _cross_matrix(dv) + dvv / (1.0 + c) - vv * dc / (1.0 + c) ** 2
 
 
-def _frame(F, n, p):
-    """(G, R) (k, 3, 3) of nodes with unit normals n (k, 3) and plane normals p (k, 3; zero: no plane)."""
-    Fs = surface_frame_gradient(F, n)
-    n1 = np.einsum("kij,kj->ki", Fs, n)
-    pn = n1 - p * np.einsum("ki,ki->k", p, n1)[:, None]
-    n2 = pn / np.linalg.norm(pn, axis=1)[:, None]
-    return Fs + (n2 - n1)[:, :, None] * n[:, None, :], _turn(n, n2)
+def _frame(F, n, n2):
+    """(G, R) (k, 3, 3): ``F (I - n n^T) + n2 n^T`` and the least rotation taking n to n2."""
+    G = F - np.einsum("kij,kj->ki", F, n)[:, :, None] * n[:, None, :] + n2[:, :, None] * n[:, None, :]
+    return G, _turn(n, n2)
 
 
-def _frame_jvp(F, n, p, dF):
-    """(dG, dR) of :func:`_frame` in the direction dF."""
-    Fs = surface_frame_gradient(F, n)
-    dFs = surface_frame_gradient_jvp(F, n, dF)
-    n1 = np.einsum("kij,kj->ki", Fs, n)
-    dn1 = np.einsum("kij,kj->ki", dFs, n)
-    pn = n1 - p * np.einsum("ki,ki->k", p, n1)[:, None]
-    dpn = dn1 - p * np.einsum("ki,ki->k", p, dn1)[:, None]
-    q = np.linalg.norm(pn, axis=1)[:, None]
-    n2 = pn / q
-    dn2 = (dpn - n2 * np.einsum("ki,ki->k", n2, dpn)[:, None]) / q
-    return dFs + (dn2 - dn1)[:, :, None] * n[:, None, :], _turn_jvp(n, n2, dn2)
+def _frame_jvp(n, n2, dF, dn2):
+    """(dG, dR) of :func:`_frame` in the direction (dF, dn2)."""
+    dG = dF - np.einsum("kij,kj->ki", dF, n)[:, :, None] * n[:, None, :] + dn2[:, :, None] * n[:, None, :]
+    return dG, _turn_jvp(n, n2, dn2)
 
 
-def wall_frames(F: np.ndarray, normals: np.ndarray, planes: np.ndarray | None = None, *,
-                turns: bool = False):
-    """(Ns, 3, 3) each wall node's surface frame ``G`` (module docstring) for frames ``F`` (Ns, 3, 3) and
-    unit ``normals`` (Ns, 3; a zero row: ``G = F``). ``G = I`` exactly where ``F`` is the identity.
-    ``turns``: also return ``R`` (Ns, 3, 3), the least rotation taking ``n`` to ``G n`` (``F`` where
-    there is no normal, ``I`` where ``F`` is).
-
-    ``planes`` (Ns, 3): the unit normal ``p`` of the plane a wall node slides in (zero: none; the
-    node's ``n`` then lies in the plane, :func:`ffdcli.volume.wall_layer.in_plane`). Its off-wall nodes
-    slide in that plane too, while the one-sided deformed normal ``n'`` may leave it (a twist or a
-    sweep that grows along the span tilts the root's wall). With the mirror image the plane stands for,
-    the wall's normal at the root is the unit ``P n' / |P n'|`` (``P = I - p p^T``; for a map that keeps
-    the plane, ``P cof(F) n`` has the direction of ``P cof(F) n_1`` for any one-sided normal ``n_1``
-    whose projection is ``n``), and ``G`` maps ``n`` to it: the root's first cell keeps its height along
-    the mirrored wall's normal, and its edge its angle to it."""
+def wall_frames(F: np.ndarray, normals: np.ndarray, new_normals: np.ndarray, *, turns: bool = False):
+    """(Ns, 3, 3) each wall node's frame ``G = F (I - n n^T) + n' n^T`` (module docstring) for frames ``F``
+    (Ns, 3, 3), unit ``normals`` ``n`` (Ns, 3; a zero row: ``G = F``) and the deformed wall's unit
+    normals ``n'`` (:func:`deformed_normals`). ``G = I`` exactly where ``F`` is the identity and ``n' = n``.
+    ``turns``: also return ``R`` (Ns, 3, 3), the least rotation taking ``n`` to ``n'`` (``F`` where
+    there is no normal, ``I`` where ``G`` is)."""
     G = np.array(F, dtype=np.float64, copy=True)
     R = G.copy()
-    m = np.flatnonzero(_with_normal(normals) & np.any(G != _EYE, axis=(1, 2)))
+    m = np.flatnonzero(_with_normal(normals) & (np.any(G != _EYE, axis=(1, 2)) | np.any(new_normals != normals, axis=1)))
     if len(m):
-        G[m], R[m] = _frame(G[m], normals[m], _planes(planes, len(G))[m])
+        G[m], R[m] = _frame(G[m], normals[m], new_normals[m])
     return (G, R) if turns else G
 
 
-def wall_frames_jvp(F: np.ndarray, normals: np.ndarray, dF: np.ndarray, planes: np.ndarray | None = None, *,
+def wall_frames_jvp(normals: np.ndarray, new_normals: np.ndarray, dF: np.ndarray, dn2: np.ndarray, *,
                     turns: bool = False):
-    """(Ns, 3, 3) ``dG`` (and ``dR`` with ``turns``): the derivative of :func:`wall_frames` at ``F`` in the
-    direction ``dF``."""
+    """(Ns, 3, 3) ``dG`` (and ``dR`` with ``turns``): the derivative of :func:`wall_frames` in the direction
+    ``(dF, dn')`` (it is linear in ``F``: the point enters through ``n'`` only)."""
     dG = np.array(dF, dtype=np.float64, copy=True)
     dR = dG.copy()
     m = np.flatnonzero(_with_normal(normals))
     if len(m):
-        dG[m], dR[m] = _frame_jvp(F[m], normals[m], _planes(planes, len(dG))[m], dF[m])
+        dG[m], dR[m] = _frame_jvp(normals[m], new_normals[m], dF[m], dn2[m])
     return (dG, dR) if turns else dG
 
 
-def wall_frames_vjp(F: np.ndarray, normals: np.ndarray, gG: np.ndarray, planes: np.ndarray | None = None,
-                    gR: np.ndarray | None = None) -> np.ndarray:
-    """(Ns, 3, 3) ``gF``: the transpose of :func:`wall_frames_jvp` applied to ``gG`` (Ns, 3, 3) and ``gR``
-    (the turns' cotangent; None: zero) (each node's 9 x 9 Jacobians from nine forward products)."""
-    out = np.array(gG, dtype=np.float64, copy=True)
+def wall_frames_vjp(normals: np.ndarray, new_normals: np.ndarray, gG: np.ndarray, gR: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The transpose of :func:`wall_frames_jvp`: ``(gF (Ns, 3, 3), gn' (Ns, 3))`` of ``gG`` and ``gR``
+    (Ns, 3, 3; None: zero)."""
+    gF = np.array(gG, dtype=np.float64, copy=True)
     if gR is not None:
-        out += gR
+        gF += gR
+    gn = np.zeros((len(gF), 3))
     m = np.flatnonzero(_with_normal(normals))
-    k = len(m)
-    if not k:
-        return out
-    basis = np.eye(9).reshape(9, 3, 3)
-    Fm = np.broadcast_to(F[m][None], (9, k, 3, 3)).reshape(-1, 3, 3)
-    nm = np.broadcast_to(normals[m][None], (9, k, 3)).reshape(-1, 3)
-    pm = np.broadcast_to(_planes(planes, len(out))[m][None], (9, k, 3)).reshape(-1, 3)
-    dF = np.broadcast_to(basis[:, None], (9, k, 3, 3)).reshape(-1, 3, 3)
-    JG, JR = _frame_jvp(Fm, nm, pm, dF)           # J[a, node, :] = vec dG(E_a)
-    out[m] = np.einsum("ank,nk->na", JG.reshape(9, k, 9), gG[m].reshape(k, 9)).reshape(k, 3, 3)
+    if not len(m):
+        return gF, gn
+    n, n2 = normals[m], new_normals[m]
+    gm = gG[m]
+    gF[m] = gm - np.einsum("kij,kj->ki", gm, n)[:, :, None] * n[:, None, :]
+    gn[m] = np.einsum("kij,kj->ki", gm, n)
     if gR is not None:
-        out[m] += np.einsum("ank,nk->na", JR.reshape(9, k, 9), gR[m].reshape(k, 9)).reshape(k, 3, 3)
+        for a in range(3):              # three forward products of the turn
+            e = np.zeros_like(n2)
+            e[:, a] = 1.0
+            gn[m, a] += np.einsum("kij,kij->k", _turn_jvp(n, n2, e), gR[m])
+    return gF, gn
+
+
+def deformed_normals(layer: WallLayer, b: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the unit normals of the wall moved by ``b`` (Ns, 3) (:func:`ffdcli.volume.wall_layer.layer_normals`)."""
+    return layer_normals(layer.wall_position + b, layer.faces, layer.planes)
+
+
+def _normal_parts(layer: WallLayer, b: np.ndarray):
+    pos = layer.wall_position + b
+    summed = np.zeros((len(pos), 3))
+    for blk in layer.faces:
+        v = face_vectors(pos, [blk])
+        for c in range(3):
+            summed[:, c] += np.bincount(blk.data.ravel(), np.repeat(v[:, c], blk.data.shape[1]), len(pos))
+    ln = np.linalg.norm(summed, axis=1)
+    u = summed / np.where(ln > 0, ln, 1.0)[:, None]
+    p = np.zeros((len(pos), 3)) if layer.planes is None else layer.planes
+    pu = u - p * np.einsum("ij,ij->i", p, u)[:, None]
+    q = np.linalg.norm(pu, axis=1)
+    return pos, u, np.where(ln > 0, ln, 1.0), p, pu / np.where(q > 0, q, 1.0)[:, None], np.where(q > 0, q, 1.0)
+
+
+def _face_pairs(blk: CellBlock):
+    """Each face's vector area as ``scale * (u x v)`` (lines: a turn of u): (columns of u: +, -; of v: +, -)."""
+    if blk.type == "triangle":
+        return (1, 0), (2, 0)
+    if blk.type == "quad":
+        return (2, 0), (3, 1)
+    return (1, 0), None
+
+
+def _line_turn(t):
+    v = np.zeros_like(t)
+    v[:, 0], v[:, 1] = t[:, 1], -t[:, 0]
+    return v
+
+
+def deformed_normals_jvp(layer: WallLayer, b: np.ndarray, db: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the derivative of :func:`deformed_normals` at ``b`` in the direction ``db``."""
+    pos, u, ln, p, n2, q = _normal_parts(layer, b)
+    dS = np.zeros_like(pos)
+    for blk in layer.faces:
+        (a1, a0), vv = _face_pairs(blk)
+        d = blk.data
+        du = db[d[:, a1]] - db[d[:, a0]]
+        if vv is None:
+            dv = _line_turn(du)
+        else:
+            uu = pos[d[:, a1]] - pos[d[:, a0]]
+            w = pos[d[:, vv[0]]] - pos[d[:, vv[1]]]
+            dw = db[d[:, vv[0]]] - db[d[:, vv[1]]]
+            dv = 0.5 * (np.cross(du, w) + np.cross(uu, dw))
+        for c in range(3):
+            dS[:, c] += np.bincount(d.ravel(), np.repeat(dv[:, c], d.shape[1]), len(pos))
+    du = (dS - u * np.einsum("ij,ij->i", u, dS)[:, None]) / ln[:, None]
+    dpu = du - p * np.einsum("ij,ij->i", p, du)[:, None]
+    return (dpu - n2 * np.einsum("ij,ij->i", n2, dpu)[:, None]) / q[:, None]
+
+
+def deformed_normals_vjp(layer: WallLayer, b: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the transpose of :func:`deformed_normals_jvp` applied to ``g`` (Ns, 3)."""
+    pos, u, ln, p, n2, q = _normal_parts(layer, b)
+    g = (g - n2 * np.einsum("ij,ij->i", n2, g)[:, None]) / q[:, None]
+    g = g - p * np.einsum("ij,ij->i", p, g)[:, None]
+    gS = (g - u * np.einsum("ij,ij->i", u, g)[:, None]) / ln[:, None]
+    out = np.zeros_like(pos)
+    for blk in layer.faces:
+        (a1, a0), vv = _face_pairs(blk)
+        d = blk.data
+        gf = gS[d].sum(axis=1)                          # (F, 3): each face's cotangent
+        if vv is None:
+            gu = -_line_turn(gf)                        # the turn's transpose is minus itself
+            gw = None
+        else:
+            uu = pos[d[:, a1]] - pos[d[:, a0]]
+            w = pos[d[:, vv[0]]] - pos[d[:, vv[1]]]
+            gu = 0.5 * np.cross(w, gf)
+            gw = 0.5 * np.cross(gf, uu)
+        pairs = [(a1, gu), (a0, -gu)] + ([] if gw is None else [(vv[0], gw), (vv[1], -gw)])
+        for col, val in pairs:
+            for c in range(3):
+                out[:, c] += np.bincount(d[:, col], val[:, c], len(pos))
     return out
 
 
@@ -167,12 +227,22 @@ def _rigid(layer: WallLayer, b: np.ndarray, M: np.ndarray, sel: np.ndarray | Non
     return P @ c + np.einsum("nij,nj->ni", Mx, x)
 
 
+def _point(at, b, ns: int):
+    """(b0, F0) of ``at``: the surface translations and frames the layer is linearised at."""
+    if at is None:
+        return np.zeros((ns, 3)), _frames(None, ns)
+    if isinstance(at, tuple):
+        return np.asarray(at[0], dtype=np.float64), _frames(at[1], ns)
+    raise ValueError("the wall layer's derivative needs at=(surface translations, frames) of the point: "
+                     "its normals are the deformed wall's")
+
+
 def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, lo: int, hi: int, *, at=None
                 ) -> np.ndarray:
     """Blend the layer's rigid motion into the warp's displacements ``d`` (hi - lo, 3) of the target
     rows ``lo:hi`` (in place; returned). ``b`` (Ns, 3) the surface translations, ``frames`` (Ns, 3, 3) or
-    None (identity) the frames given to the warp. ``at``: the frames (Ns, 3, 3) at which the layer is
-    linearised (then ``frames - I`` is a direction ``dF`` and ``b`` a ``db``: the forward derivative)."""
+    None (identity) the frames given to the warp. ``at``: ``(b0, F0)`` at which the layer is linearised
+    (then ``frames - I`` is a direction ``dF`` and ``b`` a ``db``: the forward derivative)."""
     if layer is None or not len(layer.rows):
         return d
     sel = np.flatnonzero((layer.rows >= lo) & (layer.rows < hi))
@@ -180,14 +250,17 @@ def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, l
         return d
     ns = len(layer.normals)
     F = _frames(frames, ns)
+    b = np.asarray(b, dtype=np.float64)
     if at is None:
-        G, R = wall_frames(F, layer.normals, layer.planes, turns=True)
+        G, R = wall_frames(F, layer.normals, deformed_normals(layer, b), turns=True)
         M, T = G - _EYE, R - G                      # T: the turn's difference from the frame
     else:
-        M, dR = wall_frames_jvp(_frames(at, ns), layer.normals, F - _EYE, layer.planes, turns=True)
+        b0, _ = _point(at, b, ns)
+        n2 = deformed_normals(layer, b0)
+        M, dR = wall_frames_jvp(layer.normals, n2, F - _EYE, deformed_normals_jvp(layer, b0, b), turns=True)
         T = dR - M
     rows, s = layer.rows[sel] - lo, layer.weight[sel][:, None]
-    rigid = _rigid(layer, np.asarray(b, dtype=np.float64), M, sel)
+    rigid = _rigid(layer, b, M, sel)
     if layer.stacked is not None:                   # a stack's lean turns with its wall, unstretched
         rigid += layer.stacked[sel][:, None] * _rigid(layer, np.zeros((ns, 3)), T, sel)
     d[rows] = (1.0 - s) * d[rows] + s * rigid
@@ -195,22 +268,26 @@ def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, l
 
 
 def layer_transpose(layer: WallLayer, gt: np.ndarray, at) -> tuple[np.ndarray, np.ndarray]:
-    """The transpose of :func:`blend_layer`'s derivative at frames ``at`` (Ns, 3, 3; None: identity).
+    """The transpose of :func:`blend_layer`'s derivative at ``at`` = ``(b0, F0)`` (None: the undeformed wall).
 
     ``gt`` (Nt, 3): dJ/d(displacement) of every target (after the sliding projections' transpose); it is
     scaled in place by ``1 - s`` on the layer's rows (what goes on to the warp's transpose). Returns
     the layer's own ``(dJ/db (Ns, 3), dJ/dF (Ns, 3, 3))``."""
     ns = len(layer.normals)
+    b0, _ = _point(at, None, ns)
     rows, s = layer.rows, layer.weight[:, None]
     gs = s * gt[rows]
     gt[rows] *= 1.0 - s
     PT = layer.partition.T.tocsr()
     g_b = PT @ gs
     g_M = _rigid_transpose(layer, PT, gs, g_b)
+    n2 = deformed_normals(layer, b0)
     if layer.stacked is None:
-        return g_b, wall_frames_vjp(_frames(at, ns), layer.normals, g_M, layer.planes)
-    g_T = _rigid_transpose(layer, PT, layer.stacked[:, None] * gs)
-    return g_b, wall_frames_vjp(_frames(at, ns), layer.normals, g_M - g_T, layer.planes, g_T)
+        g_F, g_n = wall_frames_vjp(layer.normals, n2, g_M)
+    else:
+        g_T = _rigid_transpose(layer, PT, layer.stacked[:, None] * gs)
+        g_F, g_n = wall_frames_vjp(layer.normals, n2, g_M - g_T, g_T)
+    return g_b + deformed_normals_vjp(layer, b0, g_n), g_F
 
 
 def _rigid_transpose(layer: WallLayer, PT, g: np.ndarray, g_b: np.ndarray | None = None) -> np.ndarray:

@@ -85,6 +85,9 @@ class WallLayer:
     planes
         (Ns, 3) the unit normal of the plane a wall node slides in (a wing's root on a symmetry plane),
         zero for the others.
+    faces
+        the wall's faces as :class:`~ffdcli.mesh.CellBlock` s of rows of ``wall_position``: the deformed
+        wall's own normals (:func:`layer_normals`).
     stacked
         (n,) how much each node is on one wall node's stack alone, in [0, 1]: ``(K sum_k psi_k^2 - 1) /
         (K - 1)`` (1: one wall node has all the weight, as the first cells' nodes have; 0: ``K`` share
@@ -103,6 +106,7 @@ class WallLayer:
     thickness: float
     planes: np.ndarray | None = None
     stacked: np.ndarray | None = None
+    faces: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -320,8 +324,32 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
     psi2 = np.asarray(part.multiply(part).sum(axis=1)).ravel()
     stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
-    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, nrm, float(np.median(thick)),
-                     planes, stacked)
+    local = tuple(CellBlock(b.type, np.searchsorted(wall_ids, b.data)) for b in faces
+                  if b.type != "vertex" and len(b.data))
+    unit = layer_normals(wall - origin, local, planes)         # the same sums the deformed wall's go through
+    unit[_no_normal(nrm)] = 0.0
+    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, unit, float(np.median(thick)),
+                     planes, stacked, local)
+
+
+def _no_normal(normals: np.ndarray) -> np.ndarray:
+    """(Ns,) True where a wall node has no normal (zero row: a sharp edge, a node on no face)."""
+    return np.einsum("ij,ij->i", normals, normals) == 0
+
+
+def layer_normals(position: np.ndarray, faces, planes: np.ndarray | None = None) -> np.ndarray:
+    """(Ns, 3) the unit normals of a wall whose nodes are at ``position`` (Ns, 3) (the sums of its
+    ``faces``' vector areas, :func:`ffdcli.geometry.surface.face_vectors`; blocks of rows of
+    ``position``), a node on a plane (``planes``) with the mirror image's (:func:`in_plane`). On a kink
+    (a deflected hinge) it is the mean of the two sides', as a mesh generator extrudes there."""
+    summed = np.zeros((len(position), 3))
+    for b in faces:
+        v = face_vectors(position, [b])
+        for c in range(3):
+            summed[:, c] += np.bincount(b.data.ravel(), np.repeat(v[:, c], b.data.shape[1]), len(position))
+    ln = np.linalg.norm(summed, axis=1)
+    unit = np.where(ln[:, None] > 0, summed / np.where(ln > 0, ln, 1.0)[:, None], 0.0)
+    return unit if planes is None else in_plane(unit, planes)
 
 
 def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
