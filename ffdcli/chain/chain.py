@@ -145,7 +145,7 @@ class DesignChain:
         Ps = self.lattices.forward(values)
         dPs = self.lattices.jvp(values, dv)
         db = self.surface.jvp(Ps, dPs)
-        x = (None, self.frame_stage().forward(Ps)) if self.volume.moves else None
+        x = (self.surface.forward(Ps), self.frame_stage().forward(Ps)) if self.volume.moves else None
         dF = self.frame_stage().jvp(Ps, dPs) if self.volume.moves else None
         return self.volume.jvp(x, (db, dF), progress=progress)
 
@@ -165,7 +165,11 @@ class DesignChain:
     def mesh_vjp(self, values, g, progress=None) -> np.ndarray:
         """(n_vars,) dJ/dv for ``g`` = dJ/dX at every mesh node (N, 3), through the volume motion (under
         MPI each rank sums its share of the volume, the sums reduced)."""
-        x = (None, self.frames(values)) if self.volume.moves else None
+        if self.volume.moves:
+            Ps = self.lattices.forward(values)
+            x = (self.surface.forward(Ps), self.frame_stage().forward(Ps))
+        else:
+            x = None
         g_b, g_F = self.volume.vjp(x, g, progress=progress)
         return self._pull(values, g_b, g_F if self.volume.moves else None)
 

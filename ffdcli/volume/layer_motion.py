@@ -231,7 +231,7 @@ def _point(at, b, ns: int):
     """(b0, F0) of ``at``: the surface translations and frames the layer is linearised at."""
     if at is None:
         return np.zeros((ns, 3)), _frames(None, ns)
-    if isinstance(at, tuple):
+    if isinstance(at, tuple) and at[0] is not None and np.shape(at[0]) == (ns, 3):
         return np.asarray(at[0], dtype=np.float64), _frames(at[1], ns)
     raise ValueError("the wall layer's derivative needs at=(surface translations, frames) of the point: "
                      "its normals are the deformed wall's")
