@@ -16,7 +16,8 @@ The wall nodes on a sharp edge (a sharp trailing edge, a flat tip's rim: faces t
 is the wake's or the tip's: they are left out. A wall node on a symmetry plane (a wing's root: a
 planar marker the warp slides, :func:`ffdcli.volume.roles.marker_roles`) is measured against the
 normal of the wall and its mirror image, which lies in the plane
-(:func:`ffdcli.volume.wall_layer.in_plane`). Only meshes with a boundary layer are judged (median first-cell aspect ratio at least
+(:func:`ffdcli.volume.wall_layer.in_plane`). Only meshes with a boundary layer are judged (median
+first-cell aspect ratio at least
 :data:`ffdcli.volume.wall_layer.MIN_ASPECT`): on an Euler mesh the first cell is not a y+ and the
 cell rules serve.
 """

@@ -2,28 +2,28 @@
 derivatives (forward and transpose).
 
 A node of the layer (:mod:`ffdcli.volume.wall_layer`: weights ``psi_k`` of its nearest wall nodes,
-blend weight ``s``) moves by
+blend weight ``s``, stack share ``w``) moves by
 
-    d = (1 - s) d_warp + s sum_k psi_k [b_k + (G_k - I)(x - x_k)],
+    d = (1 - s) d_warp + s sum_k psi_k [b_k + ((1 - w) G_k + w R_k - I)(x - x_k)],
 
-``b_k`` the wall node's translation and ``G_k`` its *surface frame*: ``G = F (I - n n^T) + n' n^T`` for
-the frame ``F`` the warp is given (:func:`ffdcli.volume.frames.surface_frame_gradient`; ``n'`` the
-deformed unit normal ``cof(F) n / |cof(F) n|``). ``G`` is the rotation of the wall's local frame
-(the polar factor of G, which maps ``n`` to ``n'``) times the wall's own stretch along itself: it
-never stretches along the normal. An off-wall edge ``h n + tau`` (``tau`` along the wall) goes to
-``h n' + F tau``: its height over the deformed wall is ``h`` exactly (y+ kept) and it leans from the
-new normal only as much as the wall's own stretch tilts its tangential part (a 0.3 degree edge, a 5 %
-stretch: 0.015 degree). With ``volume.carry: rotation`` the frames are rotations and ``G = F``; with
-``carry: gradient`` (the default) the warp beyond the layer keeps the FFD map's whole gradient. A wall
-node on a sharp edge (zero normal in the layer) carries ``F`` itself: the wedge behind a sharp trailing
-edge is one smooth map, as with ``carry: gradient``.
+``b_k`` the wall node's translation, ``G_k = F (I - n n^T) + n' n^T`` its frame: ``F`` the frame the
+warp is given along the wall (the wall's own stretch), ``n'`` the unit normal of the *deformed wall*
+at the node (:func:`deformed_normals`: the moved wall faces' vector areas, a root's projected into its
+symmetry plane), not ``cof(F) n`` (one-sided at a hinge, unresolved across a device's transition).
+``R_k`` the least rotation taking ``n`` to ``n'``. An off-wall edge ``h n + tau`` (``tau`` along the
+wall) of a node on one stack (``w = 1``) goes to ``h n' + R tau``: its height over the deformed wall
+is ``h`` and its angle to the normal the same (y+ and the stack's lean kept); between stacks
+(``w -> 0``) it goes to ``h n' + F tau``, following the wall's stretch (an affine map kept affine).
+A wall node on a sharp edge (zero normal in the layer) carries ``F`` itself: the wedge behind a sharp
+trailing edge is one smooth map, as with ``carry: gradient``.
 
-The motion is linear in (b, G) with the weights fixed on the undeformed mesh (a sparse matrix ``P``:
-``sum_k psi_k [b_k - (G_k - I) x_k] + (sum_k psi_k (G_k - I)) x``), and ``G`` is a function of ``F``
-node by node: its derivative in a direction ``(db, dF)`` at frames ``F`` is
-``(1 - s) d_warp(db, dF) + s P [db + dG(F; dF) (x - x_k)]`` (:func:`blend_layer` with ``at``), the
-transpose :func:`layer_transpose`. A frame equal to the identity gives ``G = I`` exactly, so a design
-without changes writes the input back bit for bit.
+The motion is linear in (b, G, R) with the weights fixed on the undeformed mesh (a sparse matrix
+``P``: ``sum_k psi_k [b_k - M_k x_k] + (sum_k psi_k M_k) x``), ``G`` linear in ``F`` and both
+``G`` and ``R`` functions of ``n'``, itself a function of ``b``: the derivative in a direction
+``(db, dF)`` at ``(b, F)`` is :func:`blend_layer` with ``at=(b, F)``, the transpose
+:func:`layer_transpose` (``dn'`` through :func:`deformed_normals_jvp` / :func:`deformed_normals_vjp`).
+A frame equal to the identity and an unmoved wall give ``G = R = I`` exactly, so a design without
+changes writes the input back bit for bit.
 """
 
 from __future__ import annotations
@@ -94,7 +94,8 @@ def wall_frames(F: np.ndarray, normals: np.ndarray, new_normals: np.ndarray, *, 
     there is no normal, ``I`` where ``G`` is)."""
     G = np.array(F, dtype=np.float64, copy=True)
     R = G.copy()
-    m = np.flatnonzero(_with_normal(normals) & (np.any(G != _EYE, axis=(1, 2)) | np.any(new_normals != normals, axis=1)))
+    moved = np.any(G != _EYE, axis=(1, 2)) | np.any(new_normals != normals, axis=1)
+    m = np.flatnonzero(_with_normal(normals) & moved)
     if len(m):
         G[m], R[m] = _frame(G[m], normals[m], new_normals[m])
     return (G, R) if turns else G

@@ -41,7 +41,6 @@ def stack_heights(points: np.ndarray, cells: list[CellBlock], wall_ids: np.ndarr
     ``spacing`` (Ns,) the shortest wall edge at each node; ``first`` (Ns,) the off-wall edge's far node
     (-1: none)."""
     pts = np.asarray(points, dtype=np.float64)
-    ns = len(wall_ids)
     on_wall = np.zeros(len(pts), bool)
     on_wall[wall_ids] = True
     base = pts[wall_ids]

@@ -446,8 +446,8 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         for bit to the serial one.
     at
         With a wall layer (``model.layer``, :mod:`ffdcli.volume.layer_motion`; nonlinear): ``(b, F)``, the
-        translations (Ns, 3) and frames (Ns, 3, 3) at which to linearise it, ``surface_displacement`` and ``surface_rotation - I``
-        then being a direction: the forward derivative (``DesignModel.mesh_jvp``).
+        translations (Ns, 3) and frames (Ns, 3, 3) at which to linearise it, ``surface_displacement``
+        and ``surface_rotation - I`` then being a direction: the forward derivative (``DesignModel.mesh_jvp``).
 
     Returns
     -------

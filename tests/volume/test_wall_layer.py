@@ -7,11 +7,17 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from ffdcli.mesh import CellBlock
 from ffdcli.quality.metrics import cell_quality
 from ffdcli.testing.ogrid import airfoil_ogrid_mesh
-from ffdcli.mesh import CellBlock
-from ffdcli.volume.layer_motion import (deformed_normals, deformed_normals_jvp, deformed_normals_vjp, wall_frames,
-                                        wall_frames_jvp, wall_frames_vjp)
+from ffdcli.volume.layer_motion import (
+    deformed_normals,
+    deformed_normals_jvp,
+    deformed_normals_vjp,
+    wall_frames,
+    wall_frames_jvp,
+    wall_frames_vjp,
+)
 from ffdcli.volume.wall_layer import WallLayer, detect_wall_layer, layer_normals, off_wall_edges, sharp_nodes
 from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp, warp_vjp
 
