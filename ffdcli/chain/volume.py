@@ -114,5 +114,6 @@ class VolumeStage(Stage):
             return g[ids].copy(), np.zeros((len(ids), 3, 3))
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
-        g_b, g_M = warp_vjp(self.model(progress), gs, progress=progress, comm=self.share.reduction_comm(), at=(x[0], x[1]))
+        g_b, g_M = warp_vjp(self.model(progress), gs, progress=progress, comm=self.share.reduction_comm(),
+                            at=(x[0], x[1]))
         return g_b + g[ids], g_M
