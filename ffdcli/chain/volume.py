@@ -3,7 +3,7 @@
 ``x = (b, F)``: the surface displacement (S, 3) and frames (S, 3, 3) (rows as the run's surface);
 ``y`` the mesh points (N, 3): ``X0 + warp(b, F)`` with the surface nodes exactly ``X0 + b`` (bit for
 bit where the FFD puts them). The warp is a fixed linear map of ``(b, M = F - I)`` (a rigid wall
-layer, :mod:`ffdcli.volume.layer_motion`, is not: its products are linearised at ``x``'s frames,
+layer, :mod:`ffdcli.volume.layer_motion`, is not: its products are linearised at ``x = (b, F)``,
 ``at=``), so ``jvp`` is ``warp(db, I + dF)`` and ``vjp`` its exact transpose
 :func:`ffdcli.volume.warp.warp_vjp`. Without a
 volume motion (``volume.method: none``, a surface mesh) only the surface nodes move.
