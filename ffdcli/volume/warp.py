@@ -71,8 +71,7 @@ reference walk, exact sums, moments); NumPy reference :mod:`ffdcli.volume.idw_re
 
 **The wall layer.** A mesh with thin cells stacked on its wall (a RANS mesh) moves them rigidly with
 their wall (:mod:`ffdcli.volume.wall_layer`, :mod:`ffdcli.volume.layer_motion`; ``volume.wall_layer``):
-not linear in its inputs (it turns with the deformed wall's normals), so :func:`warp_vjp` and the forward
-derivative take ``at=(b, F)``, the surface translations and frames of the point.
+not linear (it turns with the deformed wall's normals): :func:`warp_vjp` and the forward derivative take ``at=(b, F)``.
 """
 
 from __future__ import annotations
