@@ -314,15 +314,14 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     flat = np.ptp(pts, axis=0).min() <= 1e-12 * max(float(np.ptp(pts, axis=0).max()), 1e-300)
     k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
     x = pts[target_ids[rows]]
-    part = _partition(tree, x, k, len(wall_ids))
+    part, psi2 = _partition(tree, x, k, len(wall_ids))
     delta = part @ thick                        # the layer's thickness where each node is (continuous)
     t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
     weight = 1.0 - t * t * (3.0 - 2.0 * t)
     keep = weight > 0
-    rows, weight, x, part = rows[keep], weight[keep], x[keep], part[keep]
+    rows, weight, x, part, psi2 = rows[keep], weight[keep], x[keep], part[keep], psi2[keep]
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
-    psi2 = np.asarray(part.multiply(part).sum(axis=1)).ravel()
     stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
     local = tuple(CellBlock(b.type, np.searchsorted(wall_ids, b.data)) for b in faces
                   if b.type != "vertex" and len(b.data))
@@ -352,11 +351,12 @@ def layer_normals(position: np.ndarray, faces, planes: np.ndarray | None = None)
     return unit if planes is None else in_plane(unit, planes)
 
 
-def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
-    """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module docstring)."""
+def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> tuple[csr_matrix, np.ndarray]:
+    """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module
+    docstring), and (n,) the sums of their squares."""
     n = len(x)
     if k < 1:
-        return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns))
+        return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns)), np.ones(n)
     d, j = tree.query(x, k=k + 1)
     R = d[:, -1:]
     d, j = d[:, :-1], j[:, :-1]
@@ -366,4 +366,5 @@ def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
     psi[bad] = 0.0
     psi[bad, 0] = 1.0                   # on a wall node, or every neighbour as far: the nearest
     psi /= psi.sum(axis=1, keepdims=True)
-    return csr_matrix((psi.ravel(), (np.repeat(np.arange(n), k), j.ravel())), shape=(n, ns))
+    ptr = np.arange(0, n * k + 1, k)
+    return csr_matrix((psi.ravel(), j.ravel(), ptr), shape=(n, ns)), np.einsum("ij,ij->i", psi, psi)
