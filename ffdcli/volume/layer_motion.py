@@ -35,6 +35,9 @@ from ffdcli.mesh import CellBlock
 from ffdcli.volume.wall_layer import WallLayer, layer_normals
 
 _EYE = np.eye(3)
+#: A wall node whose deformed normal is within this of the reverse of its normal (cos > 1 - FLIPPED) has
+#: turned over: no least rotation, R is G there.
+FLIPPED = 1e-6
 
 
 def _frames(frames, ns: int) -> np.ndarray:
@@ -74,16 +77,28 @@ def _turn_jvp(n, n2, dn2):
     return dc * _EYE + _cross_matrix(dv) + dvv / (1.0 + c) - vv * dc / (1.0 + c) ** 2
 
 
+def _flipped(n, n2):
+    """(k,) True where the wall has turned over (n2 nearly -n: a design that folds the wall), where the
+    least rotation is not defined: there R is G."""
+    return np.einsum("ki,ki->k", n, n2) < FLIPPED - 1.0
+
+
 def _frame(F, n, n2):
     """(G, R) (k, 3, 3): ``F (I - n n^T) + n2 n^T`` and the least rotation taking n to n2."""
     G = F - np.einsum("kij,kj->ki", F, n)[:, :, None] * n[:, None, :] + n2[:, :, None] * n[:, None, :]
-    return G, _turn(n, n2)
+    flip = _flipped(n, n2)
+    R = _turn(n, np.where(flip[:, None], n, n2))
+    R[flip] = G[flip]
+    return G, R
 
 
 def _frame_jvp(n, n2, dF, dn2):
     """(dG, dR) of :func:`_frame` in the direction (dF, dn2)."""
     dG = dF - np.einsum("kij,kj->ki", dF, n)[:, :, None] * n[:, None, :] + dn2[:, :, None] * n[:, None, :]
-    return dG, _turn_jvp(n, n2, dn2)
+    flip = _flipped(n, n2)
+    dR = _turn_jvp(n, np.where(flip[:, None], n, n2), dn2)
+    dR[flip] = dG[flip]
+    return dG, dR
 
 
 def wall_frames(F: np.ndarray, normals: np.ndarray, new_normals: np.ndarray, *, turns: bool = False):
@@ -129,10 +144,16 @@ def wall_frames_vjp(normals: np.ndarray, new_normals: np.ndarray, gG: np.ndarray
     gF[m] = gm - np.einsum("kij,kj->ki", gm, n)[:, :, None] * n[:, None, :]
     gn[m] = np.einsum("kij,kj->ki", gm, n)
     if gR is not None:
+        flip = _flipped(n, n2)
+        safe = np.where(flip[:, None], n, n2)
         for a in range(3):              # three forward products of the turn
             e = np.zeros_like(n2)
             e[:, a] = 1.0
-            gn[m, a] += np.einsum("kij,kij->k", _turn_jvp(n, n2, e), gR[m])
+            gn[m, a] += np.einsum("kij,kij->k", _turn_jvp(n, safe, e), gR[m]) * ~flip
+        fl = m[flip]                    # a turned-over wall: R is G
+        if len(fl):
+            gF[fl] += gR[fl] - np.einsum("kij,kj->ki", gR[fl], normals[fl])[:, :, None] * normals[fl][:, None, :]
+            gn[fl] += np.einsum("kij,kj->ki", gR[fl], normals[fl])
     return gF, gn
 
 

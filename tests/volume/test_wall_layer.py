@@ -140,15 +140,17 @@ def test_wall_frame_products():
     n2 = nrm + 0.4 * rng.normal(size=(n, 3))
     n2 /= np.linalg.norm(n2, axis=1)[:, None]
     n2[5] = nrm[5]
+    n2[49] = -nrm[49]                           # a wall turned over: no least rotation, R is G (finite)
     F = np.eye(3) + 0.3 * rng.normal(size=(n, 3, 3))
     F[5] = np.eye(3)
     G, R = wall_frames(F, nrm, n2, turns=True)
     assert np.array_equal(G[:5], F[:5]) and np.array_equal(G[5], np.eye(3)) and np.array_equal(R[5], np.eye(3))
+    assert np.all(np.isfinite(R)) and np.array_equal(R[49], G[49])
     assert np.allclose(np.einsum("nij,nj->ni", G, nrm)[6:], n2[6:])
     assert np.allclose(np.einsum("nij,nj->ni", R, nrm)[6:], n2[6:])
-    assert np.allclose(np.einsum("nij,nkj->nik", R[6:], R[6:]), np.eye(3)) and np.allclose(np.linalg.det(R[6:]), 1)
+    assert np.allclose(np.einsum("nij,nkj->nik", R[6:49], R[6:49]), np.eye(3)) and np.allclose(np.linalg.det(R[6:49]), 1)
     axis = np.cross(nrm, n2)                    # the least rotation keeps the axis n x n'
-    assert np.allclose(np.einsum("nij,nj->ni", R, axis)[6:], axis[6:])
+    assert np.allclose(np.einsum("nij,nj->ni", R, axis)[6:49], axis[6:49])
     t = np.cross(nrm, rng.normal(size=(n, 3)))
     assert np.allclose(np.einsum("nij,nj->ni", G, t), np.einsum("nij,nj->ni", F, t))
     dF = rng.normal(size=(n, 3, 3))

@@ -56,7 +56,8 @@ def _map(p, kind, size):
         q[:, 0] = x0 + (p[:, 0] - x0) * f
         F[:, 0, 0] = f
         F[:, 0, 2] = (p[:, 0] - x0) * size / span
-    elif kind == "bump":                            # a thickness change of size chords, smooth along the span
+    elif kind == "bump":      # a thickness change of size chords, smooth along the span (-0.05 folds this wing's
+        # trailing edge: its half thickness at 0.9 chord is 0.016)
         w = np.sin(np.pi * (p[:, 0] - x0) / chord) * np.sin(np.pi * eta / 2 + 0.3)
         q[:, 1] += size * chord * w * np.sign(p[:, 1] + 1e-12)
         F[:, 1, 0] = size * np.pi * np.cos(np.pi * (p[:, 0] - x0) / chord) * np.sin(np.pi * eta / 2 + 0.3) \
@@ -72,7 +73,7 @@ def _map(p, kind, size):
 
 
 @pytest.mark.parametrize("kind,size", [("sweep", 10.0), ("sweep", -10.0), ("twist", 20.0), ("twist", -20.0),
-                                       ("chord", -0.5), ("bump", 0.05), ("bump", -0.05), ("slat", 15.0),
+                                       ("chord", -0.5), ("bump", 0.05), ("bump", -0.03), ("slat", 15.0),
                                        ("flap", 10.0), ("flap", 25.0)])
 def test_every_first_cell_keeps_its_height_and_angle(wing, kind, size):
     m, model = wing
