@@ -18,12 +18,11 @@ the map, ``det(J') / det(J)`` from the lattice's parametric derivatives before (
 exactly 1 (to rounding) for a dihedral (or a sweep, the same shear along the chord) alone, and
 positive when the dihedral is combined with a sweep, span, twist or chord change of a plausible size.
 The slow test runs a 6 degree tail dihedral through ``ffd deform``'s gate on generated wing + tail
-(+ fin) volume meshes: the tail's root on the symmetry plane, on a fuselage, and under a central fin.
+(+ fin) volume meshes (``benchmarks/bench_tail_dihedral.py``, which runs the whole search): the tail's
+root on the symmetry plane, on a fuselage, and under a central fin.
 """
 
 from __future__ import annotations
-
-from functools import partial
 
 import numpy as np
 import pytest
@@ -31,15 +30,11 @@ import yaml
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from ffdcli.app.deformation import deform
 from ffdcli.app.run import load_run
 from ffdcli.design import load_design
 from ffdcli.io.formats import write_mesh
-from ffdcli.lattice.embedding import embed
-from ffdcli.lattice.lattice import derivatives, evaluate
+from ffdcli.lattice.lattice import derivatives
 from ffdcli.mesh import CellBlock, Mesh
-from ffdcli.quality.metrics import cell_quality
-from ffdcli.testing.gmsh_wings import fluid_tets, loft, planform_sections
 from ffdcli.testing.wings import Planform, surface_mesh
 
 GRID = np.stack(np.meshgrid(*[np.linspace(0.0, 1.0, 9)] * 3, indexing="ij"), -1).reshape(-1, 3)
@@ -151,91 +146,23 @@ def test_a_tail_dihedral_with_another_plausible_change_keeps_the_map_unfolded(tm
     assert map_determinants(run).min() > 0.2
 
 
+
 # -- the whole design on generated volume meshes: wing + tail + fin ---------------------------------
 
-def _part(**kw):
-    return partial(loft, sections=planform_sections(Planform(**kw), [0.0, 1.0], n_chord=41))
-
-
-def _fuselage(occ, r=0.2):
-    cyl = occ.addCylinder(-0.5, 0.0, 0.0, 4.1, 0.0, 0.0, r)
-    ends = [(3, occ.addSphere(-0.5, 0.0, 0.0, r)), (3, occ.addSphere(3.6, 0.0, 0.0, r))]
-    (out, _) = occ.fuse([(3, cyl)], ends)
-    return out[0][1]
-
-
-TAIL = dict(semi_span=1.0, root_chord=0.5, taper=0.6, le_sweep_deg=30.0, root_airfoil="0010", sections="xz")
-#: name -> (solids, fused, the fin a component of its own, spanwise sections of the tail's box)
-AIRCRAFT = {
-    # the tail's root on the symmetry plane, a twin fin standing clear above it
-    "root-on-plane": (lambda: {"wing": _part(semi_span=2.0, root_chord=1.0, taper=0.4, le_sweep_deg=25.0,
-                                             sections="xz"),
-                               "htail": _part(**TAIL, dihedral_deg=3.0, root_offset=(3.0, 0.0, 0.0)),
-                               "vfin": _part(semi_span=0.7, root_chord=0.5, taper=0.6, le_sweep_deg=35.0,
-                                             root_airfoil="0010", sections="xy", root_offset=(3.1, 0.6, 0.3))},
-                      False, True, 4),
-    # the tail through a fuselage: its root is a junction on the body (sections frozen)
-    "root-on-body": (lambda: {"fuselage": _fuselage,
-                              "wing": _part(semi_span=2.0, root_chord=1.0, taper=0.4, le_sweep_deg=25.0,
-                                            sections="xz", root_offset=(0.6, 0.0, -0.05)),
-                              "htail": _part(**TAIL, root_offset=(3.0, 0.0, 0.0))},
-                     True, False, 8),
-    # a central fin standing on the tail's root at the symmetry plane (the fin is the body of the junction)
-    "fin-on-root": (lambda: {"wing": _part(semi_span=2.0, root_chord=1.0, taper=0.4, le_sweep_deg=25.0,
-                                           sections="xz"),
-                             "htail": _part(**TAIL, root_offset=(3.0, 0.0, 0.0)),
-                             "vfin": _part(semi_span=0.7, root_chord=0.5, taper=0.6, le_sweep_deg=35.0,
-                                           root_airfoil="0012", sections="xy", root_offset=(3.05, 0.0, 0.0))},
-                    True, False, 8),
-}
-
-
-@pytest.fixture(scope="module")
-def aircraft_meshes(tmp_path_factory):
-    pytest.importorskip("gmsh")
-    folder = tmp_path_factory.mktemp("aircraft")
-    made = {}
-
-    def get(name):
-        if name not in made:
-            solids, fuse, _, _ = AIRCRAFT[name]
-            pts, tets, markers = fluid_tets(solids(), (-3.0, 0.0, -3.0), (7.0, 4.0, 3.0), symmetry_axis=1,
-                                            h_solid=0.08, h_edge=0.04, h_far=1.0, fuse=fuse, name=name)
-            path = folder / f"{name}.su2"
-            write_mesh(Mesh(points=pts, dim=3, cells=[CellBlock("tetra", tets)],
-                            markers={k: [CellBlock("triangle", v)] for k, v in markers.items()}), path)
-            made[name] = path
-        return made[name]
-
-    return get
-
-
 @pytest.mark.slow
-@pytest.mark.parametrize("delta", [6.0, -6.0])
-@pytest.mark.parametrize("name", list(AIRCRAFT))
-def test_a_six_degree_tail_dihedral_passes_the_gate_on_generated_aircraft(tmp_path, aircraft_meshes, name, delta):
-    mesh = aircraft_meshes(name)
-    _, _, fin_component, m = AIRCRAFT[name]
-    comps = [{"name": "wing", "surface": "wing", "box": {"points": [5, 5, 2]}, "changes": [{"twist": {"tip": -2}}]},
-             {"name": "htail", "surface": "htail", "box": {"points": [5, m, 2]}, "changes": [{"dihedral": delta}]}]
-    if fin_component:
-        comps.append({"name": "vfin", "surface": "vfin", "box": {"points": [5, 4, 2]}, "changes": []})
-    path = tmp_path / "design.yaml"
-    path.write_text(yaml.safe_dump({"mesh": str(mesh), "components": comps,
-                                    "output": {"mesh": str(tmp_path / "out.su2")}}, sort_keys=False))
-    run = load_run(load_design(path), use_cache=False)
-    tail = run.components[1]
-    assert (tail.frozen > 0) == (name != "root-on-plane")
-    # the design's own map: the shear in the whole lattice, and every cell inside it stays valid
-    np.testing.assert_allclose(map_determinants(run, 1), 1.0, rtol=0, atol=1e-9)
-    X = run.prep.mesh.points
-    P0, P1 = tail.P0, run.chain.lattices.forward(run.variables()[1])[1]
-    emb = embed(tail.box.lattice(P0), X)
-    Xm = X.copy()
-    Xm[emb.inside] = evaluate(tail.box.lattice(P1), emb.params[emb.inside])
-    tets = run.prep.mesh.cells[0].data
-    inside = tets[emb.inside[tets].all(axis=1)]        # few: the lattice hugs the tail (none on a coarse body mesh)
-    assert (cell_quality(Xm, [CellBlock("tetra", inside)]) > 0).all()
-    # and the design as ffd deform runs it (the volume, the gate, its recovery) passes
-    res = deform(run)
-    assert res.quality.ok, res.quality.failure_message()
+@pytest.mark.parametrize("name", ["sample", "root-on-fuselage", "fin-on-root"])
+def test_a_six_degree_tail_dihedral_passes_the_gate_on_generated_aircraft(tmp_path_factory, name):
+    """The tail's root on the symmetry plane under a twin fin, through a fuselage (a junction), and
+    under a central fin standing on it (the fin is the junction's body): +-6 degrees, the map is the
+    shear (det 1), no cell inside the tail's lattice is inverted by it, and ``ffd deform`` passes."""
+    pytest.importorskip("gmsh")
+    from benchmarks import bench_tail_dihedral as bench
+
+    work = tmp_path_factory.mktemp(name)
+    for delta in (6.0, -6.0):
+        row = bench.run_one(name, delta, work)
+        assert "error" not in row, row
+        assert (row["frozen"] > 0) == (name != "sample")
+        assert abs(row["det min"] - 1) < 1e-9 and abs(row["det max"] - 1) < 1e-9, row
+        assert row["q map"] is None or row["q map"] > 0, row
+        assert row["map inverted"] == 0 and row["ok"], row
