@@ -34,19 +34,17 @@ def node_cells(pad: np.ndarray, n: int):
 
 
 @njit(cache=True, parallel=True)
-def walk_stacks(pts, pad, cell_of, ptr, on_wall, base, up, spacing, first, max_layers, stack_cos):
-    """(Ns,) each stack's height over its wall node at ``base`` (Ns, 3) along ``up`` (Ns, 3), from
-    its first off-wall node ``first`` (-1: none): on to the node of the front's cells most aligned
-    with ``up`` (the first of equals) while its edge is within ``stack_cos`` of it and shorter than
-    ``spacing``."""
+def walk_stacks(pts, pad, cell_of, ptr, on_wall, up, spacing, first, max_layers, stack_cos):
+    """(Ns,) each stack's top node, from its first off-wall node ``first`` (-1: none): on to the node of
+    the top's cells most aligned with ``up`` (Ns, 3) (the first of equals) while its edge is within
+    ``stack_cos`` of it and shorter than ``spacing`` (the heights are the caller's, as the vectorised
+    walk computes them)."""
     ns = first.shape[0]
-    height = np.zeros(ns)
+    top = first.copy()
     for k in prange(ns):               # each stack on its own
         f = first[k]
         if f < 0:
             continue
-        height[k] = ((pts[f, 0] - base[k, 0]) * up[k, 0] + (pts[f, 1] - base[k, 1]) * up[k, 1]
-                     + (pts[f, 2] - base[k, 2]) * up[k, 2])
         for _ in range(max_layers):
             best = -1
             best_cos = stack_cos
@@ -67,6 +65,5 @@ def walk_stacks(pts, pad, cell_of, ptr, on_wall, base, up, spacing, first, max_l
             if best < 0 or not best_ln < spacing[k]:
                 break
             f = best
-            height[k] = ((pts[f, 0] - base[k, 0]) * up[k, 0] + (pts[f, 1] - base[k, 1]) * up[k, 1]
-                         + (pts[f, 2] - base[k, 2]) * up[k, 2])
-    return height
+        top[k] = f
+    return top
