@@ -19,8 +19,8 @@ item, :func:`item_schema`), ``from_spec(spec, ctx)`` with ``ctx`` a :class:`Cons
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from abc import ABC, abstractmethod
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 

@@ -188,7 +188,8 @@ def test_the_constraint_is_the_quality_stage_of_the_chain(tmp_path, case):
         design = tmp_path / "airfoil.yaml"
         design.write_text(json.dumps({"mesh": str(AIRFOIL), "surface": "airfoil", "box": {"points": [4, 3]},
                                       "changes": [{"twist": {"angle": 6}},
-                                                  {"shape": {"upper": [0, 0.01, 0.02, 0.0], "lower": [0, -0.01, 0, 0]}}],
+                                                  {"shape": {"upper": [0, 0.01, 0.02, 0.0],
+                                                             "lower": [0, -0.01, 0, 0]}}],
                                       "constraints": MQ_PLAIN + MQ}))
     model = DesignModel.from_file(design, cache_dir=tmp_path)
     values, J = model.constraint_values(), model.constraint_jacobian()
