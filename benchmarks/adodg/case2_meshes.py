@@ -1,0 +1,64 @@
+"""The meshes of ADODG Case 2 (RAE2822, RANS): SU2's own RAE2822 RANS mesh, copied from the shared data,
+and ffd's C-meshes (:func:`ffdcli.testing.cmesh.cmesh`: a sharp trailing edge, the first cell for
+y+ < 1 at Re 6.5e6, the far field 100 chords from the trailing edge, a conforming wake cut).
+
+Rebuild (from the repository root)::
+
+    python -m benchmarks.adodg.case2_meshes --out out/adodg
+
+=====================  ==========  =======  ========  =====================================
+file                   around      wake     normal    first cell (chord)
+=====================  ==========  =======  ========  =====================================
+rae2822_su2.su2        SU2's mesh (13,937 points, hybrid, first cell ~1e-5)
+rae2822_c0.su2         129         33       65        2e-6   (the CI test's coarse mesh)
+rae2822_c1.su2         385         97       129       1e-6   (the finer mesh, ~75k points)
+=====================  ==========  =======  ========  =====================================
+
+The airfoil: the RAE2822 coordinates of ``shared/data/airfoils/rae2822.dat`` (the UIUC database's
+file, as shipped with AeroSandbox: both surfaces end at (1, 0), a sharp trailing edge already; a blunt
+file is closed by :func:`ffdcli.testing.cmesh.close_trailing_edge`), resampled with a cubic spline.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+from pathlib import Path
+
+from ffdcli.io.formats import write_mesh
+from ffdcli.testing.cmesh import cmesh, read_airfoil
+
+ROOT = Path(__file__).resolve().parents[2]
+SHARED = ROOT.parent / "shared" / "data"
+AIRFOIL = SHARED / "airfoils" / "rae2822.dat"
+SU2_MESH = SHARED / "su2" / "optimization_rans__steady_rae2822__mesh_RAE2822_turb.su2"
+#: name: (points around, points along each side of the cut, points out, first cell in chords)
+LEVELS = {"rae2822_c0": (129, 33, 65, 2e-6), "rae2822_c1": (385, 97, 129, 1e-6)}
+FARFIELD = 100.0
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=Path("out/adodg"))
+    ap.add_argument("--airfoil", type=Path, default=AIRFOIL)
+    ap.add_argument("--levels", nargs="*", default=list(LEVELS))
+    args = ap.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    if SU2_MESH.is_file():
+        shutil.copyfile(SU2_MESH, args.out / "rae2822_su2.su2")
+        print(f"{args.out / 'rae2822_su2.su2'}: SU2's RAE2822 RANS mesh")
+    else:
+        print(f"note: {SU2_MESH} not found; SU2's mesh not copied", file=sys.stderr)
+    xy = read_airfoil(args.airfoil)
+    for name in args.levels:
+        around, wake, normal, first = LEVELS[name]
+        mesh = cmesh(xy, around, wake, normal, first, FARFIELD)
+        write_mesh(mesh, args.out / f"{name}.su2")
+        print(f"{args.out / (name + '.su2')}: {len(mesh.points):,} points, {around} around, {wake} along "
+              f"each side of the cut, {normal} out, first cell {first:g} chord, far field {FARFIELD:g} chords")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
