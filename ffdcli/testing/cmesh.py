@@ -112,7 +112,8 @@ def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97
         Airfoil coordinates in Selig order, chord along x from about 0 to about 1; a blunt trailing
         edge is closed (:func:`close_trailing_edge`).
     n_around : int
-        Points on the airfoil, the trailing edge counted once (made odd: the leading edge is a point).
+        Points on the airfoil from the trailing edge round to it, both ends counted (as
+        :func:`ffdcli.testing.ogrid.airfoil_ogrid`; made odd: the leading edge is a point).
     n_wake : int
         Points along the cut behind the trailing edge (the trailing edge not counted).
     n_normal : int
@@ -126,7 +127,7 @@ def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97
     Returns
     -------
     grid : (I, n_normal, 2) float64
-        The grid points, ``I = n_around + 1 + 2 n_wake`` lines, the trailing edge at two lines and
+        The grid points, ``I = n_around + 2 n_wake`` lines, the trailing edge at two lines and
         each cut point at two.
     ids : (I, n_normal) int64
         Each grid point's index into ``points`` (the cut's two sides and the trailing edge share one).

@@ -15,7 +15,7 @@ import yaml
 
 from ffdcli.io.formats import write_mesh
 from ffdcli.optimize.solvers.base import find_program
-from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history
+from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history, with_keys
 from ffdcli.optimize.workflow import run_optimize
 from ffdcli.testing.cmesh import cmesh, read_airfoil
 
@@ -35,7 +35,10 @@ def missing() -> str | None:
 @pytest.mark.skipif(missing() is not None, reason=str(missing()))
 def test_case2_rans_adjoint_gradient_on_a_coarse_c_mesh(tmp_path):
     write_mesh(cmesh(read_airfoil(AIRFOIL), 97, 25, 49, 1e-5, 100.0), tmp_path / "rae2822_c.su2")
-    (tmp_path / "case2.cfg").write_text((ROOT / "configs" / "adodg" / "case2.cfg").read_text())
+    lines = read_config(ROOT / "configs" / "adodg" / "case2.cfg")          # the C-mesh's markers are lower case
+    (tmp_path / "case2.cfg").write_text(with_keys(lines, {
+        "MARKER_HEATFLUX": "( airfoil, 0.0 )", "MARKER_FAR": "( farfield )", "MARKER_PLOTTING": "( airfoil )",
+        "MARKER_MONITORING": "( airfoil )"}))
     design = yaml.safe_load((ROOT / "configs" / "adodg" / "case2.yaml").read_text())
     design.update(mesh="rae2822_c.su2", surface="airfoil", output={"mesh": "out/best.su2"})
     design["optimize"].update(config="case2.cfg", folder="opt")
