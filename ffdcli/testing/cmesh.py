@@ -102,6 +102,81 @@ def _wall_normals(ring: np.ndarray) -> np.ndarray:
     return np.stack([-tang[:, 1], tang[:, 0]], axis=1)
 
 
+def _cut_and_wall(airfoil_xy, n_around: int, n_wake: int, farfield: float):
+    """The C's j = 0 line (I, 2): the cut from the outflow to the trailing edge (geometric from the
+    trailing edge's spacing), the airfoil clockwise from the trailing edge, the cut out again; with the
+    trailing edge's two line indices and the chord."""
+    xy = _resample(close_trailing_edge(np.asarray(airfoil_xy, dtype=np.float64)), n_around)
+    if polygon_area(xy[:-1]) < 0:
+        raise ValueError("the airfoil coordinates run clockwise; expected Selig order (upper side first)")
+    te = xy[0]
+    chord = float(te[0] - xy[:, 0].min())
+    wall = xy[::-1]                                     # lower TE -> LE -> upper TE: clockwise
+    ds_te = float(np.linalg.norm(wall[1] - wall[0]))
+    cut = te[0] + _geometric(np.array([ds_te]), np.array([farfield * chord]), n_wake)[0, 1:]
+    line0 = np.concatenate([np.stack([cut[::-1], np.full(n_wake, te[1])], axis=1), wall,
+                            np.stack([cut, np.full(n_wake, te[1])], axis=1)])
+    return line0, n_wake, n_wake + len(wall) - 1, chord
+
+
+def _arc(line: np.ndarray) -> np.ndarray:
+    """Cumulative arc length (m,) along a polyline (m, 2)."""
+    return np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))]
+
+
+def _start_directions(line0: np.ndarray, w0: int, w1: int, chord: float) -> np.ndarray:
+    """Unit start directions (I, 2): the wall normals into the fluid, straight down and up from the cut,
+    averaged (a Gaussian in arc length, each side of the cut on its own) over ``TE_BLEND`` chords at the
+    trailing edge, fading to none 10 ``TE_BLEND`` ahead of it."""
+    normal = _wall_normals(line0)
+    normal[:w0] = (0.0, -1.0)
+    normal[w1 + 1:] = (0.0, 1.0)
+    s0 = _arc(line0)
+    te_x = line0[w0, 0]
+    near = np.clip((line0[:, 0] - (te_x - 10 * TE_BLEND * chord)) / (10 * TE_BLEND * chord), 0.0, 1.0)
+    width = TE_BLEND * chord * near + 1e-12
+    lower = np.arange(len(line0)) <= (w0 + w1) // 2
+    for side in (lower, ~lower):
+        idx = np.flatnonzero(side)
+        kern = np.exp(-0.5 * ((s0[idx][:, None] - s0[idx][None, :]) / width[idx][:, None]) ** 2)
+        normal[idx] = kern @ normal[idx]
+    return normal / np.linalg.norm(normal, axis=1, keepdims=True)
+
+
+def _far_points(line0: np.ndarray, w0: int, w1: int, length: float) -> np.ndarray:
+    """Each line's far-field point (I, 2): straight below and above the cut's points, and round the
+    half circle of radius ``length`` about the trailing edge for the airfoil's (by arc length: 270 deg
+    below the trailing edge, 180 ahead, 90 above)."""
+    te = line0[w0]
+    outer = np.empty_like(line0)
+    outer[:w0] = np.stack([line0[:w0, 0], np.full(w0, te[1] - length)], axis=1)
+    outer[w1 + 1:] = np.stack([line0[w1 + 1:, 0], np.full(len(line0) - w1 - 1, te[1] + length)], axis=1)
+    s0 = _arc(line0)
+    frac = (s0[w0:w1 + 1] - s0[w0]) / (s0[w1] - s0[w0])
+    theta = 1.5 * np.pi - np.pi * frac
+    outer[w0:w1 + 1] = te + length * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    return outer
+
+
+def _lines(line0: np.ndarray, normal: np.ndarray, outer: np.ndarray, chord: float, first: float,
+           n_normal: int) -> np.ndarray:
+    """The grid (I, n_normal, 2): each line a cubic Hermite curve from its start point (tangent
+    ``NORMAL_REACH`` chords along its start direction) to its far-field point, sampled finely near its
+    start, its points placed by arc length with geometric growth from ``first``."""
+    t = np.linspace(0.0, 1.0, 4001) ** 3
+    h00, h10, h01, h11 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, -2 * t**3 + 3 * t**2, t**3 - t**2
+    curve = (h00[None, :, None] * line0[:, None] + h10[None, :, None] * (NORMAL_REACH * chord * normal)[:, None]
+             + h01[None, :, None] * outer[:, None] + h11[None, :, None] * (outer - line0)[:, None])
+    arc = np.concatenate([np.zeros((len(line0), 1)),
+                          np.cumsum(np.linalg.norm(np.diff(curve, axis=1), axis=2), axis=1)], axis=1)
+    dist = _geometric(np.full(len(line0), first), arc[:, -1], n_normal - 1)
+    grid = np.empty((len(line0), n_normal, 2))
+    for c in range(2):                                  # per coordinate, line by line (not point by point)
+        grid[..., c] = np.array([np.interp(dist[i], arc[i], curve[i, :, c]) for i in range(len(line0))])
+    grid[:, 0] = line0
+    return grid
+
+
 def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97, first_cell: float = 1.5e-6,
            farfield: float = 100.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The structured C-grid (see the module docstring) and its boundary lines.
@@ -138,53 +213,11 @@ def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97
         ``airfoil`` and ``farfield`` line segments, each with the fluid on its left.
     """
     n_around += 1 - n_around % 2
-    xy = _resample(close_trailing_edge(np.asarray(airfoil_xy, dtype=np.float64)), n_around)
-    if polygon_area(xy[:-1]) < 0:
-        raise ValueError("the airfoil coordinates run clockwise; expected Selig order (upper side first)")
-    te = xy[0].copy()
-    chord = float(te[0] - xy[:, 0].min())
-    wall = xy[::-1]                                     # lower TE -> LE -> upper TE: clockwise
-    ds_te = float(np.linalg.norm(wall[1] - wall[0]))
-    length = farfield * chord
-    # the cut: geometric from the trailing-edge spacing to the outflow
-    cut = te[0] + _geometric(np.array([ds_te]), np.array([length]), n_wake)[0, 1:]
-    line0 = np.concatenate([np.stack([cut[::-1], np.full(n_wake, te[1])], axis=1), wall,
-                            np.stack([cut, np.full(n_wake, te[1])], axis=1)])
+    line0, w0, w1, chord = _cut_and_wall(airfoil_xy, n_around, n_wake, farfield)
+    normal = _start_directions(line0, w0, w1, chord)
+    outer = _far_points(line0, w0, w1, farfield * chord)
+    grid = _lines(line0, normal, outer, chord, first_cell * chord, n_normal)
     n_lines = len(line0)
-    w0, w1 = n_wake, n_wake + n_around - 1                 # the trailing edge's two lines
-    normal = _wall_normals(line0)
-    normal[:w0] = (0.0, -1.0)
-    normal[w1 + 1:] = (0.0, 1.0)
-    # average the start directions near the trailing edge (each side on its own)
-    s0 = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(line0, axis=0), axis=1))]
-    near = np.clip((line0[:, 0] - (te[0] - 10 * TE_BLEND * chord)) / (10 * TE_BLEND * chord), 0.0, 1.0)
-    width = TE_BLEND * chord * near + 1e-12
-    lower = np.arange(n_lines) <= (w0 + w1) // 2
-    for side in (lower, ~lower):
-        idx = np.flatnonzero(side)
-        kern = np.exp(-0.5 * ((s0[idx][:, None] - s0[idx][None, :]) / width[idx][:, None]) ** 2)
-        normal[idx] = kern @ normal[idx]
-    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
-    # far-field points: below and above the cut straight out, round the half circle for the airfoil
-    outer = np.empty_like(line0)
-    outer[:w0] = np.stack([line0[:w0, 0], np.full(w0, te[1] - length)], axis=1)
-    outer[w1 + 1:] = np.stack([line0[w1 + 1:, 0], np.full(n_lines - w1 - 1, te[1] + length)], axis=1)
-    frac = (s0[w0:w1 + 1] - s0[w0]) / (s0[w1] - s0[w0])
-    theta = 1.5 * np.pi - np.pi * frac                  # 270 deg (below the TE) -> 180 (ahead) -> 90
-    outer[w0:w1 + 1] = te + length * np.stack([np.cos(theta), np.sin(theta)], axis=1)
-    # each line: a Hermite curve, sampled finely near its start, then points by arc length
-    t = np.linspace(0.0, 1.0, 4001) ** 3
-    h00, h10, h01, h11 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, -2 * t**3 + 3 * t**2, t**3 - t**2
-    chordwise = outer - line0
-    curve = (h00[None, :, None] * line0[:, None] + h10[None, :, None] * (NORMAL_REACH * chord * normal)[:, None]
-             + h01[None, :, None] * outer[:, None] + h11[None, :, None] * chordwise[:, None])
-    arc = np.concatenate([np.zeros((n_lines, 1)),
-                          np.cumsum(np.linalg.norm(np.diff(curve, axis=1), axis=2), axis=1)], axis=1)
-    dist = _geometric(np.full(n_lines, first_cell * chord), arc[:, -1], n_normal - 1)
-    grid = np.empty((n_lines, n_normal, 2))
-    for c in range(2):                                  # per coordinate, every line at once
-        grid[..., c] = np.array([np.interp(dist[i], arc[i], curve[i, :, c]) for i in range(n_lines)])
-    grid[:, 0] = line0
     # one index per point: the cut's two sides and the trailing edge's two lines share theirs
     ids = np.arange(n_lines * n_normal).reshape(n_lines, n_normal)
     ids[w1:, 0] = ids[w0::-1, 0]
