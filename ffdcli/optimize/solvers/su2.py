@@ -17,7 +17,11 @@ the physics and numerics, is the user's file as written):
   RESTART_ASCII, SURFACE_CSV)`` (suffix: SU2's own, ``cd`` for DRAG, ``cl`` for LIFT), ``CONV_FIELD`` the
   adjoint's names of the config's residual fields (:func:`adjoint_convergence`), and
   ``CONV_RESIDUAL_MINVAL`` when ``optimize.adjoint_residual`` is given (the adjoints' own target: a
-  transonic adjoint often converges more slowly than its flow).
+  transonic adjoint often converges more slowly than its flow);
+* the numerics of :mod:`ffdcli.optimize.solvers.su2_settings`: a config that adapts its CFL has its
+  adjoints run at the flow's final CFL, fixed (``CFL_ADAPT= NO``, ``CFL_NUMBER``; the flow's
+  ``HISTORY_OUTPUT`` gets the ``CFL_NUMBER`` group), and a warm-started RANS flow is asked for
+  ``CONV_RESIDUAL_MINVAL`` one order lower than a cold one.
 
 Functions are read from the final row of ``history.csv`` under SU2's column names (DRAG -> ``CD``,
 LIFT -> ``CL``, MOMENT_Z -> ``CMz``: :data:`HISTORY_COLUMNS`). A run fails (:class:`SolverFailure`,
