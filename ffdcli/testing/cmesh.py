@@ -15,6 +15,12 @@ cut the first cell grows downstream (``first_cell`` at the trailing edge, 1e-4 Ã
 beyond), so the wake cells are not ten million times longer than high.
 
 ``python -m benchmarks.adodg.case2_meshes --out out/adodg`` writes the RAE2822's (ADODG Case 2).
+
+Limit, measured: SU2 8.1's RANS flow (SA, JST, 2- or 3-level multigrid, CFL 20-50) on a coarse one
+(97 points around, 25 along each side of the cut, 49 out, first cell 1e-5 chord) stalls near rms[Rho]
+-7.5 and then diverges after 250-420 iterations, at M 0.734 and at M 0.6; the meshes pass ``ffd check``
+(no cell below a scaled Jacobian of 0.4), and the cause (the cut's cells, 1e-5 chord high and up to
+tens of chords long near the outflow, are the suspects) is not yet found.
 """
 
 from __future__ import annotations
