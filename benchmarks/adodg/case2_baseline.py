@@ -52,13 +52,17 @@ def run(mesh: Path, mode: str, work: Path, su2: Path) -> dict:
     with open(folder / "flow.log", "w") as log:
         rc = subprocess.call([str(su2), "flow.cfg"], cwd=folder, stdout=log, stderr=subprocess.STDOUT)
     hist = read_history(folder / "history.csv")
-    aoa = None
-    for line in (folder / "flow.log").read_text(errors="replace").splitlines():
-        if "AoA" in line and "=" in line and mode == "cl":
-            aoa = line.strip()
+    aoa = None                                  # fixed CL: SU2's last "Previous AOA" + "Changed AoA by"
+    rows = [ln.split("|") for ln in (folder / "flow.log").read_text(errors="replace").splitlines()]
+    for i, r in enumerate(rows):
+        if mode == "cl" and len(r) > 2 and r[1].strip() == "Previous AOA":
+            try:
+                aoa = float(r[2]) + float(rows[i + 1][2])
+            except (ValueError, IndexError):
+                pass
     return {"case": f"{mesh.stem}:{mode}", "rc": rc, "CL": hist["CL"][-1], "CD": hist["CD"][-1],
             "CM": -hist["CMz"][-1], "iterations": int(hist["Inner_Iter"][-1]) + 1,
-            "rms": hist["rms[Rho]"][-1], "wall": time.time() - t0, "aoa_line": aoa}
+            "rms": hist["rms[Rho]"][-1], "wall": time.time() - t0, "aoa": aoa}
 
 
 def main(argv=None) -> int:
@@ -78,8 +82,8 @@ def main(argv=None) -> int:
         r = run(args.meshes / f"{name}.su2", mode, args.work, su2)
         print(f"| {r['case']} | {r['CL']:.4f} | {1e4 * r['CD']:.1f} | {r['CM']:.4f} | {r['iterations']} | "
               f"{r['rms']:.2f} | {r['wall']:.0f} |" + ("" if r["rc"] == 0 else f" (exit {r['rc']})"), flush=True)
-        if r["aoa_line"]:
-            print(f"  {r['aoa_line']}", flush=True)
+        if r["aoa"] is not None:
+            print(f"  angle of attack at CL {TARGET_CL}: {r['aoa']:.4f} deg", flush=True)
     return 0
 
 
