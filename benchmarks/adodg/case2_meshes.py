@@ -26,6 +26,7 @@ Selig order), the finer mesh an optimum found on SU2's mesh is evaluated on.
 from __future__ import annotations
 
 import argparse
+import filecmp
 import shutil
 import sys
 from pathlib import Path
@@ -66,9 +67,13 @@ def main(argv=None) -> int:
     ap.add_argument("--levels", nargs="*", default=list(LEVELS))
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
+    copy = args.out / "rae2822_su2.su2"
     if SU2_MESH.is_file():
-        shutil.copyfile(SU2_MESH, args.out / "rae2822_su2.su2")
-        print(f"{args.out / 'rae2822_su2.su2'}: SU2's RAE2822 RANS mesh")
+        # never rewritten when it is already the same bytes: a running `ffd optimize` refuses a mesh
+        # that changed on disk since it was read (measured: a second run of this command stopped one)
+        if not (copy.is_file() and filecmp.cmp(SU2_MESH, copy, shallow=False)):
+            shutil.copyfile(SU2_MESH, copy)
+        print(f"{copy}: SU2's RAE2822 RANS mesh")
     else:
         print(f"note: {SU2_MESH} not found; SU2's mesh not copied", file=sys.stderr)
     sections = {"c": read_airfoil(args.airfoil), "s": wall_section(SU2_MESH) if SU2_MESH.is_file() else None}
