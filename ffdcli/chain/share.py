@@ -17,6 +17,7 @@ import numpy as np
 from ffdcli.chain.cache import Once
 from ffdcli.errors import InputError
 from ffdcli.parallel.comm import SerialComm
+from ffdcli.parallel.distributed import RankNodes
 from ffdcli.parallel.distributed import diagonal as global_diagonal
 from ffdcli.parallel.partition import rank_part
 from ffdcli.quality.gate import QualityReport, check_quality, check_quality_part
@@ -65,6 +66,16 @@ class MeshShare:
     def targets(self) -> np.ndarray | None:
         """The rows the warp moves: of a local mesh, its part's (owned nodes and halo); else None (all)."""
         return self.part().rows if self.local else None
+
+    def nodes(self) -> RankNodes | None:
+        """Of a local mesh, which of its rows this rank owns and their global ids (what the wall layer's
+        walk through the cells shares between the ranks, :mod:`ffdcli.volume.wall_stacks`); else None."""
+        if not self.local:
+            return None
+        part = self.part()
+        owned = np.zeros(len(self.mesh.points), dtype=bool)
+        owned[part.rows[part.owned]] = True
+        return RankNodes(self.comm, np.asarray(self.mesh.global_ids, dtype=np.int64), owned)
 
     def diagonal(self, points: np.ndarray | None = None) -> float | None:
         """Of a local mesh, the bounding-box diagonal of every node at ``points`` (the local rows; default

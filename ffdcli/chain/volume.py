@@ -18,7 +18,6 @@ import numpy as np
 from ffdcli.chain.cache import Once
 from ffdcli.chain.share import MeshShare
 from ffdcli.chain.stage import Stage
-from ffdcli.errors import InputError
 from ffdcli.settings import WarpSettings
 from ffdcli.volume.cache import ReferenceCache
 from ffdcli.volume.warp import WarpModel, prepare_mesh_warp, warp, warp_vjp
@@ -64,17 +63,10 @@ class VolumeStage(Stage):
 
     def _build(self, progress) -> WarpModel:
         model, _ = prepare_mesh_warp(self.share.mesh, self.names, self.settings, progress=progress,
-                                     size=self.share.diagonal(), targets=self.share.targets())
+                                     size=self.share.diagonal(), targets=self.share.targets(),
+                                     nodes=self.share.nodes())
         if not np.array_equal(model.surface_ids, self.surface_ids):
             raise RuntimeError("the warp's surface nodes differ from the box's")
-        if self.share.local and any(self.share.comm.allgather(model.layer is not None)):
-            # the layer's thickness is walked through the cells above each wall node, which one rank's
-            # part does not hold whole: its motion would depend on the split, and MPI runs are the serial
-            # run bit for bit, so the ranks refuse together rather than move the volume otherwise
-            raise InputError("the mesh has a boundary layer on the wall (thin first cells), whose rigid motion "
-                             "is not available on MPI ranks' parts yet: run this design without mpiexec, or "
-                             "set volume.wall_layer: none to move the volume by the warp alone",
-                             key="volume.wall_layer")
         weights = None if self.warp_cache is None else self.warp_cache.load(model.target_ids)
         if weights is not None:
             model.set_reference_weights(weights)

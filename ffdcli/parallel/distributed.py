@@ -15,7 +15,11 @@ files, the mesh written) is put back in global terms:
 * :func:`rows_of_block`: the coordinates of a block of global ids (the point rows a rank read)
   from their owners, so that each rank prints the text of its own rows of an SU2 file
   (:func:`ffdcli.io.formats.su2.render_rows`) and rank 0 only copies it into the output
-  (:mod:`ffdcli.io.parts`: the write of a local mesh).
+  (:mod:`ffdcli.io.parts`: the write of a local mesh);
+* :class:`RankNodes`: which rows of a rank's local mesh it owns (it holds every cell around them),
+  their global ids and the communicator: what a computation that walks from node to node through
+  the cells (the wall layer's stacks, :mod:`ffdcli.volume.wall_stacks`) needs to let the owner of
+  each node take each step.
 
 Every function takes the communicator explicitly; with a mesh that has every node (``global_ids``
 None) they are the serial computation.
@@ -23,12 +27,44 @@ None) they are the serial computation.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ffdcli.mesh import Mesh
 
 #: Global ids per message of :func:`gather_points` (24 MB of coordinates at most per chunk).
 GATHER_ROWS = 1 << 20
+
+
+@dataclass(frozen=True, eq=False)
+class RankNodes:
+    """One rank's local mesh among the ranks' (module docstring).
+
+    comm
+        The communicator (:mod:`ffdcli.parallel.comm`).
+    ids
+        (n,) the sorted global id of each row of the local mesh.
+    owned
+        (n,) bool: the rows this rank owns (every cell around such a node is in its local mesh; every
+        node is owned by exactly one rank).
+    """
+
+    comm: object
+    ids: np.ndarray
+    owned: np.ndarray
+
+    def rows(self, gid) -> np.ndarray:
+        """The local rows of global ids this rank holds."""
+        return np.searchsorted(self.ids, np.asarray(gid, dtype=np.int64))
+
+    def owns(self, gid) -> np.ndarray:
+        """(m,) bool: which of the global ids ``gid`` this rank holds and owns."""
+        gid = np.asarray(gid, dtype=np.int64)
+        if not len(self.ids):
+            return np.zeros(len(gid), dtype=bool)
+        r = np.minimum(self.rows(gid), len(self.ids) - 1)
+        return (self.ids[r] == gid) & self.owned[r]
 
 
 def extent(points: np.ndarray, comm=None) -> tuple[np.ndarray, np.ndarray]:

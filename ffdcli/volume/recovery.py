@@ -91,7 +91,7 @@ def incremental_warp(chain, P1, settings: WarpSettings, steps: int, *, progress=
         Rk = frames.forward(Pk)
         dR = Rk if R_prev is None else Rk @ np.linalg.inv(R_prev)
         model, _ = prepare_mesh_warp(replace(mesh, points=pts), names, settings, progress=progress,
-                                     size=share.diagonal(pts), targets=share.targets())
+                                     size=share.diagonal(pts), targets=share.targets(), nodes=share.nodes())
         pts = pts + share.warp(model, bk - b_prev, dR, progress)
         pts[sid] = mesh.points[sid] + bk
         b_prev, R_prev = bk, Rk

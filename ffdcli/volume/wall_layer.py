@@ -46,6 +46,7 @@ from scipy.spatial import cKDTree
 
 from ffdcli.geometry.surface import face_vectors, vertex_normals
 from ffdcli.mesh import CellBlock
+from ffdcli.parallel.distributed import RankNodes, extent
 from ffdcli.volume.wall_stacks import stack_heights
 
 #: The median first-cell aspect ratio (shortest wall spacing / first-cell height) from which a mesh has
@@ -229,33 +230,52 @@ def sharp_nodes(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray
 
 
 def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[CellBlock], wall_ids: np.ndarray,
-                      target_ids: np.ndarray, sliding=()) -> WallLayer | None:
+                      target_ids: np.ndarray, sliding=(), nodes: RankNodes | None = None) -> WallLayer | None:
     """The wall layer of a mesh (module docstring), or None when its first cells are not thin.
 
     ``faces``: the deforming surface's faces (global ids); ``wall_ids`` (Ns,): its sorted nodes (the
     warp's surface nodes); ``target_ids`` (Nt,): the warp's targets, in its order; ``sliding``: the warp's
-    :class:`~ffdcli.volume.roles.SlidingPlane` s (the wall nodes in one slide with it)."""
+    :class:`~ffdcli.volume.roles.SlidingPlane` s (the wall nodes in one slide with it).
+
+    ``nodes``: of one MPI rank's local mesh (a collective: :class:`~ffdcli.parallel.distributed.RankNodes`;
+    the local mesh holds every wall node and face, but only the cells around the nodes it owns): each
+    wall node's off-wall edge is the owner's, the stacks are walked step by step by the owners of their
+    tops (:func:`ffdcli.volume.wall_stacks.stack_heights`), the flatness is the whole mesh's. Every wall
+    figure is then the serial one bit for bit, and each target's weights are computed from them alone:
+    the rows of the serial layer."""
     pts = np.asarray(points, dtype=np.float64)
     wall_ids = np.asarray(wall_ids, dtype=np.int64)
     target_ids = np.asarray(target_ids, dtype=np.int64)
-    if not len(wall_ids) or not len(target_ids) or not cells:
+    has_cells = bool(cells) if nodes is None else any(nodes.comm.allgather(bool(cells)))
+    if not len(wall_ids) or not has_cells:
+        return None
+    if nodes is None and not len(target_ids):
         return None
     nrm = wall_normals(pts, faces, wall_ids)
     edges = off_wall_edges(pts, cells, faces, wall_ids, nrm)
+    if nodes is not None:
+        edges = _owners_edges(edges, wall_ids, nodes)
     ok = (edges.height > 0) & (edges.spacing > 0)
     if not ok.any():
         return None
     aspect = edges.spacing[ok] / edges.height[ok]
     if np.median(aspect) < MIN_ASPECT:
         return None
-    thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node)
+    thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node, nodes)
     thick = np.maximum(thick, edges.height)
+    if nodes is None:
+        span = np.ptp(pts, axis=0)
+    else:                                         # every node once: the owned rows of every rank
+        lo, hi = extent(pts[nodes.owned], nodes.comm)
+        span = hi - lo
+    flat = span.min() <= 1e-12 * max(float(span.max()), 1e-300)
+    if not len(target_ids):                       # a rank without targets: nothing of its own moves
+        return None
     reach = float(thick.max()) * (1.0 + BLEND)
     wall = pts[wall_ids]
     tree = cKDTree(wall)
     dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
     rows = np.flatnonzero(np.isfinite(dist))
-    flat = np.ptp(pts, axis=0).min() <= 1e-12 * max(float(np.ptp(pts, axis=0).max()), 1e-300)
     k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
     x = pts[target_ids[rows]]
     part = _partition(tree, x, k, len(wall_ids))
@@ -275,6 +295,20 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
         planes[on] = normal
     return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, nrm, float(np.median(thick)),
                      planes)
+
+
+def _owners_edges(edges: OffWallEdges, wall_ids: np.ndarray, nodes: RankNodes) -> OffWallEdges:
+    """The off-wall edges of one rank's local mesh as the owners of the wall nodes found them (the owner
+    holds every cell around its node: the serial edge), gathered (a collective); ``node`` in global ids."""
+    k = np.flatnonzero(nodes.owned[wall_ids])
+    far = edges.node[k]
+    gid = np.where(far >= 0, nodes.ids[np.maximum(far, 0)], -1)
+    got = nodes.comm.allgather((k, gid, edges.height[k], edges.angle[k]))
+    node = np.full(len(wall_ids), -1, np.int64)
+    height, angle = np.zeros(len(wall_ids)), np.zeros(len(wall_ids))
+    for kk, g, h, a in got:
+        node[kk], height[kk], angle[kk] = g, h, a
+    return OffWallEdges(node, height, angle, edges.spacing)
 
 
 def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:

@@ -363,14 +363,14 @@ def _mean_chord(surface: np.ndarray, area: np.ndarray, size: float) -> float:
 
 
 def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None,
-                      size: float | None = None, targets=None) -> tuple[WarpModel, MarkerRoles]:
+                      size: float | None = None, targets=None, nodes=None) -> tuple[WarpModel, MarkerRoles]:
     """:func:`marker_roles` then :func:`prepare_warp` for an :class:`ffdcli.mesh.Mesh`.
 
     ``surface`` is the marker name or names of the deforming surface. The warp's surface nodes
     (``model.surface_ids``) are the sorted unique nodes of those markers: :func:`warp` takes their
     displacement in that order. ``size``: the bounding-box diagonal of the whole mesh when ``mesh``
     is one MPI rank's local mesh (:func:`ffdcli.parallel.distributed.diagonal`); default that of its points.
-    ``targets``: as in :func:`prepare_warp`.
+    ``targets``: as in :func:`prepare_warp`; ``nodes``: :func:`ffdcli.volume.wall_layer.detect_wall_layer`'s.
     """
     settings = settings or WarpSettings()
     roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path, size=size)
@@ -379,7 +379,7 @@ def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, pr
     if settings.wall_layer == "rigid" and settings.method != "none":
         names = [surface] if isinstance(surface, str) else list(surface)
         model.layer = detect_wall_layer(mesh.points, mesh.cells, mesh.marker_faces(names), model.surface_ids,
-                                        model.target_ids, roles.sliding)
+                                        model.target_ids, roles.sliding, nodes)
     return model, roles
 
 

@@ -251,3 +251,98 @@ def test_a_file_with_su2s_ffd_section_is_gathered_and_its_section_refreshed(tmp_
         return parts.rendered_mesh(local, part, X[local.global_ids], tmp_path / "o.su2", comm)
 
     assert run_ranks(RANKS, one) == [(False, None)] * RANKS
+
+
+@pytest.fixture(scope="module")
+def rans_ogrid(tmp_path_factory):
+    """A NACA 0012 O-mesh with a 1e-6 chord first cell (a boundary layer of quads, 4365 nodes)."""
+    from ffdcli.testing.ogrid import airfoil_ogrid_mesh
+
+    path = tmp_path_factory.mktemp("rans") / "ogrid.su2"
+    formats.write_mesh(airfoil_ogrid_mesh("0012", n_around=97, n_radial=45, first_cell=1e-6), path)
+    return path
+
+
+@pytest.mark.parametrize("mesh, ranks", [("ogrid", 2), ("ogrid", 3), ("ogrid", 5), ("rae2822", 3)])
+def test_a_boundary_layer_moves_on_local_meshes_as_in_the_serial_run(mesh, ranks, rans_ogrid, tmp_path):
+    """The wall layer of a RANS mesh (its stacks walked through cells that no one rank's part holds
+    whole) moves on 2, 3 and 5 ranks' local meshes as in the serial run: every row each rank moves, the
+    wall report and the gate's, and the files, bit for bit; the first cells kept (the layer did move)."""
+    from conftest import shared_file
+
+    if mesh == "rae2822":
+        path, surface = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2"), "AIRFOIL"
+    else:
+        path, surface = rans_ogrid, "airfoil"
+    design = _design(tmp_path, {"mesh": str(path), "surface": surface, "box": {"points": [6, 5]},
+                                "changes": [{"shape": {"upper": [0, 0.01, 0.02, 0.02, 0.01, 0],
+                                                       "lower": [0, -0.01, 0, -0.01, 0, 0], "sections": "all"}}]})
+    outputs = {"mesh_path": "out.su2"}
+    serial_dir, mpi_dir = tmp_path / "serial", tmp_path / "mpi"
+    serial_dir.mkdir()
+    mpi_dir.mkdir()
+    run = load_run(load_design(design), use_cache=False)
+    res = deform(run)
+    written = write_outputs(run, res, **{k: serial_dir / v for k, v in outputs.items()})
+    assert run.volume.model().layer is not None
+    assert res.wall_layer is not None and abs(res.wall_layer.ratio_min - 1) < 1e-3 > abs(res.wall_layer.ratio_max - 1)
+
+    def one(comm):
+        r = load_run(load_design(design), comm=comm, local=True, use_cache=False)
+        x = deform(r)
+        w = write_outputs(r, x, comm=comm, **{k: mpi_dir / v for k, v in outputs.items()})
+        moved = np.union1d(r.warp_targets(), r.surface_ids)
+        return r.prep.mesh.global_ids, moved, x.points, x.quality.to_dict(), x.wall_layer, w
+
+    got = run_ranks(ranks, one)
+    for g, moved, pts, q, wall, _ in got:
+        assert len(g) < run.prep.mesh.n_points
+        np.testing.assert_array_equal(pts[moved], res.points[g[moved]])
+        assert q == res.quality.to_dict() and wall == res.wall_layer
+    _same_files(written, got[0][5])
+
+
+@pytest.mark.parametrize("ranks, seed", [(2, 0), (3, 1), (4, 2), (5, 3), (5, -1)])
+def test_the_wall_layer_of_any_split_is_the_serial_layers_rows(ranks, seed, rans_ogrid):
+    """Any owner of each node (random splits, and node ids dealt round the ranks: every step of a stack on
+    another rank than the one before; the Morton split is the other tests'): each rank's
+    wall layer (off-wall edges from the owners, stacks walked step by step by the owners of their tops)
+    is the serial layer's rows of its targets, bit for bit."""
+    from ffdcli.parallel.distributed import RankNodes
+    from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp
+
+    mesh = formats.read_mesh(rans_ogrid)
+    serial, _ = prepare_mesh_warp(mesh, "airfoil", WarpSettings())
+    ser = serial.layer
+    assert ser is not None
+    if seed < 0:            # dealt round: ring k of 96 nodes, node i on rank (k + i) % 5: each ring on another
+        owner = np.arange(mesh.n_points) % ranks
+    else:
+        owner = np.random.default_rng(seed).integers(0, ranks, mesh.n_points)
+
+    def one(comm):
+        local, part = localize(mesh, owner, comm.rank)
+        owned = np.zeros(len(local.points), dtype=bool)
+        owned[part.rows[part.owned]] = True
+        nodes = RankNodes(comm, local.global_ids, owned)
+        model, _ = prepare_mesh_warp(local, "airfoil", WarpSettings(), targets=part.rows, nodes=nodes,
+                                     size=serial_diagonal(mesh.points))
+        return local.global_ids, model
+
+    where = {int(t): i for i, t in enumerate(serial.target_ids[ser.rows])}
+    covered = set()
+    for g, model in run_ranks(ranks, one):
+        lay = model.layer
+        if lay is None:
+            assert not len(model.target_ids)
+            continue
+        gid = g[model.target_ids[lay.rows]]
+        idx = np.array([where[int(t)] for t in gid], dtype=np.int64)
+        np.testing.assert_array_equal(lay.weight, ser.weight[idx])
+        np.testing.assert_array_equal(lay.position, ser.position[idx])
+        assert (lay.partition != ser.partition[idx]).nnz == 0
+        np.testing.assert_array_equal(lay.partition[np.argsort(idx)].indices, ser.partition[np.sort(idx)].indices)
+        np.testing.assert_array_equal(lay.normals, ser.normals)
+        assert lay.thickness == ser.thickness
+        covered |= set(gid.tolist())
+    assert covered == set(where)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from conftest import REPO, run_ffd
@@ -76,11 +77,11 @@ CASES = {
     # (mesh source, surface, changes, ranks, input format, output suffix, volume)
     "span_y_right_prisms_round_tip": ("gen:right_dihedral_zx_bl", "wing",
                                       [{"twist": {"tip": 8}}, {"span": 1.1}, {"sweep": 5}, {"dihedral": 3}],
-                                      2, ".su2", ".su2", {"wall_layer": "none"}),
-    # these two wings' first cells are thin (a boundary layer): under MPI its rigid motion is refused
-    # (test_a_boundary_layer_under_mpi_is_refused_on_every_rank), so they run with the warp alone
+                                      2, ".su2", ".su2", None),
+    # these two wings' first cells are thin (a boundary layer): its rigid motion, walked through the
+    # ranks' parts, is the serial one
     "span_neg_y_left_round_tip_cgns_3_ranks": ("gen:left_swept_round", "wing", [{"twist": {"tip": 10}}],
-                                               3, ".cgns", ".cgns", {"wall_layer": "none"}),
+                                               3, ".cgns", ".cgns", None),
     "span_x_far_field_50_vtu_in_su2_out": ("gen:transport_x_ff50", "wing",
                                            [{"chord": {"tip": 0.7}}, {"sweep": -5}], 2, ".vtu", ".su2", None),
     "airfoil_2d": ("samples/naca0012_2d.su2", "airfoil",
@@ -115,20 +116,42 @@ def test_mpi_deform_equals_the_serial_run_on_meshes_with_variety(case, tmp_path)
         assert a["recovered_with"] and a["recovery"][0]["failed"] > 0
 
 
-def test_a_boundary_layer_under_mpi_is_refused_on_every_rank(tmp_path):
-    """A boundary-layer mesh's rigid wall layer is walked through cells one rank's part does not hold
-    whole: under mpiexec the ranks refuse together (exit 2, one line naming the key and what to do),
-    nothing written; serially the same design is deformed."""
-    mesh = _generated("right_dihedral_zx_bl", tmp_path / "meshes")
-    design = _design(tmp_path, mesh, "wing", [{"twist": {"tip": 8}}], points=(6, 8, 2), suffix=".su2",
-                     volume=None)
-    out = tmp_path / "mpi"
-    out.mkdir()
-    proc = mpi_ffd(2, "deform", design, "-o", out / "mesh.su2", "--cache-dir", tmp_path / "cache", cwd=tmp_path)
-    assert proc.returncode == 2, proc.stderr[-2000:]
-    errors = [ln for ln in proc.stderr.splitlines() if ln.startswith("ffd: error:")]
-    assert len(errors) == 1 and "volume.wall_layer" in errors[0] and "mpiexec" in errors[0], proc.stderr
-    assert not any(out.iterdir())
-    serial = run_ffd("deform", design, "-o", tmp_path / "serial.su2", "--cache-dir", tmp_path / "cache",
-                     cwd=tmp_path)
-    assert serial.returncode == 0, serial.stderr[-2000:]
+@pytest.mark.parametrize("mesh, ranks", [("ogrid", 2), ("ogrid", 3), ("rae2822", 2), ("rae2822", 3)])
+def test_a_boundary_layer_under_mpi_moves_as_in_the_serial_run(mesh, ranks, tmp_path):
+    """RANS meshes (a generated O-mesh with a 1e-6 chord first cell, SU2's RAE2822 with 1e-5): the wall
+    layer's stacks cross the ranks' parts, and ``mpiexec -n 2|3 ffd deform`` writes the serial files
+    byte for byte and reports the serial wall layer (first cells kept); ``ffd grad`` through the volume
+    (the layer's transpose) gives the serial gradient."""
+    from conftest import shared_file
+
+    from ffdcli.io.formats import read_mesh, write_mesh
+    from ffdcli.testing.ogrid import airfoil_ogrid_mesh
+
+    if mesh == "rae2822":
+        path, surface = shared_file("su2/deformation__rae2822__mesh_RAE2822_turb_ffd.su2"), "AIRFOIL"
+    else:
+        path, surface = tmp_path / "ogrid.su2", "airfoil"
+        write_mesh(airfoil_ogrid_mesh("0012", n_around=129, n_radial=61, first_cell=1e-6), path)
+    shape = {"upper": [0, 0.02, 0.03, 0.02, 0.01, 0], "lower": [0, -0.01, 0, -0.02, 0, 0], "sections": "all"}
+    design = _design(tmp_path, path, surface, [{"shape": shape}], points=(6, 5))
+    (a, _), (b, _) = _serial_and_parallel(tmp_path, design, ranks, ".su2")
+    assert _stable(a) == _stable(b)
+    _same_files(tmp_path)
+    wall = a["wall_layer"]
+    assert wall is not None and abs(wall["ratio_min"] - 1) < 1e-3 and abs(wall["ratio_max"] - 1) < 1e-3, wall
+    if ranks != 2:
+        return
+    pts = read_mesh(tmp_path / "serial" / "mesh.su2").points[:, :2]       # a 2D mesh: x, y
+    # a sensitivity on every node, largest near the airfoil: the layer's transpose is used
+    g = np.random.default_rng(3).normal(size=pts.shape) * np.exp(-np.linalg.norm(pts - pts.mean(0), axis=1))[:, None]
+    sens = tmp_path / "volume_sens.csv"
+    np.savetxt(sens, np.hstack([pts, g]), delimiter=",", header="x,y,dJ/dx,dJ/dy", comments="")
+    ser = run_ffd("grad", design, "--sens", sens, "--json", cwd=tmp_path)
+    par = mpi_ffd(ranks, "grad", design, "--sens", sens, "--json", cwd=tmp_path)
+    assert ser.returncode == 0 and par.returncode == 0, (ser.stderr[-2000:], par.stderr[-2000:])
+    a, b = json.loads(ser.stdout), json.loads(par.stdout)
+    assert a["through_volume"] and b["through_volume"]
+    scale = max(abs(v) for v in a["gradient"].values())
+    assert scale > 0
+    for k, v in a["gradient"].items():
+        assert abs(b["gradient"][k] - v) <= 1e-12 * max(1.0, scale), k
