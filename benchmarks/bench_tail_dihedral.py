@@ -1,4 +1,4 @@
-"""Tail dihedral on generated wing + tail + fin meshes: does the design's own map fold (issue 43, item 20)?
+"""Tail dihedral on generated wing + tail + fin meshes: does the design's own map fold?
 
 Usage (from the repository root; gmsh, the ``[test]`` extra, makes the meshes)::
 
