@@ -26,6 +26,8 @@ Run alone, for quick iteration on the warp settings::
     python -m benchmarks.bench_robustness --quick
     python -m benchmarks.bench_robustness --mesh gen:transport_x_bl --design sweep+10 --set volume.alpha=1.0
     python -m benchmarks.bench_robustness --list
+    python -m benchmarks.bench_robustness --json rows.json --compare rows_before.json   # row by row
+    python -m benchmarks.bench_robustness --compare rows_before.json rows.json          # two files, no run
 
 It is also part of ``make bench`` (``python -m benchmarks``), whose ``--quick`` runs the quick form.
 
@@ -465,6 +467,21 @@ def run(quick: bool = False) -> list[dict]:
     return rows + multi
 
 
+def compare_rows(before: list[dict], after: list[dict]) -> list[str]:
+    """Row by row (matched by mesh and design): the rows of one side only and every field that differs
+    (the seconds left out), one line per row. Empty when the tables are identical."""
+    a = {(r["mesh"], r["design"]): r for r in before}
+    b = {(r["mesh"], r["design"]): r for r in after}
+    out = [f"only in the first: {k[0]} / {k[1]}" for k in a if k not in b]
+    out += [f"only in the second: {k[0]} / {k[1]}" for k in b if k not in a]
+    for k in (k for k in a if k in b):
+        fields = sorted((set(a[k]) | set(b[k])) - {"seconds"})
+        diff = [f"{f} {a[k].get(f)!r} -> {b[k].get(f)!r}" for f in fields if a[k].get(f) != b[k].get(f)]
+        if diff:
+            out.append(f"{k[0]} / {k[1]}: " + "; ".join(diff))
+    return out
+
+
 def _plain_note(rows: list[dict]) -> str:
     """The plain ratio's figures (``good: 1``: the reference not capped), for comparison."""
     plain = [r["mesh_quality_plain"] for r in rows if r.get("mesh_quality_plain") is not None]
@@ -508,10 +525,19 @@ def main(argv=None) -> int:
     ap.add_argument("--work", type=Path, default=REPO / "out" / "robustness",
                     help="folder for generated meshes, design files and box caches")
     ap.add_argument("--json", metavar="FILE", type=Path, help="also write the rows as JSON")
+    ap.add_argument("--compare", metavar="FILE", type=Path, nargs="+",
+                    help="compare row by row with the rows of an earlier --json FILE (two files: compare "
+                         "them and exit, nothing run)")
     ap.add_argument("--list", action="store_true", help="print the mesh and design names and exit")
     ap.add_argument("--multi", action="store_true", help="only the multi-component forms (wing + tail + fin, "
                                                          "wing on a body) under planform designs")
     args = ap.parse_args(argv)
+    if args.compare and len(args.compare) > 2:
+        ap.error("--compare takes one file (compared with this run) or two (compared with each other)")
+    if args.compare and len(args.compare) == 2:
+        lines = compare_rows(*(json.loads(f.read_text()) for f in args.compare))
+        print("\n".join(lines) or "identical, row by row (the seconds left out)")
+        return 1 if lines else 0
     if args.list:
         print("meshes: " + " ".join(MESHES))
         print("designs: " + " ".join(DESIGNS))
@@ -536,6 +562,9 @@ def main(argv=None) -> int:
     print(f"({time.perf_counter() - t0:.0f} s; overrides: {' '.join(args.overrides) or 'none'})")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1, default=str))
+    if args.compare:
+        lines = compare_rows(json.loads(args.compare[0].read_text()), json.loads(json.dumps(rows, default=str)))
+        print(f"\nrow by row against {args.compare[0]}:\n" + ("\n".join(lines) or "identical (the seconds left out)"))
     refused = sum(r["status"] not in ("ok", "REFUSED") if r["mesh"].startswith("multi:") else r["status"] != "ok"
                   for r in rows)
     return 1 if refused else 0

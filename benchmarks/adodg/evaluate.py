@@ -4,8 +4,9 @@ The pitfall of Destarac et al.: an optimum that only holds on its own mesh is no
 takes the best design of an ``ffd optimize`` run (the lowest CD among its feasible evaluations, ffd's
 own rule, as ``best.yaml``), and applies its values to the finest mesh **with the same lattice**: the
 run's automatic lattice is written to a Plot3D file (``ffd box --export-plot3d``) and the evaluation's
-design file names it as ``box.file``. An automatic box fitted to the finer mesh would differ (its
-extent comes from the surface's sampling), so the shape would not be the optimum's. Then:
+design file names it as ``box.file``: an automatic box fitted to the finer mesh takes its extent from
+that mesh's sampling of the surface, so only the run's own lattice is the optimum's shape by
+construction. Then:
 
 * the lattice is checked: the run's mesh is rebuilt on its own level from the file and its wall nodes
   compared with the run's best mesh (``lattice_error``), and on the finer level the wall nodes that are

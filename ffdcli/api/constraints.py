@@ -92,10 +92,7 @@ class ConstraintSet:
     def inputs(self, chain: DesignChain, values: np.ndarray, c: int = 0, mesh_points=None) -> ConstraintInputs:
         """What component ``c``'s constraints read at ``values``: its lattice, its rows of dP'/dv (every
         variable's column), its surface points and basis, and the whole mesh's motion (``mesh_quality``)."""
-        mesh = {"mesh_points": mesh_points or (lambda: chain.mesh_points(values)),
-                "mesh_vjp": lambda G: chain.mesh_vjp(values, G),
-                "design_map": lambda: chain.design_map(values),
-                "design_map_vjp": lambda G: chain.design_map_vjp(values, G)}
+        mesh = {"quality": lambda measures, jacobian: chain.quality_of(measures, values, jacobian, mesh_points)}
         comp = chain.components[c]
         P = chain.lattices.forward(values)[c]
         emb = comp.prep.embedding

@@ -134,6 +134,36 @@ class DesignChain:
         Ps = self.lattices.forward(values)
         return self.quality.design_map(self.surface.forward(Ps), self.frames_gradient.forward(Ps))
 
+    # -- the quality of the moved mesh (mesh_quality) --------------------------------------------
+    def quality_inputs(self, values, mesh_points: Callable | None = None):
+        """``x = (X, b, F)`` of the quality stage at ``values``: the mesh as ``ffd deform`` places it
+        (``mesh_points()``: as deformed already), the surface displacement and the map's frames
+        (``b``, ``F`` None without a volume motion: no design map)."""
+        values = np.asarray(values, dtype=float)
+        X = np.asarray(mesh_points() if mesh_points is not None else self.mesh_points(values), dtype=float)
+        if not self.volume.moves:
+            return X, None, None
+        Ps = self.lattices.forward(values)
+        return X, self.surface.forward(Ps), self.frames_gradient.forward(Ps)
+
+    def quality_of(self, measures, values, jacobian: bool = False, mesh_points: Callable | None = None):
+        """``(y (C,), dy/dv (C, n_vars) or None)`` of ``measures`` (``mesh_quality`` items) at ``values``:
+        the quality stage's value, its reverse product carried down the chain (through the volume
+        motion, and through the design map near the wall)."""
+        stage = self.quality.over(measures)
+        x = self.quality_inputs(values, mesh_points)
+        if not jacobian:
+            return stage.forward(x), None
+        y = np.array([v for v, _, _ in stage.value_and_gradients(x)])
+        rows = []
+        for k in range(len(stage.measures)):
+            gX, g_b, g_F = stage.vjp(x, np.eye(len(stage.measures))[k])
+            row = np.asarray(self.mesh_vjp(values, gX), dtype=float)
+            if np.any(g_b) or np.any(g_F):
+                row = row + self._pull(values, g_b, g_F, "gradient")
+            rows.append(row)
+        return y, np.array(rows).reshape(len(rows), self.n_vars)
+
     # -- forward products ------------------------------------------------------------------------
     def surface_jvp(self, values, dv) -> np.ndarray:
         """(S, 3) dX_s/dv @ dv."""
@@ -145,7 +175,7 @@ class DesignChain:
         Ps = self.lattices.forward(values)
         dPs = self.lattices.jvp(values, dv)
         db = self.surface.jvp(Ps, dPs)
-        x = (None, self.frame_stage().forward(Ps)) if self.volume.moves else None
+        x = (self.surface.forward(Ps), self.frame_stage().forward(Ps)) if self.volume.moves else None
         dF = self.frame_stage().jvp(Ps, dPs) if self.volume.moves else None
         return self.volume.jvp(x, (db, dF), progress=progress)
 
@@ -165,7 +195,11 @@ class DesignChain:
     def mesh_vjp(self, values, g, progress=None) -> np.ndarray:
         """(n_vars,) dJ/dv for ``g`` = dJ/dX at every mesh node (N, 3), through the volume motion (under
         MPI each rank sums its share of the volume, the sums reduced)."""
-        x = (None, self.frames(values)) if self.volume.moves else None
+        if self.volume.moves:
+            Ps = self.lattices.forward(values)
+            x = (self.surface.forward(Ps), self.frame_stage().forward(Ps))
+        else:
+            x = None
         g_b, g_F = self.volume.vjp(x, g, progress=progress)
         return self._pull(values, g_b, g_F if self.volume.moves else None)
 

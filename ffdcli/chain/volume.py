@@ -3,7 +3,7 @@
 ``x = (b, F)``: the surface displacement (S, 3) and frames (S, 3, 3) (rows as the run's surface);
 ``y`` the mesh points (N, 3): ``X0 + warp(b, F)`` with the surface nodes exactly ``X0 + b`` (bit for
 bit where the FFD puts them). The warp is a fixed linear map of ``(b, M = F - I)`` (a rigid wall
-layer, :mod:`ffdcli.volume.layer_motion`, is not: its products are linearised at ``x``'s frames,
+layer, :mod:`ffdcli.volume.layer_motion`, is not: its products are linearised at ``x = (b, F)``,
 ``at=``), so ``jvp`` is ``warp(db, I + dF)`` and ``vjp`` its exact transpose
 :func:`ffdcli.volume.warp.warp_vjp`. Without a
 volume motion (``volume.method: none``, a surface mesh) only the surface nodes move.
@@ -92,8 +92,8 @@ class VolumeStage(Stage):
     def jvp(self, x, dx, progress=None) -> np.ndarray:
         db, dF = dx
         db = np.asarray(db, dtype=float)
-        if self.moves:       # a wall layer is not linear in the frames: linearised at x's (at=)
-            out = warp(self.model(progress), db, np.eye(3) + dF, progress=progress, at=x[1])
+        if self.moves:       # a wall layer is not linear in the frames: linearised at x (at=)
+            out = warp(self.model(progress), db, np.eye(3) + dF, progress=progress, at=(x[0], x[1]))
         else:
             out = np.zeros((len(self.points0), 3))
         out[self.surface_ids] = db
@@ -106,5 +106,6 @@ class VolumeStage(Stage):
             return g[ids].copy(), np.zeros((len(ids), 3, 3))
         gs = g.copy()
         gs[ids] = 0.0          # surface nodes are placed by the FFD exactly; the warp's own value there is overwritten
-        g_b, g_M = warp_vjp(self.model(progress), gs, progress=progress, comm=self.share.reduction_comm(), at=x[1])
+        g_b, g_M = warp_vjp(self.model(progress), gs, progress=progress, comm=self.share.reduction_comm(),
+                            at=(x[0], x[1]))
         return g_b + g[ids], g_M

@@ -19,6 +19,7 @@ item, :func:`item_schema`), ``from_spec(spec, ctx)`` with ``ctx`` a :class:`Cons
 
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
@@ -53,52 +54,25 @@ class ConstraintInputs:
         The surface basis ``B``.
     rmatvec : callable (G (S, 3)) -> (n_ctrl, 3), optional
         ``B.T @ G`` by a faster route than ``basis`` (e.g. :meth:`ffdcli.lattice.embedding.Embedding.rmatvec`).
-    mesh_points : callable () -> ndarray (N, 3), optional
-        Every mesh node as the design places it, volume motion included (``mesh_quality``;
-        :meth:`ffdcli.api.DesignModel.mesh_points`).
-    mesh_vjp : callable (G (N, 3)) -> ndarray (n_vars,), optional
-        ``dJ/dv`` for ``G = dJ/dX`` at every mesh node, through the volume motion
-        (:meth:`ffdcli.api.DesignModel.mesh_vjp`).
-    design_map : callable () -> (X_map (N, 3), zone (N,) bool) or None, optional
-        The input nodes near the wall moved by the design's own map (:mod:`ffdcli.quality.design_map`;
-        ``mesh_quality`` compares the cells there with it); None or absent: no map.
-    design_map_vjp : callable (G (N, 3)) -> ndarray (n_vars,), optional
-        ``dJ/dv`` for ``G = dJ/dX_map``.
+    quality : callable (measures, jacobian) -> (values (C,), jacobian (C, n_vars) or None), optional
+        The value (and ``jacobian``: the exact derivative) of ``mesh_quality`` measures on the mesh as the
+        design moves it: the chain's quality stage (:meth:`ffdcli.chain.DesignChain.quality_of`).
     """
 
     def __init__(self, P, P0, values, lattice_jacobian: Callable, surface_points: Callable, basis: Callable,
-                 rmatvec: Callable | None = None, *, mesh_points: Callable | None = None,
-                 mesh_vjp: Callable | None = None, design_map: Callable | None = None,
-                 design_map_vjp: Callable | None = None):
+                 rmatvec: Callable | None = None, *, quality: Callable | None = None):
         self.P = np.asarray(P, dtype=float)
         self.P0 = np.asarray(P0, dtype=float)
         self.values = np.asarray(values, dtype=float)
         self._D, self._X, self._B, self._rmatvec = lattice_jacobian, surface_points, basis, rmatvec
-        self._mesh_points, self._mesh_vjp = mesh_points, mesh_vjp
-        self._design_map, self._design_map_vjp = design_map, design_map_vjp
+        self._quality = quality
 
-    def _needs_mesh(self, what):
-        if what is None:
+    def quality(self, measures, jacobian: bool = False):
+        """``(values (C,), jacobian (C, n_vars) or None)`` of ``measures`` on the moved volume mesh."""
+        if self._quality is None:
             raise InputError("mesh_quality needs the motion of the volume mesh: evaluate it through a design "
-                             "model (ffdcli.api.DesignModel, ffd constraints), which gives mesh_points and mesh_vjp")
-        return what
-
-    @cached_property
-    def mesh_X(self) -> np.ndarray:
-        """(N, 3) every mesh node after the design."""
-        return np.asarray(self._needs_mesh(self._mesh_points)(), dtype=float)
-
-    def mesh_vjp(self, G: np.ndarray) -> np.ndarray:
-        """(n_vars,) ``dJ/dv`` for ``G`` (N, 3) ``= dJ/dX`` at every mesh node."""
-        return self._needs_mesh(self._mesh_vjp)(G)
-
-    def design_map(self):
-        """``(X_map (N, 3), zone (N,))`` of the design's own map near the wall, or None without one."""
-        return None if self._design_map is None else self._design_map()
-
-    def design_map_vjp(self, G: np.ndarray) -> np.ndarray:
-        """(n_vars,) ``dJ/dv`` for ``G`` (N, 3) ``= dJ/dX_map``."""
-        return self._design_map_vjp(G)
+                             "model (ffdcli.api.DesignModel, ffd constraints), whose chain moves the mesh")
+        return self._quality(tuple(measures), jacobian)
 
     def rmatvec(self, G: np.ndarray) -> np.ndarray:
         """(n_ctrl, 3) ``B.T @ G`` for ``G`` (S, 3) (a compiled product when one was given)."""
@@ -202,8 +176,10 @@ def item_schema(description: str, props: dict | None = None, required=()) -> dic
 
 
 @dataclass(frozen=True, eq=False)
-class Constraint:
-    """Common part: the position in ``constraints``, the kind, the bounds and the item names."""
+class Constraint(ABC):
+    """Common part: the position in ``constraints``, the kind, the bounds and the item names; a kind
+    implements the abstract :attr:`size`, :meth:`value` and :meth:`jacobian` (and, when the two share
+    work, :meth:`value_and_jacobian`)."""
 
     index: int
     lower: float
@@ -214,8 +190,9 @@ class Constraint:
     default_bounds = (None, None)
 
     @property
-    def size(self) -> int:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def size(self) -> int:
+        """The number of items (values) of the constraint."""
 
     @property
     def scalar(self) -> bool:
@@ -228,11 +205,13 @@ class Constraint:
         base = f"k{self.index}.{self.kind}"
         return [base] if self.scalar else [f"{base}[{j}]" for j in range(self.size)]
 
-    def value(self, inp: ConstraintInputs) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def value(self, inp: ConstraintInputs) -> np.ndarray:
+        """(c,) the items' values for the design of ``inp``."""
 
-    def jacobian(self, inp: ConstraintInputs) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def jacobian(self, inp: ConstraintInputs) -> np.ndarray:
+        """(c, n_vars) their exact derivatives with respect to the design variables."""
 
     def value_and_jacobian(self, inp: ConstraintInputs) -> tuple[np.ndarray, np.ndarray]:
         """Both at once ((c,), (c, n_vars)); kinds that share the work override it."""

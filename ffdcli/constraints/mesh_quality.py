@@ -38,10 +38,11 @@ see coming and be pushed back from), it bounds the minimum from below (a satisfi
 satisfied minimum), and its error is bounded by a number that does not depend on the values.
 
 Derivative: ``dKS/dX = sum_i w_i dr_i/dX`` with the soft-min weights ``w_i = exp(-rho (r_i - m)) /
-sum``; it reaches the design variables through the volume motion's exact transpose
-(:meth:`ffdcli.api.DesignModel.mesh_vjp`: the IDW warp's transpose and the surface's chain rule), and
-through the references near the wall by the design map's transpose
-(:meth:`ffdcli.api.DesignModel.design_map_vjp`).
+sum``. The constraint gives this measure to the derivative chain's quality stage
+(:class:`ffdcli.chain.QualityStage`, through :meth:`ffdcli.chain.DesignChain.quality_of`), which
+carries it to the design variables through the volume motion's exact transpose (the IDW warp's
+transpose and the surface's chain rule) and through the references near the wall by the design
+map's transpose.
 Both passes are compiled loops over the cells (:func:`corner_values`, :func:`corner_vjp`), each
 with its NumPy reference beside it.
 """
@@ -422,25 +423,16 @@ class MeshQuality(Constraint):
                 corner_vjp(X_map, d[a], t, self.plane, cm, G_map, use_numba=use_numba)
         return value, G, G_map
 
-    def _map(self, inp):
-        """(X_map, zone) of the inputs' design map, or (None, None) without one."""
-        got = inp.design_map()
-        return (None, None) if got is None else got
-
+    # the value and derivative on the moved mesh: the chain's quality stage (ffdcli.chain.quality), the
+    # one home of how the measure meets the volume motion and the design map
     def value(self, inp):
-        X_map, zone = self._map(inp)
-        return np.array([self.measure(inp.mesh_X, X_map=X_map, zone=zone)[0]])
+        return inp.quality((self,))[0]
 
     def jacobian(self, inp):
         return self.value_and_jacobian(inp)[1]
 
     def value_and_jacobian(self, inp):
-        X_map, zone = self._map(inp)
-        value, G, G_map = self.measure(inp.mesh_X, grad=True, X_map=X_map, zone=zone)
-        jac = np.asarray(inp.mesh_vjp(G), dtype=float)
-        if G_map is not None and np.any(G_map):
-            jac = jac + inp.design_map_vjp(G_map)
-        return np.array([value]), jac[None, :]
+        return inp.quality((self,), jacobian=True)
 
 
 CONSTRAINTS.register(MeshQuality)

@@ -25,7 +25,11 @@ design's (the last accepted iterate's) scaled objective plus ``max(1, |value|)``
 which SLSQP's line search rejects: it shortens the step toward the last good design (a factor 0.1 to
 0.5 per try). After ``max_failures`` failures the run stops (:class:`StopRun`, exit 1). A line search
 that spends more than ``line_search`` evaluations (its full step included) without an accepted step
-ends the run with that reason instead of spending solves.
+ends the run with that reason instead of spending solves. ``method: SQP`` is told of a failure instead
+(a NaN objective): it refuses the trial and shrinks its move limit.
+
+Every method is one ``scipy.optimize.minimize`` call with the same objective, gradient, constraints and
+callback; ffd's SQP is given as a callable method (:func:`ffdcli.optimize.sqp.method`).
 
 Iterations are scipy's: SLSQP counts one when an iteration's full step has been evaluated; the steps
 back of its line search and the accepted design (whose gradients are asked) belong to it. SQP counts
@@ -131,6 +135,7 @@ class Driver:
         self.sides: list[Side] = []
         self.f_scale = 1.0
         self.latest: dict[str, np.ndarray] = {}      # the latest adjoint gradient of each function
+        self.refuse_failed = settings.method == "SQP"   # a failed design: refused (SQP) or penalised
 
     # -- the variables -------------------------------------------------------------------------
     def values_of(self, x: np.ndarray) -> np.ndarray:
@@ -208,12 +213,21 @@ class Driver:
         return ev if ev.failed is None else self.anchor
 
     def objective(self, x):
+        """The scaled objective; a failed design: NaN for ``method: SQP`` (:func:`ffdcli.optimize.sqp.method`
+        refuses the trial), else the last good design's objective plus a penalty (scipy's methods back off)."""
         ev = self._get(x, False)
+        if ev.failed is not None and self.refuse_failed:
+            return float("nan")
         f = self.f_scale * (ev if ev.failed is None else self.anchor).functions[self.settings.objective]
         return f if ev.failed is None else f + max(1.0, abs(f))
 
     def objective_grad(self, x):
-        ev = self._response(x, True)
+        """The scaled objective's gradient; a failed design: NaN (``method: SQP``) or the last good one's."""
+        ev = self._get(x, True)
+        if ev.failed is not None:
+            if self.refuse_failed:
+                return np.full(len(self.chosen), np.nan)
+            ev = self.anchor
         return self.f_scale * self.r * self.gradient(ev, self.settings.objective)[self.chosen]
 
     def _sides(self, x, equality: bool, jac: bool):
@@ -234,42 +248,18 @@ class Driver:
 
     def accepted(self, *args) -> None:
         """scipy's callback: SLSQP calls it once an iteration's full step is evaluated (its line search
-        follows); trust-constr after each iteration."""
+        follows), trust-constr after each iteration, SQP after each accepted step (the next trial is
+        already the next iteration's full step)."""
         self.iterations += 1
-        self.trial_next = False
-
-    def point(self, x: np.ndarray, gradient: bool) -> sqp.Point | None:
-        """The scaled design ``x`` as :class:`ffdcli.optimize.sqp.Point` (every constraint side, inequalities
-        then equalities); None when it failed."""
-        ev = self._get(x, gradient)
-        if ev.failed is not None:
-            return None
-        c = np.concatenate([self._sides(x, False, False), self._sides(x, True, False)])
-        if not gradient:
-            return sqp.Point(x=np.asarray(x, float).copy(), f=self.objective(x), c=c)
-        A = np.vstack([self._sides(x, False, True), self._sides(x, True, True)])
-        return sqp.Point(x=np.asarray(x, float).copy(), f=self.objective(x), c=c, g=self.objective_grad(x), A=A)
-
-    def _run_sqp(self, x0: np.ndarray) -> Outcome:
-        lo, hi = np.array(self.bounds, dtype=float).T
-        equality = np.array([s.equality for s in self.sides if not s.equality]
-                            + [s.equality for s in self.sides if s.equality], dtype=bool)
-
-        def accepted(p):
-            self.iterations += 1
-
-        res = sqp.minimize_sqp(self.point, x0, lo, hi, equality, radius=self.settings.move_limit,
-                               iterations=self.settings.iterations, tolerance=self.settings.tolerance,
-                               callback=accepted)
-        return Outcome(status=res.status, message=res.message, iterations=self.iterations)
+        self.trial_next = self.refuse_failed
 
     # -- the run -----------------------------------------------------------------------------------
     def run(self) -> Outcome:
-        """Start (the baseline) and run the optimiser; StopRun propagates to the caller."""
+        """Start (the baseline) and run the optimiser, one ``scipy.optimize.minimize`` call for every
+        method (ffd's SQP as a callable method); StopRun propagates to the caller."""
         self.start()
         x0 = np.zeros(len(self.chosen))
-        if self.settings.method == "SQP":
-            return self._run_sqp(x0)
+        method = self.settings.method
         cons = []
         if any(not s.equality for s in self.sides):
             cons.append({"type": "ineq", "fun": lambda x: self._sides(x, False, False),
@@ -277,17 +267,30 @@ class Driver:
         if any(s.equality for s in self.sides):
             cons.append({"type": "eq", "fun": lambda x: self._sides(x, True, False),
                          "jac": lambda x: self._sides(x, True, True)})
-        if self.settings.method == "trust-constr":
-            nl = [so.NonlinearConstraint(c["fun"], 0.0, np.inf if c["type"] == "ineq" else 0.0, jac=c["jac"])
-                  for c in cons]
-            res = so.minimize(self.objective, x0, jac=self.objective_grad, method="trust-constr",
-                              bounds=so.Bounds(*np.array(self.bounds).T), constraints=nl, callback=self.accepted,
-                              options={"maxiter": max(self.settings.iterations, 1), "gtol": self.settings.tolerance,
-                                       "xtol": self.settings.tolerance})
-            status = "converged" if res.status in (1, 2) else "iterations"
+        bounds = self.bounds
+        tol, iterations = self.settings.tolerance, self.settings.iterations
+        if method == "SQP":
+            options = {"radius": self.settings.move_limit, "maxiter": iterations, "tol": tol}
+        elif method == "trust-constr":
+            cons = [so.NonlinearConstraint(c["fun"], 0.0, np.inf if c["type"] == "ineq" else 0.0, jac=c["jac"])
+                    for c in cons]
+            bounds = so.Bounds(*np.array(self.bounds).T)
+            options = {"maxiter": max(iterations, 1), "gtol": tol, "xtol": tol}
         else:
-            res = so.minimize(self.objective, x0, jac=self.objective_grad, method="SLSQP", bounds=self.bounds,
-                              constraints=cons, callback=self.accepted,
-                              options={"maxiter": self.settings.iterations, "ftol": self.settings.tolerance})
-            status = "converged" if res.status == 0 else ("iterations" if res.status == 9 else "stopped")
-        return Outcome(status=status, message=str(res.message), iterations=self.iterations)
+            options = {"maxiter": iterations, "ftol": tol}
+        res = so.minimize(self.objective, x0, jac=self.objective_grad, method=METHODS.get(method, method),
+                          bounds=bounds, constraints=cons, callback=self.accepted, options=options)
+        return Outcome(status=outcome(method, res), message=str(res.message), iterations=self.iterations)
+
+
+#: ``optimize.method`` -> what ``scipy.optimize.minimize`` is given (ffd's own SQP is a callable method).
+METHODS = {"SQP": sqp.method}
+
+
+def outcome(method: str, res) -> str:
+    """converged, iterations or stopped, from ``scipy.optimize.minimize``'s result for ``method``."""
+    if method == "SQP":
+        return res.outcome
+    if method == "trust-constr":
+        return "converged" if res.status in (1, 2) else "iterations"
+    return "converged" if res.status == 0 else ("iterations" if res.status == 9 else "stopped")

@@ -349,3 +349,78 @@ def minimize_sqp(evaluate: Callable[[np.ndarray, bool], Point | None], x0: np.nd
         elif ratio < SHRINK_AT:
             radius = 0.5 * size
     return Result(p, "iterations", f"{iterations} iterations reached", done, trials)
+
+
+def method(fun: Callable, x0: np.ndarray, args=(), jac: Callable | None = None, bounds=None, constraints=(),
+           callback: Callable | None = None, *, radius: float = 0.1, maxiter: int = 100, tol: float = 1e-6,
+           **unused) -> so.OptimizeResult:
+    """:func:`minimize_sqp` behind scipy's face: ``scipy.optimize.minimize(fun, x0, jac=jac,
+    method=sqp.method, bounds=bounds, constraints=constraints, callback=callback,
+    options={"radius": r, "maxiter": n, "tol": t})``, so a driver has one call path for every method.
+
+    Parameters
+    ----------
+    fun, jac : callable
+        ``fun(x, *args)`` -> float and ``jac(x, *args)`` -> (n,) (required). A value or gradient that is
+        not finite marks a failed design (a flow that diverged, a mesh refused): the trial is refused
+        and the move limit shrinks to a quarter of the step.
+    bounds : sequence of (lo, hi) or scipy.optimize.Bounds, optional
+        The variables' bounds (``None`` or infinite: unbounded).
+    constraints : sequence of dict
+        scipy's ``{"type": "ineq" | "eq", "fun": c(x) >= 0 | = 0, "jac": dc/dx, "args": ...}``;
+        inequalities come before equalities in :class:`Point`'s ``c``, each in the order given.
+    callback : callable, optional
+        ``callback(x)`` after each accepted step.
+    radius, maxiter, tol
+        :func:`minimize_sqp`'s first move limit, iterations and tolerance.
+
+    Returns
+    -------
+    scipy.optimize.OptimizeResult
+        ``x``, ``fun``, ``outcome`` (converged, iterations, stopped), ``message``, ``success``,
+        ``nit`` (accepted steps), ``nfev`` (trials).
+    """
+    if jac is None or not callable(jac):
+        raise ValueError("method SQP needs the gradient: pass jac as a callable")
+    x0 = np.asarray(x0, dtype=float)
+    n = x0.size
+    if bounds is None:
+        lower, upper = np.full(n, -np.inf), np.full(n, np.inf)
+    elif isinstance(bounds, so.Bounds):
+        lower, upper = np.broadcast_to(bounds.lb, n).astype(float), np.broadcast_to(bounds.ub, n).astype(float)
+    else:
+        lower, upper = (np.array([np.nan if b is None else b for b in side], dtype=float)
+                        for side in zip(*bounds, strict=True))
+        lower, upper = np.nan_to_num(lower, nan=-np.inf), np.nan_to_num(upper, nan=np.inf)
+    cons = [c for c in constraints if c["type"] == "ineq"] + [c for c in constraints if c["type"] == "eq"]
+    sizes: list[int] = []           # each constraint's length, learnt at the first design
+
+    def evaluate(x, gradient):
+        f = float(fun(x, *args))
+        if not np.isfinite(f):
+            return None
+        parts = [np.atleast_1d(np.asarray(k["fun"](x, *k.get("args", ())), dtype=float)) for k in cons]
+        sizes[:] = [q.size for q in parts]
+        c = np.concatenate(parts or [np.zeros(0)])
+        if not gradient:
+            return Point(x=np.asarray(x, float).copy(), f=f, c=c)
+        g = np.asarray(jac(x, *args), dtype=float)
+        if not np.isfinite(g).all():
+            return None
+        A = np.vstack([np.atleast_2d(k["jac"](x, *k.get("args", ()))) for k in cons] or [np.zeros((0, n))])
+        return Point(x=np.asarray(x, float).copy(), f=f, c=c, g=g, A=A)
+
+    # minimize_sqp's first call is evaluate(x0, True): made here (it tells the constraints' lengths), replayed
+    first = [evaluate(x0, True)]
+    equality = np.concatenate([np.full(size, k["type"] == "eq") for size, k in zip(sizes, cons, strict=False)]
+                              or [np.zeros(0, dtype=bool)])
+
+    def replay(x, gradient):
+        return first.pop() if first else evaluate(x, gradient)
+
+    res = minimize_sqp(replay, x0, lower, upper, equality, radius=radius, iterations=maxiter, tolerance=tol,
+                       callback=None if callback is None else (lambda q: callback(q.x.copy())))
+    p = res.point
+    return so.OptimizeResult(x=None if p is None else p.x, fun=None if p is None else p.f, outcome=res.status,
+                             message=res.message, success=res.status == "converged", nit=res.iterations,
+                             nfev=res.trials)

@@ -239,7 +239,7 @@ class MPIComm(SerialComm):
         err = error if rank == self.rank else RankError(message, code, rank, report)
         if isinstance(err, KeyboardInterrupt):
             # click turns a KeyboardInterrupt into a new Abort, which has lost the agreement: this rank
-            # then waited in one more agreement than the others (the Ctrl-C deadlock of issue 43)
+            # then waited in one more agreement than the others (a deadlock on Ctrl-C)
             err = Terminated(signal.SIGINT)
         err.ffd_agreed = True
         raise err

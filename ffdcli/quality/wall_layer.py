@@ -13,7 +13,11 @@ makes it a rule: a design outside 1 +- that tolerance is refused as an inverted 
 ``--force`` writes it with a warning). ``ffd check`` reports the heights and angles of the mesh as it is.
 The wall nodes on a sharp edge (a sharp trailing edge, a flat tip's rim: faces turning by more than
 60 degrees, :func:`ffdcli.volume.wall_layer.sharp_nodes`) have no wall normal and their off-wall edge
-is the wake's or the tip's: they are left out. Only meshes with a boundary layer are judged (median first-cell aspect ratio at least
+is the wake's or the tip's: they are left out. A wall node on a symmetry plane (a wing's root: a
+planar marker the warp slides, :func:`ffdcli.volume.roles.marker_roles`) is measured against the
+normal of the wall and its mirror image, which lies in the plane
+(:func:`ffdcli.volume.wall_layer.in_plane`). Only meshes with a boundary layer are judged (median
+first-cell aspect ratio at least
 :data:`ffdcli.volume.wall_layer.MIN_ASPECT`): on an Euler mesh the first cell is not a y+ and the
 cell rules serve.
 """
@@ -26,7 +30,8 @@ import numpy as np
 
 from ffdcli.errors import QualityError
 from ffdcli.mesh import Mesh
-from ffdcli.volume.wall_layer import MIN_ASPECT, off_wall_edges, sharp_nodes
+from ffdcli.volume.roles import marker_roles
+from ffdcli.volume.wall_layer import MIN_ASPECT, in_plane, off_wall_edges, sharp_nodes, wall_normals, wall_planes
 
 #: The default tolerance on a first cell's height change (``volume.first_cell``).
 DEFAULT_FIRST_CELL = 0.01
@@ -106,10 +111,14 @@ def wall_node_rows(mesh: Mesh, walls, points_after=None, points_before=None) -> 
     ref = after if points_before is None else np.asarray(points_before, dtype=np.float64)
     if not mesh.cells or not len(ids):
         return np.empty((0, 9))
-    e0 = off_wall_edges(ref, mesh.cells, faces, ids)
+    sliding = marker_roles(ref, mesh.markers, names, mesh.dim).sliding
+    n0 = wall_normals(ref, faces, ids)
+    planes = wall_planes(ref[ids], n0, sliding)      # a root on a symmetry plane: the mirrored wall's normal
+    e0 = off_wall_edges(ref, mesh.cells, faces, ids, in_plane(n0, planes))
     ok = (e0.node >= 0) & (e0.height > 0) & (e0.spacing > 0)
     ok[sharp_nodes(ref, faces, ids)] = False        # no wall normal: the edge's first cell is the wake's
-    e1 = e0 if points_before is None else off_wall_edges(after, mesh.cells, faces, ids, edge_nodes=e0.node)
+    e1 = e0 if points_before is None else off_wall_edges(
+        after, mesh.cells, faces, ids, in_plane(wall_normals(after, faces, ids), planes), edge_nodes=e0.node)
     node = np.asarray(ids)[ok]
     return np.column_stack([node.astype(np.float64), e0.height[ok], e0.spacing[ok], e1.height[ok],
                             e0.angle[ok], e1.angle[ok], ref[node]])

@@ -93,7 +93,8 @@ def loft(occ, sections: list[np.ndarray]) -> int:
 
 def fluid_tets(solids: dict[str, SolidBuilder], lo, hi, *, symmetry_axis: int, symmetry_at: float = 0.0,
                h_solid: float, h_edge: float, h_far: float, grow: float | None = None, fuse: bool = False,
-               name: str = "fluid") -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+               name: str = "fluid", edge_grow: float | None = None
+               ) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
     """Tetrahedral mesh of the fluid between ``solids`` and the box ``lo``..``hi`` (module docstring).
 
     Parameters
@@ -110,6 +111,10 @@ def fluid_tets(solids: dict[str, SolidBuilder], lo, hi, *, symmetry_axis: int, s
     grow
         Distance from the solids over which the size grows from ``h_solid`` to ``h_far``
         (default 0.6 of the box's smallest extent).
+    edge_grow
+        Distance from the solids' curves at which the size has grown linearly from ``h_edge`` to
+        ``h_solid`` (a graded band along leading and trailing edges, resolving a leading-edge radius);
+        default None: from ``h_edge`` toward ``h_far`` over 20 ``h_solid`` (a thin band).
     fuse
         The solids intersect (a wing through a fuselage) and are fused first, sharing the junction.
 
@@ -136,7 +141,8 @@ def fluid_tets(solids: dict[str, SolidBuilder], lo, hi, *, symmetry_axis: int, s
         vols, boxes = _fluid(gmsh, solids, lo, hi, fuse)
         groups = _classify(gmsh, vols, boxes, list(solids), lo, hi, symmetry_axis, symmetry_at)
         faces = [t for n in solids for t in groups[n]]
-        _size_fields(gmsh, faces, h_solid, h_edge, h_far, 0.6 * float(np.min(hi - lo)) if grow is None else grow)
+        _size_fields(gmsh, faces, h_solid, h_edge, h_far, 0.6 * float(np.min(hi - lo)) if grow is None else grow,
+                     edge_grow)
         gmsh.model.mesh.generate(3)
         node_tags, xyz = gmsh.model.mesh.getNodes()[:2]
         etypes, _, enodes = gmsh.model.mesh.getElements(3, vols[0][1])
@@ -199,9 +205,11 @@ def _classify(gmsh, vols, boxes, names: list[str], lo, hi, axis: int, at: float)
     return groups
 
 
-def _size_fields(gmsh, faces: list[int], h_solid: float, h_edge: float, h_far: float, grow: float) -> None:
+def _size_fields(gmsh, faces: list[int], h_solid: float, h_edge: float, h_far: float, grow: float,
+                 edge_grow: float | None = None) -> None:
     """Background size: ``h_solid`` on ``faces`` growing to ``h_far`` over ``grow``, ``h_edge`` near
-    their curves growing over 20 ``h_solid``; sizes from the boundary, points and curvature off."""
+    their curves growing toward ``h_far`` over 20 ``h_solid`` (or reaching ``h_solid`` at ``edge_grow``);
+    sizes from the boundary, points and curvature off."""
     curves = sorted({abs(c[1]) for s in faces for c in gmsh.model.getBoundary([(2, s)], oriented=False)})
     f = gmsh.model.mesh.field
     d_s = f.add("Distance")
@@ -215,13 +223,15 @@ def _size_fields(gmsh, faces: list[int], h_solid: float, h_edge: float, h_far: f
     f.setNumber(t_s, "DistMax", grow)
     d_c = f.add("Distance")
     f.setNumbers(d_c, "CurvesList", curves)
-    f.setNumber(d_c, "Sampling", 200)
+    f.setNumber(d_c, "Sampling", 200 if edge_grow is None else 2000)
     t_c = f.add("Threshold")
     f.setNumber(t_c, "InField", d_c)
     f.setNumber(t_c, "SizeMin", h_edge)
     f.setNumber(t_c, "SizeMax", h_far)
     f.setNumber(t_c, "DistMin", 0.5 * h_edge)
-    f.setNumber(t_c, "DistMax", 20 * h_solid)
+    # edge_grow: the same ramp toward h_far, steep enough to reach h_solid at edge_grow
+    f.setNumber(t_c, "DistMax", 20 * h_solid if edge_grow is None
+                else 0.5 * h_edge + edge_grow * (h_far - h_edge) / max(h_solid - h_edge, 1e-12 * h_far))
     m = f.add("Min")
     f.setNumbers(m, "FieldsList", [t_s, t_c])
     f.setAsBackgroundMesh(m)

@@ -2,38 +2,42 @@
 derivatives (forward and transpose).
 
 A node of the layer (:mod:`ffdcli.volume.wall_layer`: weights ``psi_k`` of its nearest wall nodes,
-blend weight ``s``) moves by
+blend weight ``s``, stack share ``w``) moves by
 
-    d = (1 - s) d_warp + s sum_k psi_k [b_k + (G_k - I)(x - x_k)],
+    d = (1 - s) d_warp + s sum_k psi_k [b_k + ((1 - w) G_k + w R_k - I)(x - x_k)],
 
-``b_k`` the wall node's translation and ``G_k`` its *surface frame*: ``G = F (I - n n^T) + n' n^T`` for
-the frame ``F`` the warp is given (:func:`ffdcli.volume.frames.surface_frame_gradient`; ``n'`` the
-deformed unit normal ``cof(F) n / |cof(F) n|``). ``G`` is the rotation of the wall's local frame
-(the polar factor of G, which maps ``n`` to ``n'``) times the wall's own stretch along itself: it
-never stretches along the normal. An off-wall edge ``h n + tau`` (``tau`` along the wall) goes to
-``h n' + F tau``: its height over the deformed wall is ``h`` exactly (y+ kept) and it leans from the
-new normal only as much as the wall's own stretch tilts its tangential part (a 0.3 degree edge, a 5 %
-stretch: 0.015 degree). With ``volume.carry: rotation`` the frames are rotations and ``G = F``; with
-``carry: gradient`` (the default) the warp beyond the layer keeps the FFD map's whole gradient. A wall
-node on a sharp edge (zero normal in the layer) carries ``F`` itself: the wedge behind a sharp trailing
-edge is one smooth map, as with ``carry: gradient``.
+``b_k`` the wall node's translation, ``G_k = F (I - n n^T) + n' n^T`` its frame: ``F`` the frame the
+warp is given along the wall (the wall's own stretch), ``n'`` the unit normal of the *deformed wall*
+at the node (:func:`deformed_normals`: the moved wall faces' vector areas, a root's projected into its
+symmetry plane), not ``cof(F) n`` (one-sided at a hinge, unresolved across a device's transition).
+``R_k`` the least rotation taking ``n`` to ``n'``. An off-wall edge ``h n + tau`` (``tau`` along the
+wall) of a node on one stack (``w = 1``) goes to ``h n' + R tau``: its height over the deformed wall
+is ``h`` and its angle to the normal the same (y+ and the stack's lean kept); between stacks
+(``w -> 0``) it goes to ``h n' + F tau``, following the wall's stretch (an affine map kept affine).
+A wall node on a sharp edge (zero normal in the layer) carries ``F`` itself: the wedge behind a sharp
+trailing edge is one smooth map, as with ``carry: gradient``.
 
-The motion is linear in (b, G) with the weights fixed on the undeformed mesh (a sparse matrix ``P``:
-``sum_k psi_k [b_k - (G_k - I) x_k] + (sum_k psi_k (G_k - I)) x``), and ``G`` is a function of ``F``
-node by node: its derivative in a direction ``(db, dF)`` at frames ``F`` is
-``(1 - s) d_warp(db, dF) + s P [db + dG(F; dF) (x - x_k)]`` (:func:`blend_layer` with ``at``), the
-transpose :func:`layer_transpose`. A frame equal to the identity gives ``G = I`` exactly, so a design
-without changes writes the input back bit for bit.
+The motion is linear in (b, G, R) with the weights fixed on the undeformed mesh (a sparse matrix
+``P``: ``sum_k psi_k [b_k - M_k x_k] + (sum_k psi_k M_k) x``), ``G`` linear in ``F`` and both
+``G`` and ``R`` functions of ``n'``, itself a function of ``b``: the derivative in a direction
+``(db, dF)`` at ``(b, F)`` is :func:`blend_layer` with ``at=(b, F)``, the transpose
+:func:`layer_transpose` (``dn'`` through :func:`deformed_normals_jvp` / :func:`deformed_normals_vjp`).
+A frame equal to the identity and an unmoved wall give ``G = R = I`` exactly, so a design without
+changes writes the input back bit for bit.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ffdcli.volume.frames import surface_frame_gradient, surface_frame_gradient_jvp
-from ffdcli.volume.wall_layer import WallLayer
+from ffdcli.geometry.surface import face_vectors
+from ffdcli.mesh import CellBlock
+from ffdcli.volume.wall_layer import WallLayer, layer_normals
 
 _EYE = np.eye(3)
+#: A wall node whose deformed normal is within this of the reverse of its normal (cos > 1 - FLIPPED) has
+#: turned over: no least rotation, R is G there.
+FLIPPED = 1e-6
 
 
 def _frames(frames, ns: int) -> np.ndarray:
@@ -49,74 +53,190 @@ def _with_normal(normals: np.ndarray) -> np.ndarray:
     return np.einsum("ij,ij->i", normals, normals) > 0
 
 
-def _planes(planes, ns: int) -> np.ndarray:
-    return np.zeros((ns, 3)) if planes is None else planes
+def _cross_matrix(v):
+    """(k, 3, 3) [v]x of (k, 3) vectors."""
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
 
 
-def _frame(F, n, p):
-    """G (k, 3, 3) of nodes with unit normals n (k, 3) and plane normals p (k, 3; zero: no plane)."""
-    Fs = surface_frame_gradient(F, n)
-    n1 = np.einsum("kij,kj->ki", Fs, n)
-    pn = n1 - p * np.einsum("ki,ki->k", p, n1)[:, None]
-    n2 = pn / np.einsum("ki,ki->k", n1, pn)[:, None]
-    return Fs + (n2 - n1)[:, :, None] * n[:, None, :]
+def _turn(n, n2):
+    """(k, 3, 3) the least rotation taking unit n to unit n2 (Rodrigues: c I + [v]x + v v^T / (1 + c))."""
+    v = np.cross(n, n2)
+    c = np.einsum("ki,ki->k", n, n2)[:, None, None]
+    return c * _EYE + _cross_matrix(v) + v[:, :, None] * v[:, None, :] / (1.0 + c)
 
 
-def _frame_jvp(F, n, p, dF):
-    Fs = surface_frame_gradient(F, n)
-    dFs = surface_frame_gradient_jvp(F, n, dF)
-    n1 = np.einsum("kij,kj->ki", Fs, n)
-    dn1 = np.einsum("kij,kj->ki", dFs, n)
-    pn = n1 - p * np.einsum("ki,ki->k", p, n1)[:, None]
-    dpn = dn1 - p * np.einsum("ki,ki->k", p, dn1)[:, None]
-    q = np.einsum("ki,ki->k", n1, pn)[:, None]
-    dq = 2.0 * np.einsum("ki,ki->k", pn, dn1)[:, None]
-    dn2 = dpn / q - pn * dq / q ** 2
-    return dFs + (dn2 - dn1)[:, :, None] * n[:, None, :]
+def _turn_jvp(n, n2, dn2):
+    v, dv = np.cross(n, n2), np.cross(n, dn2)
+    c = np.einsum("ki,ki->k", n, n2)[:, None, None]
+    dc = np.einsum("ki,ki->k", n, dn2)[:, None, None]
+    vv = v[:, :, None] * v[:, None, :]
+    dvv = dv[:, :, None] * v[:, None, :] + v[:, :, None] * dv[:, None, :]
+    return dc * _EYE + _cross_matrix(dv) + dvv / (1.0 + c) - vv * dc / (1.0 + c) ** 2
 
 
-def wall_frames(F: np.ndarray, normals: np.ndarray, planes: np.ndarray | None = None) -> np.ndarray:
-    """(Ns, 3, 3) each wall node's surface frame ``G`` (module docstring) for frames ``F`` (Ns, 3, 3) and
-    unit ``normals`` (Ns, 3; a zero row: ``G = F``). ``G = I`` exactly where ``F`` is the identity.
+def _flipped(n, n2):
+    """(k,) True where the wall has turned over (n2 nearly -n: a design that folds the wall), where the
+    least rotation is not defined: there R is G."""
+    return np.einsum("ki,ki->k", n, n2) < FLIPPED - 1.0
 
-    ``planes`` (Ns, 3): the unit normal ``p`` of the plane a wall node slides in (zero: none). Its
-    off-wall nodes slide in that plane too, while the wall's deformed normal ``n'`` may leave it (a
-    twist that grows along the span tilts the root's normal): ``G`` then maps ``n`` to
-    ``P n' / (n' . P n')`` (``P = I - p p^T``), in the plane and as far from the wall along ``n'`` as
-    before: the first cell's height is kept, its edge leaning by the tilt."""
+
+def _frame(F, n, n2):
+    """(G, R) (k, 3, 3): ``F (I - n n^T) + n2 n^T`` and the least rotation taking n to n2."""
+    G = F - np.einsum("kij,kj->ki", F, n)[:, :, None] * n[:, None, :] + n2[:, :, None] * n[:, None, :]
+    flip = _flipped(n, n2)
+    R = _turn(n, np.where(flip[:, None], n, n2))
+    R[flip] = G[flip]
+    return G, R
+
+
+def _frame_jvp(n, n2, dF, dn2):
+    """(dG, dR) of :func:`_frame` in the direction (dF, dn2)."""
+    dG = dF - np.einsum("kij,kj->ki", dF, n)[:, :, None] * n[:, None, :] + dn2[:, :, None] * n[:, None, :]
+    flip = _flipped(n, n2)
+    dR = _turn_jvp(n, np.where(flip[:, None], n, n2), dn2)
+    dR[flip] = dG[flip]
+    return dG, dR
+
+
+def wall_frames(F: np.ndarray, normals: np.ndarray, new_normals: np.ndarray, *, turns: bool = False):
+    """(Ns, 3, 3) each wall node's frame ``G = F (I - n n^T) + n' n^T`` (module docstring) for frames ``F``
+    (Ns, 3, 3), unit ``normals`` ``n`` (Ns, 3; a zero row: ``G = F``) and the deformed wall's unit
+    normals ``n'`` (:func:`deformed_normals`). ``G = I`` exactly where ``F`` is the identity and ``n' = n``.
+    ``turns``: also return ``R`` (Ns, 3, 3), the least rotation taking ``n`` to ``n'`` (``F`` where
+    there is no normal, ``I`` where ``G`` is)."""
     G = np.array(F, dtype=np.float64, copy=True)
-    m = np.flatnonzero(_with_normal(normals) & np.any(G != _EYE, axis=(1, 2)))
+    R = G.copy()
+    moved = np.any(G != _EYE, axis=(1, 2)) | np.any(new_normals != normals, axis=1)
+    m = np.flatnonzero(_with_normal(normals) & moved)
     if len(m):
-        G[m] = _frame(G[m], normals[m], _planes(planes, len(G))[m])
-    return G
+        G[m], R[m] = _frame(G[m], normals[m], new_normals[m])
+    return (G, R) if turns else G
 
 
-def wall_frames_jvp(F: np.ndarray, normals: np.ndarray, dF: np.ndarray, planes: np.ndarray | None = None
-                    ) -> np.ndarray:
-    """(Ns, 3, 3) ``dG``: the derivative of :func:`wall_frames` at ``F`` in the direction ``dF``."""
+def wall_frames_jvp(normals: np.ndarray, new_normals: np.ndarray, dF: np.ndarray, dn2: np.ndarray, *,
+                    turns: bool = False):
+    """(Ns, 3, 3) ``dG`` (and ``dR`` with ``turns``): the derivative of :func:`wall_frames` in the direction
+    ``(dF, dn')`` (it is linear in ``F``: the point enters through ``n'`` only)."""
     dG = np.array(dF, dtype=np.float64, copy=True)
+    dR = dG.copy()
     m = np.flatnonzero(_with_normal(normals))
     if len(m):
-        dG[m] = _frame_jvp(F[m], normals[m], _planes(planes, len(dG))[m], dF[m])
-    return dG
+        dG[m], dR[m] = _frame_jvp(normals[m], new_normals[m], dF[m], dn2[m])
+    return (dG, dR) if turns else dG
 
 
-def wall_frames_vjp(F: np.ndarray, normals: np.ndarray, gG: np.ndarray, planes: np.ndarray | None = None
-                    ) -> np.ndarray:
-    """(Ns, 3, 3) ``gF``: the transpose of :func:`wall_frames_jvp` applied to ``gG`` (Ns, 3, 3) (each
-    node's 9 x 9 Jacobian from nine forward products)."""
-    out = np.array(gG, dtype=np.float64, copy=True)
+def wall_frames_vjp(normals: np.ndarray, new_normals: np.ndarray, gG: np.ndarray, gR: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The transpose of :func:`wall_frames_jvp`: ``(gF (Ns, 3, 3), gn' (Ns, 3))`` of ``gG`` and ``gR``
+    (Ns, 3, 3; None: zero)."""
+    gF = np.array(gG, dtype=np.float64, copy=True)
+    if gR is not None:
+        gF += gR
+    gn = np.zeros((len(gF), 3))
     m = np.flatnonzero(_with_normal(normals))
-    k = len(m)
-    if not k:
-        return out
-    basis = np.eye(9).reshape(9, 3, 3)
-    Fm = np.broadcast_to(F[m][None], (9, k, 3, 3)).reshape(-1, 3, 3)
-    nm = np.broadcast_to(normals[m][None], (9, k, 3)).reshape(-1, 3)
-    pm = np.broadcast_to(_planes(planes, len(out))[m][None], (9, k, 3)).reshape(-1, 3)
-    dF = np.broadcast_to(basis[:, None], (9, k, 3, 3)).reshape(-1, 3, 3)
-    J = _frame_jvp(Fm, nm, pm, dF).reshape(9, k, 9)          # J[a, node, :] = vec dG(E_a)
-    out[m] = np.einsum("ank,nk->na", J, gG[m].reshape(k, 9)).reshape(k, 3, 3)
+    if not len(m):
+        return gF, gn
+    n, n2 = normals[m], new_normals[m]
+    gm = gG[m]
+    gF[m] = gm - np.einsum("kij,kj->ki", gm, n)[:, :, None] * n[:, None, :]
+    gn[m] = np.einsum("kij,kj->ki", gm, n)
+    if gR is not None:
+        flip = _flipped(n, n2)
+        safe = np.where(flip[:, None], n, n2)
+        for a in range(3):              # three forward products of the turn
+            e = np.zeros_like(n2)
+            e[:, a] = 1.0
+            gn[m, a] += np.einsum("kij,kij->k", _turn_jvp(n, safe, e), gR[m]) * ~flip
+        fl = m[flip]                    # a turned-over wall: R is G
+        if len(fl):
+            gF[fl] += gR[fl] - np.einsum("kij,kj->ki", gR[fl], normals[fl])[:, :, None] * normals[fl][:, None, :]
+            gn[fl] += np.einsum("kij,kj->ki", gR[fl], normals[fl])
+    return gF, gn
+
+
+def deformed_normals(layer: WallLayer, b: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the unit normals of the wall moved by ``b`` (Ns, 3) (:func:`ffdcli.volume.wall_layer.layer_normals`)."""
+    return layer_normals(layer.wall_position + b, layer.faces, layer.planes)
+
+
+def _normal_parts(layer: WallLayer, b: np.ndarray):
+    pos = layer.wall_position + b
+    summed = np.zeros((len(pos), 3))
+    for blk in layer.faces:
+        v = face_vectors(pos, [blk])
+        for c in range(3):
+            summed[:, c] += np.bincount(blk.data.ravel(), np.repeat(v[:, c], blk.data.shape[1]), len(pos))
+    ln = np.linalg.norm(summed, axis=1)
+    u = summed / np.where(ln > 0, ln, 1.0)[:, None]
+    p = np.zeros((len(pos), 3)) if layer.planes is None else layer.planes
+    pu = u - p * np.einsum("ij,ij->i", p, u)[:, None]
+    q = np.linalg.norm(pu, axis=1)
+    return pos, u, np.where(ln > 0, ln, 1.0), p, pu / np.where(q > 0, q, 1.0)[:, None], np.where(q > 0, q, 1.0)
+
+
+def _face_pairs(blk: CellBlock):
+    """Each face's vector area as ``scale * (u x v)`` (lines: a turn of u): (columns of u: +, -; of v: +, -)."""
+    if blk.type == "triangle":
+        return (1, 0), (2, 0)
+    if blk.type == "quad":
+        return (2, 0), (3, 1)
+    return (1, 0), None
+
+
+def _line_turn(t):
+    v = np.zeros_like(t)
+    v[:, 0], v[:, 1] = t[:, 1], -t[:, 0]
+    return v
+
+
+def deformed_normals_jvp(layer: WallLayer, b: np.ndarray, db: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the derivative of :func:`deformed_normals` at ``b`` in the direction ``db``."""
+    pos, u, ln, p, n2, q = _normal_parts(layer, b)
+    dS = np.zeros_like(pos)
+    for blk in layer.faces:
+        (a1, a0), vv = _face_pairs(blk)
+        d = blk.data
+        du = db[d[:, a1]] - db[d[:, a0]]
+        if vv is None:
+            dv = _line_turn(du)
+        else:
+            uu = pos[d[:, a1]] - pos[d[:, a0]]
+            w = pos[d[:, vv[0]]] - pos[d[:, vv[1]]]
+            dw = db[d[:, vv[0]]] - db[d[:, vv[1]]]
+            dv = 0.5 * (np.cross(du, w) + np.cross(uu, dw))
+        for c in range(3):
+            dS[:, c] += np.bincount(d.ravel(), np.repeat(dv[:, c], d.shape[1]), len(pos))
+    du = (dS - u * np.einsum("ij,ij->i", u, dS)[:, None]) / ln[:, None]
+    dpu = du - p * np.einsum("ij,ij->i", p, du)[:, None]
+    return (dpu - n2 * np.einsum("ij,ij->i", n2, dpu)[:, None]) / q[:, None]
+
+
+def deformed_normals_vjp(layer: WallLayer, b: np.ndarray, g: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the transpose of :func:`deformed_normals_jvp` applied to ``g`` (Ns, 3)."""
+    pos, u, ln, p, n2, q = _normal_parts(layer, b)
+    g = (g - n2 * np.einsum("ij,ij->i", n2, g)[:, None]) / q[:, None]
+    g = g - p * np.einsum("ij,ij->i", p, g)[:, None]
+    gS = (g - u * np.einsum("ij,ij->i", u, g)[:, None]) / ln[:, None]
+    out = np.zeros_like(pos)
+    for blk in layer.faces:
+        (a1, a0), vv = _face_pairs(blk)
+        d = blk.data
+        gf = gS[d].sum(axis=1)                          # (F, 3): each face's cotangent
+        if vv is None:
+            gu = -_line_turn(gf)                        # the turn's transpose is minus itself
+            gw = None
+        else:
+            uu = pos[d[:, a1]] - pos[d[:, a0]]
+            w = pos[d[:, vv[0]]] - pos[d[:, vv[1]]]
+            gu = 0.5 * np.cross(w, gf)
+            gw = 0.5 * np.cross(gf, uu)
+        pairs = [(a1, gu), (a0, -gu)] + ([] if gw is None else [(vv[0], gw), (vv[1], -gw)])
+        for col, val in pairs:
+            for c in range(3):
+                out[:, c] += np.bincount(d[:, col], val[:, c], len(pos))
     return out
 
 
@@ -129,12 +249,22 @@ def _rigid(layer: WallLayer, b: np.ndarray, M: np.ndarray, sel: np.ndarray | Non
     return P @ c + np.einsum("nij,nj->ni", Mx, x)
 
 
+def _point(at, b, ns: int):
+    """(b0, F0) of ``at``: the surface translations and frames the layer is linearised at."""
+    if at is None:
+        return np.zeros((ns, 3)), _frames(None, ns)
+    if isinstance(at, tuple) and at[0] is not None and np.shape(at[0]) == (ns, 3):
+        return np.asarray(at[0], dtype=np.float64), _frames(at[1], ns)
+    raise ValueError("the wall layer's derivative needs at=(surface translations, frames) of the point: "
+                     "its normals are the deformed wall's")
+
+
 def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, lo: int, hi: int, *, at=None
                 ) -> np.ndarray:
     """Blend the layer's rigid motion into the warp's displacements ``d`` (hi - lo, 3) of the target
     rows ``lo:hi`` (in place; returned). ``b`` (Ns, 3) the surface translations, ``frames`` (Ns, 3, 3) or
-    None (identity) the frames given to the warp. ``at``: the frames (Ns, 3, 3) at which the layer is
-    linearised (then ``frames - I`` is a direction ``dF`` and ``b`` a ``db``: the forward derivative)."""
+    None (identity) the frames given to the warp. ``at``: ``(b0, F0)`` at which the layer is linearised
+    (then ``frames - I`` is a direction ``dF`` and ``b`` a ``db``: the forward derivative)."""
     if layer is None or not len(layer.rows):
         return d
     sel = np.flatnonzero((layer.rows >= lo) & (layer.rows < hi))
@@ -142,27 +272,50 @@ def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, l
         return d
     ns = len(layer.normals)
     F = _frames(frames, ns)
+    b = np.asarray(b, dtype=np.float64)
     if at is None:
-        M = wall_frames(F, layer.normals, layer.planes) - _EYE
+        G, R = wall_frames(F, layer.normals, deformed_normals(layer, b), turns=True)
+        M, T = G - _EYE, R - G                      # T: the turn's difference from the frame
     else:
-        M = wall_frames_jvp(_frames(at, ns), layer.normals, F - _EYE, layer.planes)
+        b0, _ = _point(at, b, ns)
+        n2 = deformed_normals(layer, b0)
+        M, dR = wall_frames_jvp(layer.normals, n2, F - _EYE, deformed_normals_jvp(layer, b0, b), turns=True)
+        T = dR - M
     rows, s = layer.rows[sel] - lo, layer.weight[sel][:, None]
-    d[rows] = (1.0 - s) * d[rows] + s * _rigid(layer, np.asarray(b, dtype=np.float64), M, sel)
+    rigid = _rigid(layer, b, M, sel)
+    if layer.stacked is not None:                   # a stack's lean turns with its wall, unstretched
+        rigid += layer.stacked[sel][:, None] * _rigid(layer, np.zeros((ns, 3)), T, sel)
+    d[rows] = (1.0 - s) * d[rows] + s * rigid
     return d
 
 
 def layer_transpose(layer: WallLayer, gt: np.ndarray, at) -> tuple[np.ndarray, np.ndarray]:
-    """The transpose of :func:`blend_layer`'s derivative at frames ``at`` (Ns, 3, 3; None: identity).
+    """The transpose of :func:`blend_layer`'s derivative at ``at`` = ``(b0, F0)`` (None: the undeformed wall).
 
     ``gt`` (Nt, 3): dJ/d(displacement) of every target (after the sliding projections' transpose); it is
     scaled in place by ``1 - s`` on the layer's rows (what goes on to the warp's transpose). Returns
     the layer's own ``(dJ/db (Ns, 3), dJ/dF (Ns, 3, 3))``."""
     ns = len(layer.normals)
+    b0, _ = _point(at, None, ns)
     rows, s = layer.rows, layer.weight[:, None]
     gs = s * gt[rows]
     gt[rows] *= 1.0 - s
     PT = layer.partition.T.tocsr()
     g_b = PT @ gs
-    g_M = (PT @ (gs[:, :, None] * layer.position[:, None, :]).reshape(-1, 9)).reshape(ns, 3, 3)
+    g_M = _rigid_transpose(layer, PT, gs, g_b)
+    n2 = deformed_normals(layer, b0)
+    if layer.stacked is None:
+        g_F, g_n = wall_frames_vjp(layer.normals, n2, g_M)
+    else:
+        g_T = _rigid_transpose(layer, PT, layer.stacked[:, None] * gs)
+        g_F, g_n = wall_frames_vjp(layer.normals, n2, g_M - g_T, g_T)
+    return g_b + deformed_normals_vjp(layer, b0, g_n), g_F
+
+
+def _rigid_transpose(layer: WallLayer, PT, g: np.ndarray, g_b: np.ndarray | None = None) -> np.ndarray:
+    """(Ns, 3, 3) the transpose of :func:`_rigid` in ``M`` applied to ``g`` (n, 3); ``g_b``: ``PT @ g``."""
+    ns = PT.shape[0]
+    g_b = PT @ g if g_b is None else g_b
+    g_M = (PT @ (g[:, :, None] * layer.position[:, None, :]).reshape(-1, 9)).reshape(ns, 3, 3)
     g_M -= g_b[:, :, None] * layer.wall_position[:, None, :]
-    return g_b, wall_frames_vjp(_frames(at, ns), layer.normals, g_M, layer.planes)
+    return g_M

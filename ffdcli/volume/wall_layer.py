@@ -59,6 +59,10 @@ BLEND = 4.0
 #: A wall node is on a sharp edge (a sharp trailing edge, a flat tip's rim) when the faces around it
 #: turn by more than 60 degrees: |sum of their vector areas| < cos(30 deg) x the sum of their areas.
 SHARP_COS = float(np.cos(np.radians(30.0)))
+#: A wall node is on a sliding plane within this fraction of the wall's size (the warp's own tolerance).
+PLANE_TOL = 1e-9
+#: ... and when its wall meets the plane at more than this many degrees (a wing's root: about 90).
+PLANE_MIN_ANGLE = 30.0
 #: The wall nodes whose rigid motions a layer node blends (2D, 3D).
 NEIGHBOURS = {2: 4, 3: 8}
 
@@ -82,6 +86,14 @@ class WallLayer:
     planes
         (Ns, 3) the unit normal of the plane a wall node slides in (a wing's root on a symmetry plane),
         zero for the others.
+    faces
+        the wall's faces as :class:`~ffdcli.mesh.CellBlock` s of rows of ``wall_position``: the deformed
+        wall's own normals (:func:`layer_normals`).
+    stacked
+        (n,) how much each node is on one wall node's stack alone, in [0, 1]: ``(K sum_k psi_k^2 - 1) /
+        (K - 1)`` (1: one wall node has all the weight, as the first cells' nodes have; 0: ``K`` share
+        it evenly). That share of its offset from the wall turns with the wall's rotation unstretched
+        (the stack's lean kept); the rest follows the wall's frame (:mod:`ffdcli.volume.layer_motion`).
     thickness
         the median of the stacks' heights (mesh units; the blend ends at ``delta (1 + BLEND)`` of each node's).
     """
@@ -94,6 +106,8 @@ class WallLayer:
     normals: np.ndarray
     thickness: float
     planes: np.ndarray | None = None
+    stacked: np.ndarray | None = None
+    faces: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -212,6 +226,46 @@ def off_wall_edges(points: np.ndarray, cells: list[CellBlock], faces: list[CellB
     return OffWallEdges(node, np.where(ok, height, 0.0), angle, _wall_spacing(pts, faces, wall_ids))
 
 
+def wall_planes(wall: np.ndarray, normals: np.ndarray, sliding=()) -> np.ndarray:
+    """(Ns, 3) the unit normal of the sliding plane each wall node lies in (zero for the others).
+
+    ``wall`` (Ns, 3) the wall nodes' positions, ``normals`` (Ns, 3) their wall normals, ``sliding`` the
+    warp's :class:`~ffdcli.volume.roles.SlidingPlane` s (or ``(ids, normal, point)``). A wall node is on a
+    plane when it lies in it (to :data:`PLANE_TOL` of the wall's size) and its wall meets the plane at
+    more than :data:`PLANE_MIN_ANGLE` (a wing's root on a symmetry plane; a wall lying in the plane is
+    not one)."""
+    planes = np.zeros((len(wall), 3))
+    if not len(wall):
+        return planes
+    size = float(np.linalg.norm(np.ptp(wall, axis=0)))
+    for plane in sliding:
+        normal = np.asarray(plane[1], dtype=np.float64)
+        on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= PLANE_TOL * size
+        on &= np.abs(normals @ normal) < np.sin(np.radians(90.0 - PLANE_MIN_ANGLE)) * np.linalg.norm(normals, axis=1)
+        planes[on] = normal
+    return planes
+
+
+def in_plane(normals: np.ndarray, planes: np.ndarray) -> np.ndarray:
+    """(Ns, 3) the wall normals of the nodes on a plane (``planes``, :func:`wall_planes`) projected into
+    it and made unit again; the others as they are.
+
+    A symmetry plane mirrors the wall: a root node's faces are half of its faces, the mirror image the
+    other half, and the normal of the whole (the wall and its image) lies in the plane. The one-sided
+    normal of a triangulated leading edge leans out of the plane by several degrees (7 on the generated
+    wings), and a twist or a sweep that grows along the span tilts it further; the mirrored wall's
+    normal does not lean, and it is the direction a mesh generator stacks the root's layers in (in the
+    plane)."""
+    on = np.einsum("ij,ij->i", planes, planes) > 0
+    if not on.any():
+        return normals
+    out = np.array(normals, dtype=np.float64, copy=True)
+    v = out[on] - planes[on] * np.einsum("ij,ij->i", out[on], planes[on])[:, None]
+    ln = np.linalg.norm(v, axis=1)
+    out[on] = np.where(ln[:, None] > 0, v / np.where(ln > 0, ln, 1.0)[:, None], 0.0)
+    return out
+
+
 def sharp_nodes(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray) -> np.ndarray:
     """(k,) the wall nodes (rows of ``wall_ids``) on a sharp edge (:data:`SHARP_COS`)."""
     n = len(points)
@@ -251,7 +305,10 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
         return None
     if nodes is None and not len(target_ids):
         return None
+    wall = pts[wall_ids]
     nrm = wall_normals(pts, faces, wall_ids)
+    planes = wall_planes(wall, nrm, sliding)
+    nrm = in_plane(nrm, planes)                 # a root's layer stacks in its symmetry plane
     edges = off_wall_edges(pts, cells, faces, wall_ids, nrm)
     if nodes is not None:
         edges = _owners_edges(edges, wall_ids, nodes)
@@ -272,29 +329,26 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     if not len(target_ids):                       # a rank without targets: nothing of its own moves
         return None
     reach = float(thick.max()) * (1.0 + BLEND)
-    wall = pts[wall_ids]
     tree = cKDTree(wall)
     dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
     rows = np.flatnonzero(np.isfinite(dist))
     k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
     x = pts[target_ids[rows]]
-    part = _partition(tree, x, k, len(wall_ids))
+    part, psi2 = _partition(tree, x, k, len(wall_ids))
     delta = part @ thick                        # the layer's thickness where each node is (continuous)
     t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
     weight = 1.0 - t * t * (3.0 - 2.0 * t)
     keep = weight > 0
-    rows, weight, x, part = rows[keep], weight[keep], x[keep], part[keep]
+    rows, weight, x, part, psi2 = rows[keep], weight[keep], x[keep], part[keep], psi2[keep]
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
-    planes = np.zeros((len(wall_ids), 3))
-    size = float(np.linalg.norm(np.ptp(wall, axis=0)))
-    for plane in sliding:               # the wall nodes on a sliding plane (a root on a symmetry plane)
-        normal = np.asarray(plane[1], dtype=np.float64)
-        on = np.abs((wall - np.asarray(plane[2], dtype=np.float64)) @ normal) <= 1e-9 * size
-        on &= np.abs(nrm @ normal) < 0.05          # the wall meets the plane nearly square (within 3 degrees)
-        planes[on] = normal
-    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, nrm, float(np.median(thick)),
-                     planes)
+    stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
+    local = tuple(CellBlock(b.type, np.searchsorted(wall_ids, b.data)) for b in faces
+                  if b.type != "vertex" and len(b.data))
+    unit = layer_normals(wall - origin, local, planes)         # the same sums the deformed wall's go through
+    unit[_no_normal(nrm)] = 0.0
+    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, unit, float(np.median(thick)),
+                     planes, stacked, local)
 
 
 def _owners_edges(edges: OffWallEdges, wall_ids: np.ndarray, nodes: RankNodes) -> OffWallEdges:
@@ -311,11 +365,32 @@ def _owners_edges(edges: OffWallEdges, wall_ids: np.ndarray, nodes: RankNodes) -
     return OffWallEdges(node, height, angle, edges.spacing)
 
 
-def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
-    """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module docstring)."""
+def _no_normal(normals: np.ndarray) -> np.ndarray:
+    """(Ns,) True where a wall node has no normal (zero row: a sharp edge, a node on no face)."""
+    return np.einsum("ij,ij->i", normals, normals) == 0
+
+
+def layer_normals(position: np.ndarray, faces, planes: np.ndarray | None = None) -> np.ndarray:
+    """(Ns, 3) the unit normals of a wall whose nodes are at ``position`` (Ns, 3) (the sums of its
+    ``faces``' vector areas, :func:`ffdcli.geometry.surface.face_vectors`; blocks of rows of
+    ``position``), a node on a plane (``planes``) with the mirror image's (:func:`in_plane`). On a kink
+    (a deflected hinge) it is the mean of the two sides', as a mesh generator extrudes there."""
+    summed = np.zeros((len(position), 3))
+    for b in faces:
+        v = face_vectors(position, [b])
+        for c in range(3):
+            summed[:, c] += np.bincount(b.data.ravel(), np.repeat(v[:, c], b.data.shape[1]), len(position))
+    ln = np.linalg.norm(summed, axis=1)
+    unit = np.where(ln[:, None] > 0, summed / np.where(ln > 0, ln, 1.0)[:, None], 0.0)
+    return unit if planes is None else in_plane(unit, planes)
+
+
+def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> tuple[csr_matrix, np.ndarray]:
+    """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module
+    docstring), and (n,) the sums of their squares."""
     n = len(x)
     if k < 1:
-        return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns))
+        return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns)), np.ones(n)
     d, j = tree.query(x, k=k + 1)
     R = d[:, -1:]
     d, j = d[:, :-1], j[:, :-1]
@@ -325,4 +400,5 @@ def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> csr_matrix:
     psi[bad] = 0.0
     psi[bad, 0] = 1.0                   # on a wall node, or every neighbour as far: the nearest
     psi /= psi.sum(axis=1, keepdims=True)
-    return csr_matrix((psi.ravel(), (np.repeat(np.arange(n), k), j.ravel())), shape=(n, ns))
+    ptr = np.arange(0, n * k + 1, k)
+    return csr_matrix((psi.ravel(), j.ravel(), ptr), shape=(n, ns)), np.einsum("ij,ij->i", psi, psi)

@@ -6,7 +6,8 @@ normal's direction (the next quad's or prism's), for as long as that edge stays 
 :data:`STACK_COS` of the normal and shorter than the wall's own spacing at the node (the cells still
 thinner than wide). The stack's height is the top node's height over the wall node: the prism layer's
 thickness on a tetrahedral mesh with prisms, the height at which a structured mesh's cells become as
-tall as wide. All stacks advance together (one vectorised step per layer).
+tall as wide. Serially each stack is walked on its own by a compiled kernel
+(:mod:`ffdcli.volume._stack_walk`); under MPI all stacks advance together, one vectorised step per layer.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ import numpy as np
 
 from ffdcli.mesh import CellBlock
 from ffdcli.parallel.distributed import RankNodes
+from ffdcli.volume._stack_walk import node_cells, walk_stacks
 
 #: A stack goes on along edges within 37 degrees of the wall normal (cos 0.8).
 STACK_COS = 0.8
@@ -33,6 +35,17 @@ def _node_cells(cells: list[CellBlock], n: int):
     order = np.argsort(node, kind="stable")
     ptr = np.r_[0, np.cumsum(np.bincount(node, minlength=n))]
     return pad, cell_of[order], ptr
+
+
+def _padded(cells: list[CellBlock]) -> np.ndarray:
+    """(C, 8) the cells' nodes padded with -1."""
+    blocks = [b.data for b in cells if len(b.data)]
+    pad = np.full((sum(len(d) for d in blocks), 8), -1, dtype=np.int64)
+    start = 0
+    for d in blocks:                    # one copy per cell block
+        pad[start:start + len(d), :d.shape[1]] = d
+        start += len(d)
+    return pad
 
 
 def _gather(nodes: RankNodes | None, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -74,6 +87,14 @@ def stack_heights(points: np.ndarray, cells: list[CellBlock], wall_ids: np.ndarr
     up[k0] *= sign[:, None]
     height[k0] = h0
     front = first.copy()
+    if nodes is None:                   # serially: each stack walked on its own by a compiled kernel
+        pad = _padded(cells)
+        cell_of, ptr = node_cells(pad, len(pts))
+        top = walk_stacks(pts, pad, cell_of, ptr, on_wall, np.ascontiguousarray(up), np.asarray(spacing, np.float64),
+                          np.asarray(first, np.int64), MAX_LAYERS, STACK_COS)
+        moved = np.flatnonzero(top != first)
+        height[moved] = np.einsum("ij,ij->i", pts[top[moved]] - base[moved], up[moved])
+        return height
     pad, cell_of, ptr = _node_cells(cells, len(pts))
     for _ in range(MAX_LAYERS):
         k = np.flatnonzero(alive)

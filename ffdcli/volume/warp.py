@@ -71,7 +71,7 @@ reference walk, exact sums, moments); NumPy reference :mod:`ffdcli.volume.idw_re
 
 **The wall layer.** A mesh with thin cells stacked on its wall (a RANS mesh) moves them rigidly with
 their wall (:mod:`ffdcli.volume.wall_layer`, :mod:`ffdcli.volume.layer_motion`; ``volume.wall_layer``):
-not linear in the frames, so :func:`warp_vjp` and the forward derivative take ``at=``, the frames.
+not linear (it turns with the deformed wall's normals): :func:`warp_vjp` and the forward derivative take ``at=(b, F)``.
 """
 
 from __future__ import annotations
@@ -444,9 +444,9 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
         nodes (``rows``) and the blocks are gathered; every rank returns the whole result, equal bit
         for bit to the serial one.
     at
-        With a wall layer (``model.layer``, :mod:`ffdcli.volume.layer_motion`; nonlinear in the frames): the
-        frames (Ns, 3, 3) at which to linearise it, ``surface_displacement`` and ``surface_rotation - I``
-        then being a direction: the forward derivative (``DesignModel.mesh_jvp``).
+        With a wall layer (``model.layer``, :mod:`ffdcli.volume.layer_motion`; nonlinear): ``(b, F)``, the
+        translations (Ns, 3) and frames (Ns, 3, 3) at which to linearise it, ``surface_displacement``
+        and ``surface_rotation - I`` then being a direction: the forward derivative (``DesignModel.mesh_jvp``).
 
     Returns
     -------
@@ -538,7 +538,7 @@ def warp_vjp(model: WarpModel, g: np.ndarray, *, exact: bool = False, progress=N
     if model.layer is not None and len(model.layer.rows):
         if at is None:
             raise ValueError("warp_vjp: this model moves its wall layer rigidly (nonlinear in the frames): "
-                             "pass at=, the frames the warp was given")
+                             "pass at=(b, F), the translations and frames the warp was given")
         layer_b, layer_M = layer_transpose(model.layer, gt, at)
         g_b += layer_b
         g_M += layer_M

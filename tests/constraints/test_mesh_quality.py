@@ -1,5 +1,5 @@
-"""Issue 31 item 4: the ``mesh_quality`` constraint (a smooth minimum of the volume cells' quality after
-the design over before) with its exact derivative through the volume motion."""
+"""The ``mesh_quality`` constraint (a smooth minimum of the volume cells' quality after the design over
+before) with its exact derivative through the volume motion, read from the chain's quality stage."""
 
 from __future__ import annotations
 
@@ -172,6 +172,42 @@ def test_derivative_through_the_volume_motion_tets_and_quads(tmp_path):
         # the O-grid's wall cells are ~1e-4 chords thick: a 1e-4 shape step (mesh units) is not small
         # for them (central differences then differ by 1e-5, shrinking as step^2: 1e-7 at 1e-5)
         _fd_constraint(model, step=1e-4 if surface == "wing" else 1e-5)
+
+
+@pytest.mark.parametrize("case", ["hex_wing", "airfoil_2d"])
+def test_the_constraint_is_the_quality_stage_of_the_chain(tmp_path, case):
+    """One home for the rule: each item's value and Jacobian are the chain's quality stage's, bit for bit
+    the composition of the model's public products (the measure on the moved mesh against the design
+    map, ``mesh_vjp`` of its mesh gradient plus ``design_map_vjp`` of its map gradient); several items
+    at once give the rows of each alone."""
+    if case == "hex_wing":
+        mesh = write_volume_wing(tmp_path, taper=0.6, le_sweep_deg=15)
+        design = write_design(tmp_path, mesh, [{"chord": {"tip": 0.7}}, {"twist": {"root": 1, "tip": 8}}],
+                              volume={"method": "idw"}, extra={"constraints": MQ_PLAIN + MQ})
+    else:
+        design = tmp_path / "airfoil.yaml"
+        design.write_text(json.dumps({"mesh": str(AIRFOIL), "surface": "airfoil", "box": {"points": [4, 3]},
+                                      "changes": [{"twist": {"angle": 6}},
+                                                  {"shape": {"upper": [0, 0.01, 0.02, 0.0],
+                                                             "lower": [0, -0.01, 0, 0]}}],
+                                      "constraints": MQ_PLAIN + MQ}))
+    model = DesignModel.from_file(design, cache_dir=tmp_path)
+    values, J = model.constraint_values(), model.constraint_jacobian()
+    X = model.mesh_points()
+    X_map, zone = model.design_map_points()
+    mapped = 0
+    for k, item in enumerate(model.constraints):
+        value, G, G_map = item.measure(X, grad=True, X_map=X_map, zone=zone)
+        expected = model.mesh_vjp(G)
+        if np.any(G_map):
+            expected = expected + model.design_map_vjp(G_map)
+            mapped += 1
+        assert values[k] == value
+        assert np.array_equal(J[k], expected), np.abs(J[k] - expected).max()
+    assert mapped, "the design map's part of the derivative is exercised"
+    both, jac = model.chain.quality_of(model.constraints, model.values, jacobian=True)
+    np.testing.assert_array_equal(both, values)
+    np.testing.assert_allclose(jac, J, rtol=1e-14, atol=1e-14 * np.abs(J).max())
 
 
 @pytest.mark.parametrize("change, path", [

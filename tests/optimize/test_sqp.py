@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.optimize as so
 
+from ffdcli.optimize import sqp
 from ffdcli.optimize.sqp import Filter, Point, bfgs_update, least_distance, minimize_sqp, solve_qp, violation
 
 
@@ -92,6 +93,54 @@ def test_iterations_are_accepted_steps_and_the_limit_holds():
     # a step never exceeds the move limit, which at most doubles per accepted step
     xs = [np.array([1.0, 5, 5, 1])] + [p.x for p in seen]
     assert all(np.abs(b - a).max() <= 0.05 * 2 ** k + 1e-12 for k, (a, b) in enumerate(zip(xs, xs[1:])))
+
+
+@pytest.mark.parametrize("radius", [0.05, 0.3])
+def test_scipy_minimize_with_the_callable_method_takes_the_same_steps(radius):
+    """``scipy.optimize.minimize(method=sqp.method)``: the driver's one call path gives the same accepted
+    designs, trials and result as :func:`minimize_sqp` itself (inequalities first, whatever the order)."""
+    evaluate, _ = hs071()
+    seen = []
+    r = minimize_sqp(evaluate, np.array([1.0, 5, 5, 1]), np.ones(4), np.full(4, 5.0), np.array([False, True]),
+                     radius=radius, iterations=100, tolerance=1e-9, callback=lambda p: seen.append(p.x))
+    f, g, c, A = (lambda x: x[0] * x[3] * x[:3].sum() + x[2],
+                  lambda x: np.array([x[3] * (2 * x[0] + x[1] + x[2]), x[0] * x[3], x[0] * x[3] + 1,
+                                      x[0] * x[:3].sum()]),
+                  lambda x: np.array([x.prod() - 25.0, x @ x - 40.0]),
+                  lambda x: np.array([[x[1] * x[2] * x[3], x[0] * x[2] * x[3], x[0] * x[1] * x[3],
+                                       x[0] * x[1] * x[2]], 2 * x]))
+    steps = []
+    res = so.minimize(f, np.array([1.0, 5, 5, 1]), jac=g, method=sqp.method, bounds=[(1, 5)] * 4,
+                      constraints=[{"type": "eq", "fun": lambda x: c(x)[1:], "jac": lambda x: A(x)[1:]},
+                                   {"type": "ineq", "fun": lambda x: c(x)[:1], "jac": lambda x: A(x)[:1]}],
+                      callback=steps.append, options={"radius": radius, "maxiter": 100, "tol": 1e-9})
+    assert res.outcome == r.status == "converged" and res.success
+    assert res.nit == r.iterations and res.nfev == r.trials
+    np.testing.assert_array_equal(res.x, r.point.x)
+    assert len(steps) == len(seen) and all(np.array_equal(a, b) for a, b in zip(steps, seen, strict=True))
+
+
+def test_scipy_face_a_nan_objective_is_a_failed_design():
+    """Through scipy's face a failed design is a NaN value (or gradient): the trial is refused, the move
+    limit cut to a quarter, and the run still reaches (-1, -1) on the circle."""
+    failed = []
+
+    def f(x):
+        if len(failed) < 2 and not np.allclose(x, [1.0, 0.5]):
+            failed.append(x.copy())
+            return float("nan")
+        return float(x.sum())
+
+    res = so.minimize(f, np.array([1.0, 0.5]), jac=lambda x: np.ones(2), method=sqp.method,
+                      bounds=so.Bounds(-5.0, 5.0),
+                      constraints=[{"type": "eq", "fun": lambda x: x @ x - 2.0, "jac": lambda x: 2 * x[None, :]}],
+                      options={"radius": 1.0, "maxiter": 100, "tol": 1e-9})
+    assert res.outcome == "converged" and len(failed) == 2
+    np.testing.assert_allclose(res.x, [-1.0, -1.0], atol=1e-6)
+    x0 = np.array([1.0, 0.5])
+    assert np.abs(failed[1] - x0).max() <= 0.25 * np.abs(failed[0] - x0).max() + 1e-12
+    with pytest.raises(ValueError, match="jac"):
+        so.minimize(f, x0, method=sqp.method)
 
 
 def test_least_distance_matches_a_general_solver():

@@ -4,7 +4,7 @@ the design's mesh by ``ffd deform`` with the run level's automatic box), evaluat
 lattice written to a Plot3D file (``box.file``). The run level rebuilt from the file equals the run's
 mesh, the finer wall equals the optimum at the nodes the levels share, and the add-material rule is
 judged at every finer wall node (met by designs that thicken the section, broken by ones that thin it).
-The run level's box fitted afresh to the finer mesh is a different shape: the reason for the file."""
+The warm start of the finer solve: the run's solution prolonged to the finer mesh."""
 
 from __future__ import annotations
 
@@ -112,21 +112,6 @@ def test_optimum_on_the_finer_level_is_the_same_shape_and_keeps_the_rule(tmp_pat
     ffd("deform", str(yml), "--cache-dir", str(tmp_path / "cache"))
     m = add_material(wall_xy(l1), wall_xy(tmp_path / "thin_L1.su2"))
     assert m.margin < -1e-4
-
-
-def test_a_box_fitted_to_the_finer_level_is_another_shape(tmp_path, levels):
-    l0, l1 = levels
-    design = design_file(tmp_path, l0)
-    values = symmetric([0.004, 0.008, 0.006, 0.002])
-    own = tmp_path / "L0.su2"
-    fresh = tmp_path / "L1_auto.su2"
-    for mesh, out in ((l0, own), (l1, fresh)):
-        ffd("deform", str(write_yaml(tmp_path / f"{out.stem}.yaml",
-                                     design_data(design, mesh, values=values, names=NAMES, box_file=None, output=out))),
-            "--cache-dir", str(tmp_path / "cache"))
-    ic, jf = common_nodes(wall_xy(l0), wall_xy(l1))
-    gap = np.abs(wall_xy(own)[ic] - wall_xy(fresh)[jf]).max()
-    assert gap > 1e-8                                     # not the optimum's shape: hence box.file
 
 
 def test_prolonged_restart_keeps_the_shared_nodes_and_stays_within_the_coarse_values(tmp_path, levels):

@@ -103,6 +103,34 @@ def test_robustness_harness_runs_in_quick_form(mesh_dir, tmp_path, monkeypatch):
     assert br.summary(rows)[0]["measured"] == sum(r["status"] == "REFUSED" for r in rows)
 
 
+def test_compare_rows_names_every_difference_but_the_seconds(tmp_path):
+    """``--compare``: two row files compared row by row (matched by mesh and design)."""
+    import json
+
+    from benchmarks import bench_robustness as br
+
+    rng = np.random.default_rng(4)
+    before = [{"mesh": m, "design": d, "status": "ok", "inverted": 0, "q_after": float(rng.uniform(0.01, 0.5)),
+               "first_cell": [1.0, 1.0], "seconds": float(rng.uniform(1, 9))}
+              for m in ("gen:a", "rect_wing") for d in ("twist_tip+10", "flap20", "sweep-5")]
+    after = [dict(r, seconds=r["seconds"] + 1) for r in before]          # only the times differ
+    assert br.compare_rows(before, after) == []
+    after[1] = dict(after[1], status="REFUSED", inverted=3)
+    after[4] = dict(after[4], first_cell=[0.999, 1.0])
+    del after[5]
+    after.append({"mesh": "rans:x", "design": "2d_flap10", "status": "ok"})
+    lines = br.compare_rows(before, after)
+    assert lines[0] == "only in the first: rect_wing / sweep-5"
+    assert lines[1] == "only in the second: rans:x / 2d_flap10"
+    assert lines[2] == "gen:a / flap20: inverted 0 -> 3; status 'ok' -> 'REFUSED'"
+    assert lines[3].startswith("rect_wing / flap20: first_cell [1.0, 1.0] -> [0.999, 1.0]") and len(lines) == 4
+    a, b = tmp_path / "a.json", tmp_path / "b.json"
+    a.write_text(json.dumps(before))
+    b.write_text(json.dumps(after))
+    assert br.main(["--compare", str(a), str(a)]) == 0
+    assert br.main(["--compare", str(a), str(b)]) == 1
+
+
 #: Generated wings with variety on which the default volume settings must not invert a cell.
 NO_INVERSION = {name: tm.smaller(tm.CASES[name], 1.5) for name in
                 ("rect_z_bl_ff5", "transport_x_ff50", "blunt_te_x", "crm_metres")}

@@ -7,10 +7,18 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from ffdcli.mesh import CellBlock
 from ffdcli.quality.metrics import cell_quality
 from ffdcli.testing.ogrid import airfoil_ogrid_mesh
-from ffdcli.volume.layer_motion import wall_frames, wall_frames_jvp, wall_frames_vjp
-from ffdcli.volume.wall_layer import detect_wall_layer, off_wall_edges, sharp_nodes
+from ffdcli.volume.layer_motion import (
+    deformed_normals,
+    deformed_normals_jvp,
+    deformed_normals_vjp,
+    wall_frames,
+    wall_frames_jvp,
+    wall_frames_vjp,
+)
+from ffdcli.volume.wall_layer import WallLayer, detect_wall_layer, layer_normals, off_wall_edges, sharp_nodes
 from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp, warp_vjp
 
 
@@ -111,39 +119,52 @@ def test_layer_derivatives_match_central_differences(rans, seed):
     dF[:, 2, :] = dF[:, :, 2] = 0
     h = 1e-6
     fd = (warp(model, b + h * db, F + h * dF) - warp(model, b - h * db, F - h * dF)) / (2 * h)
-    jv = warp(model, db, np.eye(3) + dF, at=F)
+    jv = warp(model, db, np.eye(3) + dF, at=(b, F))
     assert np.abs(fd - jv).max() < 1e-6 * np.abs(fd).max()
     g = rng.normal(size=(m.n_points, 3))
-    g_b, g_M = warp_vjp(model, g, at=F)
+    g_b, g_M = warp_vjp(model, g, at=(b, F))
     assert np.isclose(np.sum(g * jv), np.sum(g_b * db) + np.sum(g_M * dF), rtol=1e-10)
     with pytest.raises(ValueError, match="at="):
         warp_vjp(model, g)
 
 
 def test_wall_frame_products():
-    """G maps the normal to the deformed unit normal, keeps F along the wall, is F where there is no
-    normal (a sharp edge) and I where F is; its forward and transposed products are exact."""
+    """G maps the normal to the deformed wall's normal, keeps F along the wall, is F where there is no
+    normal (a sharp edge) and I where F is and the normal stays; R is the least rotation taking n to
+    n'; their forward and transposed products are exact."""
     rng = np.random.default_rng(3)
     n = 50
     nrm = rng.normal(size=(n, 3))
     nrm /= np.linalg.norm(nrm, axis=1)[:, None]
     nrm[:5] = 0.0
+    n2 = nrm + 0.4 * rng.normal(size=(n, 3))
+    n2 /= np.linalg.norm(n2, axis=1)[:, None]
+    n2[5] = nrm[5]
+    n2[49] = -nrm[49]                           # a wall turned over: no least rotation, R is G (finite)
     F = np.eye(3) + 0.3 * rng.normal(size=(n, 3, 3))
     F[5] = np.eye(3)
-    G = wall_frames(F, nrm)
-    assert np.array_equal(G[:5], F[:5]) and np.array_equal(G[5], np.eye(3))
-    n1 = np.einsum("nij,nj->ni", np.linalg.det(F)[:, None, None] * np.linalg.inv(np.swapaxes(F, 1, 2)), nrm)
-    n1 /= np.maximum(np.linalg.norm(n1, axis=1), 1e-300)[:, None]
-    assert np.allclose(np.einsum("nij,nj->ni", G, nrm)[6:], n1[6:])
+    G, R = wall_frames(F, nrm, n2, turns=True)
+    assert np.array_equal(G[:5], F[:5]) and np.array_equal(G[5], np.eye(3)) and np.array_equal(R[5], np.eye(3))
+    assert np.all(np.isfinite(R)) and np.array_equal(R[49], G[49])
+    assert np.allclose(np.einsum("nij,nj->ni", G, nrm)[6:], n2[6:])
+    assert np.allclose(np.einsum("nij,nj->ni", R, nrm)[6:], n2[6:])
+    assert np.allclose(np.einsum("nij,nkj->nik", R[6:49], R[6:49]), np.eye(3)) and np.allclose(np.linalg.det(R[6:49]), 1)
+    axis = np.cross(nrm, n2)                    # the least rotation keeps the axis n x n'
+    assert np.allclose(np.einsum("nij,nj->ni", R, axis)[6:49], axis[6:49])
     t = np.cross(nrm, rng.normal(size=(n, 3)))
     assert np.allclose(np.einsum("nij,nj->ni", G, t), np.einsum("nij,nj->ni", F, t))
     dF = rng.normal(size=(n, 3, 3))
+    dn = rng.normal(size=(n, 3))
     h = 1e-6
-    fd = (wall_frames(F + h * dF, nrm) - wall_frames(F - h * dF, nrm)) / (2 * h)
-    jv = wall_frames_jvp(F, nrm, dF)
-    assert np.abs(fd - jv).max() < 1e-7
-    gG = rng.normal(size=(n, 3, 3))
-    assert np.isclose(np.sum(gG * jv), np.sum(wall_frames_vjp(F, nrm, gG) * dF))
+    for k in (0, 1):
+        fd = (wall_frames(F + h * dF, nrm, n2 + h * dn, turns=True)[k]
+              - wall_frames(F - h * dF, nrm, n2 - h * dn, turns=True)[k]) / (2 * h)
+        jv = wall_frames_jvp(nrm, n2, dF, dn, turns=True)[k]
+        assert np.abs(fd - jv)[6:].max() < 1e-7
+    jG, jR = wall_frames_jvp(nrm, n2, dF, dn, turns=True)
+    gG, gR = rng.normal(size=(2, n, 3, 3))
+    gF, gn = wall_frames_vjp(nrm, n2, gG, gR)
+    assert np.isclose(np.sum(gG * jG) + np.sum(gR * jR), np.sum(gF * dF) + np.sum(gn * dn))
 
 
 @pytest.mark.parametrize("carry", ["gradient", "rotation"])
@@ -178,26 +199,44 @@ def test_design_model_products_through_the_layer_match_central_differences(tmp_p
     assert np.abs(fd - jv).max() <= 1e-6 * np.abs(fd).max()
 
 
+def _sheet(rng, nx=7, nz=6):
+    """A wavy triangulated sheet over x in [0, 1], z in [0, 1] (its root z = 0 on a plane) as a WallLayer
+    with no layer nodes: its wall, faces and planes only."""
+    x, z = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, nz), indexing="ij")
+    y = 0.1 * np.sin(3 * x + rng.uniform()) * (1 + z)
+    pos = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    i = np.arange(nx * nz).reshape(nx, nz)
+    a, b, c, d = i[:-1, :-1].ravel(), i[1:, :-1].ravel(), i[1:, 1:].ravel(), i[:-1, 1:].ravel()
+    tri = np.concatenate([np.column_stack([a, b, c]), np.column_stack([a, c, d])])
+    planes = np.zeros((len(pos), 3))
+    planes[pos[:, 2] == 0] = [0.0, 0.0, 1.0]
+    faces = (CellBlock("triangle", tri[: len(tri) // 2]), CellBlock("quad", np.column_stack([a, b, c, d])[::3]),
+             CellBlock("triangle", tri[len(tri) // 2:]))
+    unit = layer_normals(pos, faces, planes)
+    return WallLayer(np.zeros(0, np.int64), None, np.zeros((0, 3)), pos, np.zeros(0), unit, 0.0, planes, None, faces)
+
+
 def test_a_sliding_wall_node_keeps_its_first_cell_in_its_plane():
-    """A root node on a symmetry plane: G n stays in the plane and as far from the tilted wall as n was;
-    forward and transposed products exact."""
+    """A root node on a symmetry plane: its normal is the mirrored wall's (the one-sided normal projected
+    into the plane, unit), before and after the wall moves out of square with the plane; the deformed
+    normals' forward and transposed products are exact."""
     rng = np.random.default_rng(4)
-    n = 40
-    nrm = rng.normal(size=(n, 3))
-    nrm[:, 2] = 0.0                                      # the normals of root nodes lie in the plane z = 0
-    nrm /= np.linalg.norm(nrm, axis=1)[:, None]
-    planes = np.tile([0.0, 0.0, 1.0], (n, 1))
-    F = np.eye(3) + 0.2 * rng.normal(size=(n, 3, 3))
-    G = wall_frames(F, nrm, planes)
-    Gn = np.einsum("nij,nj->ni", G, nrm)
-    n1 = np.einsum("nij,nj->ni", wall_frames(F, nrm), nrm)     # the deformed normal, out of the plane
-    assert np.abs(n1[:, 2]).max() > 0.05
-    assert np.abs(Gn[:, 2]).max() < 1e-14
-    assert np.allclose(np.einsum("ni,ni->n", Gn, n1), 1.0)
-    dF = rng.normal(size=(n, 3, 3))
+    layer = _sheet(rng)
+    root = layer.planes[:, 2] != 0
+    assert np.abs(layer.normals[root, 2]).max() == 0 and np.allclose(np.linalg.norm(layer.normals, axis=1), 1)
+    pos = layer.wall_position
+    b = np.column_stack([0.2 * pos[:, 2] * pos[:, 0], 0.05 * np.cos(2 * pos[:, 0]) * (1 + pos[:, 2]) ** 2,
+                         0.1 * pos[:, 2] ** 2])            # a shear and a bend that tilt the root's wall
+    one_sided = layer_normals(pos + b, layer.faces)
+    assert np.abs(one_sided[root, 2]).max() > 0.05
+    n2 = deformed_normals(layer, b)
+    mirrored = one_sided[root] * [1.0, 1.0, 0.0]
+    assert np.allclose(n2[root], mirrored / np.linalg.norm(mirrored, axis=1)[:, None])
+    assert np.allclose(n2[~root], one_sided[~root])
+    db = rng.normal(size=b.shape)
     h = 1e-6
-    fd = (wall_frames(F + h * dF, nrm, planes) - wall_frames(F - h * dF, nrm, planes)) / (2 * h)
-    jv = wall_frames_jvp(F, nrm, dF, planes)
-    assert np.abs(fd - jv).max() < 1e-7
-    gG = rng.normal(size=(n, 3, 3))
-    assert np.isclose(np.sum(gG * jv), np.sum(wall_frames_vjp(F, nrm, gG, planes) * dF))
+    fd = (deformed_normals(layer, b + h * db) - deformed_normals(layer, b - h * db)) / (2 * h)
+    jv = deformed_normals_jvp(layer, b, db)
+    assert np.abs(fd - jv).max() < 1e-7 * np.abs(jv).max()
+    g = rng.normal(size=b.shape)
+    assert np.isclose(np.sum(g * jv), np.sum(deformed_normals_vjp(layer, b, g) * db), rtol=1e-12)

@@ -107,17 +107,25 @@ def read(path: str | Path, progress=None, *, fast_ints: bool = True) -> Mesh:
     return parser.mesh(st)
 
 
-def _map_file(path: Path) -> tuple[mmap.mmap, os.stat_result]:
-    """The SU2 file mapped for reading, and its stat; InputError when it cannot be opened or is empty."""
+def _refuse_empty(st: os.stat_result) -> str | None:
+    return "the file is empty; expected an SU2 mesh (NDIME=, NELEM=, NPOIN=, NMARK=)" if st.st_size == 0 else None
+
+
+def _map_file(path: Path, *, cannot: str = "cannot open",
+              refuse=_refuse_empty) -> tuple[mmap.mmap, os.stat_result]:
+    """The SU2 file mapped for reading, and its stat (the one place an SU2 file is opened and mapped).
+
+    InputError ``"<cannot>: <reason>"`` when it cannot be opened, or ``refuse(stat)``'s words when that
+    gives any (default: an empty file)."""
     try:
         fh = open(path, "rb")
     except OSError as e:
-        raise InputError(f"cannot open: {e.strerror or e}", path=path) from None
+        raise InputError(f"{cannot}: {e.strerror or e}", path=path) from None
     with fh:
         st = os.fstat(fh.fileno())
-        if st.st_size == 0:
-            raise InputError("the file is empty; expected an SU2 mesh (NDIME=, NELEM=, NPOIN=, NMARK=)",
-                             path=path)
+        problem = refuse(st)
+        if problem:
+            raise InputError(problem, path=path)
         return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ), st
 
 
@@ -226,17 +234,9 @@ def write(mesh: Mesh, path: str | Path, points: np.ndarray, progress=None) -> di
 
 def _open_source(original: Path, size: int, mtime_ns: int) -> mmap.mmap:
     """The input file mapped for reading, refused when it is not the version that was read."""
-    try:
-        fh = open(original, "rb")
-    except OSError as e:
-        raise InputError(f"cannot reopen the input mesh to copy it: {e.strerror or e}",
-                         path=original) from None
-    with fh:
-        st = os.fstat(fh.fileno())
-        if st.st_size != size or st.st_mtime_ns != mtime_ns:
-            raise InputError("the input mesh changed on disk since it was read; read it again",
-                             path=original)
-        return mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+    return _map_file(original, cannot="cannot reopen the input mesh to copy it",
+                     refuse=lambda st: "the input mesh changed on disk since it was read; read it again"
+                     if st.st_size != size or st.st_mtime_ns != mtime_ns else None)[0]
 
 
 def render_rows(original: str | Path, src: Su2Source, points: np.ndarray) -> np.ndarray:

@@ -17,7 +17,11 @@ the physics and numerics, is the user's file as written):
   RESTART_ASCII, SURFACE_CSV)`` (suffix: SU2's own, ``cd`` for DRAG, ``cl`` for LIFT), ``CONV_FIELD`` the
   adjoint's names of the config's residual fields (:func:`adjoint_convergence`), and
   ``CONV_RESIDUAL_MINVAL`` when ``optimize.adjoint_residual`` is given (the adjoints' own target: a
-  transonic adjoint often converges more slowly than its flow).
+  transonic adjoint often converges more slowly than its flow);
+* the numerics of :mod:`ffdcli.optimize.solvers.su2_settings`: a config that adapts its CFL has its
+  adjoints run at the flow's final CFL, fixed (``CFL_ADAPT= NO``, ``CFL_NUMBER``; the flow's
+  ``HISTORY_OUTPUT`` gets the ``CFL_NUMBER`` group), and a warm-started RANS flow is asked for
+  ``CONV_RESIDUAL_MINVAL`` one order lower than a cold one.
 
 Functions are read from the final row of ``history.csv`` under SU2's column names (DRAG -> ``CD``,
 LIFT -> ``CL``, MOMENT_Z -> ``CMz``: :data:`HISTORY_COLUMNS`). A run fails (:class:`SolverFailure`,
@@ -48,6 +52,7 @@ from ffdcli.io.atomic import written_as
 from ffdcli.io.formats import read_mesh
 from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
 from ffdcli.optimize.solvers.su2_convergence import criteria, exit_reason, shortfalls, start_iteration
+from ffdcli.optimize.solvers.su2_settings import adjoint_cfl, flow_history_groups, warm_flow_residual
 from ffdcli.optimize.solvers.base import (
     SOLVERS,
     FlowResult,
@@ -279,7 +284,9 @@ class SU2(Solver):
         source = None
         if minval is not None:
             source = (f"optimize.adjoint_residual {minval}" if adjoint and self.adjoint_residual is not None
-                      else f"{self.config.name}'s CONV_RESIDUAL_MINVAL {minval}")
+                      else f"{self.config.name}'s CONV_RESIDUAL_MINVAL {minval}" if adjoint
+                      else f"{minval} (a warm-started RANS flow: one order below {self.config.name}'s "
+                           "CONV_RESIDUAL_MINVAL)")
         return criteria(self._value, self.config.name, conv_field=conv, adjoint=adjoint,
                         coefficients=HISTORY_COLUMNS, minval=None if minval is None else float(minval),
                         minval_source=source, path=self.config)
@@ -320,8 +327,9 @@ class SU2(Solver):
         """``HISTORY_OUTPUT`` with SU2's function columns: the config's list plus ``AERO_COEFF``."""
         given = config_value(self.lines, "HISTORY_OUTPUT")
         items = [t for t in re.split(r"[\s,()]+", given or "") if t] or ["ITER", "RMS_RES"]
-        if "AERO_COEFF" not in [t.upper() for t in items]:
-            items.append("AERO_COEFF")
+        for group in ("AERO_COEFF", *flow_history_groups(self._value)):
+            if group not in [t.upper() for t in items]:
+                items.append(group)     # the functions; the final CFL of an adapting flow (its adjoints' CFL)
         if cauchy_only(self.lines) or any(r.kind == "cauchy" for r in self._criteria(False)):
             if "CAUCHY" not in [t.upper() for t in items]:
                 items.append("CAUCHY")          # the Cauchy[CD] columns the convergence is judged by
@@ -331,9 +339,11 @@ class SU2(Solver):
         warm = start is not None and (Path(start) / "restart_flow.dat").is_file()
         if warm:                      # SU2 starts from a nearby design's solution (same mesh topology)
             shutil.copyfile(Path(start) / "restart_flow.dat", folder / "solution_flow.dat")
+        tighter = warm_flow_residual(self._value) if warm else None    # a warm RANS flow: one order further
         log, seconds = self._run("SU2_CFD", folder, "flow", {
             **self._common(mesh, warm), "MATH_PROBLEM": "DIRECT", "CONV_FILENAME": "history",
-            "OUTPUT_FILES": "(RESTART, SURFACE_CSV)", "HISTORY_OUTPUT": self._history_output()})
+            "OUTPUT_FILES": "(RESTART, SURFACE_CSV)", "HISTORY_OUTPUT": self._history_output(),
+            **({} if tighter is None else {"CONV_RESIDUAL_MINVAL": tighter})})
         hist_path = folder / "history.csv"
         if not hist_path.is_file():
             raise SolverFailure("SU2_CFD wrote no history.csv", log)
@@ -345,7 +355,7 @@ class SU2(Solver):
         bad = [n for n, v in functions.items() if not math.isfinite(v)]
         if bad:
             raise SolverFailure(f"SU2_CFD gave {bad[0]} = {functions[bad[0]]}", log)
-        self._converged(log, history, "flow")
+        self._converged(log, history, "warm-started flow" if tighter else "flow", tighter)
         if not (folder / "restart_flow.dat").is_file():
             raise SolverFailure("SU2_CFD wrote no restart_flow.dat", log)
         return FlowResult(functions=functions, seconds=seconds, log=log)
@@ -361,11 +371,15 @@ class SU2(Solver):
         if warm:                      # the adjoint starts from a nearby design's adjoint solution
             shutil.copyfile(Path(start) / f"restart_adj_{sfx}.dat", folder / f"solution_adj_{sfx}.dat")
         discrete = self.adjoint_kind == "discrete"
+        try:                          # an adapting flow's adjoint runs at the flow's final CFL, fixed
+            cfl = adjoint_cfl(self._value, read_history(folder / "history.csv"))
+        except (OSError, ValueError) as e:
+            raise SolverFailure(f"the adjoint of {function} was not started: {e}", folder / "flow.log") from None
         log, seconds = self._run("SU2_CFD_AD" if discrete else "SU2_CFD", folder, f"adjoint_{sfx}", {
             **self._common(mesh, warm), "MATH_PROBLEM": "DISCRETE_ADJOINT" if discrete else "CONTINUOUS_ADJOINT",
             "OBJECTIVE_FUNCTION": function, "OBJECTIVE_WEIGHT": "1.0", "CONV_FILENAME": f"history_adj_{sfx}",
             "SURFACE_ADJ_FILENAME": f"surface_adjoint_{sfx}", "OUTPUT_FILES": "(RESTART, RESTART_ASCII, SURFACE_CSV)",
-            **adjoint_convergence(self.lines), **self._adjoint_target()})
+            **adjoint_convergence(self.lines), **self._adjoint_target(), **cfl})
         hist = folder / f"history_adj_{sfx}.csv"
         self._converged(log, read_history(hist) if hist.is_file() else {}, f"adjoint of {function}",
                         None if self.adjoint_residual is None else f"{self.adjoint_residual:g}")

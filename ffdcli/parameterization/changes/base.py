@@ -7,6 +7,7 @@ See :mod:`ffdcli.parameterization.changes` for the protocol every change follows
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Any
@@ -202,8 +203,10 @@ class SpecContext:
         return self.error(message, key)
 
 
-class Change:
-    """Common interface (see the module docstring). Subclasses are frozen dataclasses.
+class Change(ABC):
+    """Common interface (see the module docstring). Subclasses are frozen dataclasses; a kind implements
+    the abstract methods (:meth:`from_spec`, :meth:`apply`, :meth:`variables`, :meth:`with_values`,
+    :meth:`jacobian_own`, :meth:`jvp_P`).
 
     ``from_spec(spec, ctx)`` (a classmethod) builds the change from its YAML value ``spec`` (already
     valid against the schema of :mod:`ffdcli.design.schema`) and checks what needs the lattice
@@ -219,23 +222,29 @@ class Change:
         return [self.unit] * self.size
 
     @classmethod
-    def from_spec(cls, spec, ctx: SpecContext) -> Change:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def from_spec(cls, spec, ctx: SpecContext) -> Change:
+        """The change of the YAML value ``spec`` (the class docstring)."""
 
-    def apply(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def apply(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:
+        """(n, m, l, 3) the lattice ``P`` after the change."""
 
-    def variables(self) -> list[tuple[str, float]]:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def variables(self) -> list[tuple[str, float]]:
+        """``[(name, value)]`` of the change's design variables."""
 
-    def with_values(self, values) -> Change:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def with_values(self, values) -> Change:
+        """The same change with its variables set to ``values`` (k,)."""
 
-    def jacobian_own(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def jacobian_own(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:
+        """(k, n, m, l, 3) dP'/d(own variables) at the input lattice ``P``."""
 
-    def jvp_P(self, P: np.ndarray, frame: LatticeFrame, dP: np.ndarray) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def jvp_P(self, P: np.ndarray, frame: LatticeFrame, dP: np.ndarray) -> np.ndarray:
+        """dP' for a change ``dP`` of the input lattice (the variables held)."""
 
     def bounds(self, P: np.ndarray, frame: LatticeFrame) -> np.ndarray:
         """(k, 2) natural (lower, upper) bounds of this change's variables at its input lattice ``P``.
@@ -298,8 +307,9 @@ class SectionMap(Change):
     def values(self) -> np.ndarray:
         return self.law.values
 
-    def maps(self, P, frame) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def maps(self, P, frame) -> np.ndarray:
+        """(m, 4, 4) the homogeneous map of each section."""
 
     def apply(self, P, frame):
         return apply_homogeneous(self.maps(P, frame), P)

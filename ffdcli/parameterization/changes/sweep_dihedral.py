@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from abc import abstractmethod
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -61,8 +62,9 @@ class Shear(Change):
             return cls(offsets=SectionLaw.listed(offsets))
         return cls(delta=float(spec))
 
-    def _dir(self, frame) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abstractmethod
+    def _dir(self, frame) -> np.ndarray:
+        """(3,) the direction the leading edge is sheared along (chord for sweep, thickness for dihedral)."""
 
     def angle(self, P, frame) -> float:
         """The current angle of the leading-edge line, radians."""
