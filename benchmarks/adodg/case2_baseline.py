@@ -13,7 +13,6 @@ Run (from the repository root, after ``python -m benchmarks.adodg.case2_meshes -
 from __future__ import annotations
 
 import argparse
-import os
 import shutil
 import subprocess
 import sys
