@@ -5,14 +5,19 @@ The mesh: the generated 32-prism-layer wing of the robustness table (``gmsh_wing
 ``twist: {tip: 10}`` on a 6 x 8 x 2 lattice (the box cached before the timed runs). Each round loads
 the design afresh (:func:`ffdcli.app.run.load_run`, untimed) and times
 :func:`ffdcli.app.deformation.deform` (the warp's preparation, the wall layer's detection and motion,
-the volume, the quality gate and the first-cell report) once with ``volume.wall_layer: none`` and once
+the volume, the quality gate and the first-cell report; the box and the warp's reference weights read
+from their caches, as a second ``ffd deform`` of the mesh reads them) once with ``volume.wall_layer: none`` and once
 with ``rigid``, one after the other in one process, in CPU seconds of the process
 (``time.process_time``: the machine may be shared, and wall seconds then measure the neighbours). Printed:
 each round's ratio rigid / none and the smallest and largest over the rounds, beside the target 1.3.
 One untimed round first compiles and warms the kernels.
 
-``python -m benchmarks.bench_wall_layer [--rounds 5] [--work DIR] [--profile]`` (``--profile``: the
-layer's stages, CPU seconds of each, summed over the rounds); also part of ``make bench``.
+The same rounds follow with no cache read or written (each run as the first of the mesh: the reference
+weights and the layer computed in it).
+
+``python -m benchmarks.bench_wall_layer [--rounds 5] [--work DIR] [--profile] [--cold]`` (``--profile``: the
+rigid runs' stages, CPU seconds of each, summed over the rounds; ``--cold``: the first-run rounds only);
+also part of ``make bench``.
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ def _design(work: Path) -> Path:
     mesh = gmsh_wings.write_case(CASE, work / "meshes")
     folder = work / "designs" / "wall_layer_cost"
     folder.mkdir(parents=True, exist_ok=True)
+    (work / "cache").mkdir(exist_ok=True)        # the box and the warp's reference weights kept, as ffd deform does
     path = folder / "twist_tip10.yaml"
     path.write_text(yaml.safe_dump({"mesh": str(mesh), "surface": "wing", "box": {"points": [6, 8, 2]},
                                     "changes": DESIGN, "output": {"mesh": str(folder / "out.su2")}},
@@ -46,13 +52,15 @@ def _design(work: Path) -> Path:
     return path
 
 
-def _one(path: Path, mode: str, work: Path, profile: cProfile.Profile | None = None) -> float:
-    """CPU seconds of one ``deform`` with ``volume.wall_layer: mode`` (the run loaded untimed)."""
+def _one(path: Path, mode: str, work: Path, profile: cProfile.Profile | None = None, cached: bool = True) -> float:
+    """CPU seconds of one ``deform`` with ``volume.wall_layer: mode`` (the run loaded untimed; ``cached``
+    False: no cache read or written, as a first run of the mesh)."""
     from ffdcli.app.deformation import deform
     from ffdcli.app.run import load_run
     from ffdcli.design import load_design
 
-    run = load_run(load_design(path, overrides=[f"volume.wall_layer={mode}"]), cache_dir=work / "cache")
+    run = load_run(load_design(path, overrides=[f"volume.wall_layer={mode}"]), cache_dir=work / "cache",
+                   use_cache=cached)
     if profile is not None:
         profile.enable()
     t0 = time.process_time()
@@ -63,8 +71,10 @@ def _one(path: Path, mode: str, work: Path, profile: cProfile.Profile | None = N
     return dt
 
 
-def measure(rounds: int = 5, work: Path | None = None, profile: bool = False) -> dict:
-    """``{"none": [s, ...], "rigid": [s, ...], "ratio": [...]}``: CPU seconds of each round, alternating."""
+def measure(rounds: int = 5, work: Path | None = None, profile: bool = False, cached: bool = True) -> dict:
+    """``{"none": [s, ...], "rigid": [s, ...], "ratio": [...]}``: CPU seconds of each round, alternating
+    (``cached`` False: every run as the first of the mesh, its warp's reference weights and wall layer
+    computed)."""
     work = work or REPO / "out" / "robustness"
     path = _design(work)
     for mode in ("none", "rigid"):          # compile, read the box cache once
@@ -74,26 +84,27 @@ def measure(rounds: int = 5, work: Path | None = None, profile: bool = False) ->
     for k in range(rounds):
         order = ("none", "rigid") if k % 2 == 0 else ("rigid", "none")
         for mode in order:
-            out[mode].append(_one(path, mode, work, prof if mode == "rigid" else None))
+            out[mode].append(_one(path, mode, work, prof if mode == "rigid" else None, cached))
     out["ratio"] = [r / n for r, n in zip(out["rigid"], out["none"], strict=True)]
     if prof is not None:
         out["profile"] = prof
     return out
 
 
-def _rows(m: dict) -> list[dict]:
+def _rows(m: dict, what: str = "caches read") -> list[dict]:
     ratio = m["ratio"]
-    return [{"case": f"ffd deform CPU s, wall_layer none ({CASE}, {len(ratio)} rounds, min-max)",
+    return [{"case": f"ffd deform CPU s, wall_layer none ({CASE}, {what}, {len(ratio)} rounds, min-max)",
              "measured": f"{min(m['none']):.3f}-{max(m['none']):.3f}"},
-            {"case": "ffd deform CPU s, wall_layer rigid (min-max)",
+            {"case": f"ffd deform CPU s, wall_layer rigid ({what}, min-max)",
              "measured": f"{min(m['rigid']):.3f}-{max(m['rigid']):.3f}"},
-            {"case": "rigid / none, each round (min-max)", "measured": f"{min(ratio):.2f}-{max(ratio):.2f}",
+            {"case": f"rigid / none, each round ({what}, min-max)", "measured": f"{min(ratio):.2f}-{max(ratio):.2f}",
              "target": f"<= {TARGET}", "met": max(ratio) <= TARGET}]
 
 
 def run(quick: bool = False) -> list[dict]:
     """Rows for ``python -m benchmarks``."""
-    return _rows(measure(3 if quick else 5))
+    n = 3 if quick else 5
+    return _rows(measure(n)) + _rows(measure(n, cached=False), "first run, no cache")
 
 
 def main(argv=None) -> int:
@@ -102,14 +113,17 @@ def main(argv=None) -> int:
     ap.add_argument("--work", type=Path, default=REPO / "out" / "robustness",
                     help="folder of the generated mesh, design and box cache (default out/robustness)")
     ap.add_argument("--profile", action="store_true", help="also print the rigid runs' stages (CPU seconds)")
+    ap.add_argument("--cold", action="store_true", help="only the first-run rounds (no cache read or written)")
     args = ap.parse_args(argv)
-    m = measure(args.rounds, args.work, args.profile)
-    for k, (n, r) in enumerate(zip(m["none"], m["rigid"], strict=True)):
-        print(f"round {k + 1}: none {n:.3f} s  rigid {r:.3f} s  ratio {r / n:.3f}")
-    for row in _rows(m):
-        print(f"{row['case']}: {row['measured']}" + (f"  (target {row['target']})" if "target" in row else ""))
-    if "profile" in m:
-        pstats.Stats(m["profile"]).sort_stats("tottime").print_stats(20)
+    for cached in ([False] if args.cold else [True, False]):
+        m = measure(args.rounds, args.work, args.profile, cached)
+        what = "caches read" if cached else "first run, no cache"
+        for k, (n, r) in enumerate(zip(m["none"], m["rigid"], strict=True)):
+            print(f"{what}, round {k + 1}: none {n:.3f} s  rigid {r:.3f} s  ratio {r / n:.3f}")
+        for row in _rows(m, what):
+            print(f"{row['case']}: {row['measured']}" + (f"  (target {row['target']})" if "target" in row else ""))
+        if "profile" in m:
+            pstats.Stats(m["profile"]).sort_stats("tottime").print_stats(20)
     return 0
 
 

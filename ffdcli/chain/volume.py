@@ -20,6 +20,7 @@ from ffdcli.chain.share import MeshShare
 from ffdcli.chain.stage import Stage
 from ffdcli.settings import WarpSettings
 from ffdcli.volume.cache import ReferenceCache
+from ffdcli.volume.wall_layer import layer_arrays
 from ffdcli.volume.warp import WarpModel, prepare_mesh_warp, warp, warp_vjp
 
 
@@ -62,12 +63,22 @@ class VolumeStage(Stage):
         return self._model.get(lambda: self._build(progress))
 
     def _build(self, progress) -> WarpModel:
+        kept = {}
+
+        def saved_layer(target_ids):            # the cache file read once: the weights and the wall layer
+            kept["weights"], layer = self.warp_cache.load_all(target_ids)
+            return layer
+
         model, _ = prepare_mesh_warp(self.share.mesh, self.names, self.settings, progress=progress,
                                      size=self.share.diagonal(), targets=self.share.targets(),
-                                     nodes=self.share.nodes())
+                                     nodes=self.share.nodes(),
+                                     saved_layer=None if self.warp_cache is None else saved_layer)
         if not np.array_equal(model.surface_ids, self.surface_ids):
             raise RuntimeError("the warp's surface nodes differ from the box's")
-        weights = None if self.warp_cache is None else self.warp_cache.load(model.target_ids)
+        if "weights" in kept:
+            weights = kept["weights"]
+        else:
+            weights = None if self.warp_cache is None else self.warp_cache.load(model.target_ids)
         if weights is not None:
             model.set_reference_weights(weights)
             self._cached = True
@@ -82,7 +93,8 @@ class VolumeStage(Stage):
             points += self.share.warp(model, b, F, progress)     # MPI: each rank its rows or its block
             if self.warp_cache is not None and not self._cached:
                 # the reference weights were computed by this warp: keep them for the next run
-                self._cached = self.warp_cache.save(model.target_ids, model.reference_weights())
+                layer = None if model.layer is None else layer_arrays(model.layer)
+                self._cached = self.warp_cache.save(model.target_ids, model.reference_weights(), layer)
         else:
             points[ids] += b
         # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).

@@ -1,5 +1,9 @@
 """The volume warp's reference weights, kept between runs: one ``.npz`` file beside the mesh (or in
-``--cache-dir``), next to the box cache (:mod:`ffdcli.box.cache`).
+``--cache-dir``), next to the box cache (:mod:`ffdcli.box.cache`). A RANS mesh's wall layer
+(:mod:`ffdcli.volume.wall_layer`: which nodes follow their wall, with which weights) is kept in the same
+file: finding it walks every wall node's stack and searches the nearest wall nodes of every node near
+the wall, more than a third of a deformation of the 98k-node 32-layer wing, and it too depends on the
+mesh, the surface and the settings only.
 
 Each volume node's reference weight (:meth:`ffdcli.volume.warp.WarpModel.tolerances`) is a walk of the
 source tree of its own: about a seventh of a deformation's warp on a 1M-node mesh. It depends on the
@@ -28,8 +32,8 @@ from ffdcli import __version__
 from ffdcli.io.keyed_npz import read_keyed, write_keyed
 from ffdcli.settings import WarpSettings
 
-#: Bumped whenever the content of the file changes meaning.
-CACHE_FORMAT = 1
+#: Bumped whenever the content of the file changes meaning (2: the wall layer's arrays beside the weights).
+CACHE_FORMAT = 2
 
 
 def reference_key(mesh_hash: str, surface: list[str], settings: WarpSettings, reference_tolerance: float) -> str:
@@ -53,25 +57,34 @@ def _ids_hash(target_ids: np.ndarray) -> str:
     return hashlib.sha256(np.ascontiguousarray(target_ids, dtype=np.int64).tobytes()).hexdigest()
 
 
-def save_references(path: str | Path, key: str, target_ids: np.ndarray, weights: np.ndarray) -> None:
-    """Write the (Nt,) ``weights`` of the volume nodes ``target_ids`` (the model's order) atomically."""
-    write_keyed(path, key, CACHE_FORMAT, {"weights": np.asarray(weights, dtype=np.float64)},
+def save_references(path: str | Path, key: str, target_ids: np.ndarray, weights: np.ndarray,
+                    layer: dict | None = None) -> None:
+    """Write the (Nt,) ``weights`` of the volume nodes ``target_ids`` (the model's order) atomically;
+    ``layer``: the wall layer's arrays (:func:`ffdcli.volume.wall_layer.layer_arrays`) beside them."""
+    write_keyed(path, key, CACHE_FORMAT, {"weights": np.asarray(weights, dtype=np.float64), **(layer or {})},
                 targets=_ids_hash(target_ids))
+
+
+def load_cache(path: str | Path, key: str, target_ids: np.ndarray) -> tuple[np.ndarray | None, dict]:
+    """``(weights, layer)``: the (Nt,) reference weights of the volume nodes ``target_ids`` (the model's
+    order) and the wall layer's arrays (``layer_*``; empty when none were kept), or ``(None, {})`` if the
+    file is absent, stale, corrupt or of other nodes."""
+    got = read_keyed(path, key, CACHE_FORMAT)
+    if got is None or "weights" not in got[1]:
+        return None, {}
+    header, arrays = got
+    w = arrays["weights"]
+    if w.dtype != np.float64 or w.shape != (len(target_ids),) or header.get("targets") != _ids_hash(target_ids):
+        return None, {}
+    if not np.all(np.isfinite(w)) or np.any(w <= 0):       # a weight is a sum of positive terms
+        return None, {}
+    return w, {k: v for k, v in arrays.items() if k.startswith("layer_")}
 
 
 def load_references(path: str | Path, key: str, target_ids: np.ndarray) -> np.ndarray | None:
     """The (Nt,) reference weights of the volume nodes ``target_ids`` (the model's order), or None if
     the file is absent, stale, corrupt or of other nodes."""
-    got = read_keyed(path, key, CACHE_FORMAT)
-    if got is None or "weights" not in got[1]:
-        return None
-    header, arrays = got
-    w = arrays["weights"]
-    if w.dtype != np.float64 or w.shape != (len(target_ids),) or header.get("targets") != _ids_hash(target_ids):
-        return None
-    if not np.all(np.isfinite(w)) or np.any(w <= 0):       # a weight is a sum of positive terms
-        return None
-    return w
+    return load_cache(path, key, target_ids)[0]
 
 
 @dataclass(frozen=True)
@@ -87,11 +100,15 @@ class ReferenceCache:
         """:func:`load_references`, or None when the file is not to be read."""
         return load_references(self.path, self.key, target_ids) if self.read else None
 
-    def save(self, target_ids: np.ndarray, weights: np.ndarray) -> bool:
+    def load_all(self, target_ids: np.ndarray) -> tuple[np.ndarray | None, dict]:
+        """:func:`load_cache`, or ``(None, {})`` when the file is not to be read."""
+        return load_cache(self.path, self.key, target_ids) if self.read else (None, {})
+
+    def save(self, target_ids: np.ndarray, weights: np.ndarray, layer: dict | None = None) -> bool:
         """:func:`save_references`; False (nothing written, the run goes on) when the folder cannot
         be written: the box cache beside it has already said so."""
         try:
-            save_references(self.path, self.key, target_ids, weights)
+            save_references(self.path, self.key, target_ids, weights, layer)
         except OSError:
             return False
         return True

@@ -240,13 +240,22 @@ def deformed_normals_vjp(layer: WallLayer, b: np.ndarray, g: np.ndarray) -> np.n
     return out
 
 
-def _rigid(layer: WallLayer, b: np.ndarray, M: np.ndarray, sel: np.ndarray | None = None) -> np.ndarray:
-    """(n, 3) ``sum_k psi_k [b_k + M_k (x - x_k)]`` of the layer's rows ``sel`` (default all)."""
+def _rigid(layer: WallLayer, b: np.ndarray, M: np.ndarray, sel: np.ndarray | None = None,
+           T: np.ndarray | None = None) -> np.ndarray:
+    """(n, 3) ``sum_k psi_k [b_k + M_k (x - x_k)]`` of the layer's rows ``sel`` (default all); with ``T``
+    (Ns, 3, 3) plus ``w sum_k psi_k T_k (x - x_k)``, ``w`` the rows' ``stacked`` share (one product with
+    the partition for both)."""
     P = layer.partition if sel is None else layer.partition[sel]
     x = layer.position if sel is None else layer.position[sel]
-    c = b - np.einsum("nij,nj->ni", M, layer.wall_position)
-    Mx = (P @ M.reshape(-1, 9)).reshape(-1, 3, 3)
-    return P @ c + np.einsum("nij,nj->ni", Mx, x)
+    parts = [b - np.einsum("nij,nj->ni", M, layer.wall_position), M.reshape(-1, 9)]
+    if T is not None:
+        parts += [-np.einsum("nij,nj->ni", T, layer.wall_position), T.reshape(-1, 9)]
+    got = P @ np.hstack(parts)
+    out = got[:, :3] + np.einsum("nij,nj->ni", got[:, 3:12].reshape(-1, 3, 3), x)
+    if T is not None:
+        w = layer.stacked if sel is None else layer.stacked[sel]
+        out += w[:, None] * (got[:, 12:15] + np.einsum("nij,nj->ni", got[:, 15:].reshape(-1, 3, 3), x))
+    return out
 
 
 def _point(at, b, ns: int):
@@ -281,10 +290,10 @@ def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, l
         n2 = deformed_normals(layer, b0)
         M, dR = wall_frames_jvp(layer.normals, n2, F - _EYE, deformed_normals_jvp(layer, b0, b), turns=True)
         T = dR - M
+    every = len(sel) == len(layer.rows)              # serially: every row, no copies of the weights
     rows, s = layer.rows[sel] - lo, layer.weight[sel][:, None]
-    rigid = _rigid(layer, b, M, sel)
-    if layer.stacked is not None:                   # a stack's lean turns with its wall, unstretched
-        rigid += layer.stacked[sel][:, None] * _rigid(layer, np.zeros((ns, 3)), T, sel)
+    # a stack's lean turns with its wall, unstretched (the stacked share of T)
+    rigid = _rigid(layer, b, M, None if every else sel, None if layer.stacked is None else T)
     d[rows] = (1.0 - s) * d[rows] + s * rigid
     return d
 

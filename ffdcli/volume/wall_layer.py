@@ -339,16 +339,62 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
     weight = 1.0 - t * t * (3.0 - 2.0 * t)
     keep = weight > 0
-    rows, weight, x, part, psi2 = rows[keep], weight[keep], x[keep], part[keep], psi2[keep]
+    rows, weight, part, psi2 = rows[keep], weight[keep], part[keep], psi2[keep]
+    stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
+    return _assemble(pts, faces, wall_ids, target_ids, sliding, rows.astype(np.int64), part, weight, stacked,
+                     float(np.median(thick)))
+
+
+def _assemble(pts, faces, wall_ids, target_ids, sliding, rows, part, weight, stacked, thickness) -> WallLayer:
+    """The layer of the nodes ``rows`` (with their weights, found by :func:`detect_wall_layer` or read
+    back by :func:`layer_from_arrays`) and the wall's geometry, which is cheap to compute again."""
+    wall = pts[wall_ids]
+    nrm = wall_normals(pts, faces, wall_ids)
+    planes = wall_planes(wall, nrm, sliding)
+    nrm = in_plane(nrm, planes)
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
-    stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
     local = tuple(CellBlock(b.type, np.searchsorted(wall_ids, b.data)) for b in faces
                   if b.type != "vertex" and len(b.data))
     unit = layer_normals(wall - origin, local, planes)         # the same sums the deformed wall's go through
     unit[_no_normal(nrm)] = 0.0
-    return WallLayer(rows.astype(np.int64), part, x - origin, wall - origin, weight, unit, float(np.median(thick)),
+    return WallLayer(rows, part, pts[target_ids[rows]] - origin, wall - origin, weight, unit, thickness,
                      planes, stacked, local)
+
+
+def layer_arrays(layer: WallLayer) -> dict[str, np.ndarray]:
+    """What :func:`detect_wall_layer` found of ``layer`` that takes time to find (the nodes, their wall
+    weights, blend weights and stack shares, the thickness), as named arrays for a cache file
+    (:mod:`ffdcli.volume.cache`); :func:`layer_from_arrays` builds the layer back from them."""
+    part = layer.partition.tocsr()
+    return {"layer_rows": layer.rows, "layer_indptr": part.indptr.astype(np.int64),
+            "layer_indices": part.indices.astype(np.int64), "layer_psi": part.data, "layer_weight": layer.weight,
+            "layer_stacked": layer.stacked, "layer_thickness": np.array(layer.thickness)}
+
+
+def layer_from_arrays(points: np.ndarray, faces: list[CellBlock], wall_ids: np.ndarray, target_ids: np.ndarray,
+                      arrays: dict, sliding=()) -> WallLayer | None:
+    """The layer :func:`detect_wall_layer` finds on this mesh, from :func:`layer_arrays` of it (read back
+    from a cache file whose key is this mesh's, surface's and settings'); None when the arrays are
+    absent or do not fit (then the layer is found again). The same arrays bit for bit: the wall's
+    geometry is computed by the same functions."""
+    names = ("layer_rows", "layer_indptr", "layer_indices", "layer_psi", "layer_weight", "layer_stacked",
+             "layer_thickness")
+    if not all(n in arrays for n in names):
+        return None
+    rows, ptr, idx, psi, weight, stacked, thick = (arrays[n] for n in names)
+    n, ns, nt = len(rows), len(wall_ids), len(target_ids)
+    ints = all(a.dtype == np.int64 for a in (rows, ptr, idx))
+    floats = all(a.dtype == np.float64 for a in (psi, weight, stacked, thick))
+    if not (ints and floats and rows.ndim == 1 and thick.shape == () and ptr.shape == (n + 1,)
+            and weight.shape == (n,) and stacked.shape == (n,) and idx.shape == psi.shape == (ptr[-1] if n else 0,)
+            and ptr[0] == 0 and np.all(np.diff(ptr) >= 0) and (not n or (rows.min() >= 0 and rows.max() < nt))
+            and (not len(idx) or (idx.min() >= 0 and idx.max() < ns))):
+        return None
+    pts = np.asarray(points, dtype=np.float64)
+    part = csr_matrix((psi, idx, ptr), shape=(n, ns))
+    return _assemble(pts, faces, np.asarray(wall_ids, dtype=np.int64), np.asarray(target_ids, dtype=np.int64),
+                     sliding, rows, part, weight, stacked, float(thick))
 
 
 def _owners_edges(edges: OffWallEdges, wall_ids: np.ndarray, nodes: RankNodes) -> OffWallEdges:
