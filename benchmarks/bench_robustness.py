@@ -10,7 +10,9 @@ refusals and 0 inverted cells with the default ``volume:`` settings, and every d
 ``mesh_quality`` bound.
 
 RANS meshes (SU2's RAE2822 of ``../shared/data``, a NACA 0012 O-mesh with a first cell of 1e-6 chord
-and 70 layers, ``gen:rect_z_rans32``: 32 prism layers from 1e-6) add the wall layer's figures: the
+and 70 layers, a NACA 2412 C-mesh with a sharp trailing edge and a conforming wake cut (129 points
+round the airfoil, 33 along the cut, 65 off the wall, first cell 1e-6: ``ffdcli.testing.cmesh``),
+``gen:rect_z_rans32``: 32 prism layers from 1e-6) add the wall layer's figures: the
 first-cell height after / before (min-max) and the off-wall angle change at the wall nodes
 (:mod:`ffdcli.quality.wall_layer`; the first cells changed by more than 1 %: ffd deform's warning); the airfoils
 run the ``2d_`` designs on a 10 x 2 lattice.
@@ -141,6 +143,7 @@ class MeshSource:
     bundled: str | None = None      # a path (relative to the repo, or absolute)
     case: str | None = None         # a ffdcli.testing.gmsh_wings case
     ogrid: tuple | None = None      # (NACA code, points around, nodes off the wall, first cell): ffdcli.testing.ogrid
+    cmesh: tuple | None = None      # (NACA code, points around, along the cut, off the wall, first cell): ffdcli.testing.cmesh
     dim: int = 3
 
     def path(self, work: Path) -> Path | None:
@@ -163,6 +166,17 @@ class MeshSource:
                 p.parent.mkdir(parents=True, exist_ok=True)
                 write_mesh(airfoil_ogrid_mesh(code, n_around, n_radial, first_cell=first), p)
             return p
+        if self.cmesh is not None:
+            from ffdcli.io.formats import write_mesh
+            from ffdcli.testing.cmesh import cmesh
+            from ffdcli.testing.naca import naca4
+
+            code, n_around, n_wake, n_normal, first = self.cmesh
+            p = work / "meshes" / f"cmesh_{code}_{n_around}x{n_wake}x{n_normal}_{first:g}.su2"
+            if not p.is_file():
+                p.parent.mkdir(parents=True, exist_ok=True)
+                write_mesh(cmesh(naca4(code, 161), n_around, n_wake, n_normal, first), p)
+            return p
         p = Path(self.bundled)
         p = p if p.is_absolute() else REPO / p
         return p if p.is_file() else None
@@ -181,6 +195,8 @@ def _meshes() -> dict[str, MeshSource]:
     out["rans:rae2822"] = MeshSource("rans:rae2822", "AIRFOIL", dim=2, bundled="/work/shared/data/su2/"
                                      "deformation__rae2822__mesh_RAE2822_turb_ffd.su2")
     out["rans:ogrid_1e-6"] = MeshSource("rans:ogrid_1e-6", "airfoil", dim=2, ogrid=("0012", 193, 71, 1e-6))
+    # a C-mesh: sharp trailing edge, the wake cut conforming (its two sides the same nodes), 1e-6 chord first cell
+    out["rans:cmesh"] = MeshSource("rans:cmesh", "airfoil", dim=2, cmesh=("2412", 129, 33, 65, 1e-6))
     return out
 
 

@@ -11,7 +11,10 @@ Steps: the lattice kernels (embedding, ``B @ P``, ``B.T @ g``, the basis matrix,
 product) for every degree combination of :data:`ffdcli.lattice._newton_kernels.SPECIALISED` and for
 the generic ones; then, in a source checkout (``samples/`` and ``configs/`` beside the package), a 3D
 and a 2D design end to end (box fit, changes, volume motion, quality gate, SU2 read and write) into
-a temporary folder, which compiles the volume, gate and I/O kernels. The steps run side by side,
+a temporary folder, which compiles the volume, gate and I/O kernels; and the wall layer of a small
+RANS mesh (a flat plate's quads grown from a 1e-6 first cell), which compiles the stack walk's
+kernels (:mod:`ffdcli.volume._stack_walk`; the bundled designs' meshes have no boundary layer). The
+steps run side by side,
 one worker process per core (:mod:`ffdcli.app.processes`; ``-j 1``: one after the other).
 """
 
@@ -32,8 +35,10 @@ from ffdcli.jit import cache_dir
 from ffdcli.lattice._newton_kernels import SPECIALISED
 from ffdcli.lattice.embedding import embed
 from ffdcli.lattice.lattice import Lattice
+from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.parameterization.derivatives import csr_times_dense
 from ffdcli.progress import no_progress
+from ffdcli.volume.warp import prepare_mesh_warp, warp
 
 REPO = Path(__file__).resolve().parents[2]
 #: Degrees (three-axis form) that run the generic kernels: compiling one compiles them for every
@@ -78,11 +83,38 @@ def run_design(config: Path, out: Path) -> None:
                   lattice_path=out / f"{config.stem}_lattice.vtk")
 
 
+def layered_plate(n_x: int = 21, n_y: int = 25, first: float = 1e-6, growth: float = 1.6) -> Mesh:
+    """A 2D quad mesh over a flat plate (marker ``wall`` at y = 0, ``far`` round the rest) whose cells
+    grow from ``first`` off the wall by ``growth``: a RANS mesh's layer, in a few hundred nodes."""
+    x = np.linspace(0.0, 1.0, n_x)
+    y = np.r_[0.0, first * np.cumsum(growth ** np.arange(n_y - 1))]
+    pts = np.zeros((n_x * n_y, 3))
+    pts[:, 0], pts[:, 1] = np.repeat(x, n_y), np.tile(y, n_x)
+    ids = np.arange(n_x * n_y).reshape(n_x, n_y)
+    quads = np.stack([ids[:-1, :-1], ids[1:, :-1], ids[1:, 1:], ids[:-1, 1:]], axis=-1).reshape(-1, 4)
+    far = np.concatenate([np.stack([ids[-1, :-1], ids[-1, 1:]], 1), np.stack([ids[1:, -1], ids[:-1, -1]], 1),
+                          np.stack([ids[0, 1:], ids[0, :-1]], 1)])
+    return Mesh(points=pts, dim=2, cells=[CellBlock("quad", quads)],
+                markers={"wall": [CellBlock("line", np.stack([ids[:-1, 0], ids[1:, 0]], 1))],
+                         "far": [CellBlock("line", far)]})
+
+
+def wall_layer_kernels() -> None:
+    """Find the wall layer of :func:`layered_plate` and move it (the stack walk's kernels)."""
+    model, _ = prepare_mesh_warp(layered_plate(), "wall")
+    if model.layer is None:
+        raise RuntimeError("the warm-up plate has no wall layer")
+    warp(model, np.full((model.n_surface, 3), 1e-3) * [0.0, 1.0, 0.0])
+
+
 def run_step(kind: str, arg) -> float:
-    """One warm-up step (``kind`` "lattice": degrees; "design": a design file); its seconds."""
+    """One warm-up step (``kind`` "lattice": degrees; "layer": the wall layer's; "design": a design file);
+    its seconds."""
     t0 = time.perf_counter()
     if kind == "lattice":
         lattice_kernels(arg)
+    elif kind == "layer":
+        wall_layer_kernels()
     else:
         with tempfile.TemporaryDirectory(prefix="ffd-warmup-") as tmp:
             run_design(Path(arg), Path(tmp))
@@ -95,6 +127,7 @@ def steps(repo: Path = REPO) -> list[tuple[str, str, object]]:
     configs = [repo / "configs" / name for name in DESIGNS]
     if all(c.is_file() for c in configs):
         out += [(f"end to end: {c.name} (box, volume, quality gate, I/O)", "design", str(c)) for c in configs]
+    out.append(("wall layer kernels (a RANS mesh's stacks of thin cells)", "layer", None))
     out += [(f"lattice kernels, degrees {d}", "lattice", d) for d in sorted(SPECIALISED)]
     out.append(("lattice kernels, every other degree combination (generic)", "lattice", GENERIC))
     return out

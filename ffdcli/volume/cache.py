@@ -31,18 +31,24 @@ import numpy as np
 from ffdcli import __version__
 from ffdcli.io.keyed_npz import read_keyed, write_keyed
 from ffdcli.settings import WarpSettings
+from ffdcli.volume.wall_layer import BLEND, MIN_ASPECT, NEIGHBOURS, SHARP_COS, STACK_SPACINGS
+from ffdcli.volume.wall_stacks import MAX_LAYERS, STACK_COS
 
 #: Bumped whenever the content of the file changes meaning (2: the wall layer's arrays beside the weights).
 CACHE_FORMAT = 2
+#: The constants that decide which nodes are in the wall layer and their weights (part of the key).
+LAYER_RULES = {"min_aspect": MIN_ASPECT, "blend": BLEND, "sharp_cos": SHARP_COS, "neighbours": NEIGHBOURS,
+               "stack_spacings": STACK_SPACINGS, "stack_cos": STACK_COS, "max_layers": MAX_LAYERS}
 
 
 def reference_key(mesh_hash: str, surface: list[str], settings: WarpSettings, reference_tolerance: float) -> str:
     """The key of a model's reference weights: mesh content, surface names, warp settings (but
-    ``chunk``), the reference walk's tolerance, tool version and cache format."""
+    ``chunk``), the reference walk's tolerance, the wall layer's rules (:data:`LAYER_RULES`: a file
+    kept under other rules holds another layer), tool version and cache format."""
     warp = {k: v for k, v in dataclasses.asdict(settings).items() if k != "chunk"}
     blob = json.dumps({"mesh": mesh_hash, "surface": list(surface), "warp": warp,
-                       "reference_tolerance": float(reference_tolerance), "version": __version__,
-                       "format": CACHE_FORMAT}, sort_keys=True, default=str)
+                       "reference_tolerance": float(reference_tolerance), "layer": LAYER_RULES,
+                       "version": __version__, "format": CACHE_FORMAT}, sort_keys=True, default=str)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 

@@ -54,6 +54,11 @@ from ffdcli.volume.wall_stacks import stack_heights
 #: wall spacing of 1e-3 to 1e-2 chord is 100 to 1e4; an Euler mesh's about 1, a coarse mesh with a
 #: first cell of 5e-3 chord (y+ in the hundreds) about 10.
 MIN_ASPECT = 50.0
+#: The layer is at most this many wall spacings thick at a wall node (its stack of thin cells may be
+#: taller: a structured mesh's cells stay thinner than wide 0.1 chord from the RAE2822's wall, 6 spacings).
+#: A wall turned by theta over one spacing s (a deflected hinge) folds the stacks set on it along its
+#: normals at s / theta from it (5.7 s at 10 degrees): the layer and its blend stay inside that.
+STACK_SPACINGS = 1.0
 #: The blend from the rigid layer into the warp's motion, in layer thicknesses.
 BLEND = 4.0
 #: A wall node is on a sharp edge (a sharp trailing edge, a flat tip's rim) when the faces around it
@@ -319,7 +324,7 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     if np.median(aspect) < MIN_ASPECT:
         return None
     thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node, nodes)
-    thick = np.maximum(thick, edges.height)
+    thick = np.maximum(np.minimum(thick, STACK_SPACINGS * edges.spacing), edges.height)
     if nodes is None:
         span = np.ptp(pts, axis=0)
     else:                                         # every node once: the owned rows of every rank
