@@ -300,7 +300,7 @@ def main(argv: list[str] | None = None) -> int:
     r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
     r.add_argument("folder", type=Path)
     r.add_argument("--resume", action="store_true",
-                   help="go on from the project.pkl of an earlier piece (SU2's -r: designs it holds are not solved again)")
+                   help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
     p = sub.add_parser("report", help="solves, CD, constraints and the add-material rule of a run")
     p.add_argument("folder", type=Path)
     p.add_argument("--baseline", type=Path, required=True, help="the baseline mesh the run started from")
