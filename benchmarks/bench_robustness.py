@@ -143,7 +143,8 @@ class MeshSource:
     bundled: str | None = None      # a path (relative to the repo, or absolute)
     case: str | None = None         # a ffdcli.testing.gmsh_wings case
     ogrid: tuple | None = None      # (NACA code, points around, nodes off the wall, first cell): ffdcli.testing.ogrid
-    cmesh: tuple | None = None      # (NACA code, points around, along the cut, off the wall, first cell): ffdcli.testing.cmesh
+    cmesh: tuple | None = None      # (NACA code, points around, along the cut, off the wall, first cell):
+    #                                 ffdcli.testing.cmesh
     dim: int = 3
 
     def path(self, work: Path) -> Path | None:

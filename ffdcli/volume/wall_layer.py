@@ -402,6 +402,18 @@ def layer_from_arrays(points: np.ndarray, faces: list[CellBlock], wall_ids: np.n
                      sliding, rows, part, weight, stacked, float(thick))
 
 
+def saved_or_detected(points: np.ndarray, cells: list[CellBlock], faces: list[CellBlock], wall_ids: np.ndarray,
+                      target_ids: np.ndarray, sliding=(), nodes: RankNodes | None = None, saved=None
+                      ) -> WallLayer | None:
+    """:func:`detect_wall_layer`, unless ``saved`` (a function of ``target_ids`` giving the arrays an
+    earlier run kept, :func:`layer_arrays`, or an empty dict; :mod:`ffdcli.volume.cache`) gives arrays
+    that fit: then the layer built from them (:func:`layer_from_arrays`). Serial runs only (``nodes`` None)."""
+    kept = saved(target_ids) if saved is not None and nodes is None else {}
+    layer = layer_from_arrays(points, faces, wall_ids, target_ids, kept, sliding) if kept else None
+    return layer if layer is not None else detect_wall_layer(points, cells, faces, wall_ids, target_ids, sliding,
+                                                             nodes)
+
+
 def _owners_edges(edges: OffWallEdges, wall_ids: np.ndarray, nodes: RankNodes) -> OffWallEdges:
     """The off-wall edges of one rank's local mesh as the owners of the wall nodes found them (the owner
     holds every cell around its node: the serial edge), gathered (a collective); ``node`` in global ids."""

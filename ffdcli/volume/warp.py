@@ -109,7 +109,7 @@ from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names 
     sliding_projectors,
 )
 from ffdcli.volume.tree import LEAF_SIZE, build_forest, node_geometry  # noqa: F401
-from ffdcli.volume.wall_layer import WallLayer, detect_wall_layer, layer_from_arrays
+from ffdcli.volume.wall_layer import WallLayer, saved_or_detected
 
 #: The tolerance (on the scale of ``tolerance / 2``) of the coarse per-target walk whose weight is each
 #: target's reference in the block walk's decisions (:meth:`WarpModel.tolerances`).
@@ -362,33 +362,23 @@ def _mean_chord(surface: np.ndarray, area: np.ndarray, size: float) -> float:
     return chord if chord > 0 and math.isfinite(chord) else size
 
 
-def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None,
-                      size: float | None = None, targets=None, nodes=None, saved_layer=None
-                      ) -> tuple[WarpModel, MarkerRoles]:
+def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None, size: float | None = None,
+                      targets=None, nodes=None, saved_layer=None) -> tuple[WarpModel, MarkerRoles]:
     """:func:`marker_roles` then :func:`prepare_warp` for an :class:`ffdcli.mesh.Mesh`.
 
     ``surface`` is the marker name or names of the deforming surface. The warp's surface nodes
     (``model.surface_ids``) are the sorted unique nodes of those markers: :func:`warp` takes their
     displacement in that order. ``size``: the bounding-box diagonal of the whole mesh when ``mesh``
     is one MPI rank's local mesh (:func:`ffdcli.parallel.distributed.diagonal`); default that of its points.
-    ``targets``: as in :func:`prepare_warp`; ``nodes``: :func:`ffdcli.volume.wall_layer.detect_wall_layer`'s.
-    ``saved_layer``: a function of the targets' ids (Nt,) giving the wall layer's arrays kept by an earlier
-    run (:func:`ffdcli.volume.wall_layer.layer_arrays`; :mod:`ffdcli.volume.cache`), or an empty dict:
-    the layer is built from them (:func:`ffdcli.volume.wall_layer.layer_from_arrays`) instead of found again.
-    """
+    ``targets``: as in :func:`prepare_warp`; ``nodes``, ``saved_layer``: :func:`~.wall_layer.saved_or_detected`'s."""
     settings = settings or WarpSettings()
     roles = marker_roles(mesh.points, mesh.markers, surface, mesh.dim, settings, path=mesh.path, size=size)
     model = prepare_warp(mesh.points, roles.surface_ids, roles.fixed_ids, roles.sliding, settings,
                          faces=roles.faces, progress=progress, targets=targets)
     if settings.wall_layer == "rigid" and settings.method != "none":
         names = [surface] if isinstance(surface, str) else list(surface)
-        faces = mesh.marker_faces(names)
-        kept = saved_layer(model.target_ids) if saved_layer is not None and nodes is None else {}
-        model.layer = layer_from_arrays(mesh.points, faces, model.surface_ids, model.target_ids, kept,
-                                        roles.sliding) if kept else None
-        if model.layer is None:
-            model.layer = detect_wall_layer(mesh.points, mesh.cells, faces, model.surface_ids, model.target_ids,
-                                            roles.sliding, nodes)
+        model.layer = saved_or_detected(mesh.points, mesh.cells, mesh.marker_faces(names), model.surface_ids,
+                                        model.target_ids, roles.sliding, nodes, saved_layer)
     return model, roles
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-import ffdcli.volume.warp as warp_mod
+import ffdcli.volume.wall_layer as wall_layer_mod
 from ffdcli.app.deformation import deform
 from ffdcli.app.run import load_run
 from ffdcli.design import load_design
@@ -67,7 +67,7 @@ def test_a_second_run_reads_the_layer_and_moves_the_mesh_bit_for_bit(tmp_path, m
     weights, kept = load_cache(first.warp_cache.path, first.warp_cache.key, first.warp_model().target_ids)
     assert weights is not None and kept and "layer_psi" in kept
     with monkeypatch.context() as mp:
-        mp.setattr(warp_mod, "detect_wall_layer", _no_detect)
+        mp.setattr(wall_layer_mod, "detect_wall_layer", _no_detect)
         second = load_run(design)
         again = deform(second)
         _same(second.warp_model().layer, first.warp_model().layer)
