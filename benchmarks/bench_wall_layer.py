@@ -77,8 +77,8 @@ def measure(rounds: int = 5, work: Path | None = None, profile: bool = False, ca
     computed)."""
     work = work or REPO / "out" / "robustness"
     path = _design(work)
-    for mode in ("none", "rigid"):          # compile, read the box cache once
-        _one(path, mode, work)
+    for mode in ("none", "rigid"):          # compile, write the caches once
+        _one(path, mode, work, cached=cached)
     prof = cProfile.Profile(time.process_time) if profile else None
     out = {"none": [], "rigid": []}
     for k in range(rounds):

@@ -58,8 +58,11 @@ def walk_stacks(pts, pad, cell_of, ptr, on_wall, up, spacing, first, max_layers,
                     e0 = pts[v, 0] - pts[f, 0]
                     e1 = pts[v, 1] - pts[f, 1]
                     e2 = pts[v, 2] - pts[f, 2]
+                    dot = e0 * up[k, 0] + e1 * up[k, 1] + e2 * up[k, 2]
+                    if dot <= 0.0 and best_cos >= 0.0:     # no closer to the normal than the best: skip the root
+                        continue
                     ln = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
-                    cos = (e0 * up[k, 0] + e1 * up[k, 1] + e2 * up[k, 2]) / (ln if ln > 0 else 1.0)
+                    cos = dot / (ln if ln > 0 else 1.0)
                     if cos > best_cos:
                         best, best_cos, best_ln = v, cos, ln
             if best < 0 or not best_ln < spacing[k]:
