@@ -77,7 +77,7 @@ def measure(rounds: int = 5, work: Path | None = None, profile: bool = False, ca
     computed)."""
     work = work or REPO / "out" / "robustness"
     path = _design(work)
-    for mode in ("none", "rigid"):          # compile, write the caches once
+    for mode in ("none", "rigid"):          # compile (and write the caches) untimed
         _one(path, mode, work, cached=cached)
     prof = cProfile.Profile(time.process_time) if profile else None
     out = {"none": [], "rigid": []}

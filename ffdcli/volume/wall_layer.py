@@ -11,7 +11,8 @@ The mesh *has* a boundary layer when its first cells are thin against the wall's
 least :data:`MIN_ASPECT` (50). An Euler mesh (aspect about 1) has none and its volume moves as
 before. The layer's thickness ``delta_k`` at a wall node is its stack's height
 (:mod:`ffdcli.volume.wall_stacks`: the stacked quads or prisms, as long as they are thinner than wide:
-a prism layer's thickness, or where a structured mesh's cells become isotropic); where a node is, the
+a prism layer's thickness, or where a structured mesh's cells become isotropic), but no more than
+:data:`STACK_SPACINGS` (1) wall spacing ``s_k``; where a node is, the
 thickness is the blend ``delta = sum_k psi_k delta_k`` of its wall nodes' (the weights below).
 A node at distance ``d`` from its nearest wall
 node has the weight
