@@ -64,6 +64,7 @@ WING = "wing"
 SECTIONS = 9                      # ffd's box.points[1] in case3.yaml: 9 spanwise control sections
 CHORDWISE = 4                     # ffd's box.points[0]
 MARGIN = 0.02                     # ffd's automatic lattice's clearance, fraction of the chord
+TIP_PAD = 1e-5                    # the outboard face this far (chords) beyond the wing's outermost node
 BOUND_DEG = 8.0                   # ffd's c0.twist bounds, degrees
 ITERATIONS = 20                   # ffd's optimize.iterations in case3.yaml
 CL_TARGET = 0.375
@@ -76,15 +77,16 @@ def wing_box(points: np.ndarray, margin: float = MARGIN) -> dict:
     """SU2's box around the wing's points (W, 3): chord x, span y (root at the smallest y), thickness z.
 
     Returns ``{"x": (x0, x1), "y": (y0, y1), "z": (z0, z1), "te": (x_te, z_te), "chord": c}``: the bounding
-    box grown by ``margin * chord`` in x and z (not in span: the root face lies on the symmetry plane and the
-    outboard face at the wing's outermost point, where ffd's lattice ends), and the trailing-edge point
-    (the largest x; its z, the mean of the points there)."""
+    box grown by ``margin * chord`` in x and z; in span the root face lies on the symmetry plane (the
+    smallest y) and the outboard face at the wing's outermost point, where ffd's lattice ends, plus
+    :data:`TIP_PAD` chords (SU2_DEF counted the one node exactly on that face outside the box on L1, not
+    on L0); and the trailing-edge point (the largest x; its z, the mean of the points there)."""
     lo, hi = points.min(axis=0), points.max(axis=0)
     chord = float(hi[0] - lo[0])
     at_te = points[:, 0] >= hi[0] - 1e-9 * chord
     te = (float(hi[0]), float(points[at_te, 2].mean()))
     m = margin * chord
-    return {"x": (float(lo[0] - m), float(hi[0] + m)), "y": (float(lo[1]), float(hi[1])),
+    return {"x": (float(lo[0] - m), float(hi[0] + m)), "y": (float(lo[1]), float(hi[1] + TIP_PAD * chord)),
             "z": (float(lo[2] - m), float(hi[2] + m)), "te": te, "chord": chord}
 
 
@@ -209,6 +211,16 @@ def solves(folder: Path) -> tuple[int, int]:
     return len(project_rows(folder)), adjoints
 
 
+def elapsed(folder: Path) -> float | None:
+    """Seconds from the first design's start (its ``config_DSN.cfg``) to the newest file of ``DESIGNS``:
+    how long a run that has not finished (no ``run.json``) has been going, up to its last output."""
+    found = designs(folder)
+    if not found or not (found[0] / "config_DSN.cfg").is_file():
+        return None
+    start = (found[0] / "config_DSN.cfg").stat().st_mtime
+    return max(p.stat().st_mtime for p in (folder / "DESIGNS").rglob("*") if p.is_file()) - start
+
+
 def span_row(dsn: Path, alpha: float, cd0: float | None) -> dict | None:
     """Span load and efficiency of a design's flow (``DIRECT/``): :func:`benchmarks.adodg.case3_report.report`."""
     direct = dsn / "DIRECT"
@@ -240,7 +252,8 @@ def report(folder: Path, cd0: float | None = None) -> dict:
     meta = folder / "run.json"
     state = json.loads(meta.read_text()) if meta.is_file() else None
     out = {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
-           "wall": None if state is None else state["wall"], "flow_solves": flows, "adjoint_solves": adjoints,
+           "wall": None if state is None else state["wall"], "elapsed": elapsed(folder),
+           "flow_solves": flows, "adjoint_solves": adjoints,
            "designs": rows, "best": best, "alpha": alpha, "stations": info["stations"]}
     for key, r in (("baseline_load", rows[0] if rows else None), ("best_load", best)):
         load = None if r is None else span_row(folder / "DESIGNS" / r["design"], alpha, cd0)
@@ -252,7 +265,8 @@ def report(folder: Path, cd0: float | None = None) -> dict:
 def table_row(rep: dict, label: str = "SU2 `shape_optimization.py`, 9 `FFD_TWIST` (SLSQP)") -> str:
     """One markdown row: run, flow + adjoint solves, CD, CL, load - ellipse RMS / max, e_load, wall."""
     b, load = rep["best"], rep["best_load"]
-    wall = "running" if rep["wall"] is None else f"{rep['wall']:.0f}"
+    wall = f"{rep['wall']:.0f}" if rep["wall"] is not None else (
+        "running" if rep["elapsed"] is None else f"running ({rep['elapsed']:.0f} so far)")
     if b is None:
         return f"| {label} | {rep['flow_solves']} + {rep['adjoint_solves']} | no design meets CL | | | | {wall} |"
     ld = "" if load is None else f"{load['rms_pct']:.2f} / {load['max_pct']:.2f}"
@@ -263,7 +277,8 @@ def table_row(rep: dict, label: str = "SU2 `shape_optimization.py`, 9 `FFD_TWIST
 
 def summary(rep: dict) -> str:
     """Plain-text lines of a report and its table row."""
-    wall = "" if rep["wall"] is None else f", {rep['wall']:.0f} s wall"
+    wall = (f", {rep['wall']:.0f} s wall" if rep["wall"] is not None else
+            "" if rep["elapsed"] is None else f", {rep['elapsed']:.0f} s so far")
     head = "finished (exit " + str(rep["rc"]) + ")" if rep["finished"] else "RUNNING"
     lines = [f"{rep['folder']}: {head}, {rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves{wall}"]
     for r in rep["designs"]:

@@ -77,10 +77,10 @@ def test_the_box_encloses_the_wing_with_ffds_margin_and_its_planes_are_ffds_stat
     assert box["chord"] == pytest.approx(chord, rel=1e-9)
     assert box["x"] == pytest.approx((pts[:, 0].min() - m, pts[:, 0].max() + m), abs=1e-12 * (1 + abs(x0) + chord))
     assert box["z"] == pytest.approx((pts[:, 2].min() - m, pts[:, 2].max() + m), abs=1e-12 * (1 + abs(z0) + chord))
-    assert box["y"] == (0.0, pytest.approx(span))          # root on the symmetry plane, tip face at the tip
+    assert box["y"] == (0.0, pytest.approx(span + 1e-5 * chord))  # root on the symmetry plane, tip face at the tip
     assert box["te"] == pytest.approx((x0 + chord, z0), abs=1e-9 * (1 + abs(x0) + chord + abs(z0)))
     ys = stations(box)
-    assert len(ys) == SECTIONS and np.allclose(np.diff(ys), span / (SECTIONS - 1))
+    assert len(ys) == SECTIONS and np.allclose(np.diff(ys), (span + 1e-5 * chord) / (SECTIONS - 1))
     dvs = DV.findall(twist_variables(box))
     assert [int(j) for j, _ in dvs] == list(range(SECTIONS))
     for _, axis in dvs:
@@ -145,7 +145,7 @@ def test_write_configs_keeps_case3s_flow_and_runs_nothing(tmp_path):
     assert config_value(box, "MESH_FILENAME") == "mesh.su2" and config_value(box, "MESH_OUT_FILENAME") == "mesh_ffd.su2"
     assert config_value(box, "DV_KIND") == "FFD_SETTING"
     assert info["alpha"] == float(config_value(base, "AOA")) and info["wing_nodes"] == len(naca_wing(1, 3, 0, 0))
-    assert json.loads((run / "box.json").read_text())["stations"] == pytest.approx(list(np.linspace(0, 3, 9)))
+    assert json.loads((run / "box.json").read_text())["stations"] == pytest.approx(list(np.linspace(0, 3 + 1e-5, 9)))
 
 
 def test_write_configs_refuses_a_mesh_without_the_wing(tmp_path):
