@@ -35,7 +35,8 @@ other's field, as ffd's adjoints converge to ``RMS_ADJ_DENSITY``), and:
 
 ``setup`` writes ``config.cfg`` and ``box.json`` (the box, the stations, the axis) and runs ``SU2_DEF`` to
 embed the box (``mesh_ffd.su2``); ``run`` is :func:`benchmarks.adodg.su2_side.run` (``optimizer.log``,
-``run.json`` with the wall time when it ends); ``report`` reads ``history_project.csv`` and the
+``run.json`` with the wall time when it ends; ``run --resume`` goes on from ``project.pkl`` after a
+piece was stopped); ``report`` reads ``history_project.csv`` and the
 ``DESIGNS`` folders: flow and adjoint solves as SU2 logs them, CD, CL and the twists of every design,
 and for the baseline and the best design (CL within :data:`CL_TOLERANCE` of 0.375, least CD) the span load
 against the ellipse and the span efficiency (:mod:`benchmarks.adodg.case3_report`).
@@ -306,6 +307,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--folder", type=Path, required=True)
     r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
     r.add_argument("folder", type=Path)
+    r.add_argument("--resume", action="store_true",
+                   help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
     p = sub.add_parser("report", help="solves, CD, CL, twists, the best design's span load and e")
     p.add_argument("folder", type=Path)
     p.add_argument("--cd0", type=float, default=None, help="the mesh's zero-lift drag, for e from the drag")
@@ -314,7 +317,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "setup":
         print(setup(args.mesh, args.folder))
     elif args.command == "run":
-        print(f"{run(args.folder):.0f} s")
+        print(f"{run(args.folder, args.resume):.0f} s")
     else:
         rep = report(args.folder, args.cd0)
         print(json.dumps(rep, indent=1) if args.json else summary(rep))
