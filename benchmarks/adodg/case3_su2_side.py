@@ -205,6 +205,16 @@ def design_values(dsn: Path) -> list[float] | None:
     return [float(v) for v in value.split(",")] if value else None
 
 
+def gradient_per_degree(dsn: Path, function: str, values: list[float] | None) -> list[float] | None:
+    """d(function)/d(twist in degrees) of each variable at the design: SU2_DOT_AD's ``of_grad_<sfx>.csv`` (per
+    unit of SU2's value, the tangent) times d(tan)/d(deg) = (1 + value^2) pi / 180; None until it exists."""
+    found = sorted((dsn / f"ADJOINT_{function}").glob("of_grad*.csv"))
+    if not found or values is None:
+        return None
+    g = np.genfromtxt(found[0], delimiter=",", skip_header=1, usecols=1, ndmin=1)
+    return (g * (1.0 + np.asarray(values) ** 2) * math.pi / 180.0).tolist()
+
+
 def solves(folder: Path) -> tuple[int, int]:
     """(flow, adjoint) solves SU2 finished: a row of ``history_project.csv`` per flow, a gradient file
     (``of_grad*.csv``) per adjoint folder ``ADJOINT_<FUNCTION>`` of each design."""
@@ -252,10 +262,13 @@ def report(folder: Path, cd0: float | None = None) -> dict:
     flows, adjoints = solves(folder)
     meta = folder / "run.json"
     state = json.loads(meta.read_text()) if meta.is_file() else None
+    first = folder / "DESIGNS" / "DSN_001"
+    base_values = design_values(first) if first.is_dir() else None
     out = {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
            "wall": None if state is None else state["wall"], "elapsed": elapsed(folder),
            "flow_solves": flows, "adjoint_solves": adjoints,
-           "designs": rows, "best": best, "alpha": alpha, "stations": info["stations"]}
+           "designs": rows, "best": best, "alpha": alpha, "stations": info["stations"],
+           "baseline_gradient_per_deg": {f: gradient_per_degree(first, f, base_values) for f in ("DRAG", "LIFT")}}
     for key, r in (("baseline_load", rows[0] if rows else None), ("best_load", best)):
         load = None if r is None else span_row(folder / "DESIGNS" / r["design"], alpha, cd0)
         out[key] = None if load is None else {k: load[k] for k in ("CL", "CD", "CL_strips", "rms_pct", "max_pct",
@@ -292,6 +305,9 @@ def summary(rep: dict) -> str:
             e = f", e (CD - CD0) {ld['e_drag']:.4f}" if "e_drag" in ld else ""
             lines.append(f"{what}: load - ellipse RMS {ld['rms_pct']:.2f} %, max {ld['max_pct']:.2f} % of the "
                          f"root load; e_load {ld['e_load']:.4f}{e}")
+    for f, g in rep["baseline_gradient_per_deg"].items():
+        if g is not None:
+            lines.append(f"baseline d{f}/d(twist, deg): " + " ".join(f"{v:.4e}" for v in g))
     lines.append("| run | flow + adjoint solves | CD | CL | load - ellipse RMS / max (%) | e_load | wall (s) |")
     lines.append("|---|---:|---:|---:|---|---:|---:|")
     lines.append(table_row(rep))

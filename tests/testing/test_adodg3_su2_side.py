@@ -32,6 +32,7 @@ from benchmarks.adodg.case3_su2_side import (
     angle_to_value,
     config_keys,
     ffd_definition,
+    gradient_per_degree,
     mapped_nodes,
     report,
     setup,
@@ -176,6 +177,10 @@ def plate(s: float = 3.0, n_chord: int = 6, n_span: int = 96):
     return np.concatenate([grid, grid]), np.concatenate([up, lo])
 
 
+def grad_of(name: str, j: int) -> float:
+    return (0.05 if name == "DRAG" else 0.6) * (1 + 0.1 * j)
+
+
 def fake_design(folder, k: int, twist_deg, adjoints: dict, jump=None, cl: float = 0.0, cd: float = 0.0):
     """DESIGNS/DSN_00k as SU2's scripts leave it: config_DSN.cfg, ADJOINT_<F> folders (a gradient file
     when finished), and with ``jump`` a DIRECT folder (mesh, surface_flow.csv, history_direct.csv)."""
@@ -185,8 +190,10 @@ def fake_design(folder, k: int, twist_deg, adjoints: dict, jump=None, cl: float 
     (dsn / "config_DSN.cfg").write_text(f"DV_KIND= FFD_TWIST\nDV_VALUE_NEW= {values}\n")
     for name, done in adjoints.items():
         (dsn / f"ADJOINT_{name}").mkdir()
-        if done:
-            (dsn / f"ADJOINT_{name}" / f"of_grad_{name.lower()}.csv").write_text("VARIABLE, GRADIENT\n")
+        if done:   # SU2_DOT_AD's file: d(function)/d(value) per variable
+            rows = "".join(f"{j}, {grad_of(name, j)}, 0.001\n" for j in range(len(twist_deg)))
+            (dsn / f"ADJOINT_{name}" / f"of_grad_{name.lower()}.csv").write_text(
+                '"VARIABLE", "GRADIENT", "FINDIFF_STEP"\n' + rows)
     if jump is not None:
         direct = dsn / "DIRECT"
         direct.mkdir()
@@ -227,6 +234,14 @@ def test_report_counts_solves_picks_the_best_design_meeting_the_lift_and_reads_i
     assert best["CL_strips"] == pytest.approx(CL_TARGET, rel=2e-3)
     assert best["e_load"] == pytest.approx(1.0, abs=2e-3) and best["rms_pct"] < 1.0
     assert base["e_load"] < 0.95 and base["rms_pct"] > 5.0
+    per_deg = math.pi / 180                                          # d tan(theta) / d deg at theta = 0
+    for name in ("DRAG", "LIFT"):
+        assert rep["baseline_gradient_per_deg"][name] == pytest.approx([grad_of(name, j) * per_deg for j in range(9)])
+    # at a twisted design, d(value)/d(deg) = (1 + value^2) pi / 180
+    g = gradient_per_degree(tmp_path / "DESIGNS" / "DSN_002", "DRAG", [angle_to_value(t) for t in twists[1]])
+    assert g == pytest.approx([grad_of("DRAG", j) * per_deg / math.cos(math.radians(t)) ** 2
+                               for j, t in enumerate(twists[1])], rel=1e-12)
+    assert gradient_per_degree(tmp_path / "DESIGNS" / "DSN_003", "DRAG", [0.0] * 9) is None
     row = table_row(rep)
     assert "| 4 + 5 | 0.000450 | 0.374990 |" in row and f"{best['e_load']:.4f}" in row and "running" in row
 
