@@ -168,17 +168,31 @@ def setup(param: str, mesh: Path, folder: Path) -> Path:
     return folder / "config.cfg"
 
 
-def run(folder: Path) -> float:
-    """``shape_optimization.py -g DISCRETE_ADJOINT -o SLSQP -f config.cfg`` in ``folder``; wall seconds."""
+def run(folder: Path, resume: bool = False) -> float:
+    """``shape_optimization.py -g DISCRETE_ADJOINT -o SLSQP -f config.cfg`` in ``folder``; wall seconds.
+
+    With ``resume`` and a ``project.pkl`` from an earlier piece, SU2's own restart (``-r project.pkl``):
+    its project answers every design it already holds from its cache (a design is found when its
+    variables equal the requested ones exactly), so SLSQP, which is deterministic, retraces the earlier
+    piece without a solve and goes on from where it stopped; a design whose adjoint was cut short
+    solves that adjoint again. Each piece's wall time is kept in ``run.json`` (``pieces``).
+    """
     cmd = [sys.executable, str(su2_bin() / "shape_optimization.py"), "-g", "DISCRETE_ADJOINT", "-o", "SLSQP",
            "-f", "config.cfg"]
+    pieces = []
+    if resume and (folder / "project.pkl").is_file():
+        cmd += ["-r", "project.pkl"]
+        old = folder / "run.json"
+        pieces = json.loads(old.read_text()).get("pieces", []) if old.is_file() else []
     t0 = time.time()
     (folder / "run.json").unlink(missing_ok=True)
-    with open(folder / "optimizer.log", "w") as fh:
+    with open(folder / "optimizer.log", "a" if resume else "w") as fh:
         rc = subprocess.run(["nice", "-n", "5", *cmd], cwd=folder, stdout=fh, stderr=subprocess.STDOUT,
                             env=su2_env()).returncode
     wall = time.time() - t0
-    (folder / "run.json").write_text(json.dumps({"rc": rc, "wall": wall, "start": t0, "command": cmd[1:]}))
+    pieces.append({"start": t0, "wall": wall, "rc": rc})
+    (folder / "run.json").write_text(json.dumps({"rc": rc, "wall": sum(p["wall"] for p in pieces), "start": t0,
+                                                 "command": cmd[1:], "pieces": pieces}))
     return wall
 
 
@@ -286,6 +300,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--folder", type=Path, required=True)
     r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
     r.add_argument("folder", type=Path)
+    r.add_argument("--resume", action="store_true",
+                   help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
     p = sub.add_parser("report", help="solves, CD, constraints and the add-material rule of a run")
     p.add_argument("folder", type=Path)
     p.add_argument("--baseline", type=Path, required=True, help="the baseline mesh the run started from")
@@ -294,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "setup":
         print(setup(args.param, args.mesh, args.folder))
     elif args.command == "run":
-        print(f"{run(args.folder):.0f} s")
+        print(f"{run(args.folder, args.resume):.0f} s")
     else:
         rep = report(args.folder, args.baseline)
         print(json.dumps(rep, indent=1) if args.json else summary(rep))

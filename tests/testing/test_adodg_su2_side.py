@@ -6,6 +6,7 @@ wall node mapped into it; and a Hicks-Henne bump of positive amplitude adds mate
 
 from __future__ import annotations
 
+import json
 import re
 import shutil
 import subprocess
@@ -13,6 +14,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from benchmarks.adodg import su2_side as side
 from benchmarks.adodg.meshes import family, level_mesh
 from benchmarks.adodg.su2_side import (
     BOUND,
@@ -108,3 +110,31 @@ def test_a_positive_hicks_henne_bump_adds_material_on_its_side(tmp_path, l0, sid
     outward = dy[own] if side == 1 else -dy[own]
     assert outward.max() == pytest.approx(0.01, rel=0.05)      # the bump's crest, outward on its side
     assert np.abs(dy[other]).max() <= 1e-12                    # the other side stays put
+
+
+def test_run_resume_passes_su2_restart_and_keeps_the_pieces(tmp_path, monkeypatch):
+    """``run --resume`` hands SU2 its own project file (``-r project.pkl``) and adds the piece's wall
+    time to the earlier pieces'; a first run, or one without a project file, starts afresh."""
+    calls = []
+
+    class Done:
+        returncode = 0
+
+    def fake_run(cmd, **kw):
+        calls.append(cmd)
+        return Done()
+
+    monkeypatch.setattr(side.subprocess, "run", fake_run)
+    monkeypatch.setattr(side, "su2_bin", lambda: tmp_path)
+    side.run(tmp_path, resume=True)                      # no project.pkl yet: a fresh start
+    assert "-r" not in calls[-1]
+    (tmp_path / "project.pkl").write_bytes(b"x")
+    side.run(tmp_path, resume=False)
+    assert "-r" not in calls[-1]
+    first = json.loads((tmp_path / "run.json").read_text())
+    assert len(first["pieces"]) == 1
+    side.run(tmp_path, resume=True)
+    assert calls[-1][-2:] == ["-r", "project.pkl"]
+    meta = json.loads((tmp_path / "run.json").read_text())
+    assert len(meta["pieces"]) == 2
+    assert meta["wall"] == pytest.approx(sum(p["wall"] for p in meta["pieces"]))
