@@ -30,11 +30,13 @@ that case's (M 0.729, alpha 2.31, ``LIFT > 0.723``, 38 Hicks-Henne bumps, contin
     python -m benchmarks.adodg.case2_meshes --out out/adodg
     python -m benchmarks.adodg.su2_side_case2 setup --mesh out/adodg/rae2822_su2.su2 --folder out/adodg/su2_case2
     nice -n 5 python -m benchmarks.adodg.su2_side_case2 run out/adodg/su2_case2       # hours; nice -n 5
+    nice -n 5 python -m benchmarks.adodg.su2_side_case2 run out/adodg/su2_case2 --resume   # the next piece
     python -m benchmarks.adodg.su2_side_case2 report out/adodg/su2_case2
 
 ``setup`` writes ``config.cfg`` and ``mesh_ffd.su2`` (the mesh with SU2's box embedded by ``SU2_DEF``)
 and ``baseline_geometry.json`` (SU2_GEO's functions of the baseline); ``run`` starts SU2's script there
-(``optimizer.log``; ``run.json`` with the wall time when it ends); ``report`` reads
+(``optimizer.log``; ``run.json`` with the wall time when it ends; ``--resume`` goes on from SU2's own
+``project.pkl``, :func:`benchmarks.adodg.su2_side.run`); ``report`` reads
 ``history_project.csv`` and the ``DESIGNS`` folders: flow and adjoint solves, CD, CL, CMz, area, each
 design's constraints at the case's tolerance (1e-4), the best feasible design.
 """
@@ -164,6 +166,8 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--folder", type=Path, required=True)
     r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
     r.add_argument("folder", type=Path)
+    r.add_argument("--resume", action="store_true",
+                   help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
     p = sub.add_parser("report", help="solves, CD, CL, CMz, area and the constraints of a run")
     p.add_argument("folder", type=Path)
     p.add_argument("--json", action="store_true")
@@ -171,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "setup":
         print(setup(args.mesh, args.folder))
     elif args.command == "run":
-        print(f"{run(args.folder):.0f} s")
+        print(f"{run(args.folder, args.resume):.0f} s")
     else:
         rep = report(args.folder)
         print(json.dumps(rep, indent=1) if args.json else summary(rep))
