@@ -63,7 +63,7 @@ def folder_loads(folder: Path, marker: str = "AIRFOIL") -> tuple[PressureLoads, 
     pts = np.array([[float(r["x"]), float(r["y"])] for r in rows])
     cp = np.array([float(r["Pressure_Coefficient"]) for r in rows])
     _, idx = cKDTree(pts).query(loop)
-    origin = (float(config_value(cfg, "REF_ORIGIN_MOMENT_X") or 0.0), float(config_value(cfg, "REF_ORIGIN_MOMENT_Y") or 0.0))
+    origin = tuple(float(config_value(cfg, f"REF_ORIGIN_MOMENT_{c}") or 0.0) for c in "XY")
     loads = pressure_loads(loop, cp[idx], float(config_value(cfg, "AOA") or 0.0), origin)
     hist = read_history(folder / "history.csv")
     return loads, {"CL": hist["CL"][-1], "CMz": hist["CMz"][-1]}

@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import yaml
 
+from benchmarks.adodg.su2_side import su2_bin, su2_env
 from benchmarks.adodg.su2_side_case2 import (
     BOUND,
     BOX,
@@ -29,7 +30,6 @@ from benchmarks.adodg.su2_side_case2 import (
     report,
     setup,
 )
-from benchmarks.adodg.su2_side import su2_bin, su2_env
 from ffdcli.api import DesignModel
 from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.su2 import config_value, read_config, with_keys
@@ -65,7 +65,7 @@ def test_variables_are_ffd_files_24_control_points_with_its_bounds():
     # ffd's order: upper row (j = 1) at columns 0..11, then the lower row; the trailing-edge column stays put
     assert got == [(i, 1) for i in range(12)] + [(i, 0) for i in range(12)]
     names = DESIGN["optimize"]["variables"]
-    assert names[:12] == [f"c0.shape.upper[{i}]" for i in range(12)] and names[12:] == [f"c0.shape.lower[{i}]" for i in range(12)]
+    assert names == [f"c0.shape.{side}[{i}]" for side in ("upper", "lower") for i in range(12)]
     assert all(d.startswith(f"( 19, 1.0 | {MARKER} |") for d in dvs)          # FFD_CONTROL_POINT_2D, moving in y
     assert keys["FFD_DEGREE"] == f"({FFD_COLUMNS - 1}, 1, 0)" and FFD_COLUMNS == DESIGN["box"]["points"][0]
     lo, hi = DESIGN["bounds"]["c0.shape"]
