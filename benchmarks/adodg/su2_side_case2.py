@@ -112,7 +112,10 @@ def setup(mesh: Path, folder: Path) -> Path:
     (folder / "box.cfg").write_text(box)
     run_program([str(su2_bin() / "SU2_DEF"), "box.cfg"], folder, "box.log")
     keys["MESH_FILENAME"] = "mesh_ffd.su2"
-    (folder / "config.cfg").write_text(with_keys(read_config(CONFIG), keys))
+    head = ("% SU2's shape_optimization.py on ADODG Case 2 (benchmarks/adodg/su2_side_case2.py): case2.cfg with\n"
+            "% the optimiser's keys below and the CFL fixed at 50 for the flow and SU2_CFD_AD alike (the\n"
+            "% comments of case2.cfg that follow describe ffd's run, which adapts the flow's CFL).\n")
+    (folder / "config.cfg").write_text(head + with_keys(read_config(CONFIG), keys))
     (folder / "baseline_geometry.json").write_text(json.dumps(geo, indent=1))
     return folder / "config.cfg"
 
