@@ -104,7 +104,8 @@ def _wrappers(tmp_path: Path, pidfile: Path) -> dict[str, list[str]]:
         script.chmod(0o755)
         out[name] = [str(script)]
     launcher = tmp_path / "launcher.py"
-    launcher.write_text(f"import subprocess, sys\nsys.exit(subprocess.call([sys.executable, '-c', {_child(pidfile)!r}]))\n")
+    launcher.write_text("import subprocess, sys\n"
+                        f"sys.exit(subprocess.call([sys.executable, '-c', {_child(pidfile)!r}]))\n")
     out["python"] = [py, str(launcher)]
     outer = tmp_path / "outer.sh"
     outer.write_text(f'#!/bin/sh\n"{tmp_path / "sh_wait.sh"}"\nexit $?\n')

@@ -21,7 +21,8 @@ from ffdcli.optimize.solvers.su2 import SU2, read_config, with_keys
 from ffdcli.optimize.solvers.su2_convergence import cauchy_value, exit_reason, su2_error
 
 ROOT = Path(__file__).resolve().parents[2]
-LIAR = "All convergence criteria satisfied.\n\n------------------------- Exit Success (SU2_CFD) ------------------------\n"
+LIAR = ("All convergence criteria satisfied.\n\n"
+        "------------------------- Exit Success (SU2_CFD) ------------------------\n")
 
 
 def _solver(tmp_path: Path, lines: list[str]) -> SU2:

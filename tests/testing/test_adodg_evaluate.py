@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
+from benchmarks.adodg import evaluate as evaluation
 from benchmarks.adodg.evaluate import (
     best_row,
     common_nodes,
@@ -135,3 +136,23 @@ def test_prolonged_restart_keeps_the_shared_nodes_and_stays_within_the_coarse_va
     assert len(ic) == len(xy0)                                # nested: every coarse node is a fine node
     np.testing.assert_array_equal(fine[jf, 2:], values[ic, 2:])
     assert fine[:, 2:].min() >= values[:, 2:].min() and fine[:, 2:].max() <= values[:, 2:].max()
+
+
+def test_a_solve_that_never_converges_is_reported_as_such_with_its_mean_and_range(tmp_path):
+    """A flow at its iteration limit in a limit cycle: the mean CD and CL of the last iterations, the CD
+    range over them and ``converged`` False (not the last iterate as a result)."""
+    n = 3000
+    it = np.arange(n)
+    cd = 0.0218 + 1e-4 * np.sin(it / 7.0)
+    cl = 0.007 * np.cos(it / 7.0)
+    rms = np.full(n, -5.5)
+    head = '"Time_Iter","Outer_Iter","Inner_Iter","rms[Rho]","CD","CL"\n'
+    rows = "".join(f"0,0,{i},{r},{d},{lift}\n" for i, r, d, lift in zip(it, rms, cd, cl, strict=True))
+    (tmp_path / "history.csv").write_text(head + rows)
+    (tmp_path / "run.json").write_text(json.dumps({"wall": 10.0, "cpu": 9.0, "mesh": "m.su2"}))
+    s = evaluation.solved(tmp_path, tmp_path / "adodg_L3.su2")
+    assert s["converged"] is False
+    assert s["iterations"] == n
+    assert s["cd"] == pytest.approx(cd[-evaluation.TAIL:].mean(), rel=1e-12)
+    assert s["cd_range"] == pytest.approx([cd[-evaluation.TAIL:].min(), cd[-evaluation.TAIL:].max()])
+    assert abs(s["cl"]) < 1e-3
