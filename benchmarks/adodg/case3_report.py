@@ -7,7 +7,8 @@ the mesh the flow ran on, against the ellipse of the same lift.
     python -m benchmarks.adodg.case3_report RUN_FOLDER --mesh MESH.su2 [--cd0 CD0] [--strips 24] [--json]
     python -m benchmarks.adodg.case3_report BASE_FOLDER BEST_FOLDER --plot spanload.png   # loads vs ellipse
 
-``RUN_FOLDER`` holds ``surface_flow.csv`` and ``history.csv`` (CL, CD); the mesh default is the folder's
+``RUN_FOLDER`` holds ``surface_flow.csv`` and ``history.csv`` (CL, CD; ``history_direct.csv`` in a
+``DIRECT`` folder of SU2's ``shape_optimization.py``); the mesh default is the folder's
 ``*.su2`` (an evaluation's deformed mesh). ``--cd0`` is the same mesh's zero-lift drag (the alpha-0
 solve of the untwisted wing), for ``e = CL^2 / (pi AR (CD - CD0))``. Case constants: semispan 3,
 half-wing area 3, AR 6; angle of attack from the folder's ``flow.cfg`` (else ``--alpha``).
@@ -52,6 +53,15 @@ def last_history(path: Path) -> dict[str, float]:
     return {n: float(v) for n, v in zip(names, rows[-1], strict=True)}
 
 
+def history_file(folder: Path) -> Path:
+    """The flow's history in ``folder``: ``history.csv`` (ffd's evaluations, SU2_CFD's default) or
+    ``history_direct.csv`` (a ``DIRECT`` folder of SU2's ``shape_optimization.py``)."""
+    for name in ("history.csv", "history_direct.csv"):
+        if (folder / name).is_file():
+            return folder / name
+    return folder / "history.csv"
+
+
 def config_alpha(folder: Path) -> float | None:
     for name in ("flow.cfg", "c.cfg"):
         p = folder / name
@@ -72,7 +82,7 @@ def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, a
     load = strip_loads(mesh.points, tris, cp, n_strips=n_strips, alpha_deg=alpha, span=SEMISPAN)
     diff = ellipse_difference(load, SEMISPAN)
     coef = fourier_coefficients(load, SEMISPAN)
-    hist = last_history(folder / "history.csv")
+    hist = last_history(history_file(folder))
     cl, cd = hist["CL"], hist["CD"]
     out = {"folder": str(folder), "mesh": str(mesh_path), "alpha": alpha, "CL": cl, "CD": cd,
            "CL_strips": load.cl_total / S_HALF, "rms_pct": diff.rms, "max_pct": diff.max_abs,
