@@ -138,9 +138,10 @@ def run_program(args: list[str], folder: Path, log: str) -> None:
         raise RuntimeError(f"{args[0]} failed (exit {rc}): see {folder / log}")
 
 
-def geometry(folder: Path, mesh_name: str) -> dict[str, float]:
-    """SU2_GEO's 2-D functions of ``folder/mesh_name`` (AIRFOIL_AREA, AIRFOIL_THICKNESS, ...)."""
-    text = with_keys(read_config(CONFIG), {"MESH_FILENAME": mesh_name, "GEO_MARKER": "( airfoil )",
+def geometry(folder: Path, mesh_name: str, config: Path = CONFIG, marker: str = "airfoil") -> dict[str, float]:
+    """SU2_GEO's 2-D functions of ``folder/mesh_name`` (AIRFOIL_AREA, AIRFOIL_THICKNESS, ...), its wall
+    ``marker``, with ``config``'s other keys (Case 1's by default)."""
+    text = with_keys(read_config(config), {"MESH_FILENAME": mesh_name, "GEO_MARKER": f"( {marker} )",
                                            "GEO_DESCRIPTION": "AIRFOIL", "GEO_MODE": "FUNCTION",
                                            "VALUE_OBJFUNC_FILENAME": "of_func.csv"})
     (folder / "geo.cfg").write_text(text)

@@ -56,9 +56,10 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
     if check:
         rows = summary["gradient_check"]
         width = max([len(r["variable"]) for r in rows] + [8])
-        text = [f"{'function':<10} {'variable':<{width}} {'adjoint':>14} {'finite diff.':>14} {'relative':>10}"]
-        text += [f"{r['function']:<10} {r['variable']:<{width}} {r['adjoint']:>14.6e} {r['finite_difference']:>14.6e} "
-                 f"{r['relative']:>10.2e}" for r in rows]
+        fw = max([len(r["function"]) for r in rows] + [10])
+        text = [f"{'function':<{fw}} {'variable':<{width}} {'adjoint':>14} {'finite diff.':>14} {'relative':>10}"]
+        text += [f"{r['function']:<{fw}} {r['variable']:<{width}} {r['adjoint']:>14.6e} "
+                 f"{r['finite_difference']:>14.6e} {r['relative']:>10.2e}" for r in rows]
         console.result({"gradient_check": rows, "seconds": summary["seconds"]}, "\n".join(text))
         return
     exit_code = summary.pop("exit_code")
