@@ -119,7 +119,7 @@ def _designs() -> dict:
         # 2D (the RANS airfoils, a 10 x 2 lattice): twist, chord (the planform of an airfoil), shape, devices
         **{f"2d_twist{a:+d}": [{"twist": {"angle": a, "axis": 0.25}}] for a in (-20, -5, 5, 20)},
         "2d_chord0.9": [{"chord": 0.9}],
-        **{f"2d_shape_random{p}%": (lambda p: lambda m, chord: [{"shape": {"random": round(p / 100 * chord, 6),
+        **{f"2d_shape_random{p}%": (lambda q: lambda m, chord: [{"shape": {"random": round(q / 100 * chord, 6),
                                                                              "seed": 7}}])(p) for p in (1, 5)},
         "2d_flap10": [{"flap": {"hinge": 0.75, "angle": 10}}],
         "2d_slat10": [{"slat": {"hinge": 0.15, "angle": 10}}],

@@ -329,7 +329,8 @@ class WarpSettings:
                 raise InputError(f"unknown key {k!r}; expected one of {', '.join(names + list(GATE_KEYS))}",
                                  path=path, key=f"{key}.{k}")
             if isinstance(v, bool) and k not in ("fixed", "sliding"):
-                raise InputError(f"expected a {'name' if k in ('method', 'carry', 'wall_layer') else 'number'}, got {v!r}",
+                kind = "name" if k in ("method", "carry", "wall_layer") else "number"
+                raise InputError(f"expected a {kind}, got {v!r}",
                                  path=path, key=f"{key}.{k}")
             if k in ("fixed", "sliding") and v is not None:
                 if isinstance(v, str):

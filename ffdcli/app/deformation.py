@@ -23,6 +23,7 @@ from ffdcli.quality.gate import QualityReport
 from ffdcli.quality.wall_layer import DEFAULT_FIRST_CELL, WallLayerReport, wall_layer_report
 from ffdcli.volume.recovery import attempts, incremental_warp  # it runs the warp of the chain
 
+
 def design_map(run: DesignRun, P, disp: np.ndarray | None = None) -> Callable[[np.ndarray], np.ndarray]:
     """``f(node_ids) -> (k, 3)``: where the design's own map puts those input mesh nodes near the wall.
 

@@ -139,7 +139,8 @@ class QualityReport:
                                   "failed": self.n_ortho_failed, "min": self.ortho_min,
                                   "loss": self.ortho_loss_max},
                 "failed": self.n_failed, "ok": self.ok, "worst": self.worst, "worst_nodes": self.worst_nodes,
-                "input_bad": self.input_bad, "surface_cells": self.surface_cells, **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
+                "input_bad": self.input_bad, "surface_cells": self.surface_cells,
+                **({} if self.polyhedral is None else {"polyhedral": self.polyhedral})}
 
     def summary(self) -> str:
         """One line for people: the same words for ``ffd deform`` and ``ffd check``."""

@@ -148,7 +148,8 @@ def test_wall_frame_products():
     assert np.all(np.isfinite(R)) and np.array_equal(R[49], G[49])
     assert np.allclose(np.einsum("nij,nj->ni", G, nrm)[6:], n2[6:])
     assert np.allclose(np.einsum("nij,nj->ni", R, nrm)[6:], n2[6:])
-    assert np.allclose(np.einsum("nij,nkj->nik", R[6:49], R[6:49]), np.eye(3)) and np.allclose(np.linalg.det(R[6:49]), 1)
+    assert np.allclose(np.einsum("nij,nkj->nik", R[6:49], R[6:49]), np.eye(3))
+    assert np.allclose(np.linalg.det(R[6:49]), 1)
     axis = np.cross(nrm, n2)                    # the least rotation keeps the axis n x n'
     assert np.allclose(np.einsum("nij,nj->ni", R, axis)[6:49], axis[6:49])
     t = np.cross(nrm, rng.normal(size=(n, 3)))

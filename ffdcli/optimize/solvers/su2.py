@@ -51,8 +51,6 @@ from ffdcli.errors import InputError
 from ffdcli.io.atomic import written_as
 from ffdcli.io.formats import read_mesh
 from ffdcli.io.formats.wall_normals import surface_sensitivity_gradient
-from ffdcli.optimize.solvers.su2_convergence import criteria, exit_reason, shortfalls, start_iteration
-from ffdcli.optimize.solvers.su2_settings import adjoint_cfl, flow_history_groups, warm_flow_residual
 from ffdcli.optimize.solvers.base import (
     SOLVERS,
     FlowResult,
@@ -65,6 +63,8 @@ from ffdcli.optimize.solvers.base import (
     missing_program,
     run_logged,
 )
+from ffdcli.optimize.solvers.su2_convergence import criteria, exit_reason, shortfalls, start_iteration
+from ffdcli.optimize.solvers.su2_settings import adjoint_cfl, flow_history_groups, warm_flow_residual
 
 #: SU2's history columns of its functions (``SU2/io/historyMap.py``), the optimisation's name first.
 HISTORY_COLUMNS = {
