@@ -44,7 +44,6 @@ against the ellipse and the span efficiency (:mod:`benchmarks.adodg.case3_report
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import re
@@ -55,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.adodg.case3_report import report as load_report
-from benchmarks.adodg.su2_side import design_mesh, designs, project_rows, run, run_program, su2_bin
+from benchmarks.adodg.su2_side import design_mesh, designs, project_rows, run, run_program, side_parser, su2_bin
 from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.su2 import config_value, read_config, with_keys
 
@@ -315,20 +314,10 @@ def summary(rep: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.case3_su2_side",
-                                 description=__doc__.split("\n")[0])
-    sub = ap.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("setup", help="write config.cfg and embed SU2's box into FOLDER/mesh_ffd.su2")
-    s.add_argument("--mesh", type=Path, required=True)
-    s.add_argument("--folder", type=Path, required=True)
-    r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
-    r.add_argument("folder", type=Path)
-    r.add_argument("--resume", action="store_true",
-                   help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
-    p = sub.add_parser("report", help="solves, CD, CL, twists, the best design's span load and e")
-    p.add_argument("folder", type=Path)
+    ap, _, p = side_parser("python -m benchmarks.adodg.case3_su2_side", __doc__.split("\n")[0],
+                           "write config.cfg and embed SU2's box into FOLDER/mesh_ffd.su2",
+                           "solves, CD, CL, twists, the best design's span load and e")
     p.add_argument("--cd0", type=float, default=None, help="the mesh's zero-lift drag, for e from the drag")
-    p.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     if args.command == "setup":
         print(setup(args.mesh, args.folder))

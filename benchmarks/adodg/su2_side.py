@@ -206,6 +206,18 @@ def designs(folder: Path) -> list[Path]:
     return sorted((folder / "DESIGNS").glob("DSN_*"), key=_dsn_number)
 
 
+def run_state(folder: Path) -> tuple[dict | None, float]:
+    """A run's ``run.json`` (None while it runs or after it was stopped) and its wall seconds: the pieces'
+    sum when finished, else from ``config.cfg``'s time to the newest design folder or log."""
+    meta = folder / "run.json"
+    state = json.loads(meta.read_text()) if meta.is_file() else None
+    log = folder / "optimizer.log"
+    start = os.path.getmtime(folder / "config.cfg")
+    wall = state["wall"] if state else (max(os.path.getmtime(p) for p in [log, *designs(folder)]) - start
+                                        if log.is_file() else 0.0)
+    return state, wall
+
+
 def project_rows(folder: Path) -> list[dict[str, float]]:
     """``history_project.csv``: one row per design whose flow finished, in order."""
     path = folder / "history_project.csv"
@@ -259,12 +271,7 @@ def report(folder: Path, baseline: Path) -> dict:
         ok = [r for r in rows if r[key]]
         return min(ok, key=lambda r: r["CD"]) if ok else None
 
-    meta = folder / "run.json"
-    state = json.loads(meta.read_text()) if meta.is_file() else None
-    log = folder / "optimizer.log"
-    start = os.path.getmtime(folder / "config.cfg")
-    wall = state["wall"] if state else (max(os.path.getmtime(p) for p in [log, *designs(folder)]) - start
-                                        if log.is_file() else 0.0)
+    state, wall = run_state(folder)
     b0 = rows[0]["CD"] if rows else None
     out = {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
            "flow_solves": flows, "adjoint_solves": adjoints, "designs": rows, "wall": wall, "baseline_CD": b0,
@@ -291,21 +298,32 @@ def summary(rep: dict) -> str:
     return "\n".join(lines)
 
 
-def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.su2_side", description=__doc__.split("\n")[0])
+def side_parser(prog: str, description: str, setup_help: str,
+                report_help: str) -> tuple[argparse.ArgumentParser, argparse.ArgumentParser, argparse.ArgumentParser]:
+    """The ``setup | run | report`` command line every SU2 side-by-side module shares: ``setup --mesh
+    --folder``, ``run FOLDER [--resume]``, ``report FOLDER [--json]``. Returns the parser and the
+    ``setup`` and ``report`` sub-parsers, for a case's own arguments."""
+    ap = argparse.ArgumentParser(prog=prog, description=description)
     sub = ap.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("setup", help="write config.cfg and the mesh into FOLDER")
-    s.add_argument("param", choices=["ffd", "hh"])
+    s = sub.add_parser("setup", help=setup_help)
     s.add_argument("--mesh", type=Path, required=True)
     s.add_argument("--folder", type=Path, required=True)
     r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
     r.add_argument("folder", type=Path)
     r.add_argument("--resume", action="store_true",
                    help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
-    p = sub.add_parser("report", help="solves, CD, constraints and the add-material rule of a run")
+    p = sub.add_parser("report", help=report_help)
     p.add_argument("folder", type=Path)
-    p.add_argument("--baseline", type=Path, required=True, help="the baseline mesh the run started from")
     p.add_argument("--json", action="store_true")
+    return ap, s, p
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap, s, p = side_parser("python -m benchmarks.adodg.su2_side", __doc__.split("\n")[0],
+                           "write config.cfg and the mesh into FOLDER",
+                           "solves, CD, constraints and the add-material rule of a run")
+    s.add_argument("param", choices=["ffd", "hh"])
+    p.add_argument("--baseline", type=Path, required=True, help="the baseline mesh the run started from")
     args = ap.parse_args(argv)
     if args.command == "setup":
         print(setup(args.param, args.mesh, args.folder))

@@ -43,13 +43,21 @@ design's constraints at the case's tolerance (1e-4), the best feasible design.
 
 from __future__ import annotations
 
-import argparse
 import json
-import os
 import sys
 from pathlib import Path
 
-from benchmarks.adodg.su2_side import designs, ffd_definition, geometry, project_rows, run, run_program, su2_bin
+from benchmarks.adodg.su2_side import (
+    designs,
+    ffd_definition,
+    geometry,
+    project_rows,
+    run,
+    run_program,
+    run_state,
+    side_parser,
+    su2_bin,
+)
 from ffdcli.optimize.solvers.su2 import read_config, with_keys
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -136,12 +144,7 @@ def report(folder: Path) -> dict:
     rows = [{"design": f"DSN_{k + 1:03d}", "CD": r["DRAG"], "CL": r["LIFT"], "CMz": r["MOMENT_Z"],
              "area": r.get("AIRFOIL_AREA", float("nan")), "feasible": feasible(r, area0)} for k, r in enumerate(table)]
     ok = [r for r in rows if r["feasible"]]
-    meta = folder / "run.json"
-    state = json.loads(meta.read_text()) if meta.is_file() else None
-    log = folder / "optimizer.log"
-    start = os.path.getmtime(folder / "config.cfg")
-    wall = state["wall"] if state else (max(os.path.getmtime(p) for p in [log, *designs(folder)]) - start
-                                        if log.is_file() else 0.0)
+    state, wall = run_state(folder)
     return {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
             "flow_solves": len(table), "adjoint_solves": adjoints, "designs": rows, "wall": wall,
             "baseline_CD": rows[0]["CD"] if rows else None, "baseline_area": area0,
@@ -162,18 +165,9 @@ def summary(rep: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.su2_side_case2", description=__doc__.split("\n")[0])
-    sub = ap.add_subparsers(dest="command", required=True)
-    s = sub.add_parser("setup", help="write config.cfg and the mesh with SU2's box into FOLDER")
-    s.add_argument("--mesh", type=Path, required=True)
-    s.add_argument("--folder", type=Path, required=True)
-    r = sub.add_parser("run", help="run shape_optimization.py in FOLDER (set up first)")
-    r.add_argument("folder", type=Path)
-    r.add_argument("--resume", action="store_true",
-                   help="go on from an earlier piece's project.pkl (SU2's -r: designs it holds are not solved again)")
-    p = sub.add_parser("report", help="solves, CD, CL, CMz, area and the constraints of a run")
-    p.add_argument("folder", type=Path)
-    p.add_argument("--json", action="store_true")
+    ap, _, _ = side_parser("python -m benchmarks.adodg.su2_side_case2", __doc__.split("\n")[0],
+                           "write config.cfg and the mesh with SU2's box into FOLDER",
+                           "solves, CD, CL, CMz, area and the constraints of a run")
     args = ap.parse_args(argv)
     if args.command == "setup":
         print(setup(args.mesh, args.folder))
