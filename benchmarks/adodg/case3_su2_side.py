@@ -54,7 +54,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.adodg.case3_report import report as load_report
-from benchmarks.adodg.su2_side import design_mesh, designs, project_rows, run, run_program, side_parser, su2_bin
+from benchmarks.adodg.su2_side import design_mesh, designs, dispatch, project_rows, run_program, side_parser, su2_bin
 from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.su2 import config_value, read_config, with_keys
 
@@ -318,15 +318,8 @@ def main(argv: list[str] | None = None) -> int:
                            "write config.cfg and embed SU2's box into FOLDER/mesh_ffd.su2",
                            "solves, CD, CL, twists, the best design's span load and e")
     p.add_argument("--cd0", type=float, default=None, help="the mesh's zero-lift drag, for e from the drag")
-    args = ap.parse_args(argv)
-    if args.command == "setup":
-        print(setup(args.mesh, args.folder))
-    elif args.command == "run":
-        print(f"{run(args.folder, args.resume):.0f} s")
-    else:
-        rep = report(args.folder, args.cd0)
-        print(json.dumps(rep, indent=1) if args.json else summary(rep))
-    return 0
+    return dispatch(ap.parse_args(argv), lambda a: setup(a.mesh, a.folder), lambda a: report(a.folder, a.cd0),
+                    summary)
 
 
 if __name__ == "__main__":

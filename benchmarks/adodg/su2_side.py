@@ -318,21 +318,27 @@ def side_parser(prog: str, description: str, setup_help: str,
     return ap, s, p
 
 
+def dispatch(args: argparse.Namespace, setup_of, report_of, summary_of) -> int:
+    """Carry out a command parsed by :func:`side_parser` and print its result: ``setup_of(args)``, the
+    run (:func:`run`), or ``report_of(args)`` as JSON or through ``summary_of``. Returns the exit code."""
+    if args.command == "setup":
+        print(setup_of(args))
+    elif args.command == "run":
+        print(f"{run(args.folder, args.resume):.0f} s")
+    else:
+        rep = report_of(args)
+        print(json.dumps(rep, indent=1) if args.json else summary_of(rep))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     ap, s, p = side_parser("python -m benchmarks.adodg.su2_side", __doc__.split("\n")[0],
                            "write config.cfg and the mesh into FOLDER",
                            "solves, CD, constraints and the add-material rule of a run")
     s.add_argument("param", choices=["ffd", "hh"])
     p.add_argument("--baseline", type=Path, required=True, help="the baseline mesh the run started from")
-    args = ap.parse_args(argv)
-    if args.command == "setup":
-        print(setup(args.param, args.mesh, args.folder))
-    elif args.command == "run":
-        print(f"{run(args.folder, args.resume):.0f} s")
-    else:
-        rep = report(args.folder, args.baseline)
-        print(json.dumps(rep, indent=1) if args.json else summary(rep))
-    return 0
+    return dispatch(ap.parse_args(argv), lambda a: setup(a.param, a.mesh, a.folder),
+                    lambda a: report(a.folder, a.baseline), summary)
 
 
 if __name__ == "__main__":

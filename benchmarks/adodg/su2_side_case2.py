@@ -49,10 +49,10 @@ from pathlib import Path
 
 from benchmarks.adodg.su2_side import (
     designs,
+    dispatch,
     ffd_definition,
     geometry,
     project_rows,
-    run,
     run_program,
     run_state,
     side_parser,
@@ -168,15 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     ap, _, _ = side_parser("python -m benchmarks.adodg.su2_side_case2", __doc__.split("\n")[0],
                            "write config.cfg and the mesh with SU2's box into FOLDER",
                            "solves, CD, CL, CMz, area and the constraints of a run")
-    args = ap.parse_args(argv)
-    if args.command == "setup":
-        print(setup(args.mesh, args.folder))
-    elif args.command == "run":
-        print(f"{run(args.folder, args.resume):.0f} s")
-    else:
-        rep = report(args.folder)
-        print(json.dumps(rep, indent=1) if args.json else summary(rep))
-    return 0
+    return dispatch(ap.parse_args(argv), lambda a: setup(a.mesh, a.folder), lambda a: report(a.folder), summary)
 
 
 if __name__ == "__main__":
