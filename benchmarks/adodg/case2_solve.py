@@ -56,11 +56,18 @@ def solve_config(mesh: Path, mode: str, *, restart: Path | None = None, iteratio
 def run_solve(mesh: Path, mode: str, folder: Path, *, restart: Path | None = None, iterations: int = 3000,
               nice: int = 10) -> dict:
     """SU2_CFD on ``mesh`` in ``folder`` (created) under ``nice -n nice``; returns :func:`read_solve`."""
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "flow.cfg").write_text(solve_config(mesh, mode, restart=restart, iterations=iterations))
+    return launch(folder, {"mesh": str(Path(mesh).resolve()), "mode": mode,
+                           "restart": None if restart is None else str(restart), "pieces": []}, nice)
+
+
+def launch(folder: Path, meta: dict, nice: int) -> dict:
+    """Run SU2_CFD on ``folder``'s ``flow.cfg``, then write ``run.json`` (``meta`` with the exit code,
+    wall and CPU seconds of this run) and return :func:`read_solve`."""
     program = find_program("SU2_CFD", "SU2_RUN", SEARCH)
     if program is None:
         raise RuntimeError("SU2_CFD not found (SU2_RUN, PATH or ../shared/su2/bin)")
-    folder.mkdir(parents=True, exist_ok=True)
-    (folder / "flow.cfg").write_text(solve_config(mesh, mode, restart=restart, iterations=iterations))
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     with open(folder / "log.txt", "w") as log:
@@ -69,10 +76,42 @@ def run_solve(mesh: Path, mode: str, folder: Path, *, restart: Path | None = Non
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    (folder / "run.json").write_text(json.dumps({"mesh": str(Path(mesh).resolve()), "mode": mode, "rc": rc,
-                                                 "restart": None if restart is None else str(restart),
-                                                 "wall": wall, "cpu": cpu}))
+    (folder / "run.json").write_text(json.dumps({**meta, "rc": rc, "wall": wall, "cpu": cpu}))
     return read_solve(folder)
+
+
+def continue_solve(folder: Path, mesh: Path, mode: str, nice: int = 10) -> dict:
+    """Continue a solve that was stopped before it finished (no ``run.json``; SU2 wrote its restart
+    every :data:`WRITE_EVERY` iterations): its history, log and last restart are kept as piece ``k``
+    (``history_part{k}.csv``, ``log_part{k}.txt``, ``restart_part{k}.dat``; the first configuration as
+    ``flow_part1.cfg``) and SU2 runs on from that restart with the same configuration and residual
+    target (the same solve, not a new warm start). The pieces (``pieces.json``: iterations, and the wall
+    time SU2 logged, since their CPU time was not measured: the process that would have measured it
+    was stopped with them) count in :func:`read_solve`'s iterations."""
+    k = len(list(folder.glob("history_part*.csv"))) + 1
+    hist = read_history(folder / "history.csv")
+    (folder / "history.csv").rename(folder / f"history_part{k}.csv")
+    if (folder / "log.txt").is_file():
+        (folder / "log.txt").rename(folder / f"log_part{k}.txt")
+    (folder / "restart_flow.dat").rename(folder / f"restart_part{k}.dat")
+    if k == 1:
+        (folder / "flow.cfg").rename(folder / "flow_part1.cfg")
+    first = read_config(folder / "flow_part1.cfg")
+    warm = config_value(first, "SOLUTION_FILENAME") if (config_value(first, "RESTART_SOL") or "").upper() == "YES" \
+        else None
+    (folder / "flow.cfg").write_text(with_keys(first, {"RESTART_SOL": "YES", "SOLUTION_FILENAME":
+                                                       str((folder / f"restart_part{k}.dat").resolve())}))
+    n = int(hist["Inner_Iter"][-1]) + 1 if hist else 0
+    wall_su2 = float(hist["Time(sec)"][-1]) * n if hist else 0.0       # SU2's mean seconds per iteration
+    pieces = [*previous_pieces(folder), {"iterations": n, "wall_su2": wall_su2}]
+    (folder / "pieces.json").write_text(json.dumps(pieces))
+    return launch(folder, {"mesh": str(Path(mesh).resolve()), "mode": mode, "restart": warm, "pieces": pieces}, nice)
+
+
+def previous_pieces(folder: Path) -> list[dict]:
+    """The pieces recorded by an earlier continuation of ``folder`` (``pieces.json``)."""
+    path = folder / "pieces.json"
+    return json.loads(path.read_text()) if path.is_file() else []
 
 
 def fixed_cl_alpha(log_text: str) -> float | None:
@@ -99,16 +138,20 @@ def read_solve(folder: Path) -> dict:
         raise FileNotFoundError(f"{folder / 'history.csv'}: no iteration written")
     target = float(config_value(cfg, "CONV_RESIDUAL_MINVAL") or -8)
     rms, cl = float(hist["rms[Rho]"][-1]), float(hist["CL"][-1])
-    iters = int(hist["Inner_Iter"][-1]) + 1
+    pieces = meta.get("pieces") or []
+    iters = int(hist["Inner_Iter"][-1]) + 1 + sum(p["iterations"] for p in pieces)
     limit = int(float(config_value(cfg, "ITER") or 0))
     fixed = (config_value(cfg, "FIXED_CL_MODE") or "NO").upper() == "YES"
     out = {"folder": str(folder), "mode": meta["mode"], "cd": float(hist["CD"][-1]), "cl": cl,
            "cm": -float(hist["CMz"][-1]), "iterations": iters, "residual": rms, "wall": meta["wall"],
-           "cpu": meta["cpu"], "rc": meta["rc"], "warm_start": meta.get("restart")}
+           "cpu": meta["cpu"], "rc": meta["rc"], "warm_start": meta.get("restart"), "pieces": len(pieces) + 1}
+    if pieces:      # the last piece's CPU only: the others' were not measured (continue_solve)
+        out["wall_su2_pieces"] = sum(p["wall_su2"] for p in pieces)
     if fixed:
         eps = float(config_value(cfg, "CONV_CAUCHY_EPS") or 1e-10)
         out["criterion"] = f"rms[Rho] <= {target:g} and |CL - {TARGET_CL}| < {eps / 2:g} (SU2's fixed-CL test)"
-        out["converged"] = bool(rms <= target and abs(cl - TARGET_CL) < eps / 2 and iters < limit)
+        last = int(hist["Inner_Iter"][-1]) + 1                    # this piece's iterations, against ITER
+        out["converged"] = bool(rms <= target and abs(cl - TARGET_CL) < eps / 2 and last < limit)
         out["alpha"] = fixed_cl_alpha((folder / "log.txt").read_text(errors="replace"))
     else:
         out["criterion"] = f"rms[Rho] <= {target:g}"
@@ -119,10 +162,24 @@ def read_solve(folder: Path) -> dict:
 
 
 def reuse_or_solve(mesh: Path, mode: str, folder: Path, **kwargs) -> dict:
-    """The finished solve of ``mesh`` at ``mode`` already in ``folder``, else a new one (:func:`run_solve`)."""
+    """The finished solve of ``mesh`` at ``mode`` already in ``folder``; else the stopped one there
+    continued (:func:`continue_solve`: a ``flow.cfg`` of the same mesh and mode, SU2's history and a
+    restart written); else a new one (:func:`run_solve`)."""
     meta = folder / "run.json"
     if meta.is_file():
         m = json.loads(meta.read_text())
         if m.get("mesh") == str(Path(mesh).resolve()) and m.get("mode") == mode:
             return read_solve(folder)
+    elif stopped(folder, mesh, mode):
+        return continue_solve(folder, mesh, mode, nice=kwargs.get("nice", 10))
     return run_solve(mesh, mode, folder, **kwargs)
+
+
+def stopped(folder: Path, mesh: Path, mode: str) -> bool:
+    """Whether ``folder`` holds a stopped solve of ``mesh`` at ``mode`` that can be continued."""
+    cfg = folder / ("flow_part1.cfg" if (folder / "flow_part1.cfg").is_file() else "flow.cfg")
+    if not (cfg.is_file() and (folder / "history.csv").is_file() and (folder / "restart_flow.dat").is_file()):
+        return False
+    lines = read_config(cfg)
+    fixed = (config_value(lines, "FIXED_CL_MODE") or "NO").upper() == "YES"
+    return config_value(lines, "MESH_FILENAME") == str(Path(mesh).resolve()) and fixed == (mode == "cl")

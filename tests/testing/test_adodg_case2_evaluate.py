@@ -18,6 +18,7 @@ import pytest
 import yaml
 
 from benchmarks.adodg import case2_evaluate as c2
+from benchmarks.adodg import case2_solve
 from benchmarks.adodg.case2_evaluate import (
     area_ratio,
     evaluate,
@@ -31,7 +32,7 @@ from benchmarks.adodg.case2_solve import CAUCHY_EPS, read_solve, run_solve, solv
 from benchmarks.adodg.evaluate import design_data, ffd, write_yaml
 from ffdcli.io.formats import write_mesh
 from ffdcli.optimize.solvers.base import find_program
-from ffdcli.optimize.solvers.su2 import config_value
+from ffdcli.optimize.solvers.su2 import config_value, read_config
 from ffdcli.testing.cmesh import cmesh
 from ffdcli.testing.naca import naca4
 
@@ -292,3 +293,44 @@ def test_a_few_su2_iterations_on_the_coarse_mesh_are_read_back(meshes, tmp_path)
     assert s["iterations"] == 3 and not s["converged"] and s["cpu"] > 0
     assert np.isfinite([s["cd"], s["cl"], s["cm"]]).all() and s["rc"] == 0
     assert (tmp_path / "cl" / "history.csv").is_file() and (tmp_path / "cl" / "restart_flow.dat").is_file()
+
+
+def test_a_stopped_solve_is_continued_from_its_last_restart_and_its_pieces_counted(meshes, tmp_path, monkeypatch):
+    """A solve stopped after 120 iterations (history, restart, no run.json) runs on from its restart with
+    the same configuration and target; stopped again after 70, then finished after 80: all count."""
+    mesh, folder = meshes[1], tmp_path / "alpha"
+    folder.mkdir()
+    (folder / "flow.cfg").write_text(solve_config(mesh, "alpha", iterations=3000))
+    first = read_config(folder / "flow.cfg")
+    head = '"Time_Iter","Outer_Iter","Inner_Iter","Time(sec)","rms[Rho]","CD","CL","CMz"\n'
+
+    def stop_after(n: int, rms: float) -> None:
+        (folder / "history.csv").write_text(head + "".join(f"0,0,{i},1.5,{rms},0.02,0.8,0.09\n" for i in range(n)))
+        (folder / "restart_flow.dat").write_bytes(b"restart")
+
+    runs = []
+
+    def fake_su2(cmd, cwd, stdout, stderr):
+        runs.append(config_value(read_config(Path(cwd) / "flow.cfg"), "SOLUTION_FILENAME"))
+        if len(runs) == 1:
+            stop_after(70, -7.0)
+            raise KeyboardInterrupt                  # stopped again, before run.json
+        stop_after(80, -8.2)
+        return 0
+
+    monkeypatch.setattr(case2_solve.subprocess, "call", fake_su2)
+    monkeypatch.setattr(case2_solve, "find_program", lambda *a: Path("SU2_CFD"))
+    stop_after(120, -6.0)
+    assert case2_solve.stopped(folder, mesh, "alpha") and not case2_solve.stopped(folder, mesh, "cl")
+    with pytest.raises(KeyboardInterrupt):
+        case2_solve.reuse_or_solve(mesh, "alpha", folder)
+    assert not (folder / "run.json").exists()
+    s = case2_solve.reuse_or_solve(mesh, "alpha", folder)
+    assert runs == [str((folder / f"restart_part{k}.dat").resolve()) for k in (1, 2)]
+    assert s["iterations"] == 120 + 70 + 80 and s["converged"] and s["pieces"] == 3
+    assert s["wall_su2_pieces"] == pytest.approx((120 + 70) * 1.5)
+    cfg = read_config(folder / "flow.cfg")
+    assert config_value(cfg, "CONV_RESIDUAL_MINVAL") == config_value(first, "CONV_RESIDUAL_MINVAL") == "-8"
+    assert config_value(cfg, "RESTART_SOL") == "YES" and (folder / "flow_part1.cfg").read_text().splitlines() == first
+    again = case2_solve.reuse_or_solve(mesh, "alpha", folder)        # finished: read back, not run again
+    assert len(runs) == 2 and again["iterations"] == s["iterations"]
