@@ -49,7 +49,7 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial import cKDTree
 
 from benchmarks.adodg.case2_meshes import wall_loop
-from benchmarks.adodg.case2_solve import reuse_or_solve
+from benchmarks.adodg.case2_solve import SolveError, reuse_or_solve
 from benchmarks.adodg.evaluate import design_data, export_lattice, ffd, load_yaml, write_yaml
 from ffdcli.io.formats import read_mesh
 from ffdcli.testing.naca import polygon_area
@@ -350,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         out = evaluate(args.design, args.run, args.mesh, args.work, evaluation=args.evaluation,
                        run_solve=not args.no_solve, iterations=args.iterations)
-    except EvaluationError as e:
+    except (EvaluationError, SolveError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2
     print(json.dumps(out, indent=1) if args.json else summary(out))

@@ -26,6 +26,8 @@ import subprocess
 import time
 from pathlib import Path
 
+import numpy as np
+
 from benchmarks.adodg.case2_baseline import ROOT, TARGET_CL, case_config
 from ffdcli.optimize.solvers.base import find_program
 from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history, with_keys
@@ -175,11 +177,23 @@ def reuse_or_solve(mesh: Path, mode: str, folder: Path, **kwargs) -> dict:
     return run_solve(mesh, mode, folder, **kwargs)
 
 
+class SolveError(Exception):
+    """A solve that cannot be continued: one line for the user."""
+
+
 def stopped(folder: Path, mesh: Path, mode: str) -> bool:
-    """Whether ``folder`` holds a stopped solve of ``mesh`` at ``mode`` that can be continued."""
+    """Whether ``folder`` holds a stopped solve of ``mesh`` at ``mode`` that can be continued. Raises
+    SolveError when that solve was diverging (its last rms[Rho] not finite or above its first): its
+    restart is no starting point, and it is kept for the user to look at rather than overwritten."""
     cfg = folder / ("flow_part1.cfg" if (folder / "flow_part1.cfg").is_file() else "flow.cfg")
     if not (cfg.is_file() and (folder / "history.csv").is_file() and (folder / "restart_flow.dat").is_file()):
         return False
     lines = read_config(cfg)
     fixed = (config_value(lines, "FIXED_CL_MODE") or "NO").upper() == "YES"
-    return config_value(lines, "MESH_FILENAME") == str(Path(mesh).resolve()) and fixed == (mode == "cl")
+    if config_value(lines, "MESH_FILENAME") != str(Path(mesh).resolve()) or fixed != (mode == "cl"):
+        return False
+    rms = read_history(folder / "history.csv").get("rms[Rho]") or [np.nan]
+    if not np.isfinite(rms[-1]) or rms[-1] > rms[0]:
+        raise SolveError(f"{folder}: the stopped solve there was diverging (rms[Rho] {rms[0]:.2f} -> {rms[-1]:.2f}); "
+                         "move the folder away to start the solve again")
+    return True

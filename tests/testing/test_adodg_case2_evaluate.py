@@ -334,3 +334,17 @@ def test_a_stopped_solve_is_continued_from_its_last_restart_and_its_pieces_count
     assert config_value(cfg, "RESTART_SOL") == "YES" and (folder / "flow_part1.cfg").read_text().splitlines() == first
     again = case2_solve.reuse_or_solve(mesh, "alpha", folder)        # finished: read back, not run again
     assert len(runs) == 2 and again["iterations"] == s["iterations"]
+
+
+def test_a_stopped_solve_that_was_diverging_is_not_continued(meshes, tmp_path):
+    """Its restart is no starting point: refused in one line, the folder left as it is."""
+    mesh, folder = meshes[1], tmp_path / "alpha"
+    folder.mkdir()
+    (folder / "flow.cfg").write_text(solve_config(mesh, "alpha"))
+    head = '"Time_Iter","Outer_Iter","Inner_Iter","Time(sec)","rms[Rho]","CD","CL","CMz"\n'
+    (folder / "history.csv").write_text(head + "0,0,0,1.5,-4.3,0.9,0.5,0.1\n0,0,1,1.5,-5.9,0.02,0.82,0.09\n"
+                                        "0,0,2,1.5,6.2,-1e8,2e9,9e8\n")
+    (folder / "restart_flow.dat").write_bytes(b"restart")
+    with pytest.raises(case2_solve.SolveError, match="was diverging"):
+        case2_solve.reuse_or_solve(mesh, "alpha", folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["flow.cfg", "history.csv", "restart_flow.dat"]
