@@ -239,6 +239,8 @@ def test_solve_config_at_alpha_and_at_the_lift(meshes, tmp_path):
     assert float(config_value(c, "CONV_CAUCHY_EPS")) == CAUCHY_EPS
     assert config_value(c, "RESTART_SOL") == "YES" and config_value(c, "SOLUTION_FILENAME") == str(tmp_path / "r.dat")
     assert config_value(c, "CONV_RESIDUAL_MINVAL") == "-9" and config_value(c, "ITER") == "50"
+    assert config_value(a, "MGLEVEL") == "3" and config_value(solve_config(fine, "alpha", multigrid=1).splitlines(),
+                                                              "MGLEVEL") == "1"
     with pytest.raises(ValueError, match="expected 'alpha' or 'cl'"):
         solve_config(fine, "mach")
 
