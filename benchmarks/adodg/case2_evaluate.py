@@ -296,7 +296,8 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, evaluation: int
 def solve_line(label: str, s: dict) -> str:
     """One solve as a line of text."""
     return (f"  {label:<22} CD {1e4 * s['cd']:7.1f} counts  CL {s['cl']:.5f}  CM(c/4) {s['cm']:+.5f}  "
-            f"alpha {s['alpha']:.4f}  {s['iterations']} it, rms[Rho] {s['residual']:.2f}, "
+            f"alpha {'?' if s['alpha'] is None else format(s['alpha'], '.4f')}  {s['iterations']} it, "
+            f"rms[Rho] {s['residual']:.2f}, "
             f"{'converged' if s['converged'] else 'NOT converged'} ({s['criterion']}), {s['cpu']:.0f} s CPU")
 
 

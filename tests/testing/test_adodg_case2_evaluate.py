@@ -350,3 +350,18 @@ def test_a_stopped_solve_that_was_diverging_is_not_continued(meshes, tmp_path):
     with pytest.raises(case2_solve.SolveError, match="was diverging"):
         case2_solve.reuse_or_solve(mesh, "alpha", folder)
     assert sorted(p.name for p in folder.iterdir()) == ["flow.cfg", "history.csv", "restart_flow.dat"]
+
+
+def test_summary_prints_the_solves_and_the_reductions(evaluated, tmp_path):
+    """The text of an evaluation with its four solves (here read from written folders)."""
+    rows = [(245, -8.01, 0.0200, 0.805, 0.0961)]
+    solves = {name: read_solve(write_solve(tmp_path / name, mode, [(r[0], r[1], cd, *r[3:]) for r in rows],
+                                           target=-8 if mode == "alpha" else -9))
+              for name, mode, cd in (("ba", "alpha", 0.0200), ("bc", "cl", 0.0210), ("da", "alpha", 0.0130),
+                                     ("dc", "cl", 0.0135))}
+    out = {**evaluated["out"], "baseline": {"alpha": solves["ba"], "cl": solves["bc"]},
+           "solves": {"alpha": solves["da"], "cl": solves["dc"]},
+           "reduction": {"alpha": 1 - 0.0130 / 0.0200, "cl": 1 - 0.0135 / 0.0210}}
+    text = c2.summary(out)
+    assert "CD   130.0 counts" in text and "alpha ?" in text and "35.7 % at cl" in text
+    assert "NOT converged" in text                     # the fixed-CL rows miss the lift: 0.805, not 0.824
