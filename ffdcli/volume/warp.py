@@ -76,13 +76,12 @@ not linear (it turns with the deformed wall's normals): :func:`warp_vjp` and the
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numba
 import numpy as np
 
-from ffdcli.geometry.surface import vertex_areas
+from ffdcli.geometry.surface import mean_chord, vertex_areas
 from ffdcli.mesh import CellBlock, diagonal
 from ffdcli.mesh.idsets import setdiff_ids, unique_ids
 from ffdcli.mesh.morton import morton_order
@@ -100,7 +99,7 @@ from ffdcli.volume._warp_kernels import (
 )
 from ffdcli.volume.frames import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
 from ffdcli.volume.idw_reference import idw_reference  # noqa: F401  (re-exported)
-from ffdcli.volume.layer_motion import blend_layer, layer_transpose
+from ffdcli.volume.layer_motion import blend_layer, layer_transpose, warped_rows
 from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names of the warp)
     PLANE_TOLERANCE,
     MarkerRoles,
@@ -187,25 +186,30 @@ class WarpModel:
         return (self.ldef ** 2, 0.5 * s.a, 0.5 * s.b, s.a, s.b, s.alpha ** s.b, fast, eps2,
                 0.5 * float(s.tolerance), self.rotation_length ** 2 if self.rotation_length else 0.0)
 
-    def tolerances(self, lo: int, hi: int) -> np.ndarray:
-        """(hi - lo,) ``tolerance / 2 x REFERENCE_SHARE x W_ref`` of the targets ``lo:hi``: what a tree
-        node's remainder bound is held to by each target (:mod:`ffdcli.volume._warp_blocks`). ``W_ref``:
-        the target's weight from its own walk at the coarse tolerance :data:`REFERENCE_TOLERANCE`, kept
-        (geometry only)."""
-        key = (int(lo), int(hi))
-        full = self.weight_refs.get((0, self.n_targets))
-        if full is not None:
-            return self.params()[8] * REFERENCE_SHARE * full[lo:hi]
-        if key not in self.weight_refs:
-            l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
-            soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
-            w = np.empty(hi - lo)
-            weight_reference_kernel(self.target_pos[lo:hi], w, self.node_lo, self.node_hi, self.node_left,
-                                    self.node_right, self.node_center, self.node_radius, self.node_area,
-                                    self.src_pos, self.src_area, l2, ha, hb, pa, pb, ab, fast, eps2,
-                                    REFERENCE_TOLERANCE, self.fixed_node, soa)
-            self.weight_refs[key] = w
-        return self.params()[8] * REFERENCE_SHARE * self.weight_refs[key]
+    def tolerances(self, lo: int, hi: int, rows: np.ndarray | None = None) -> np.ndarray:
+        """(hi - lo,) ``tolerance / 2 x REFERENCE_SHARE x W_ref`` of the targets ``lo:hi`` (``rows``: of
+        those rows of it only, relative to ``lo``): what a tree node's remainder bound is held to by each
+        target (:mod:`ffdcli.volume._warp_blocks`). ``W_ref``: the target's weight from its own walk at the
+        coarse tolerance :data:`REFERENCE_TOLERANCE` (geometry only), computed for the targets asked for
+        and kept (a target's walk is its own: the same bits whichever targets are asked for with it)."""
+        n = self.n_targets
+        idx = np.arange(lo, hi) if rows is None else lo + np.asarray(rows, dtype=np.int64)
+        full = self.weight_refs.get((0, n))
+        if full is None:
+            full = self.weight_refs.setdefault("some", np.full(n, np.nan))
+            todo = idx[np.isnan(full[idx])]
+            if len(todo):
+                l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
+                soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
+                w = np.empty(len(todo))
+                weight_reference_kernel(self.target_pos[todo], w, self.node_lo, self.node_hi, self.node_left,
+                                        self.node_right, self.node_center, self.node_radius, self.node_area,
+                                        self.src_pos, self.src_area, l2, ha, hb, pa, pb, ab, fast, eps2,
+                                        REFERENCE_TOLERANCE, self.fixed_node, soa)
+                full[todo] = w
+                if not np.isnan(full).any():
+                    self.weight_refs[(0, n)] = full
+        return self.params()[8] * REFERENCE_SHARE * full[idx]
 
     def reference_weights(self) -> np.ndarray:
         """(Nt,) every target's reference weight (:meth:`tolerances`), computed on first use."""
@@ -303,7 +307,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     # sources and their areas
     src_ids = np.concatenate([surface_ids, fixed_ids])
     a = _source_areas(pts, areas, faces, src_ids)
-    chord = _mean_chord(pts[surface_ids], a[:len(surface_ids)], size)
+    chord = mean_chord(pts[surface_ids], a[:len(surface_ids)], size)
 
     # targets in Morton order: neighbours in memory walk the same tree nodes
     tpos = pts[target_ids] - origin
@@ -349,17 +353,6 @@ def _source_areas(pts: np.ndarray, areas, faces, src_ids: np.ndarray) -> np.ndar
         pos = a[a > 0]
         a[a == 0] = np.median(pos) if pos.size else 1.0
     return a
-
-
-def _mean_chord(surface: np.ndarray, area: np.ndarray, size: float) -> float:
-    """The wall's mean chord from its points (S, 3) and area weights (S,): half its area over its size
-    (a 2D mesh: half its length); ``size`` when that is not a positive number."""
-    if not len(surface):
-        return size
-    flat = np.ptp(surface, axis=0).min() <= 1e-12 * size    # a 2D mesh: areas are lengths
-    total = float(area.sum())
-    chord = total / 2 if flat else total / (2 * size)
-    return chord if chord > 0 and math.isfinite(chord) else size
 
 
 def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None, size: float | None = None,
@@ -478,20 +471,25 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     node_bm = node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
     l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
-    d = np.empty((t_hi - t_lo, 3))
-    tolw = None if exact else model.tolerances(t_lo, t_hi)
-    with progress("volume mesh", t_hi - t_lo) as bar:
-        for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
-            tx = model.target_pos[t_lo + lo:t_lo + hi]
+    # the targets that follow their wall wholly are not warped (their warp would be multiplied by 0)
+    free = warped_rows(model.layer, t_lo, t_hi)
+    pos = model.target_pos[t_lo:t_hi] if free is None else model.target_pos[t_lo + free]
+    d = np.empty((len(pos), 3))
+    tolw = None if exact else model.tolerances(t_lo, t_hi, free)
+    with progress("volume mesh", len(pos)) as bar:
+        for lo, hi in chunks(len(pos), model.settings.chunk):
             if exact:
-                exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
+                exact_kernel(pos[lo:hi], d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
                               rho2, use_rot)
             else:
-                warp_blocks(tx, tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
+                warp_blocks(pos[lo:hi], tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
                             model.node_left, model.node_right, model.node_center, model.node_radius,
                             model.node_area, node_bm, model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb,
                             ab, fast, eps2, rho2, use_rot, model.fixed_node)
             bar.update(hi - lo)
+    if free is not None:
+        warped, d = d, np.zeros((t_hi - t_lo, 3))
+        d[free] = warped
     d = blend_layer(model.layer, d, b, surface_rotation, t_lo, t_hi, at=at)
     if len(model.slide_rows):
         mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)
