@@ -72,6 +72,8 @@ reference walk, exact sums, moments); NumPy reference :mod:`ffdcli.volume.idw_re
 **The wall layer.** A mesh with thin cells stacked on its wall (a RANS mesh) moves them rigidly with
 their wall (:mod:`ffdcli.volume.wall_layer`, :mod:`ffdcli.volume.layer_motion`; ``volume.wall_layer``):
 not linear (it turns with the deformed wall's normals): :func:`warp_vjp` and the forward derivative take ``at=(b, F)``.
+The nodes that follow their wall wholly (blend weight 1: most of a RANS mesh's volume near the wall) are
+not warped at all (:func:`~ffdcli.volume.layer_motion.warped_rows`), nor their reference weights walked.
 """
 
 from __future__ import annotations
