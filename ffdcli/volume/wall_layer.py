@@ -341,7 +341,7 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     x = pts[target_ids]
     # one search: the k + 1 nearest wall nodes of every target, the nearest's distance its reach
     dist, near = tree.query(x, k=k + 1) if k >= 1 else (tree.query(x)[0][:, None], None)
-    rows = _within(tree, x, dist[:, 0], reach)
+    rows = nodes_within(tree, x, dist[:, 0], reach)
     part, psi2 = _partition(dist[rows], None if near is None else near[rows], k, len(wall_ids))
     delta = part @ thick                        # the layer's thickness where each node is (continuous)
     t = np.clip((dist[rows, 0] - delta) / (BLEND * delta), 0.0, 1.0)
@@ -456,7 +456,7 @@ def layer_normals(position: np.ndarray, faces, planes: np.ndarray | None = None)
     return unit if planes is None else in_plane(unit, planes)
 
 
-def _within(tree: cKDTree, x: np.ndarray, nearest: np.ndarray, reach: float) -> np.ndarray:
+def nodes_within(tree: cKDTree, x: np.ndarray, nearest: np.ndarray, reach: float) -> np.ndarray:
     """The rows of ``x`` (n, 3) whose nearest wall node (at ``nearest`` (n,)) is within ``reach``, as the
     tree's own bounded search decides (it compares squared distances): the few at ``reach`` to
     rounding asked to it."""
