@@ -157,7 +157,7 @@ class WarpModel:
     node_center: np.ndarray         # area-weighted centroid
     node_radius: np.ndarray         # max distance of the node's sources from the centroid
     node_area: np.ndarray
-    #: each target's reference weight (:meth:`tolerances`), per row range, made on first use
+    #: each target's reference weight (:meth:`tolerances`), walked on first use ("walked"; NaN: not yet)
     weight_refs: dict = field(default_factory=dict, repr=False)
     #: the near-wall layer that moves rigidly with its wall (:mod:`ffdcli.volume.layer_motion`), or None
     layer: WallLayer | None = field(default=None, repr=False)
@@ -192,39 +192,36 @@ class WarpModel:
         """(hi - lo,) ``tolerance / 2 x REFERENCE_SHARE x W_ref`` of the targets ``lo:hi`` (``rows``: of
         those rows of it only, relative to ``lo``): what a tree node's remainder bound is held to by each
         target (:mod:`ffdcli.volume._warp_blocks`). ``W_ref``: the target's weight from its own walk at the
-        coarse tolerance :data:`REFERENCE_TOLERANCE` (geometry only), computed for the targets asked for
+        coarse tolerance :data:`REFERENCE_TOLERANCE` (geometry only), walked for the targets asked for
         and kept (a target's walk is its own: the same bits whichever targets are asked for with it)."""
-        n = self.n_targets
         idx = np.arange(lo, hi) if rows is None else lo + np.asarray(rows, dtype=np.int64)
-        full = self.weight_refs.get((0, n))
-        if full is None:
-            full = self.weight_refs.setdefault("some", np.full(n, np.nan))
-            todo = idx[np.isnan(full[idx])]
-            if len(todo):
-                l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
-                soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
-                w = np.empty(len(todo))
-                weight_reference_kernel(self.target_pos[todo], w, self.node_lo, self.node_hi, self.node_left,
-                                        self.node_right, self.node_center, self.node_radius, self.node_area,
-                                        self.src_pos, self.src_area, l2, ha, hb, pa, pb, ab, fast, eps2,
-                                        REFERENCE_TOLERANCE, self.fixed_node, soa)
-                full[todo] = w
-                if not np.isnan(full).any():
-                    self.weight_refs[(0, n)] = full
-        return self.params()[8] * REFERENCE_SHARE * full[idx]
+        walked = self.weight_refs.setdefault("walked", np.full(self.n_targets, np.nan))   # NaN: not yet
+        todo = idx[np.isnan(walked[idx])]
+        if len(todo):
+            l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
+            soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
+            w = np.empty(len(todo))
+            weight_reference_kernel(self.target_pos[todo], w, self.node_lo, self.node_hi, self.node_left,
+                                    self.node_right, self.node_center, self.node_radius, self.node_area,
+                                    self.src_pos, self.src_area, l2, ha, hb, pa, pb, ab, fast, eps2,
+                                    REFERENCE_TOLERANCE, self.fixed_node, soa)
+            walked[todo] = w
+        return self.params()[8] * REFERENCE_SHARE * walked[idx]
 
-    def reference_weights(self) -> np.ndarray:
-        """(Nt,) every target's reference weight (:meth:`tolerances`), computed on first use."""
-        self.tolerances(0, self.n_targets)
-        return self.weight_refs[(0, self.n_targets)]
+    def reference_weights(self, every: bool = True) -> np.ndarray:
+        """(Nt,) every target's reference weight (:meth:`tolerances`), walked now where not yet; ``every``
+        False: as walked so far (NaN where not: the targets the wall layer moves wholly are never warped)."""
+        if every:
+            self.tolerances(0, self.n_targets)
+        return self.weight_refs.setdefault("walked", np.full(self.n_targets, np.nan))
 
     def set_reference_weights(self, weights: np.ndarray) -> None:
         """Use ``weights`` (Nt,) as :meth:`reference_weights` of this mesh and settings gave them
-        (read back by :mod:`ffdcli.volume.cache`) instead of computing them."""
-        w = np.asarray(weights, dtype=np.float64)
+        (read back by :mod:`ffdcli.volume.cache`; NaN: not walked, walked when asked for)."""
+        w = np.array(weights, dtype=np.float64)
         if w.shape != (self.n_targets,):
             raise ValueError(f"reference weights must be ({self.n_targets},), got {w.shape}")
-        self.weight_refs[(0, self.n_targets)] = w
+        self.weight_refs["walked"] = w
 
     @property
     def rotation_length(self) -> float | None:

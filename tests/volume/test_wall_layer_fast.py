@@ -5,14 +5,20 @@ the bounded one, and a serial stack stops once above the cap its caller applies.
 
 import numpy as np
 import pytest
+import yaml
 from scipy.spatial import cKDTree
 
+from ffdcli.app.deformation import deform
+from ffdcli.app.run import load_run
+from ffdcli.design import load_design
+from ffdcli.io.formats import write_mesh
 from ffdcli.testing.ogrid import airfoil_ogrid_mesh
 from ffdcli.volume import warp as warp_module
+from ffdcli.volume.cache import load_cache
 from ffdcli.volume.layer_motion import warped_rows
 from ffdcli.volume.wall_layer import nodes_within, off_wall_edges, wall_normals
 from ffdcli.volume.wall_stacks import stack_heights
-from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp
+from ffdcli.volume.warp import WarpSettings, prepare_mesh_warp, warp, warp_vjp
 
 
 def _ogrid(code, first, tolerance):
@@ -118,3 +124,36 @@ def test_one_nearest_search_finds_the_nodes_the_bounded_search_finds(seed):
     for reach in [*rng.choice(d[:, 0][d[:, 0] > 0], 5), *rng.uniform(0.01, 2.0, 3), float(d[:, 0].max())]:
         want = np.flatnonzero(np.isfinite(tree.query(x, distance_upper_bound=reach)[0]))
         assert np.array_equal(nodes_within(tree, x, d[:, 0], reach), want)
+
+
+def test_the_cache_keeps_the_weights_walked_and_a_second_run_walks_none(tmp_path, monkeypatch):
+    m = airfoil_ogrid_mesh("2412", n_around=49, n_radial=33, first_cell=1e-6)
+    write_mesh(m, tmp_path / "rans.su2")
+    (tmp_path / "d.yaml").write_text(yaml.safe_dump({
+        "mesh": str(tmp_path / "rans.su2"), "surface": "airfoil", "box": {"points": [8, 2]},
+        "changes": [{"twist": {"angle": 6, "axis": 0.25}}, {"shape": {"random": 0.02, "seed": 5}}]}))
+    design = load_design(tmp_path / "d.yaml")
+    first = load_run(design)
+    res = deform(first)
+    model = first.warp_model()
+    weights, _ = load_cache(first.warp_cache.path, first.warp_cache.key, model.target_ids)
+    free = warped_rows(model.layer, 0, model.n_targets)
+    not_walked = np.ones(model.n_targets, bool)
+    not_walked[free] = False
+    assert not_walked.any() and np.array_equal(np.isnan(weights), not_walked)
+    with monkeypatch.context() as mp:             # the second run walks no reference weight
+        mp.setattr(warp_module, "weight_reference_kernel", _no_walk)
+        second = load_run(design)
+        np.testing.assert_array_equal(deform(second).points, res.points)
+    # a product of the second run walks the others when it needs them: the bits of a run that walked all
+    rng = np.random.default_rng(1)
+    b, F = _design(model, rng, 1e-2)
+    g = rng.normal(size=(model.n_points, 3))
+    fresh, _ = prepare_mesh_warp(m, "airfoil")
+    fresh.reference_weights()
+    for got, want in zip(warp_vjp(second.warp_model(), g, at=(b, F)), warp_vjp(fresh, g, at=(b, F)), strict=True):
+        np.testing.assert_array_equal(got, want)
+
+
+def _no_walk(*a, **k):
+    raise AssertionError("a reference weight was walked")
