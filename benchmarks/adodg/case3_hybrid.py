@@ -69,7 +69,10 @@ class HybridLevel:
     first: float
     layers: int
     layer_growth: float
+    h_near: float
     h_far: float
+    relax: float = 1.0
+    relax_power: float = 1.0
 
 
 def graded(length: float, d0: float, d1: float, dmax: float, growth: float) -> np.ndarray:
@@ -189,11 +192,11 @@ def _dense_section(dense: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
 
 def section_grid(level: HybridLevel) -> tuple[np.ndarray, np.ndarray]:
     """The layers' points in the section plane, X and Z (layers + 1, n + 1) over the chordwise
-    stations: layer k lies on the offset curve at distance ``h_k``; the wall stations' normal offsets
-    are blended toward equal spacing along the top layer's curve by the weight ``(h_k / h_top)^2``
-    (the clustering of the wall relaxes away from it, and the top meets the tetrahedra with spacings
-    of the size of its height instead of the leading edge's). The leading- and trailing-edge stations
-    stay on the chord line (Z = 0): the tip cap's poles."""
+    stations. Layer k lies on the offset curve at distance ``h_k``, its stations at the wall
+    stations' normal offsets blended by the weight ``relax (h_k / h_top)^relax_power`` toward the
+    top's target (:func:`top_fractions`: the normal offsets, spread round the leading edge to half the
+    top layer's height, the gap over the trailing edge's arc shared out among its neighbours). The leading- and trailing-edge stations stay on the chord line
+    (Z = 0): the tip cap's poles."""
     xs, _ = chord_stations(level)
     g = level.layer_growth
     heights = level.first * np.concatenate([[0.0], np.cumsum(g ** np.arange(level.layers))])
@@ -201,19 +204,50 @@ def section_grid(level: HybridLevel) -> tuple[np.ndarray, np.ndarray]:
     n = len(xs) - 1
     gx = np.empty((level.layers + 1, n + 1))
     gz = np.empty_like(gx)
-    uniform = np.linspace(0.0, 1.0, n + 1)
-    for k, h in enumerate(heights):
+    natural = []
+    for h in heights:
         poly, frac, body_frac = offset_curve(h)
         wall = np.interp(xs, xd, body_frac)
         wall[-1] = 1.0
-        w = (h / heights[-1]) ** 2
-        a = (1.0 - w) * wall + w * uniform
+        natural.append((poly, frac, wall))
+    poly, frac, wall = natural[-1]
+    target = top_fractions(poly, frac, wall, 0.5 * (heights[-1] - heights[-2]), level.ds_max)
+    for k, (h, (poly, frac, wall)) in enumerate(zip(heights, natural, strict=True)):
+        w = level.relax * (h / heights[-1]) ** level.relax_power
+        a = (1.0 - w) * wall + w * target
         gx[k] = np.interp(a, frac, poly[:, 0])
         gz[k] = np.interp(a, frac, poly[:, 1])
         gz[k, [0, -1]] = 0.0
     gx[0] = xs
     gz[0] = naca4_thickness(SECTION, xs / CHORD) * CHORD
     return gx, gz
+
+
+def top_fractions(poly: np.ndarray, frac: np.ndarray, wall: np.ndarray, lo: float, hi: float,
+                  spread: float = 0.3) -> np.ndarray:
+    """Arc fractions (n + 1,) of the top layer's stations: the wall stations' normal offsets
+    ``wall`` (n + 1,) on the top's offset curve (``poly``, ``frac`` of :func:`offset_curve`), with the
+    intervals within ``spread`` chords of arc from either edge brought into [lo, hi]: round the
+    leading edge the offsets of the wall's clustered stations are closer than the layers' top height
+    (raised to ``lo``), over the sharp trailing edge one interval spans the arc about it, about 1.4
+    times the layers' height (cut to ``hi``). What an interval gains or loses is taken from or given to
+    the others of its end, so the stations move only near the edges."""
+    length = float(np.sum(np.linalg.norm(np.diff(poly, axis=0), axis=1)))
+    pos = wall * length
+    d = np.diff(pos)
+    mid = 0.5 * (pos[1:] + pos[:-1])
+    for region in (mid < spread, mid > length - spread):
+        t = np.clip(d, lo, hi)
+        change = float(np.sum((t - d)[region]))
+        free = region & (d > lo) & (d < hi)
+        if change > 0.0:
+            give = np.where(free, t - lo, 0.0)
+        else:
+            give = np.where(free, hi - t, 0.0)
+        if give.sum() > abs(change):
+            t = t - np.sign(change) * abs(change) * give / give.sum()
+            d = np.where(region, t, d)
+    return np.concatenate([[0.0], np.cumsum(d)]) / d.sum()
 
 
 def prism_layers(wall: np.ndarray, tris: np.ndarray, ids: dict[str, np.ndarray], level: HybridLevel
@@ -364,9 +398,7 @@ def hybrid_mesh(level: HybridLevel, farfield: float = 25.0) -> Mesh:
     top0 = level.layers * nw
     top = pts[top0:]
     lo, hi = box(farfield)
-    spacing = float(level.first * level.layer_growth ** (level.layers - 1))
-    size_near = max(spacing, 0.5 * level.ds_max)
-    tp, tets, mk = outer_tets(top, tris, ids["root"], lo, hi, size_near, 0.25, level.h_far,
+    tp, tets, mk = outer_tets(top, tris, ids["root"], lo, hi, level.h_near, 0.25, level.h_far,
                               f"adodg3_{level.name}")
     # gmsh's points: the first nw are the top layer's (unchanged), the rest are appended
     points = np.concatenate([pts, tp[nw:]])
@@ -388,13 +420,13 @@ RATIO = 2.0 ** 0.5
 
 
 def hybrid_levels() -> list[HybridLevel]:
-    """H0 (coarsest) ... H2: every length of H0 divided by :data:`RATIO` per level, one more layer per
-    level (the layers' total height stays about 0.08-0.09 chord). H0's leading-edge spacing is a tenth of
-    the leading-edge radius."""
+    """H0 (coarsest) ... H2: every length of H0 divided by :data:`RATIO` per level (wall spacings, layer
+    heights, tetrahedra); 8 layers growing by 1.5 (0.079 chord thick on H0, the top layer 0.027, the
+    tetrahedra 0.03 there). H0's leading-edge spacing is a tenth of the leading-edge radius."""
     out = []
     for i in range(3):
         f = RATIO ** -i
         out.append(HybridLevel(f"H{i}", ds_le=0.1 * LE_RADIUS * f, ds_te=0.004 * f, ds_max=0.06 * f,
-                               dy_max=0.15 * f, dy_tip=0.03 * f, growth=1.2, first=0.0016 * f, layers=8 + i,
-                               layer_growth=1.5, h_far=15.0 * f))
+                               dy_max=0.15 * f, dy_tip=0.03 * f, growth=1.2, first=0.0016 * f, layers=8,
+                               layer_growth=1.5, h_near=0.03 * f, h_far=15.0 * f))
     return out
