@@ -41,6 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 from scipy.spatial import cKDTree
 
 from ffdcli.mesh import CellBlock, Mesh
@@ -211,7 +212,8 @@ def section_grid(level: HybridLevel) -> tuple[np.ndarray, np.ndarray]:
         wall[-1] = 1.0
         natural.append((poly, frac, wall))
     poly, frac, wall = natural[-1]
-    target = top_fractions(poly, frac, wall, 0.5 * (heights[-1] - heights[-2]), level.ds_max)
+    top_h = heights[-1] - heights[-2]
+    target = top_fractions(poly, frac, wall, 0.5 * top_h, max(level.ds_max, top_h))
     for k, (h, (poly, frac, wall)) in enumerate(zip(heights, natural, strict=True)):
         w = level.relax * (h / heights[-1]) ** level.relax_power
         a = (1.0 - w) * wall + w * target
@@ -419,14 +421,27 @@ def hybrid_mesh(level: HybridLevel, farfield: float = 25.0) -> Mesh:
 RATIO = 2.0 ** 0.5
 
 
+#: The prism layers' total height (chords): the structured part reaches this far from the wall on
+#: every level (the flow round the leading edge, whose pressure the drag is so sensitive to, lies in it).
+LAYERS_HEIGHT = 0.4
+
+
+def layer_growth(first: float, layers: int, total: float) -> float:
+    """The growth ratio g with ``first (g^layers - 1) / (g - 1) = total``."""
+    return float(brentq(lambda g: first * (g ** layers - 1.0) / (g - 1.0) - total, 1.0 + 1e-9, 4.0))
+
+
 def hybrid_levels() -> list[HybridLevel]:
-    """H0 (coarsest) ... H2: every length of H0 divided by :data:`RATIO` per level (wall spacings, layer
-    heights, tetrahedra); 8 layers growing by 1.5 (0.079 chord thick on H0, the top layer 0.027, the
-    tetrahedra 0.03 there). H0's leading-edge spacing is a tenth of the leading-edge radius."""
+    """H0 (coarsest) ... H2: every wall spacing of H0 divided by :data:`RATIO` per level; 12, 14, 16
+    layers from a first height of 0.0016 chord (divided by RATIO per level) to :data:`LAYERS_HEIGHT`
+    (the growth solved for), the tetrahedra starting at the top layer's height. H0's leading-edge
+    spacing is a tenth of the leading-edge radius."""
     out = []
     for i in range(3):
         f = RATIO ** -i
+        first, layers = 0.0016 * f, 12 + 2 * i
+        g = layer_growth(first, layers, LAYERS_HEIGHT)
         out.append(HybridLevel(f"H{i}", ds_le=0.1 * LE_RADIUS * f, ds_te=0.004 * f, ds_max=0.06 * f,
-                               dy_max=0.15 * f, dy_tip=0.03 * f, growth=1.2, first=0.0016 * f, layers=8,
-                               layer_growth=1.5, h_near=0.03 * f, h_far=15.0 * f))
+                               dy_max=0.15 * f, dy_tip=0.03 * f, growth=1.2, first=first, layers=layers,
+                               layer_growth=g, h_near=first * g ** (layers - 1), h_far=15.0 * f))
     return out
