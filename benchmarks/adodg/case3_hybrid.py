@@ -14,23 +14,24 @@ here; this family puts the small cells only where they are needed, chordwise:
   tip section's upper half revolved by 180 degrees about the chord line, outboard: points
   ``(x, 3 + y_t(x) sin(phi), y_t(x) cos(phi))``) is the same chordwise stations times ``n_phi``
   divisions in phi, its quadrilaterals at the leading- and trailing-edge poles reduced to triangles.
-- **Prism layers** (NumPy): ``layers`` wedges per wall triangle, built from one grid in the section
-  plane (:func:`section_grid`): layer k lies on the section's offset curve at distance
-  ``h_k = first * (1 + g + ... + g^(k-1))`` (the boundary of the section grown by a disc of radius h_k:
-  normal offsets of the sides and an arc about the sharp trailing edge); its stations start as the
-  wall stations' normal offsets and are blended, by the weight ``(h_k / h_top)^2``, toward equal arc
-  spacing on the top layer, so the top meets the tetrahedra with spacings near its own height (0.03
-  chord) instead of the leading edge's. The grid is mapped onto the wing as the wall is (the upper
-  and lower sides at each spanwise station; the cap by the same revolution about the chord line), so
-  the layers follow the cap exactly and stay in the symmetry plane at the root; the leading- and
-  trailing-edge stations stay on the chord line, the cap's poles. Not a boundary layer (the flow is
-  inviscid): the layers carry the wall's chordwise clustering off it, so the cells at the leading
-  edge are ``ds_le`` by ``first`` by the spanwise spacing instead of tetrahedra that the leading edge
-  would make small in every direction. The section is convex, so the layers cannot fold.
+- **Prism layers** (NumPy): ``layers`` wedges per wall triangle, 0.4 chord thick in all
+  (:data:`LAYERS_HEIGHT`), built from one grid in the section plane (:func:`section_grid`): layer k
+  lies on the section's offset curve at distance ``h_k = first * (1 + g + ... + g^(k-1))`` (the
+  boundary of the section grown by a disc of radius h_k: normal offsets of the sides and an arc about
+  the sharp trailing edge); its stations are the wall stations' normal offsets, moved along the curve
+  near the edges only (:func:`top_fractions`: round the leading edge spread to half the top layer's
+  height, the arc over the trailing edge shared among its neighbours), by a weight growing linearly
+  with h_k. The grid is mapped onto the wing as the wall is (the upper and lower sides at each
+  spanwise station; the cap by the same revolution about the chord line), so the layers follow the
+  cap exactly and stay in the symmetry plane at the root; the leading- and trailing-edge stations
+  stay on the chord line, the cap's poles. Not a boundary layer (the flow is inviscid): the layers
+  carry the wall's chordwise clustering into the field, so the flow round the leading edge (whose
+  pressures the drag is a small difference of) is on cells ``ds_le`` chordwise there, growing with
+  the distance, instead of on tetrahedra. The section is convex, so the layers cannot fold.
 - **Tetrahedra** (gmsh, one thread): the top of the prism layers is handed to gmsh as a discrete
   surface (its nodes are kept), closed by the symmetry plane (y = 0, with the layers' section as a
-  hole) and the far-field box; gmsh fills the box with tetrahedra whose size grows from the layer's
-  top to ``h_far``.
+  hole) and the far-field box; gmsh fills the box with tetrahedra whose size grows from the top
+  layer's height (``h_near``) by 0.25 per chord of distance to ``h_far``.
 
 Markers ``wing`` (triangles), ``symmetry`` (triangles and the layers' quadrilaterals), ``farfield``;
 cells tetra and wedge in VTK order with positive volume; boundary faces oriented out of the fluid.
@@ -58,7 +59,11 @@ LE_RADIUS = 1.1019 * 0.12 ** 2
 
 @dataclass(frozen=True)
 class HybridLevel:
-    """Sizes of one level of the hybrid family, in chords (module docstring)."""
+    """Sizes of one level of the hybrid family, in chords (module docstring): wall spacings along the
+    chord (``ds_le``, ``ds_te``, ``ds_max``, growing by ``growth``) and the span (``dy_max`` at the
+    root, ``dy_tip`` at the tip and round the cap); ``layers`` prism layers from ``first`` growing by
+    ``layer_growth``, their stations moved toward the top's target by ``relax (h / h_top)^relax_power``;
+    tetrahedra from ``h_near`` at the layers' top to ``h_far``."""
 
     name: str
     ds_le: float
