@@ -322,7 +322,16 @@ def dispatch(args: argparse.Namespace, setup_of, report_of, summary_of) -> int:
     """Carry out a command parsed by :func:`side_parser` and print its result: ``setup_of(args)``, the
     run (:func:`run`), or ``report_of(args)`` as JSON or through ``summary_of``. Returns the exit code."""
     if args.command == "setup":
+        mesh = getattr(args, "mesh", None)
+        if mesh is not None and not Path(mesh).is_file():
+            print(f"error: --mesh {mesh}: no such file; give the baseline mesh (the ADODG meshes are built by "
+                  "`python -m benchmarks.adodg.meshes`, `case2_meshes` and `case3_meshes`)", file=sys.stderr)
+            return 2
         print(setup_of(args))
+    elif args.command in ("run", "report") and not (Path(args.folder) / "config.cfg").is_file():
+        print(f"error: {args.folder} has no config.cfg: run `setup --mesh MESH --folder {args.folder}` first",
+              file=sys.stderr)
+        return 2
     elif args.command == "run":
         print(f"{run(args.folder, args.resume):.0f} s")
     else:

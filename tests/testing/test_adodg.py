@@ -114,7 +114,8 @@ def test_add_material_refuses_a_chordwise_move(small):
         add_material(wall, moved)
 
 
-@pytest.mark.parametrize(("name", "n_vars"), [("case1_v8.yaml", 8), ("case1.yaml", 16), ("case1_v32.yaml", 32)])
+@pytest.mark.parametrize(("name", "n_vars"), [("case1_v8.yaml", 8), ("case1.yaml", 16), ("case1_v32.yaml", 32),
+                                              ("case1_dense.yaml", 16), ("case1_v32_dense.yaml", 32)])
 def test_design_files_load_and_their_constraints_hold_at_the_baseline(tmp_path, small, name, n_vars):
     """The three lattices' design files, on the coarsest mesh: the variables the case asks for, the
     add-material rule at every wall node and both edges, every one met by the baseline (``ffd constraints``)."""
@@ -130,8 +131,13 @@ def test_design_files_load_and_their_constraints_hold_at_the_baseline(tmp_path, 
     res = run_ffd("constraints", tmp_path / name, "--json")
     assert res.returncode == 0, res.stderr
     rows = json.loads(res.stdout)["constraints"]
-    # every wall node but the leading- and trailing-edge points (their normals lie along the chord)
+    # every wall node, the leading- and trailing-edge points twice (on both sides: their move along
+    # the thickness axis is held at zero), and with `between` 7 points on each of the n_wall segments
+    # but the two at each edge point whose normal lies along the chord (none: the curve's normal
+    # turns there, so every point between has a side)
     n_wall = small[0].cells_around
-    assert [r["name"] for r in rows] == [f"k0.add_material[{j}]" for j in range(n_wall - 2)] + ["k1.le_te[0]",
-                                                                                                 "k1.le_te[1]"]
+    between = (design["constraints"][0]["add_material"] or {}).get("between", 0)
+    n_items = n_wall + 2 + between * n_wall
+    assert [r["name"] for r in rows] == [f"k0.add_material[{j}]" for j in range(n_items)] + ["k1.le_te[0]",
+                                                                                             "k1.le_te[1]"]
     assert all(r["satisfied"] for r in rows)

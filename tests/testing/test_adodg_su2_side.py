@@ -138,3 +138,15 @@ def test_run_resume_passes_su2_restart_and_keeps_the_pieces(tmp_path, monkeypatc
     meta = json.loads((tmp_path / "run.json").read_text())
     assert len(meta["pieces"]) == 2
     assert meta["wall"] == pytest.approx(sum(p["wall"] for p in meta["pieces"]))
+
+
+@pytest.mark.parametrize("argv, said", [(["setup", "--mesh", "{tmp}/none.su2", "--folder", "{tmp}/f"], "--mesh"),
+                                        (["run", "{tmp}/empty"], "has no config.cfg"),
+                                        (["report", "{tmp}/empty"], "has no config.cfg")])
+def test_a_missing_mesh_or_folder_is_one_line_and_exit_2(tmp_path, capsys, argv, said):
+    (tmp_path / "empty").mkdir()
+    code = side.main([a.format(tmp=tmp_path) for a in argv] + (["--baseline", "b.su2"] if argv[0] == "report" else [])
+                     + (["ffd"] if argv[0] == "setup" else []))
+    err = capsys.readouterr().err
+    assert code == 2 and said in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert not (tmp_path / "f").exists()
