@@ -201,8 +201,8 @@ def section_grid(level: HybridLevel) -> tuple[np.ndarray, np.ndarray]:
     stations. Layer k lies on the offset curve at distance ``h_k``, its stations at the wall
     stations' normal offsets blended by the weight ``relax (h_k / h_top)^relax_power`` toward the
     top's target (:func:`top_fractions`: the normal offsets, spread round the leading edge to half the
-    top layer's height, the gap over the trailing edge's arc shared out among its neighbours). The leading- and trailing-edge stations stay on the chord line
-    (Z = 0): the tip cap's poles."""
+    top layer's height, the gap over the trailing edge's arc shared out among its neighbours). The
+    leading- and trailing-edge stations stay on the chord line (Z = 0): the tip cap's poles."""
     xs, _ = chord_stations(level)
     g = level.layer_growth
     heights = level.first * np.concatenate([[0.0], np.cumsum(g ** np.arange(level.layers))])
