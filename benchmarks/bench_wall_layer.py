@@ -13,7 +13,9 @@ each round's ratio rigid / none and the smallest and largest over the rounds, be
 One untimed round first compiles and warms the kernels.
 
 The same rounds follow with no cache read or written (each run as the first of the mesh: the reference
-weights and the layer computed in it).
+weights and the layer computed in it), then as a first ``ffd deform`` of the mesh is (the box's cache
+read, no warp cache: the run computes the weights and the layer and writes them, each run into a folder
+of its own).
 
 ``python -m benchmarks.bench_wall_layer [--rounds 5] [--work DIR] [--profile] [--cold]`` (``--profile``: the
 rigid runs' stages, CPU seconds of each, summed over the rounds; ``--cold``: the first-run rounds only);
@@ -25,7 +27,9 @@ from __future__ import annotations
 import argparse
 import cProfile
 import pstats
+import shutil
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -36,6 +40,8 @@ REPO = Path(__file__).resolve().parents[1]
 TARGET = 1.3
 CASE = "rect_z_rans32"
 DESIGN = [{"twist": {"tip": 10}}]
+#: How each set of rounds is named.
+WHAT = {True: "caches read", False: "first run, no cache", "written": "first run, cache written"}
 
 
 def _design(work: Path) -> Path:
@@ -52,29 +58,36 @@ def _design(work: Path) -> Path:
     return path
 
 
-def _one(path: Path, mode: str, work: Path, profile: cProfile.Profile | None = None, cached: bool = True) -> float:
+def _one(path: Path, mode: str, work: Path, profile: cProfile.Profile | None = None, cached=True) -> float:
     """CPU seconds of one ``deform`` with ``volume.wall_layer: mode`` (the run loaded untimed; ``cached``
-    False: no cache read or written, as a first run of the mesh)."""
+    False: no cache read or written, as a first run of the mesh; "written": the box's cache read, the
+    warp's computed and written into a folder of the run's own, as a first ``ffd deform`` of the mesh)."""
     from ffdcli.app.deformation import deform
     from ffdcli.app.run import load_run
     from ffdcli.design import load_design
 
-    run = load_run(load_design(path, overrides=[f"volume.wall_layer={mode}"]), cache_dir=work / "cache",
-                   use_cache=cached)
-    if profile is not None:
-        profile.enable()
-    t0 = time.process_time()
-    deform(run)
-    dt = time.process_time() - t0
-    if profile is not None:
-        profile.disable()
+    with tempfile.TemporaryDirectory(prefix="ffd-wall-layer-") as tmp:
+        folder = work / "cache"
+        if cached == "written":
+            for box in folder.glob("*.ffdcache.npz"):
+                shutil.copy(box, tmp)
+            folder = Path(tmp)
+        run = load_run(load_design(path, overrides=[f"volume.wall_layer={mode}"]), cache_dir=folder,
+                       use_cache=bool(cached))
+        if profile is not None:
+            profile.enable()
+        t0 = time.process_time()
+        deform(run)
+        dt = time.process_time() - t0
+        if profile is not None:
+            profile.disable()
     return dt
 
 
-def measure(rounds: int = 5, work: Path | None = None, profile: bool = False, cached: bool = True) -> dict:
+def measure(rounds: int = 5, work: Path | None = None, profile: bool = False, cached=True) -> dict:
     """``{"none": [s, ...], "rigid": [s, ...], "ratio": [...]}``: CPU seconds of each round, alternating
     (``cached`` False: every run as the first of the mesh, its warp's reference weights and wall layer
-    computed)."""
+    computed; "written": and written to a cache file, :func:`_one`)."""
     work = work or REPO / "out" / "robustness"
     path = _design(work)
     for mode in ("none", "rigid"):          # compile (and write the caches) untimed
@@ -104,7 +117,8 @@ def _rows(m: dict, what: str = "caches read") -> list[dict]:
 def run(quick: bool = False) -> list[dict]:
     """Rows for ``python -m benchmarks``."""
     n = 3 if quick else 5
-    return _rows(measure(n)) + _rows(measure(n, cached=False), "first run, no cache")
+    return (_rows(measure(n)) + _rows(measure(n, cached=False), "first run, no cache")
+            + _rows(measure(n, cached="written"), WHAT["written"]))
 
 
 def main(argv=None) -> int:
@@ -113,11 +127,11 @@ def main(argv=None) -> int:
     ap.add_argument("--work", type=Path, default=REPO / "out" / "robustness",
                     help="folder of the generated mesh, design and box cache (default out/robustness)")
     ap.add_argument("--profile", action="store_true", help="also print the rigid runs' stages (CPU seconds)")
-    ap.add_argument("--cold", action="store_true", help="only the first-run rounds (no cache read or written)")
+    ap.add_argument("--cold", action="store_true", help="only the first-run rounds (no cache read)")
     args = ap.parse_args(argv)
-    for cached in ([False] if args.cold else [True, False]):
+    for cached in ([False, "written"] if args.cold else [True, False, "written"]):
         m = measure(args.rounds, args.work, args.profile, cached)
-        what = "caches read" if cached else "first run, no cache"
+        what = WHAT[cached]
         for k, (n, r) in enumerate(zip(m["none"], m["rigid"], strict=True)):
             print(f"{what}, round {k + 1}: none {n:.3f} s  rigid {r:.3f} s  ratio {r / n:.3f}")
         for row in _rows(m, what):

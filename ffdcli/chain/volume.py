@@ -92,9 +92,10 @@ class VolumeStage(Stage):
             model = self.model(progress)
             points += self.share.warp(model, b, F, progress)     # MPI: each rank its rows or its block
             if self.warp_cache is not None and not self._cached:
-                # the reference weights were computed by this warp: keep them for the next run
+                # the reference weights were computed by this warp: keep them for the next run (NaN
+                # where a wall layer moves the target wholly: never warped, never walked)
                 layer = None if model.layer is None else layer_arrays(model.layer)
-                self._cached = self.warp_cache.save(model.target_ids, model.reference_weights(), layer)
+                self._cached = self.warp_cache.save(model.target_ids, model.reference_weights(every=False), layer)
         else:
             points[ids] += b
         # The surface goes exactly where the FFD put it (bit for bit X0 + B @ dP).

@@ -17,6 +17,7 @@ area (length in 2D) divided by the face's number of nodes.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
@@ -155,6 +156,17 @@ def vertex_areas(points: np.ndarray, faces: Sequence[CellBlock], n_points: int |
                            or [np.zeros(0)])
     n = len(points) if n_points is None else int(n_points)
     return _scatter(n, faces, face_measures(points, faces) / np.maximum(nodes, 1))
+
+
+def mean_chord(surface: np.ndarray, area: np.ndarray, size: float) -> float:
+    """The wall's mean chord from its points (S, 3) and area weights (S,): half its area over its size
+    (a 2D mesh: half its length); ``size`` when that is not a positive number."""
+    if not len(surface):
+        return size
+    flat = np.ptp(surface, axis=0).min() <= 1e-12 * size    # a 2D mesh: areas are lengths
+    total = float(area.sum())
+    chord = total / 2 if flat else total / (2 * size)
+    return chord if chord > 0 and math.isfinite(chord) else size
 
 
 def extract_surface(mesh: Mesh, names: str | Sequence[str]) -> Surface:

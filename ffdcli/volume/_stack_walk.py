@@ -34,18 +34,24 @@ def node_cells(pad: np.ndarray, n: int):
 
 
 @njit(cache=True, parallel=True)
-def walk_stacks(pts, pad, cell_of, ptr, on_wall, up, spacing, first, max_layers, stack_cos):
+def walk_stacks(pts, pad, cell_of, ptr, on_wall, up, spacing, first, max_layers, stack_cos, wall, stop):
     """(Ns,) each stack's top node, from its first off-wall node ``first`` (-1: none): on to the node of
     the top's cells most aligned with ``up`` (Ns, 3) (the first of equals) while its edge is within
-    ``stack_cos`` of it and shorter than ``spacing`` (the heights are the caller's, as the vectorised
-    walk computes them)."""
+    ``stack_cos`` of it and shorter than ``spacing``, and the top's height over its wall node ``wall``
+    (Ns,) along ``up`` is at most ``stop`` (Ns,; inf: no stop) (the heights are the caller's, as the
+    vectorised walk computes them)."""
     ns = first.shape[0]
     top = first.copy()
     for k in prange(ns):               # each stack on its own
         f = first[k]
         if f < 0:
             continue
+        w = wall[k]
         for _ in range(max_layers):
+            h = ((pts[f, 0] - pts[w, 0]) * up[k, 0] + (pts[f, 1] - pts[w, 1]) * up[k, 1]
+                 + (pts[f, 2] - pts[w, 2]) * up[k, 2])
+            if h > stop[k]:
+                break
             best = -1
             best_cos = stack_cos
             best_ln = 0.0

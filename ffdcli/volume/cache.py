@@ -2,17 +2,19 @@
 ``--cache-dir``), next to the box cache (:mod:`ffdcli.box.cache`). A RANS mesh's wall layer
 (:mod:`ffdcli.volume.wall_layer`: which nodes follow their wall, with which weights) is kept in the same
 file: finding it walks every wall node's stack and searches the nearest wall nodes of every node near
-the wall, more than a third of a deformation of the 98k-node 32-layer wing, and it too depends on the
+the wall, about a fifth of a deformation of the 98k-node 32-layer wing, and it too depends on the
 mesh, the surface and the settings only.
 
 Each volume node's reference weight (:meth:`ffdcli.volume.warp.WarpModel.tolerances`) is a walk of the
 source tree of its own: about a seventh of a deformation's warp on a 1M-node mesh. It depends on the
 mesh, the deforming surface and the warp settings only, never on the design, so ``ffd deform`` run in a
-loop over designs computes it once. The file name carries the key (``<mesh name>.<key>.ffdwarp.npz``):
-the SHA-256 of the mesh file's bytes, the surface marker names, the warp settings (all but ``chunk``,
-which changes no value), the reference walk's tolerance, the tool version and this format. A file
-whose key differs, that cannot be read, or whose weights do not fit the model's volume nodes (their
-count and the hash of their ids, checked on every load) is not used and is replaced atomically.
+loop over designs computes it once. A target that a wall layer moves wholly is never warped, and its
+weight is never walked: NaN in the file (walked when a product asks for it). The file name carries the
+key (``<mesh name>.<key>.ffdwarp.npz``): the SHA-256 of the mesh file's bytes, the surface marker
+names, the warp settings (all but ``chunk``, which changes no value), the reference walk's tolerance,
+the tool version and this format. A file whose key differs, that cannot be read, or whose weights do
+not fit the model's volume nodes (their count and the hash of their ids, checked on every load) is not
+used and is replaced atomically.
 
 Serial runs only: an MPI rank warps its own part's nodes and computes their weights (bit for bit the
 serial ones: a node's walk is its own).
@@ -34,8 +36,9 @@ from ffdcli.settings import WarpSettings
 from ffdcli.volume.wall_layer import BLEND, MIN_ASPECT, NEIGHBOURS, SHARP_COS, STACK_SPACINGS
 from ffdcli.volume.wall_stacks import MAX_LAYERS, STACK_COS
 
-#: Bumped whenever the content of the file changes meaning (2: the wall layer's arrays beside the weights).
-CACHE_FORMAT = 2
+#: Bumped whenever the content of the file changes meaning (2: the wall layer's arrays beside the weights;
+#: 3: NaN for the weights not walked).
+CACHE_FORMAT = 3
 #: The constants that decide which nodes are in the wall layer and their weights (part of the key).
 LAYER_RULES = {"min_aspect": MIN_ASPECT, "blend": BLEND, "sharp_cos": SHARP_COS, "neighbours": NEIGHBOURS,
                "stack_spacings": STACK_SPACINGS, "stack_cos": STACK_COS, "max_layers": MAX_LAYERS}
@@ -82,7 +85,8 @@ def load_cache(path: str | Path, key: str, target_ids: np.ndarray) -> tuple[np.n
     w = arrays["weights"]
     if w.dtype != np.float64 or w.shape != (len(target_ids),) or header.get("targets") != _ids_hash(target_ids):
         return None, {}
-    if not np.all(np.isfinite(w)) or np.any(w <= 0):       # a weight is a sum of positive terms
+    walked = ~np.isnan(w)                                  # NaN: not walked (the warp never needed it)
+    if not np.all(np.isfinite(w[walked])) or np.any(w[walked] <= 0):     # a weight is a sum of positive terms
         return None, {}
     return w, {k: v for k, v in arrays.items() if k.startswith("layer_")}
 

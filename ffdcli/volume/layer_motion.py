@@ -268,6 +268,20 @@ def _point(at, b, ns: int):
                      "its normals are the deformed wall's")
 
 
+def warped_rows(layer: WallLayer | None, lo: int, hi: int) -> np.ndarray | None:
+    """(k,) the target rows ``lo:hi`` (relative to ``lo``) whose warp displacement :func:`blend_layer` keeps
+    some of: all but the layer's rows of weight 1 (the warp's there is multiplied by ``1 - s = 0``: it
+    need not be computed); None when that is all of them."""
+    if layer is None or not len(layer.rows):
+        return None
+    whole = layer.rows[(layer.weight == 1.0) & (layer.rows >= lo) & (layer.rows < hi)] - lo
+    if not len(whole):
+        return None
+    keep = np.ones(hi - lo, bool)
+    keep[whole] = False
+    return np.flatnonzero(keep)
+
+
 def blend_layer(layer: WallLayer | None, d: np.ndarray, b: np.ndarray, frames, lo: int, hi: int, *, at=None
                 ) -> np.ndarray:
     """Blend the layer's rigid motion into the warp's displacements ``d`` (hi - lo, 3) of the target

@@ -324,10 +324,11 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
     aspect = edges.spacing[ok] / edges.height[ok]
     if np.median(aspect) < MIN_ASPECT:
         return None
-    thick = stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node, nodes)
-    thick = np.maximum(np.minimum(thick, STACK_SPACINGS * edges.spacing), edges.height)
-    if nodes is None:
-        span = np.ptp(pts, axis=0)
+    cap = STACK_SPACINGS * edges.spacing
+    thick = np.maximum(np.minimum(stack_heights(pts, cells, wall_ids, nrm, edges.spacing, edges.node, nodes, cap),
+                                  cap), edges.height)
+    if nodes is None:                             # (the extremes along contiguous rows: the same, faster)
+        span = np.ptp(np.ascontiguousarray(pts.T), axis=1)
     else:                                         # every node once: the owned rows of every rank
         lo, hi = extent(pts[nodes.owned], nodes.comm)
         span = hi - lo
@@ -336,28 +337,34 @@ def detect_wall_layer(points: np.ndarray, cells: list[CellBlock], faces: list[Ce
         return None
     reach = float(thick.max()) * (1.0 + BLEND)
     tree = cKDTree(wall)
-    dist, _ = tree.query(pts[target_ids], distance_upper_bound=reach)
-    rows = np.flatnonzero(np.isfinite(dist))
     k = min(NEIGHBOURS[2 if flat else 3], len(wall_ids) - 1)
-    x = pts[target_ids[rows]]
-    part, psi2 = _partition(tree, x, k, len(wall_ids))
+    x = pts[target_ids]
+    # one search: the k + 1 nearest wall nodes of every target, the nearest's distance its reach
+    dist, near = tree.query(x, k=k + 1) if k >= 1 else (tree.query(x)[0][:, None], None)
+    rows = nodes_within(tree, x, dist[:, 0], reach)
+    part, psi2 = _partition(dist[rows], None if near is None else near[rows], k, len(wall_ids))
     delta = part @ thick                        # the layer's thickness where each node is (continuous)
-    t = np.clip((dist[rows] - delta) / (BLEND * delta), 0.0, 1.0)
+    t = np.clip((dist[rows, 0] - delta) / (BLEND * delta), 0.0, 1.0)
     weight = 1.0 - t * t * (3.0 - 2.0 * t)
     keep = weight > 0
     rows, weight, part, psi2 = rows[keep], weight[keep], part[keep], psi2[keep]
     stacked = np.clip((k * psi2 - 1.0) / (k - 1.0), 0.0, 1.0) if k > 1 else np.ones(len(rows))
     return _assemble(pts, faces, wall_ids, target_ids, sliding, rows.astype(np.int64), part, weight, stacked,
-                     float(np.median(thick)))
+                     float(np.median(thick)), (nrm, planes))
 
 
-def _assemble(pts, faces, wall_ids, target_ids, sliding, rows, part, weight, stacked, thickness) -> WallLayer:
+def _assemble(pts, faces, wall_ids, target_ids, sliding, rows, part, weight, stacked, thickness,
+              normals=None) -> WallLayer:
     """The layer of the nodes ``rows`` (with their weights, found by :func:`detect_wall_layer` or read
-    back by :func:`layer_from_arrays`) and the wall's geometry, which is cheap to compute again."""
+    back by :func:`layer_from_arrays`) and the wall's geometry, which is cheap to compute again
+    (``normals``: the wall's normals in their planes and the planes, when the caller has them)."""
     wall = pts[wall_ids]
-    nrm = wall_normals(pts, faces, wall_ids)
-    planes = wall_planes(wall, nrm, sliding)
-    nrm = in_plane(nrm, planes)
+    if normals is None:
+        nrm = wall_normals(pts, faces, wall_ids)
+        planes = wall_planes(wall, nrm, sliding)
+        nrm = in_plane(nrm, planes)
+    else:
+        nrm, planes = normals[0].copy(), normals[1]
     nrm[sharp_nodes(pts, faces, wall_ids)] = 0.0
     origin = wall.mean(axis=0) if len(wall) else np.zeros(3)
     local = tuple(CellBlock(b.type, np.searchsorted(wall_ids, b.data)) for b in faces
@@ -449,13 +456,24 @@ def layer_normals(position: np.ndarray, faces, planes: np.ndarray | None = None)
     return unit if planes is None else in_plane(unit, planes)
 
 
-def _partition(tree: cKDTree, x: np.ndarray, k: int, ns: int) -> tuple[csr_matrix, np.ndarray]:
+def nodes_within(tree: cKDTree, x: np.ndarray, nearest: np.ndarray, reach: float) -> np.ndarray:
+    """The rows of ``x`` (n, 3) whose nearest wall node (at ``nearest`` (n,)) is within ``reach``, as the
+    tree's own bounded search decides (it compares squared distances): the few at ``reach`` to
+    rounding asked to it."""
+    inside = nearest < reach
+    edge = np.flatnonzero(np.abs(nearest - reach) <= 1e-9 * reach)
+    if len(edge):
+        inside[edge] = np.isfinite(tree.query(x[edge], distance_upper_bound=reach)[0])
+    return np.flatnonzero(inside)
+
+
+def _partition(d: np.ndarray, j: np.ndarray | None, k: int, ns: int) -> tuple[csr_matrix, np.ndarray]:
     """(n, ns) the normalised Franke-Little weights of each point's ``k`` nearest wall nodes (module
-    docstring), and (n,) the sums of their squares."""
-    n = len(x)
+    docstring), from the distances ``d`` (n, k + 1) and the indices ``j`` (n, k + 1) of its ``k + 1``
+    nearest, and (n,) the sums of their squares."""
+    n = len(d)
     if k < 1:
         return csr_matrix((np.ones(n), (np.arange(n), np.zeros(n, np.int64))), shape=(n, ns)), np.ones(n)
-    d, j = tree.query(x, k=k + 1)
     R = d[:, -1:]
     d, j = d[:, :-1], j[:, :-1]
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -22,6 +22,10 @@ from ffdcli.volume._stack_walk import node_cells, walk_stacks
 STACK_COS = 0.8
 #: At most this many layers are walked.
 MAX_LAYERS = 400
+#: A stack walked serially stops once its top is this much (relatively) higher than the caller's cap
+#: (:func:`stack_heights`): far above the rounding of a height, which the kernel and NumPy may sum
+#: in other orders.
+CAP_MARGIN = 1e-6
 
 
 def _node_cells(cells: list[CellBlock], n: int):
@@ -57,12 +61,15 @@ def _gather(nodes: RankNodes | None, *arrays: np.ndarray) -> tuple[np.ndarray, .
 
 
 def stack_heights(points: np.ndarray, cells: list[CellBlock], wall_ids: np.ndarray, normals: np.ndarray,
-                  spacing: np.ndarray, first: np.ndarray, nodes: RankNodes | None = None) -> np.ndarray:
+                  spacing: np.ndarray, first: np.ndarray, nodes: RankNodes | None = None,
+                  cap: np.ndarray | None = None) -> np.ndarray:
     """(Ns,) each wall node's stack height (module docstring).
 
     ``normals`` (Ns, 3) unit wall normals pointing anywhere (the stack goes the way its first edge goes);
     ``spacing`` (Ns,) the shortest wall edge at each node; ``first`` (Ns,) the off-wall edge's far node
-    (-1: none).
+    (-1: none). ``cap`` (Ns,): the caller takes ``min(height, cap)``, so a stack may stop once it is
+    higher than ``cap`` (each step of a stack raises its top: ``min(height, cap)`` is the same, bit for
+    bit, while the walk stops short, :data:`CAP_MARGIN`); serially only.
 
     ``nodes``: of one MPI rank's local mesh (a collective; ``first`` then holds global ids, and
     ``wall_ids`` every wall node, as on every rank): each step of a stack is taken by the rank owning
@@ -90,8 +97,9 @@ def stack_heights(points: np.ndarray, cells: list[CellBlock], wall_ids: np.ndarr
     if nodes is None:                   # serially: each stack walked on its own by a compiled kernel
         pad = _padded(cells)
         cell_of, ptr = node_cells(pad, len(pts))
+        stop = np.full(ns, np.inf) if cap is None else (1.0 + CAP_MARGIN) * np.asarray(cap, np.float64)
         top = walk_stacks(pts, pad, cell_of, ptr, on_wall, np.ascontiguousarray(up), np.asarray(spacing, np.float64),
-                          np.asarray(first, np.int64), MAX_LAYERS, STACK_COS)
+                          np.asarray(first, np.int64), MAX_LAYERS, STACK_COS, np.asarray(wall_ids, np.int64), stop)
         moved = np.flatnonzero(top != first)
         height[moved] = np.einsum("ij,ij->i", pts[top[moved]] - base[moved], up[moved])
         return height

@@ -72,17 +72,18 @@ reference walk, exact sums, moments); NumPy reference :mod:`ffdcli.volume.idw_re
 **The wall layer.** A mesh with thin cells stacked on its wall (a RANS mesh) moves them rigidly with
 their wall (:mod:`ffdcli.volume.wall_layer`, :mod:`ffdcli.volume.layer_motion`; ``volume.wall_layer``):
 not linear (it turns with the deformed wall's normals): :func:`warp_vjp` and the forward derivative take ``at=(b, F)``.
+The nodes that follow their wall wholly (blend weight 1: most of a RANS mesh's volume near the wall) are
+not warped at all (:func:`~ffdcli.volume.layer_motion.warped_rows`), nor their reference weights walked.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numba
 import numpy as np
 
-from ffdcli.geometry.surface import vertex_areas
+from ffdcli.geometry.surface import mean_chord, vertex_areas
 from ffdcli.mesh import CellBlock, diagonal
 from ffdcli.mesh.idsets import setdiff_ids, unique_ids
 from ffdcli.mesh.morton import morton_order
@@ -100,7 +101,7 @@ from ffdcli.volume._warp_kernels import (
 )
 from ffdcli.volume.frames import rotations_from_deformation_gradient  # noqa: F401  (re-exported)
 from ffdcli.volume.idw_reference import idw_reference  # noqa: F401  (re-exported)
-from ffdcli.volume.layer_motion import blend_layer, layer_transpose
+from ffdcli.volume.layer_motion import blend_layer, layer_transpose, warped_rows
 from ffdcli.volume.roles import (  # noqa: F401  (re-exported: the public names of the warp)
     PLANE_TOLERANCE,
     MarkerRoles,
@@ -156,7 +157,7 @@ class WarpModel:
     node_center: np.ndarray         # area-weighted centroid
     node_radius: np.ndarray         # max distance of the node's sources from the centroid
     node_area: np.ndarray
-    #: each target's reference weight (:meth:`tolerances`), per row range, made on first use
+    #: each target's reference weight (:meth:`tolerances`), walked on first use ("walked"; NaN: not yet)
     weight_refs: dict = field(default_factory=dict, repr=False)
     #: the near-wall layer that moves rigidly with its wall (:mod:`ffdcli.volume.layer_motion`), or None
     layer: WallLayer | None = field(default=None, repr=False)
@@ -187,38 +188,40 @@ class WarpModel:
         return (self.ldef ** 2, 0.5 * s.a, 0.5 * s.b, s.a, s.b, s.alpha ** s.b, fast, eps2,
                 0.5 * float(s.tolerance), self.rotation_length ** 2 if self.rotation_length else 0.0)
 
-    def tolerances(self, lo: int, hi: int) -> np.ndarray:
-        """(hi - lo,) ``tolerance / 2 x REFERENCE_SHARE x W_ref`` of the targets ``lo:hi``: what a tree
-        node's remainder bound is held to by each target (:mod:`ffdcli.volume._warp_blocks`). ``W_ref``:
-        the target's weight from its own walk at the coarse tolerance :data:`REFERENCE_TOLERANCE`, kept
-        (geometry only)."""
-        key = (int(lo), int(hi))
-        full = self.weight_refs.get((0, self.n_targets))
-        if full is not None:
-            return self.params()[8] * REFERENCE_SHARE * full[lo:hi]
-        if key not in self.weight_refs:
+    def tolerances(self, lo: int, hi: int, rows: np.ndarray | None = None) -> np.ndarray:
+        """(hi - lo,) ``tolerance / 2 x REFERENCE_SHARE x W_ref`` of the targets ``lo:hi`` (``rows``: of
+        those rows of it only, relative to ``lo``): what a tree node's remainder bound is held to by each
+        target (:mod:`ffdcli.volume._warp_blocks`). ``W_ref``: the target's weight from its own walk at the
+        coarse tolerance :data:`REFERENCE_TOLERANCE` (geometry only), walked for the targets asked for
+        and kept (a target's walk is its own: the same bits whichever targets are asked for with it)."""
+        idx = np.arange(lo, hi) if rows is None else lo + np.asarray(rows, dtype=np.int64)
+        walked = self.weight_refs.setdefault("walked", np.full(self.n_targets, np.nan))   # NaN: not yet
+        todo = idx[np.isnan(walked[idx])]
+        if len(todo):
             l2, ha, hb, pa, pb, ab, fast, eps2, tol, rho2 = self.params()
             soa = np.ascontiguousarray(np.vstack([self.src_pos.T, self.src_area[None, :]]))
-            w = np.empty(hi - lo)
-            weight_reference_kernel(self.target_pos[lo:hi], w, self.node_lo, self.node_hi, self.node_left,
+            w = np.empty(len(todo))
+            weight_reference_kernel(self.target_pos[todo], w, self.node_lo, self.node_hi, self.node_left,
                                     self.node_right, self.node_center, self.node_radius, self.node_area,
                                     self.src_pos, self.src_area, l2, ha, hb, pa, pb, ab, fast, eps2,
                                     REFERENCE_TOLERANCE, self.fixed_node, soa)
-            self.weight_refs[key] = w
-        return self.params()[8] * REFERENCE_SHARE * self.weight_refs[key]
+            walked[todo] = w
+        return self.params()[8] * REFERENCE_SHARE * walked[idx]
 
-    def reference_weights(self) -> np.ndarray:
-        """(Nt,) every target's reference weight (:meth:`tolerances`), computed on first use."""
-        self.tolerances(0, self.n_targets)
-        return self.weight_refs[(0, self.n_targets)]
+    def reference_weights(self, every: bool = True) -> np.ndarray:
+        """(Nt,) every target's reference weight (:meth:`tolerances`), walked now where not yet; ``every``
+        False: as walked so far (NaN where not: the targets the wall layer moves wholly are never warped)."""
+        if every:
+            self.tolerances(0, self.n_targets)
+        return self.weight_refs.setdefault("walked", np.full(self.n_targets, np.nan))
 
     def set_reference_weights(self, weights: np.ndarray) -> None:
         """Use ``weights`` (Nt,) as :meth:`reference_weights` of this mesh and settings gave them
-        (read back by :mod:`ffdcli.volume.cache`) instead of computing them."""
-        w = np.asarray(weights, dtype=np.float64)
+        (read back by :mod:`ffdcli.volume.cache`; NaN: not walked, walked when asked for)."""
+        w = np.array(weights, dtype=np.float64)
         if w.shape != (self.n_targets,):
             raise ValueError(f"reference weights must be ({self.n_targets},), got {w.shape}")
-        self.weight_refs[(0, self.n_targets)] = w
+        self.weight_refs["walked"] = w
 
     @property
     def rotation_length(self) -> float | None:
@@ -303,7 +306,7 @@ def prepare_warp(points: np.ndarray, surface_ids, fixed_ids=(), sliding=(),
     # sources and their areas
     src_ids = np.concatenate([surface_ids, fixed_ids])
     a = _source_areas(pts, areas, faces, src_ids)
-    chord = _mean_chord(pts[surface_ids], a[:len(surface_ids)], size)
+    chord = mean_chord(pts[surface_ids], a[:len(surface_ids)], size)
 
     # targets in Morton order: neighbours in memory walk the same tree nodes
     tpos = pts[target_ids] - origin
@@ -349,17 +352,6 @@ def _source_areas(pts: np.ndarray, areas, faces, src_ids: np.ndarray) -> np.ndar
         pos = a[a > 0]
         a[a == 0] = np.median(pos) if pos.size else 1.0
     return a
-
-
-def _mean_chord(surface: np.ndarray, area: np.ndarray, size: float) -> float:
-    """The wall's mean chord from its points (S, 3) and area weights (S,): half its area over its size
-    (a 2D mesh: half its length); ``size`` when that is not a positive number."""
-    if not len(surface):
-        return size
-    flat = np.ptp(surface, axis=0).min() <= 1e-12 * size    # a 2D mesh: areas are lengths
-    total = float(area.sum())
-    chord = total / 2 if flat else total / (2 * size)
-    return chord if chord > 0 and math.isfinite(chord) else size
 
 
 def prepare_mesh_warp(mesh, surface, settings: WarpSettings | None = None, *, progress=None, size: float | None = None,
@@ -478,20 +470,25 @@ def warp(model: WarpModel, surface_displacement: np.ndarray, surface_rotation: n
     node_bm = node_moments(bm, model.src_pos, model.src_area, model.node_center, model.node_lo,
                             model.node_hi, use_rot)
     l2, ha, hb, pa, pb, ab, fast, eps2, _, rho2 = model.params()
-    d = np.empty((t_hi - t_lo, 3))
-    tolw = None if exact else model.tolerances(t_lo, t_hi)
-    with progress("volume mesh", t_hi - t_lo) as bar:
-        for lo, hi in chunks(t_hi - t_lo, model.settings.chunk):
-            tx = model.target_pos[t_lo + lo:t_lo + hi]
+    # the targets that follow their wall wholly are not warped (their warp would be multiplied by 0)
+    free = warped_rows(model.layer, t_lo, t_hi)
+    pos = model.target_pos[t_lo:t_hi] if free is None else model.target_pos[t_lo + free]
+    d = np.empty((len(pos), 3))
+    tolw = None if exact else model.tolerances(t_lo, t_hi, free)
+    with progress("volume mesh", len(pos)) as bar:
+        for lo, hi in chunks(len(pos), model.settings.chunk):
             if exact:
-                exact_kernel(tx, d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
+                exact_kernel(pos[lo:hi], d[lo:hi], model.src_pos, model.src_area, bm, l2, ha, hb, ab, fast, eps2,
                               rho2, use_rot)
             else:
-                warp_blocks(tx, tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
+                warp_blocks(pos[lo:hi], tolw[lo:hi], _blocks(hi - lo), d[lo:hi], model.node_lo, model.node_hi,
                             model.node_left, model.node_right, model.node_center, model.node_radius,
                             model.node_area, node_bm, model.src_pos, model.src_area, bm, l2, ha, hb, pa, pb,
                             ab, fast, eps2, rho2, use_rot, model.fixed_node)
             bar.update(hi - lo)
+    if free is not None:
+        warped, d = d, np.zeros((t_hi - t_lo, 3))
+        d[free] = warped
     d = blend_layer(model.layer, d, b, surface_rotation, t_lo, t_hi, at=at)
     if len(model.slide_rows):
         mine = (model.slide_rows >= t_lo) & (model.slide_rows < t_hi)

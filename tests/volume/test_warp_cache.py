@@ -85,12 +85,20 @@ def test_a_file_that_does_not_fit_is_not_used_and_is_replaced(case, tmp_path):
     assert load_references(path, key, ids[::-1]) is None             # other nodes, or another order
     assert load_references(path, key, ids[:-1]) is None
     assert load_references(tmp_path / "absent.npz", key, ids) is None
-    for bad in (w[:-1], np.where(np.arange(len(w)) == 3, -1.0, w), np.where(np.arange(len(w)) == 5, np.nan, w)):
+    for bad in (w[:-1], np.where(np.arange(len(w)) == 3, -1.0, w), np.where(np.arange(len(w)) == 5, np.inf, w),
+                np.where(np.arange(len(w)) == 4, 0.0, w)):
         save_references(path, key, ids, w)
         with np.load(path) as z:
             header = bytes(z["header"])
         np.savez(path.open("wb"), header=np.frombuffer(header, np.uint8), weights=bad)
         assert load_references(path, key, ids) is None
+    # NaN: a weight not walked (a target the wall layer moves wholly): read as such, walked when asked for
+    save_references(path, key, ids, np.where(np.arange(len(w)) % 3 == 0, np.nan, w))
+    some = load_references(path, key, ids)
+    assert np.array_equal(np.isnan(some), np.arange(len(w)) % 3 == 0)
+    other = replace(model, weight_refs={})
+    other.set_reference_weights(some)
+    np.testing.assert_array_equal(other.reference_weights(), w)
     path.write_bytes(b"not a zip file")
     assert load_references(path, key, ids) is None
     header = json.dumps({"key": key, "format": 1}).encode()               # no version: not ours
