@@ -45,19 +45,28 @@ LEVELS = {"rae2822_c0": (129, 33, 65, 2e-6), "rae2822_c1": (385, 97, 129, 1e-6),
 FARFIELD = 100.0
 
 
-def wall_section(mesh_path: Path, marker: str = "AIRFOIL") -> np.ndarray:
-    """The wall of a 2D mesh as airfoil coordinates (n, 2) in Selig order (trailing edge, the point of
-    largest x, first and last; upper surface first): its line segments chained into one loop."""
-    mesh = read_mesh(mesh_path)
+def wall_loop(mesh, marker: str = "AIRFOIL") -> np.ndarray:
+    """The node ids (n,) of a 2D mesh's closed wall ``marker`` in Selig order: the trailing edge (the
+    node of largest x) first, then the upper surface, the leading edge and the lower surface (the loop
+    runs counter-clockwise; the first node is not repeated at the end). Its line segments chained."""
     seg = np.concatenate([b.data for b in mesh.markers[marker]])
     nxt = dict(zip(seg[:, 0].tolist(), seg[:, 1].tolist()))
     start = int(seg[np.argmax(mesh.points[seg[:, 0], 0]), 0])
     loop = [start]
     while nxt[loop[-1]] != start:
         loop.append(nxt[loop[-1]])
-    xy = mesh.points[loop + [start], :2]
+    ids = np.asarray(loop, dtype=np.int64)
+    xy = mesh.points[np.append(ids, start), :2]
     area = 0.5 * np.sum(xy[:-1, 0] * xy[1:, 1] - xy[1:, 0] * xy[:-1, 1])
-    return xy if area > 0 else xy[::-1]
+    return ids if area > 0 else np.append(ids[:1], ids[1:][::-1])
+
+
+def wall_section(mesh_path: Path, marker: str = "AIRFOIL") -> np.ndarray:
+    """The wall of a 2D mesh as airfoil coordinates (n + 1, 2) in Selig order (trailing edge, the point
+    of largest x, first and last; upper surface first): :func:`wall_loop`, closed."""
+    mesh = read_mesh(mesh_path)
+    ids = wall_loop(mesh, marker)
+    return mesh.points[np.append(ids, ids[0]), :2]
 
 
 def main(argv=None) -> int:

@@ -20,7 +20,10 @@ Limit, measured: SU2 8.1's RANS flow (SA, JST, 2- or 3-level multigrid, CFL 20-5
 (97 points around, 25 along each side of the cut, 49 out, first cell 1e-5 chord) stalls near rms[Rho]
 -7.5 and then diverges after 250-420 iterations, at M 0.734 and at M 0.6; the meshes pass ``ffd check``
 (no cell below a scaled Jacobian of 0.4), and the cause (the cut's cells, 1e-5 chord high and up to
-tens of chords long near the outflow, are the suspects) is not yet found.
+tens of chords long near the outflow, are the suspects) is not yet found. On the finer ``rae2822_s1``
+(ADODG Case 2) the flow diverges at iteration 185 from an odd-even oscillation on the cut 0.1 chord
+behind the trailing edge, with 2 or 3 multigrid levels only: without multigrid or with 1 level it does
+not diverge (docs/adodg.md, Case 2).
 """
 
 from __future__ import annotations

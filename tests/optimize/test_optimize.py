@@ -8,16 +8,20 @@ from __future__ import annotations
 import csv
 import json
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import yaml
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from ffdcli.api import DesignModel
 from ffdcli.cli import main
 from ffdcli.design import load_design
 from ffdcli.design.optimize import optimize_settings, select_variables
 from ffdcli.errors import InputError
+from ffdcli.optimize.problem import OptimizationProblem
 from ffdcli.optimize.solvers.analytic import AnalyticSolver
 from ffdcli.optimize.workflow import run_optimize
 
@@ -341,3 +345,48 @@ def test_a_failed_concurrent_adjoint_is_recorded(tmp_path):
     rows = history(tmp_path / "opt" / "history.csv")
     assert "adjoint of LIFT" in rows[0]["failed"] and "diverged" in rows[0]["failed"]
     assert out["status"] != "converged"
+
+
+class _Ev:
+    """A finished evaluation as the store keeps it (what the warm start reads)."""
+
+    def __init__(self, name, values, gradients=()):
+        self.folder = Path(name)
+        self.values = np.asarray(values, dtype=float)
+        self.failed = None
+        self.functions = {"DRAG": 0.01}
+        self.gradients = {g: np.zeros(len(self.values)) for g in gradients}
+
+
+class _Store:
+    def __init__(self, evs):
+        self.evs = evs
+
+    def all(self):
+        return list(self.evs)
+
+
+def _problem(evs, warm_start=True):
+    model = SimpleNamespace(design=SimpleNamespace(mesh="m.su2"))
+    return OptimizationProblem(model, solver=None, store=_Store(evs), functions=["DRAG"], warm_start=warm_start)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.integers(2, 6), st.floats(0.05, 0.95), st.integers(0, 2**31 - 1))
+def test_a_trial_starts_from_the_nearest_accepted_design_not_a_nearer_rejected_trial(n, frac, seed):
+    """The warm start of a flow: the nearest evaluation with gradients (an accepted design) even when a
+    rejected trial (no gradients) is nearer; with no gradients anywhere, the nearest; an adjoint's start
+    needs that adjoint; none when warm starts are off."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=n)
+    d = rng.normal(size=n)
+    accepted = _Ev("accepted", x, gradients=["DRAG"])
+    far = _Ev("far_accepted", x + 10 * d, gradients=["DRAG"])
+    rejected = _Ev("rejected", x + frac * d)                  # nearer to the new trial than x is
+    trial = x + d
+    p = _problem([far, accepted, rejected])
+    assert p._nearest(trial) == Path("accepted")
+    assert p._nearest(trial, "DRAG") == Path("accepted")
+    assert _problem([rejected, _Ev("other", x)])._nearest(trial) == Path("rejected")
+    assert _problem([accepted, rejected], warm_start=False)._nearest(trial) is None
+    assert _problem([rejected])._nearest(trial, "DRAG") is None
