@@ -12,7 +12,12 @@ ruled loft root -> tip fused with the revolved cap); gmsh fills the fluid betwee
 
 Rebuild (from the repository root)::
 
-    python -m benchmarks.adodg.case3_meshes --out out/adodg3            # case3_L0.su2 ... case3_L2.su2
+    python -m benchmarks.adodg.case3_meshes --out out/adodg3                   # case3_L0.su2 ... case3_L2.su2
+    python -m benchmarks.adodg.case3_meshes --family hybrid --out out/adodg3   # case3_H0.su2 ... case3_H2.su2
+
+``--family hybrid`` builds the other family, :mod:`benchmarks.adodg.case3_hybrid` (a structured wing
+surface clustered chordwise at both edges, prism layers, tetrahedra beyond), which resolves the
+leading edge; the default family (``tets``) is unchanged.
 
 The levels differ by a factor :data:`RATIO` in every element size (wing, edges, far field); the number
 of points grows 1.6-1.7 times from one level to the next (unstructured: not nested). L0 is the CI
@@ -30,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from benchmarks.adodg.case3_hybrid import hybrid_levels, hybrid_mesh
 from ffdcli.io.formats import write_mesh
 from ffdcli.mesh import CellBlock, Mesh
 from ffdcli.quality.metrics import cell_quality
@@ -118,21 +124,27 @@ def make_level(level: Level) -> Mesh:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--out", default="out/adodg3", help="folder for case3_L*.su2")
-    ap.add_argument("--levels", nargs="*", default=None, help="names (default all: L0 L1 L2)")
+    ap.add_argument("--out", default="out/adodg3", help="folder for case3_<level>.su2")
+    ap.add_argument("--family", choices=("tets", "hybrid"), default="tets",
+                    help="tets: isotropic tetrahedra, L0 L1 L2 (default); hybrid: structured wing surface, "
+                         "prism layers and tetrahedra, H0 H1 H2")
+    ap.add_argument("--levels", nargs="*", default=None, help="names (default all of the family)")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    for level in levels():
+    family = levels() if a.family == "tets" else hybrid_levels()
+    build = make_level if a.family == "tets" else hybrid_mesh
+    for level in family:
         if a.levels and level.name not in a.levels:
             continue
         t0 = time.perf_counter()
-        mesh = make_level(level)
+        mesh = build(level)
         path = out / f"case3_{level.name}.su2"
         write_mesh(mesh, path)
-        nw = len(mesh.markers["wing"][0].data)
-        print(f"{path}: {len(mesh.points):,} points, {len(mesh.cells[0].data):,} tetrahedra, {nw:,} wing "
-              f"triangles ({time.perf_counter() - t0:.0f} s)")
+        cells = ", ".join(f"{len(c.data):,} {c.type}" for c in mesh.cells)
+        nw = sum(len(b.data) for b in mesh.markers["wing"])
+        print(f"{path}: {len(mesh.points):,} points, {cells}, {nw:,} wing triangles "
+              f"({time.perf_counter() - t0:.0f} s)")
     return 0
 
 

@@ -4,7 +4,7 @@ the mesh the flow ran on, against the ellipse of the same lift.
 
 ::
 
-    python -m benchmarks.adodg.case3_report RUN_FOLDER --mesh MESH.su2 [--cd0 CD0] [--strips 24] [--json]
+    python -m benchmarks.adodg.case3_report RUN_FOLDER --mesh MESH.su2 [--cd0 CD0] [--strips 24 | 0] [--json]
     python -m benchmarks.adodg.case3_report BASE_FOLDER BEST_FOLDER --plot spanload.png   # loads vs ellipse
 
 ``RUN_FOLDER`` holds ``surface_flow.csv`` and ``history.csv`` (CL, CD; ``history_direct.csv`` in a
@@ -31,6 +31,7 @@ from benchmarks.adodg.spanload import (
     load_efficiency,
     span_efficiency,
     strip_loads,
+    wall_stations,
 )
 from ffdcli.io.formats import read_mesh
 
@@ -78,8 +79,16 @@ def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, a
     cp = read_surface_cp(folder / "surface_flow.csv", len(mesh.points))
     if np.isnan(cp[np.unique(tris)]).any():
         raise SystemExit(f"{folder}: surface_flow.csv does not cover the wall of {mesh_path}")
-    # strips over [0, 3]; the tip cap (y > 3) is counted in the last strip
-    load = strip_loads(mesh.points, tris, cp, n_strips=n_strips, alpha_deg=alpha, span=SEMISPAN)
+    # strips over [0, 3]; the tip cap (y > 3) is counted in the last strip. n_strips 0: the strips
+    # between the wall's own spanwise stations (a wall meshed in spanwise rows: the hybrid family)
+    edges = None
+    if n_strips == 0:
+        edges = wall_stations(mesh.points, tris, SEMISPAN)
+        if edges is None:
+            raise SystemExit(f"{mesh_path}: the wall is not meshed in spanwise rows (--strips 0 needs them)")
+        # the cap's lift goes to the last strip: keep it as wide as the default's (1/24 of the semispan)
+        edges = edges[(edges <= SEMISPAN * (1.0 - 1.0 / 24.0)) | (edges == SEMISPAN)]
+    load = strip_loads(mesh.points, tris, cp, n_strips=n_strips, alpha_deg=alpha, span=SEMISPAN, edges=edges)
     diff = ellipse_difference(load, SEMISPAN)
     coef = fourier_coefficients(load, SEMISPAN)
     hist = last_history(history_file(folder))
@@ -121,7 +130,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plot", type=Path, default=None, help="write the loads against the ellipse here")
     ap.add_argument("--mesh", type=Path, default=None)
     ap.add_argument("--cd0", type=float, default=None)
-    ap.add_argument("--strips", type=int, default=24)
+    ap.add_argument("--strips", type=int, default=24,
+                    help="equal strips over the semispan; 0: the strips between the wall's own spanwise "
+                         "stations (a wall meshed in spanwise rows, as the hybrid family's)")
     ap.add_argument("--alpha", type=float, default=None)
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)

@@ -78,10 +78,12 @@ def triangle_forces(points: np.ndarray, tris: np.ndarray, cp: np.ndarray) -> tup
 
 
 def strip_loads(points: np.ndarray, tris: np.ndarray, cp: np.ndarray, *, n_strips: int, alpha_deg: float,
-                span_axis: int = 1, span: float | None = None) -> SpanLoad:
+                span_axis: int = 1, span: float | None = None, edges: np.ndarray | None = None) -> SpanLoad:
     """Span load ``c cl`` in ``n_strips`` equal strips from the root to ``span`` (default: the wall's
-    largest span coordinate), each triangle's lift counted in the strip of its centroid (a centroid
-    beyond ``span``, on a tip cap, in the last strip: the total is every triangle's lift).
+    largest span coordinate), or in the strips between ``edges`` (N + 1,) (increasing, from 0 to the
+    span: e.g. :func:`wall_stations` of a wall meshed in spanwise rows, whose triangles then fall
+    whole in their own strip), each triangle's lift counted in the strip of its centroid (a centroid
+    beyond the last edge, on a tip cap, in the last strip: the total is every triangle's lift).
 
     Parameters as :func:`triangle_forces`; ``alpha_deg`` sets the lift direction
     ``(-sin a, 0, cos a)``.
@@ -96,11 +98,26 @@ def strip_loads(points: np.ndarray, tris: np.ndarray, cp: np.ndarray, *, n_strip
     lift_dir = np.zeros(3)
     lift_dir[0], lift_dir[2] = -np.sin(a), np.cos(a)
     lift = force @ lift_dir
-    s = float(points[np.unique(tris), span_axis].max()) if span is None else float(span)
-    edges = np.linspace(0.0, s, n_strips + 1)
-    idx = np.clip(np.searchsorted(edges, centroid[:, span_axis], side="right") - 1, 0, n_strips - 1)
-    per = np.bincount(idx, weights=lift, minlength=n_strips)
+    if edges is None:
+        s = float(points[np.unique(tris), span_axis].max()) if span is None else float(span)
+        edges = np.linspace(0.0, s, n_strips + 1)
+    edges = np.asarray(edges, dtype=float)
+    n = len(edges) - 1
+    idx = np.clip(np.searchsorted(edges, centroid[:, span_axis], side="right") - 1, 0, n - 1)
+    per = np.bincount(idx, weights=lift, minlength=n)
     return SpanLoad(edges=edges, ccl=per / np.diff(edges), cl_total=float(lift.sum()))
+
+
+def wall_stations(points: np.ndarray, tris: np.ndarray, span: float, *, span_axis: int = 1,
+                  most: int = 400) -> np.ndarray | None:
+    """The distinct span coordinates (K,) of the wall's nodes from 0 to ``span``, when the wall is
+    meshed in spanwise rows (at most ``most`` distinct values, the first 0 and the last ``span``);
+    None for an unstructured wall."""
+    y = np.unique(points[np.unique(tris), span_axis])
+    y = y[(y >= 0.0) & (y <= span)]
+    if len(y) > most or len(y) < 2 or y[0] != 0.0 or y[-1] != span:
+        return None
+    return y
 
 
 def ellipse_strips(edges: np.ndarray, cl_total: float, s: float) -> np.ndarray:

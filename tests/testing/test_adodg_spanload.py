@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from benchmarks.adodg.spanload import (
@@ -16,6 +16,7 @@ from benchmarks.adodg.spanload import (
     load_efficiency,
     span_efficiency,
     strip_loads,
+    wall_stations,
 )
 
 
@@ -104,3 +105,35 @@ def test_strip_loads_integrate_a_known_pressure_jump(alpha):
     assert load.cl_total == pytest.approx(ca * cl, rel=1e-3)
     d = ellipse_difference(SpanLoad(load.edges, load.ccl / ca, load.cl_total / ca), s)
     assert d.rms < 0.5
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), n_span=st.integers(3, 60), alpha=st.floats(0.0, 6.0))
+def test_station_strips_hold_each_row_of_a_wall_meshed_in_rows(seed, n_span, alpha):
+    """Strips between the wall's own spanwise stations (irregular) hold each row of triangles whole:
+    the strip load of a jump that varies along the span is its trapezoid mean over the row, exactly,
+    where equal strips that cut the rows would alias."""
+    rng = np.random.default_rng(seed)
+    s = 3.0
+    y = np.concatenate([[0.0], np.sort(rng.uniform(0.0, s, n_span - 1)), [s]])
+    assume(bool(np.all(np.diff(y) > 1e-6)))
+    points, tris = plate_wing(6, n_span, s)
+    n = len(points) // 2
+    rows = np.rint(points[:n, 1] / s * n_span).astype(int)
+    points[:n, 1] = y[rows]
+    points[n:, 1] = y[rows]
+    f = 0.3 + np.sin(2.0 * y / s) + 0.2 * rng.standard_normal(len(y))      # c cl at each station
+    cp = np.concatenate([-0.5 * f[rows], 0.5 * f[rows]])
+    edges = wall_stations(points, tris, s)
+    assert np.array_equal(edges, y)
+    load = strip_loads(points, tris, cp, n_strips=0, alpha_deg=alpha, edges=edges)
+    ca = np.cos(np.radians(alpha))
+    assert np.allclose(load.ccl, ca * 0.5 * (f[1:] + f[:-1]), rtol=1e-12, atol=1e-12)
+
+
+def test_wall_stations_refuse_an_unstructured_wall():
+    rng = np.random.default_rng(1)
+    points = np.stack([rng.uniform(0, 1, 2000), rng.uniform(0, 3, 2000), np.zeros(2000)], axis=1)
+    points[0, 1], points[1, 1] = 0.0, 3.0
+    tris = np.arange(1998).reshape(-1, 3)
+    assert wall_stations(points, np.concatenate([tris, [[0, 1, 2]]]), 3.0) is None
