@@ -39,6 +39,8 @@ from ffdcli.testing.naca import polygon_area
 TE_BLEND = 0.03
 #: The start tangent's length (chords) of each line's Hermite curve: how far it follows the normal.
 NORMAL_REACH = 0.5
+#: Growth of the wake cut's first cell with the distance behind the trailing edge (chord per chord).
+WAKE_GROWTH = 1e-3
 
 
 def read_airfoil(path) -> np.ndarray:
@@ -168,10 +170,13 @@ def _far_points(line0: np.ndarray, w0: int, w1: int, length: float) -> np.ndarra
 
 
 def _lines(line0: np.ndarray, normal: np.ndarray, outer: np.ndarray, chord: float, first: float,
-           n_normal: int) -> np.ndarray:
+           n_normal: int, extra: np.ndarray) -> np.ndarray:
     """The grid (I, n_normal, 2): each line a cubic Hermite curve from its start point (tangent
     ``NORMAL_REACH`` chords along its start direction) to its far-field point, sampled finely near its
-    start, its points placed by arc length with geometric growth from ``first``."""
+    start, its points placed by arc length with geometric growth from ``first``, plus ``extra`` (I,)
+    times ``j (1 - d_j / L)`` at its point ``j`` (``d_j`` the geometric distance, ``L`` the line's
+    length): a first cell ``first + extra`` that fades into the geometric one, the far field's point
+    unchanged, and neighbouring lines' points shifted by ``j`` times their difference in ``extra``."""
     t = np.linspace(0.0, 1.0, 4001) ** 3
     h00, h10, h01, h11 = 2 * t**3 - 3 * t**2 + 1, t**3 - 2 * t**2 + t, -2 * t**3 + 3 * t**2, t**3 - t**2
     curve = (h00[None, :, None] * line0[:, None] + h10[None, :, None] * (NORMAL_REACH * chord * normal)[:, None]
@@ -179,6 +184,7 @@ def _lines(line0: np.ndarray, normal: np.ndarray, outer: np.ndarray, chord: floa
     arc = np.concatenate([np.zeros((len(line0), 1)),
                           np.cumsum(np.linalg.norm(np.diff(curve, axis=1), axis=2), axis=1)], axis=1)
     dist = _geometric(np.full(len(line0), first), arc[:, -1], n_normal - 1)
+    dist += extra[:, None] * np.arange(n_normal) * (1.0 - dist / dist[:, -1:])
     grid = np.empty((len(line0), n_normal, 2))
     for c in range(2):                                  # per coordinate, line by line (not point by point)
         grid[..., c] = np.array([np.interp(dist[i], arc[i], curve[i, :, c]) for i in range(len(line0))])
@@ -187,7 +193,7 @@ def _lines(line0: np.ndarray, normal: np.ndarray, outer: np.ndarray, chord: floa
 
 
 def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97, first_cell: float = 1.5e-6,
-           farfield: float = 100.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           farfield: float = 100.0, wake_growth: float = WAKE_GROWTH) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The structured C-grid (see the module docstring) and its boundary lines.
 
     Parameters
@@ -207,6 +213,9 @@ def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97
     farfield : float
         Distance (chords) of the far field from the trailing edge: the radius of the half circle in
         front, the height of the lines above and below the cut, the length of the cut.
+    wake_growth : float
+        The cells on the wake cut are ``first_cell + wake_growth * x`` high, ``x`` the distance behind
+        the trailing edge (chords; 0 carries the wall's first cell down the whole cut).
 
     Returns
     -------
@@ -225,7 +234,11 @@ def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97
     line0, w0, w1, chord = _cut_and_wall(airfoil_xy, n_around, n_wake, farfield)
     normal = _start_directions(line0, w0, w1, chord)
     outer = _far_points(line0, w0, w1, farfield * chord)
-    grid = _lines(line0, normal, outer, chord, first_cell * chord, n_normal)
+    if not wake_growth >= 0:
+        raise ValueError(f"wake_growth {wake_growth}: expected >= 0")
+    behind = np.clip(line0[:, 0] - line0[w0, 0], 0.0, None)
+    behind[w0:w1 + 1] = 0.0                             # the wall's lines keep their first cell
+    grid = _lines(line0, normal, outer, chord, first_cell * chord, n_normal, wake_growth * behind)
     n_lines = len(line0)
     # one index per point: the cut's two sides and the trailing edge's two lines share theirs
     ids = np.arange(n_lines * n_normal).reshape(n_lines, n_normal)
@@ -249,10 +262,10 @@ def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97
 
 
 def cmesh(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97, first_cell: float = 1.5e-6,
-          farfield: float = 100.0) -> Mesh:
+          farfield: float = 100.0, wake_growth: float = WAKE_GROWTH) -> Mesh:
     """:func:`c_grid` as a 2D :class:`~ffdcli.mesh.Mesh`: ``dim=2``, points (N, 3) with z = 0, one
     ``quad`` block, markers ``airfoil`` and ``farfield`` (``line`` blocks; the cut has none)."""
-    _, _, xy, quads, lines = c_grid(airfoil_xy, n_around, n_wake, n_normal, first_cell, farfield)
+    _, _, xy, quads, lines = c_grid(airfoil_xy, n_around, n_wake, n_normal, first_cell, farfield, wake_growth)
     pts = np.zeros((len(xy), 3))
     pts[:, :2] = xy
     return Mesh(points=pts, dim=2, cells=[CellBlock("quad", quads)],

@@ -102,3 +102,31 @@ def test_a_blunt_trailing_edge_is_closed_to_its_mid_point(dy_up, dy_lo):
     assert np.allclose(closed[:, 0], blunt[:, 0])                              # a shear in y only
     assert polygon_area(closed) > 0
     assert np.array_equal(close_trailing_edge(xy), xy)                         # sharp: unchanged
+
+
+@settings(max_examples=12, deadline=None)
+@given(growth=st.sampled_from([0.0, 1e-4, 1e-3, 3e-3]), first=st.sampled_from([1e-6, 1e-5]),
+       n_wake=st.integers(17, 41))
+def test_the_wake_cuts_cells_grow_downstream_as_asked(growth, first, n_wake):
+    """On the cut the first cell is ``first + growth * x`` (x behind the trailing edge), on both sides,
+    the wall's lines keep ``first``, the far field does not move, and no cell inverts or shears."""
+    xy = naca4("2412", 121)
+    grid, ids, pts, quads, _ = c_grid(xy, 97, n_wake, 49, first, 100.0, wake_growth=growth)
+    ref, *_ = c_grid(xy, 97, n_wake, 49, first, 100.0, wake_growth=0.0)
+    w0, w1 = n_wake, grid.shape[0] - 1 - n_wake
+    for side in (slice(0, w0 + 1), slice(w1, None)):
+        x = grid[side, 0, 0] - grid[w0, 0, 0]
+        h = np.linalg.norm(grid[side, 1] - grid[side, 0], axis=1)
+        assert np.allclose(h, first + growth * x, rtol=2e-3)
+    assert np.allclose(np.linalg.norm(grid[w0:w1 + 1, 1] - grid[w0:w1 + 1, 0], axis=1), first, rtol=1e-3)
+    assert np.array_equal(grid[:, -1], ref[:, -1])                            # the far field as before
+    assert quad_areas(pts, quads).min() > 0
+    assert np.all(np.diff(np.abs(grid[:w0, :, 1] - grid[w0, 0, 1]), axis=1) > 0)   # monotone up each line
+
+
+def test_the_default_c_mesh_grows_its_wake_cut():
+    """The default: 1e-3 of the distance behind the trailing edge, not the wall's first cell carried down
+    the cut (on which SU2's multigrid diverged, docs/adodg.md Case 2)."""
+    grid, *_ = c_grid(naca4("2412", 121), 97, 25, 49, 1e-6, 100.0)
+    x = grid[0, 0, 0] - grid[25, 0, 0]
+    assert x > 50 and np.isclose(abs(grid[0, 1, 1] - grid[0, 0, 1]), 1e-6 + 1e-3 * x, rtol=2e-3)
