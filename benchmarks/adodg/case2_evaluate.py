@@ -225,7 +225,8 @@ def check_inputs(design: Path, run: Path, mesh: Path) -> None:
 
 
 def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, evaluation: int | None = None,
-             run_solve: bool = True, iterations: int = 3000, multigrid: int | None = None) -> dict:
+             run_solve: bool = True, iterations: int = 3000, multigrid: int | None = None,
+             cfl: float | None = None) -> dict:
     """Evaluate an evaluation of the run on ``mesh``; see the module docstring. Returns the summary,
     also written to ``WORK/eNNNN/evaluation.json``."""
     design, run, mesh = Path(design), Path(run), Path(mesh).resolve()
@@ -274,12 +275,13 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, evaluation: int
     out["area_ratio_run_mesh"] = area_ratio(base_run, des_run)
 
     if run_solve:
-        kw = {"iterations": iterations, "multigrid": multigrid}
+        kw = {"iterations": iterations, "multigrid": multigrid, "cfl": cfl}
+        # the two alpha solves first: a sitting stopped before the fixed-CL ones still compares the pair
         b_alpha = reuse_or_solve(mesh, "alpha", Path(work) / "baseline" / "alpha", **kw)
-        b_cl = reuse_or_solve(mesh, "cl", Path(work) / "baseline" / "cl",
-                              restart=Path(work) / "baseline" / "alpha" / "restart_flow.dat", **kw)
         d_alpha = reuse_or_solve(fine.resolve(), "alpha", folder / "alpha",
                                  restart=Path(work) / "baseline" / "alpha" / "restart_flow.dat", **kw)
+        b_cl = reuse_or_solve(mesh, "cl", Path(work) / "baseline" / "cl",
+                              restart=Path(work) / "baseline" / "alpha" / "restart_flow.dat", **kw)
         d_cl = reuse_or_solve(fine.resolve(), "cl", folder / "cl", restart=folder / "alpha" / "restart_flow.dat", **kw)
         out["baseline"] = {"alpha": b_alpha, "cl": b_cl}
         out["solves"] = {"alpha": d_alpha, "cl": d_cl}
@@ -346,12 +348,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--evaluation", type=int, help="this evaluation of the run instead of its best")
     ap.add_argument("--iterations", type=int, default=3000, help="SU2's ITER for each solve (default 3000)")
     ap.add_argument("--multigrid", type=int, help="SU2's MGLEVEL for the solves instead of case2.cfg's 3")
+    ap.add_argument("--cfl", type=float, help="a fixed CFL for the solves instead of case2.cfg's adapted one")
     ap.add_argument("--no-solve", action="store_true", help="the lattice, shape, boundary-layer and area checks only")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args(argv)
     try:
         out = evaluate(args.design, args.run, args.mesh, args.work, evaluation=args.evaluation,
-                       run_solve=not args.no_solve, iterations=args.iterations, multigrid=args.multigrid)
+                       run_solve=not args.no_solve, iterations=args.iterations, multigrid=args.multigrid,
+                       cfl=args.cfl)
     except (EvaluationError, SolveError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 2

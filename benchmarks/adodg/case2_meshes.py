@@ -1,6 +1,7 @@
 """The meshes of ADODG Case 2 (RAE2822, RANS): SU2's own RAE2822 RANS mesh, copied from the shared data,
 and ffd's C-meshes (:func:`ffdcli.testing.cmesh.cmesh`: a sharp trailing edge, the first cell for
-y+ < 1 at Re 6.5e6, the far field 100 chords from the trailing edge, a conforming wake cut).
+y+ < 1 at Re 6.5e6, the far field 100 chords from the trailing edge, a conforming wake cut whose first
+cell grows downstream, ``first cell + 1e-3 x`` at ``x`` chords behind the trailing edge).
 
 Rebuild (from the repository root)::
 

@@ -39,11 +39,13 @@ WRITE_EVERY = 50           # iterations between SU2's restart (and surface) file
 
 
 def solve_config(mesh: Path, mode: str, *, restart: Path | None = None, iterations: int = 3000,
-                 multigrid: int | None = None) -> str:
+                 multigrid: int | None = None, cfl: float | None = None) -> str:
     """case2.cfg for ``mesh`` (absolute path) at ``mode`` ('alpha' or 'cl'), capped at ``iterations``,
     warm-started from ``restart`` (an SU2 restart on a mesh of the same nodes) and then one order tighter;
     ``multigrid`` levels instead of case2.cfg's 3 when given (the converged solution does not depend on
-    them: on ffd's C-meshes SU2 diverges with 2 or 3, docs/adodg.md Case 2)."""
+    them: on a C-mesh whose cut carried the wall's first cell SU2 diverged with 2 or 3, docs/adodg.md Case 2);
+    ``cfl``, when given, a fixed CFL instead of case2.cfg's adapted one (on ``rae2822_s1`` SU2's adaptation
+    cut the CFL from 50 to 1 where a warm-started flow stalled near rms[Rho] -8.4, and the flow diverged)."""
     if mode not in ("alpha", "cl"):
         raise ValueError(f"mode {mode!r}: expected 'alpha' or 'cl'")
     lines = case_config(Path(mesh), mode).splitlines()
@@ -53,6 +55,8 @@ def solve_config(mesh: Path, mode: str, *, restart: Path | None = None, iteratio
         keys["CONV_CAUCHY_EPS"] = f"{CAUCHY_EPS:g}"
     if multigrid is not None:
         keys["MGLEVEL"] = str(int(multigrid))
+    if cfl is not None:
+        keys.update(CFL_ADAPT="NO", CFL_NUMBER=f"{float(cfl):g}")
     if restart is not None:
         minval = float(config_value(lines, "CONV_RESIDUAL_MINVAL") or -8)
         keys.update(RESTART_SOL="YES", SOLUTION_FILENAME=str(Path(restart).resolve()),
@@ -61,11 +65,11 @@ def solve_config(mesh: Path, mode: str, *, restart: Path | None = None, iteratio
 
 
 def run_solve(mesh: Path, mode: str, folder: Path, *, restart: Path | None = None, iterations: int = 3000,
-              multigrid: int | None = None, nice: int = 10) -> dict:
+              multigrid: int | None = None, cfl: float | None = None, nice: int = 10) -> dict:
     """SU2_CFD on ``mesh`` in ``folder`` (created) under ``nice -n nice``; returns :func:`read_solve`."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "flow.cfg").write_text(solve_config(mesh, mode, restart=restart, iterations=iterations,
-                                                  multigrid=multigrid))
+                                                  multigrid=multigrid, cfl=cfl))
     return launch(folder, {"mesh": str(Path(mesh).resolve()), "mode": mode,
                            "restart": None if restart is None else str(restart), "pieces": []}, nice)
 

@@ -10,20 +10,23 @@ Each grid line ``i`` leaves its wall point (or cut point) along the wall normal 
 up from the cut) and bends into the straight line to its far-field point (a cubic Hermite curve),
 with the points placed along its arc length by geometric growth from ``first_cell``: the wall cells
 are orthogonal and exactly ``first_cell`` high. Near the trailing edge the start directions are
-averaged over a few hundredths of a chord (no two lines cross where the surfaces meet); along the
-cut the first cell grows downstream (``first_cell`` at the trailing edge, 1e-4 × the distance from it
-beyond), so the wake cells are not ten million times longer than high.
+averaged over a few hundredths of a chord (no two lines cross where the surfaces meet). Along the
+cut the first cell grows downstream: ``first_cell + wake_growth * x`` at ``x`` behind the trailing edge
+(``WAKE_GROWTH`` = 1e-3: 1e-4 chord at 0.1 chord, 1e-3 at 1, 0.1 at the outflow), the extra height added
+as ``wake_growth * x * j`` fading to nothing at the far field (:func:`_lines`), so the far field does
+not move and neighbouring cut lines' points differ by at most ``wake_growth * j`` per unit of their
+spacing (no shear); the wall's lines keep ``first_cell``.
 
 ``python -m benchmarks.adodg.case2_meshes --out out/adodg`` writes the RAE2822's (ADODG Case 2).
 
-Limit, measured: SU2 8.1's RANS flow (SA, JST, 2- or 3-level multigrid, CFL 20-50) on a coarse one
-(97 points around, 25 along each side of the cut, 49 out, first cell 1e-5 chord) stalls near rms[Rho]
--7.5 and then diverges after 250-420 iterations, at M 0.734 and at M 0.6; the meshes pass ``ffd check``
-(no cell below a scaled Jacobian of 0.4), and the cause (the cut's cells, 1e-5 chord high and up to
-tens of chords long near the outflow, are the suspects) is not yet found. On the finer ``rae2822_s1``
-(ADODG Case 2) the flow diverges at iteration 185 from an odd-even oscillation on the cut 0.1 chord
-behind the trailing edge, with 2 or 3 multigrid levels only: without multigrid or with 1 level it does
-not diverge (docs/adodg.md, Case 2).
+Limit, measured: with the wall's first cell carried down the whole cut (``wake_growth=0``: cells 1e-6
+chord high and up to 12 chords long at the outflow) SU2 8.1's RANS flow (SA, JST, 3-level W multigrid,
+CFL 50) on ``rae2822_s1`` (ADODG Case 2) diverged at iteration 185 from an odd-even oscillation of the
+density on the cut 0.1 to 0.5 chord behind the trailing edge (with 2 or 3 multigrid levels; 0 or 1
+did not diverge but did not converge either); with the default growth the same solve converges to
+rms[Rho] -8 (docs/adodg.md, Case 2). On a coarse mesh (97 points around, 25 along each side of the cut,
+49 out, first cell 1e-5 chord) with the cut at the wall's first cell the flow stalled near rms[Rho]
+-7.5 and diverged after 250-420 iterations; not run again with the growing cut.
 """
 
 from __future__ import annotations

@@ -241,6 +241,10 @@ def test_solve_config_at_alpha_and_at_the_lift(meshes, tmp_path):
     assert config_value(c, "CONV_RESIDUAL_MINVAL") == "-9" and config_value(c, "ITER") == "50"
     assert config_value(a, "MGLEVEL") == "3" and config_value(solve_config(fine, "alpha", multigrid=1).splitlines(),
                                                               "MGLEVEL") == "1"
+    assert config_value(a, "CFL_ADAPT") == "YES"                           # case2.cfg's adapted CFL by default
+    for cfl in (20.0, 50.0):
+        f = solve_config(fine, "cl", restart=tmp_path / "r.dat", cfl=cfl).splitlines()
+        assert config_value(f, "CFL_ADAPT") == "NO" and float(config_value(f, "CFL_NUMBER")) == cfl
     with pytest.raises(ValueError, match="expected 'alpha' or 'cl'"):
         solve_config(fine, "mach")
 
