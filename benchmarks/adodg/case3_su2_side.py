@@ -153,13 +153,14 @@ def wing_points(mesh) -> np.ndarray:
     return mesh.points[ids]
 
 
-def write_configs(mesh: Path, folder: Path) -> dict:
+def write_configs(mesh: Path, folder: Path, config: Path = CONFIG) -> dict:
     """Copy ``mesh`` to ``folder/mesh.su2``; write ``box.cfg`` (SU2_DEF embeds the box), ``config.cfg`` (the
-    optimisation, on ``mesh_ffd.su2``) and ``box.json``; no SU2 program runs. Returns box.json's dict."""
-    lines = read_config(CONFIG)
+    optimisation, on ``mesh_ffd.su2``, with ``config``'s flow settings: ``case3.cfg`` by default,
+    ``case3_hybrid.cfg`` for the hybrid family) and ``box.json``; no SU2 program runs. Returns box.json's dict."""
+    lines = read_config(config)
     ref = float(config_value(lines, "REF_LENGTH") or 1.0)
     if ref != 1.0:
-        raise ValueError(f"{CONFIG}: REF_LENGTH {ref}; the twist bounds assume 1 (SU2's angle is atan(v / REF_LENGTH))")
+        raise ValueError(f"{config}: REF_LENGTH {ref}; the twist bounds assume 1 (SU2's angle is atan(v / REF_LENGTH))")
     m = read_mesh(mesh)
     if WING not in m.markers or m.dim != 3:
         raise ValueError(f"{mesh}: expected a 3-D mesh with a marker {WING!r}")
@@ -170,7 +171,7 @@ def write_configs(mesh: Path, folder: Path) -> dict:
     (folder / "box.cfg").write_text(with_keys(lines, {**keys, "MESH_OUT_FILENAME": "mesh_ffd.su2"}))
     (folder / "config.cfg").write_text(with_keys(lines, {**keys, "MESH_FILENAME": "mesh_ffd.su2"}))
     info = {**box, "stations": stations(box).tolist(), "source_mesh": str(mesh), "wing_nodes": int(len(wing_points(m))),
-            "bound_deg": BOUND_DEG, "alpha": float(config_value(lines, "AOA"))}
+            "bound_deg": BOUND_DEG, "alpha": float(config_value(lines, "AOA")), "flow_config": str(config)}
     (folder / "box.json").write_text(json.dumps(info, indent=1))
     return info
 
@@ -183,11 +184,11 @@ def mapped_nodes(log: str) -> tuple[int, int, int]:
     return tuple(int(v) for v in m.groups())
 
 
-def setup(mesh: Path, folder: Path) -> Path:
+def setup(mesh: Path, folder: Path, config: Path = CONFIG) -> Path:
     """:func:`write_configs`, then ``SU2_DEF box.cfg`` (the box embedded into ``mesh_ffd.su2``); raises if a
     wing node is left outside the box."""
     folder = Path(folder)
-    info = write_configs(Path(mesh), folder)
+    info = write_configs(Path(mesh), folder, Path(config))
     run_program([str(su2_bin() / "SU2_DEF"), "box.cfg"], folder, "box.log")
     total, inside, mapped = mapped_nodes((folder / "box.log").read_text())
     if not total == inside == mapped == info["wing_nodes"]:
@@ -231,16 +232,16 @@ def elapsed(folder: Path) -> float | None:
     return max(p.stat().st_mtime for p in (folder / "DESIGNS").rglob("*") if p.is_file()) - start
 
 
-def span_row(dsn: Path, alpha: float, cd0: float | None) -> dict | None:
+def span_row(dsn: Path, alpha: float, cd0: float | None, n_strips: int = STRIPS) -> dict | None:
     """Span load and efficiency of a design's flow (``DIRECT/``): :func:`benchmarks.adodg.case3_report.report`."""
     direct = dsn / "DIRECT"
     mesh = design_mesh(dsn)
     if mesh is None or not (direct / "surface_flow.csv").is_file():
         return None
-    return load_report(direct, mesh, cd0=cd0, n_strips=STRIPS, alpha=alpha)
+    return load_report(direct, mesh, cd0=cd0, n_strips=n_strips, alpha=alpha)
 
 
-def report(folder: Path, cd0: float | None = None) -> dict:
+def report(folder: Path, cd0: float | None = None, n_strips: int = STRIPS) -> dict:
     """What a (finished or running) run reached: solves, every design's CD, CL and twists (degrees, root
     first, and relative to the root), the best design meeting the lift equality, and the span load of the
     baseline and of that design against the ellipse."""
@@ -269,7 +270,7 @@ def report(folder: Path, cd0: float | None = None) -> dict:
            "designs": rows, "best": best, "alpha": alpha, "stations": info["stations"],
            "baseline_gradient_per_deg": {f: gradient_per_degree(first, f, base_values) for f in ("DRAG", "LIFT")}}
     for key, r in (("baseline_load", rows[0] if rows else None), ("best_load", best)):
-        load = None if r is None else span_row(folder / "DESIGNS" / r["design"], alpha, cd0)
+        load = None if r is None else span_row(folder / "DESIGNS" / r["design"], alpha, cd0, n_strips)
         out[key] = None if load is None else {k: load[k] for k in ("CL", "CD", "CL_strips", "rms_pct", "max_pct",
                                                                    "e_load", "e_drag") if k in load}
     return out
@@ -314,11 +315,16 @@ def summary(rep: dict) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap, _, p = side_parser("python -m benchmarks.adodg.case3_su2_side", __doc__.split("\n")[0],
+    ap, s, p = side_parser("python -m benchmarks.adodg.case3_su2_side", __doc__.split("\n")[0],
                            "write config.cfg and embed SU2's box into FOLDER/mesh_ffd.su2",
                            "solves, CD, CL, twists, the best design's span load and e")
+    s.add_argument("--config", type=Path, default=CONFIG,
+                   help="the flow settings (default configs/adodg/case3.cfg; configs/adodg/case3_hybrid.cfg for H0-H2)")
     p.add_argument("--cd0", type=float, default=None, help="the mesh's zero-lift drag, for e from the drag")
-    return dispatch(ap.parse_args(argv), lambda a: setup(a.mesh, a.folder), lambda a: report(a.folder, a.cd0),
+    p.add_argument("--strips", type=int, default=STRIPS,
+                   help=f"equal spanwise strips (default {STRIPS}); 0: strips between the wall's own spanwise stations")
+    return dispatch(ap.parse_args(argv), lambda a: setup(a.mesh, a.folder, a.config),
+                    lambda a: report(a.folder, a.cd0, a.strips),
                     summary)
 
 

@@ -149,6 +149,17 @@ def test_write_configs_keeps_case3s_flow_and_runs_nothing(tmp_path):
     assert json.loads((run / "box.json").read_text())["stations"] == pytest.approx(list(np.linspace(0, 3 + 1e-5, 9)))
 
 
+def test_write_configs_takes_the_hybrid_familys_flow_settings_when_asked(tmp_path):
+    hybrid = CONFIG.parent / "case3_hybrid.cfg"
+    write_mesh(tiny_mesh(naca_wing(1.0, 3.0, 0.0, 0.0)), tmp_path / "w.su2")
+    info = write_configs(tmp_path / "w.su2", tmp_path / "run", hybrid)
+    cfg = read_config(tmp_path / "run" / "config.cfg")
+    aoa = config_value(read_config(hybrid), "AOA")
+    assert config_value(cfg, "AOA") == aoa != config_value(read_config(CONFIG), "AOA")
+    assert info["alpha"] == float(config_value(read_config(hybrid), "AOA")) and info["flow_config"] == str(hybrid)
+    assert config_value(cfg, "MESH_FILENAME") == "mesh_ffd.su2"
+
+
 def test_write_configs_refuses_a_mesh_without_the_wing(tmp_path):
     m = tiny_mesh(naca_wing(1.0, 3.0, 0.0, 0.0))
     m = Mesh(points=m.points, dim=3, cells=m.cells, markers={"body": m.markers["wing"]})
