@@ -282,10 +282,14 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, evaluation: int
                                  restart=Path(work) / "baseline" / "alpha" / "restart_flow.dat", **kw)
         b_cl = reuse_or_solve(mesh, "cl", Path(work) / "baseline" / "cl",
                               restart=Path(work) / "baseline" / "alpha" / "restart_flow.dat", **kw)
-        d_cl = reuse_or_solve(fine.resolve(), "cl", folder / "cl", restart=folder / "alpha" / "restart_flow.dat", **kw)
+        # the design's fixed-CL solve starts from its alpha solution, unless that solve diverged (its restart,
+        # written every 50 iterations, then holds the diverged state): then from the baseline's alpha solution
+        start = folder / "alpha" if finished(d_alpha) else Path(work) / "baseline" / "alpha"
+        d_cl = reuse_or_solve(fine.resolve(), "cl", folder / "cl", restart=start / "restart_flow.dat", **kw)
         out["baseline"] = {"alpha": b_alpha, "cl": b_cl}
         out["solves"] = {"alpha": d_alpha, "cl": d_cl}
-        out["reduction"] = {"alpha": 1.0 - d_alpha["cd"] / b_alpha["cd"], "cl": 1.0 - d_cl["cd"] / b_cl["cd"]}
+        out["reduction"] = {c: 1.0 - out["solves"][c]["cd"] / out["baseline"][c]["cd"] for c in ("alpha", "cl")
+                            if finished(out["solves"][c]) and finished(out["baseline"][c])}
     out["reduction_run"] = {}
     if base_row is not None:
         out["reduction_run"]["alpha"] = 1.0 - float(row["objective"]) / float(base_row["objective"])
@@ -293,6 +297,12 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, evaluation: int
         out["reduction_run"]["cl"] = 1.0 - float(row["objective"]) / RUN_BASELINE_CL_CD[run_mesh.stem]
     (folder / "evaluation.json").write_text(json.dumps(out, indent=1))
     return out
+
+
+def finished(solve: dict) -> bool:
+    """Whether a solve ended without diverging (SU2's exit code 0, a finite residual): its coefficients are
+    its last iteration's, converged or not by the criterion."""
+    return solve["rc"] == 0 and bool(np.isfinite(solve["residual"]))
 
 
 def solve_line(label: str, s: dict) -> str:

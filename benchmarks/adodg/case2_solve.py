@@ -15,7 +15,8 @@ the exit code). Two conditions:
 
 The result of a folder (:func:`read_solve`): CD, CL, CM(c/4) nose-up positive (SU2's CMz negated, see
 docs/adodg.md "the sign"), the angle of attack (fixed CL: SU2's last "Previous AOA" plus "Changed AoA
-by"), iterations, the final rms[Rho], converged or not with the criterion, wall and CPU seconds.
+by", else the ``AOA`` of SU2's ``flow.meta``), iterations, the final rms[Rho], converged or not with the
+criterion, wall and CPU seconds.
 """
 
 from __future__ import annotations
@@ -139,6 +140,19 @@ def fixed_cl_alpha(log_text: str) -> float | None:
     return aoa
 
 
+def meta_alpha(meta_text: str) -> float | None:
+    """The angle of attack in SU2's ``flow.meta`` (``AOA= ...``, written with each restart: the angle of the
+    last restart written, in fixed-CL mode the trimmed one)."""
+    for line in meta_text.splitlines():
+        key, _, value = line.partition("=")
+        if key.strip() == "AOA":
+            try:
+                return float(value)
+            except ValueError:
+                return None
+    return None
+
+
 def read_solve(folder: Path) -> dict:
     """The finished solve in ``folder`` (``run.json``, ``flow.cfg``, ``history.csv``, ``log.txt``).
 
@@ -165,6 +179,8 @@ def read_solve(folder: Path) -> dict:
         last = int(hist["Inner_Iter"][-1]) + 1                    # this piece's iterations, against ITER
         out["converged"] = bool(rms <= target and abs(cl - TARGET_CL) < eps / 2 and last < limit)
         out["alpha"] = fixed_cl_alpha((folder / "log.txt").read_text(errors="replace"))
+        if out["alpha"] is None and (folder / "flow.meta").is_file():       # SU2 8 does not always log it
+            out["alpha"] = meta_alpha((folder / "flow.meta").read_text(errors="replace"))
     else:
         out["criterion"] = f"rms[Rho] <= {target:g}"
         out["converged"] = bool(rms <= target)

@@ -283,6 +283,35 @@ def test_read_solve_judges_convergence_by_the_stated_criterion(tmp_path):
     assert not capped["converged"]                                # stopped by ITER, not by SU2's test
     failed = read_solve(write_solve(tmp_path / "f", "alpha", [(245, -8.01, 0.0194, 0.805, 0.0961)], rc=1))
     assert not failed["converged"]
+    assert c2.finished(a) and c2.finished(stalled) and not c2.finished(failed)     # diverged: rc 1
+
+
+@pytest.mark.parametrize("aoa", [2.74112662988105, 3.1, 1.95])
+def test_a_fixed_cl_solve_without_su2_s_aoa_lines_reads_the_angle_from_flow_meta(tmp_path, aoa):
+    folder = write_solve(tmp_path / "c", "cl", [(551, -7.1, 0.02114, 0.824069, 0.10416)], target=-9)
+    assert read_solve(folder)["alpha"] is None                   # neither in the log nor a flow.meta
+    (folder / "flow.meta").write_text(f"ITER= 551\nAOA= {aoa!r}\nSIDESLIP_ANGLE= 0\nDCD_DCL_VALUE= 0.1\n")
+    assert read_solve(folder)["alpha"] == aoa
+
+
+def test_a_design_whose_alpha_solve_diverged_starts_its_fixed_cl_solve_from_the_baseline(evaluated, tmp_path,
+                                                                                        monkeypatch):
+    """Four solves faked: the design's alpha solve diverged (rc 1), so its restart is not the fixed-CL
+    solve's start (the baseline's alpha solution is), and no drag reduction is taken from it."""
+    calls = {}
+
+    def fake(mesh, mode, folder, **kw):
+        calls[(Path(folder).parent.name, mode)] = kw.get("restart")
+        diverged = Path(folder).parent.name.startswith("e") and mode == "alpha"
+        return read_solve(write_solve(tmp_path / "f" / f"{Path(folder).parent.name}_{mode}", mode,
+                                      [(700, 3.0 if diverged else -8.5, 0.02, 0.824, 0.1)], rc=1 if diverged else 0))
+    monkeypatch.setattr(c2, "reuse_or_solve", fake)
+    work = tmp_path / "w"
+    out = c2.evaluate(evaluated["design"], evaluated["run"], evaluated["meshes"][1], work, evaluation=2)
+    start = work / "baseline" / "alpha" / "restart_flow.dat"
+    assert calls[("e0002", "alpha")] == start and calls[("e0002", "cl")] == start
+    assert calls[("baseline", "cl")] == start and calls[("baseline", "alpha")] is None
+    assert set(out["reduction"]) == {"cl"}                       # none from the diverged alpha solve
 
 
 def su2_missing() -> str | None:
