@@ -196,7 +196,8 @@ def _lines(line0: np.ndarray, normal: np.ndarray, outer: np.ndarray, chord: floa
 
 
 def c_grid(airfoil_xy, n_around: int = 257, n_wake: int = 65, n_normal: int = 97, first_cell: float = 1.5e-6,
-           farfield: float = 100.0, wake_growth: float = WAKE_GROWTH) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+           farfield: float = 100.0, wake_growth: float = WAKE_GROWTH
+           ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The structured C-grid (see the module docstring) and its boundary lines.
 
     Parameters
