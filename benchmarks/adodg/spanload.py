@@ -112,11 +112,17 @@ def wall_stations(points: np.ndarray, tris: np.ndarray, span: float, *, span_axi
                   most: int = 400) -> np.ndarray | None:
     """The distinct span coordinates (K,) of the wall's nodes from 0 to ``span``, when the wall is
     meshed in spanwise rows (at most ``most`` distinct values, the first 0 and the last ``span``);
-    None for an unstructured wall."""
+    None for an unstructured wall. Values within ``1e-9 span`` of each other are one row (a mesh
+    moved by another program, SU2_DEF's, carries its rows' span coordinates with round-off)."""
+    tol = 1e-9 * span
     y = np.unique(points[np.unique(tris), span_axis])
-    y = y[(y >= 0.0) & (y <= span)]
-    if len(y) > most or len(y) < 2 or y[0] != 0.0 or y[-1] != span:
+    y = y[(y >= -tol) & (y <= span + tol)]
+    if len(y) < 2:
         return None
+    y = y[np.concatenate([[True], np.diff(y) > tol])]
+    if len(y) > most or abs(y[0]) > tol or abs(y[-1] - span) > tol:
+        return None
+    y[0], y[-1] = 0.0, span
     return y
 
 

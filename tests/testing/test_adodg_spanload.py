@@ -137,3 +137,23 @@ def test_wall_stations_refuse_an_unstructured_wall():
     points[0, 1], points[1, 1] = 0.0, 3.0
     tris = np.arange(1998).reshape(-1, 3)
     assert wall_stations(points, np.concatenate([tris, [[0, 1, 2]]]), 3.0) is None
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 10_000), n_span=st.integers(3, 40), noise=st.sampled_from([1e-15, 1e-13, 1e-11]))
+def test_wall_stations_take_rows_moved_with_round_off_as_one_row_each(seed, n_span, noise):
+    """A wall whose rows another program moved (SU2_DEF: span coordinates off by 1e-14) keeps its rows:
+    the same stations as the exact wall, 0 and the span exactly, and the same strip loads."""
+    rng = np.random.default_rng(seed)
+    s = 3.0
+    points, tris = plate_wing(6, n_span, s)
+    exact = wall_stations(points, tris, s)
+    moved = points.copy()
+    moved[:, 1] += noise * s * rng.uniform(-1.0, 1.0, len(points))
+    edges = wall_stations(moved, tris, s)
+    assert edges is not None and len(edges) == len(exact) == n_span + 1
+    assert edges[0] == 0.0 and edges[-1] == s and np.allclose(edges, exact, rtol=0, atol=2 * noise * s)
+    cp = np.concatenate([-np.ones(len(points) // 2), np.ones(len(points) // 2)])
+    a = strip_loads(points, tris, cp, n_strips=0, alpha_deg=2.0, edges=exact)
+    b = strip_loads(moved, tris, cp, n_strips=0, alpha_deg=2.0, edges=edges)
+    assert np.allclose(a.ccl, b.ccl, rtol=1e-6)
