@@ -27,6 +27,7 @@ import numpy as np
 from benchmarks.adodg.case2_evaluate import EvaluationError, history_rows, pick_row
 from benchmarks.adodg.case3_report import S_HALF, SEMISPAN, config_alpha, report
 from benchmarks.adodg.case3_su2_side import stations, wing_box, wing_points
+from ffdcli.errors import FfdError
 from ffdcli.io.formats import read_mesh
 
 matplotlib.use("Agg")
@@ -120,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     try:
         drawn = run_plot(args.run, args.out / args.name, evaluation=args.evaluation, n_strips=args.strips)
-    except EvaluationError as e:
+    except (EvaluationError, FfdError) as e:          # a missing run, evaluation or evaluation file
         print(f"error: {e}", file=sys.stderr)
         return 2
     print(args.out / args.name)

@@ -10,9 +10,7 @@ import numpy as np
 import pytest
 
 from benchmarks.adodg.case3_plots import main, run_plot
-from ffdcli.io.formats import write_mesh
-from ffdcli.mesh import CellBlock, Mesh
-from tests.testing.test_adodg3_su2_side import plate
+from tests.testing.test_adodg3_su2_side import write_plate_flow
 
 S = 3.0
 HEADER = ("evaluation,iteration,norm,objective,LIFT,violation,step,solver_seconds,ffd_seconds,flow_solves,"
@@ -24,14 +22,7 @@ def fake_evaluation(run, k: int, twist, jump, cl: float, cd: float, alpha: float
     history.csv, flow.cfg (AOA), result.json (the twists)."""
     folder = run / "evals" / f"{k:04d}"
     folder.mkdir(parents=True)
-    pts, tris = plate(S)
-    write_mesh(Mesh(points=pts, dim=3, cells=[CellBlock("tetra", np.array([[0, 1, 2, 3]]))],
-                    markers={"wing": [CellBlock("triangle", tris)]}), folder / "mesh.su2")
-    j = jump(pts[: len(pts) // 2, 1])
-    cp = np.concatenate([-0.5 * j, 0.5 * j])
-    rows = "\n".join(f"{i},{pts[i, 0]},{pts[i, 1]},{pts[i, 2]},{cp[i]}" for i in range(len(pts)))
-    (folder / "surface_flow.csv").write_text('"PointID","x","y","z","Pressure_Coefficient"\n' + rows + "\n")
-    (folder / "history.csv").write_text(f'"Inner_Iter","CL","CD"\n1,{cl},{cd}\n')
+    write_plate_flow(folder, "mesh.su2", "history.csv", jump, cl, cd, S)
     (folder / "flow.cfg").write_text(f"SOLVER= EULER\nAOA= {alpha}\n")
     (folder / "result.json").write_text(json.dumps({"index": k, "values": list(twist)}))
 
@@ -69,4 +60,12 @@ def test_an_evaluation_asked_for_is_drawn_and_a_missing_one_is_one_line(run, tmp
     assert main(["--run", str(run), "--out", str(tmp_path / "o"), "--evaluation", "7"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--evaluation 7" in err[0]
+    assert not (tmp_path / "o" / "adodg_case3_run.png").exists()
+
+
+def test_an_evaluation_without_its_mesh_is_one_line_and_no_picture(run, tmp_path, capsys):
+    (run / "evals" / "0003" / "mesh.su2").unlink()              # a trial's files half gone
+    assert main(["--run", str(run), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "0003" in err[0] and "Traceback" not in err[0]
     assert not (tmp_path / "o" / "adodg_case3_run.png").exists()

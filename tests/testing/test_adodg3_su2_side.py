@@ -188,6 +188,19 @@ def plate(s: float = 3.0, n_chord: int = 6, n_span: int = 96):
     return np.concatenate([grid, grid]), np.concatenate([up, lo])
 
 
+def write_plate_flow(folder, mesh_name: str, history_name: str, jump, cl: float, cd: float, s: float = 3.0) -> None:
+    """A flow on :func:`plate` as SU2 leaves it in ``folder``: the mesh, ``surface_flow.csv`` (Cp = -/+
+    jump(y)/2 on the two sides: the pressure jump is ``jump``) and a one-row history with CL and CD."""
+    pts, tris = plate(s)
+    write_mesh(Mesh(points=pts, dim=3, cells=[CellBlock("tetra", np.array([[0, 1, 2, 3]]))],
+                    markers={"wing": [CellBlock("triangle", tris)]}), folder / mesh_name)
+    j = jump(pts[: len(pts) // 2, 1])
+    cp = np.concatenate([-0.5 * j, 0.5 * j])
+    rows = "\n".join(f"{i},{pts[i, 0]},{pts[i, 1]},{pts[i, 2]},{cp[i]}" for i in range(len(pts)))
+    (folder / "surface_flow.csv").write_text('"PointID","x","y","z","Pressure_Coefficient"\n' + rows + "\n")
+    (folder / history_name).write_text('"Inner_Iter","CL","CD"\n' + f"1,{cl},{cd}\n")
+
+
 def grad_of(name: str, j: int) -> float:
     return (0.05 if name == "DRAG" else 0.6) * (1 + 0.1 * j)
 
@@ -208,14 +221,7 @@ def fake_design(folder, k: int, twist_deg, adjoints: dict, jump=None, cl: float 
     if jump is not None:
         direct = dsn / "DIRECT"
         direct.mkdir()
-        pts, tris = plate()
-        write_mesh(Mesh(points=pts, dim=3, cells=[CellBlock("tetra", np.array([[0, 1, 2, 3]]))],
-                        markers={"wing": [CellBlock("triangle", tris)]}), direct / "mesh_ffd_deform.su2")
-        j = jump(pts[: len(pts) // 2, 1])
-        cp = np.concatenate([-0.5 * j, 0.5 * j])
-        rows = "\n".join(f"{i},{pts[i, 0]},{pts[i, 1]},{pts[i, 2]},{cp[i]}" for i in range(len(pts)))
-        (direct / "surface_flow.csv").write_text('"PointID","x","y","z","Pressure_Coefficient"\n' + rows + "\n")
-        (direct / "history_direct.csv").write_text('"Inner_Iter","CL","CD"\n' + f"1,{cl},{cd}\n")
+        write_plate_flow(direct, "mesh_ffd_deform.su2", "history_direct.csv", jump, cl, cd)
 
 
 def test_report_counts_solves_picks_the_best_design_meeting_the_lift_and_reads_its_load(tmp_path):
