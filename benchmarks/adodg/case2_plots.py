@@ -11,6 +11,15 @@
   moment bound.
 
     python -m benchmarks.adodg.case2_plots --run out/adodg/case2 --out docs/gallery [--evaluation N]
+
+With ``--solve LABEL FOLDER MESH`` (repeated) only the -Cp and Cf_x picture is drawn, of any SU2 solves
+(each folder holds SU2's ``surface_flow.csv`` and ``history.csv``, ``MESH`` the mesh it was solved on),
+labelled with the CD and CL of the history's last row: the finer mesh's solves of
+``case2_evaluate``, for one, into ``--name``::
+
+    python -m benchmarks.adodg.case2_plots --out docs/gallery --name adodg_case2_cp_cf_fine.png \
+        --solve baseline out/adodg/case2_s1/baseline/cl out/adodg/rae2822_s1.su2 \
+        --solve "evaluation 34" out/adodg/case2_s1/e0034/cl out/adodg/case2_s1/e0034/mesh.su2
 """
 
 from __future__ import annotations
@@ -26,20 +35,23 @@ import numpy as np
 from benchmarks.adodg.case2_evaluate import EvaluationError, marker_named, pick_row
 from benchmarks.adodg.case2_meshes import wall_loop
 from ffdcli.io.formats import read_mesh
+from ffdcli.optimize.solvers.su2 import read_history
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
-TITLE = "ADODG Case 2: RAE2822, RANS SA, M 0.734, Re 6.5e6, alpha 2.79"
+CASE = "ADODG Case 2: RAE2822, RANS SA, M 0.734, Re 6.5e6"
+TITLE = CASE + ", alpha 2.79"
 TARGET_CL, CM_BOUND = 0.824, -0.092
 
 
-def surfaces(folder: Path) -> dict[str, np.ndarray]:
+def surfaces(folder: Path, mesh_path: Path | None = None) -> dict[str, np.ndarray]:
     """SU2's ``surface_flow.csv`` of an evaluation ``folder`` split into the upper and lower surfaces
-    along the wall loop of its ``mesh.su2``: {'upper'|'lower': (k, 4) x, y, Cp, Cf_x}, the upper from
-    the trailing edge to the leading edge, the lower from the leading edge to the trailing edge."""
+    along the wall loop of its mesh (``mesh_path``, default the folder's ``mesh.su2``): {'upper'|'lower':
+    (k, 4) x, y, Cp, Cf_x}, the upper from the trailing edge to the leading edge, the lower from the
+    leading edge to the trailing edge."""
     d = np.genfromtxt(folder / "surface_flow.csv", delimiter=",", names=True)
-    mesh = read_mesh(folder / "mesh.su2")
+    mesh = read_mesh(mesh_path or folder / "mesh.su2")
     loop = wall_loop(mesh, marker_named(mesh, "airfoil"))
     row = np.full(len(mesh.points), -1, dtype=np.int64)
     row[d["PointID"].astype(np.int64)] = np.arange(len(d))
@@ -50,19 +62,20 @@ def surfaces(folder: Path) -> dict[str, np.ndarray]:
     return {"upper": table[: le + 1], "lower": np.vstack([table[le:], table[:1]])}
 
 
-def cp_cf_plot(curves: list[tuple[str, Path, str]], path: Path) -> None:
+def cp_cf_plot(curves: list[tuple[str, Path, str]], path: Path, meshes: list[Path | None] | None = None,
+               title: str = TITLE) -> None:
     """-Cp (top) and Cf_x (bottom) on both surfaces (upper solid, lower dashed) of each curve
-    (label, evaluation folder, colour)."""
+    (label, evaluation folder, colour), each on its folder's ``mesh.su2`` or on ``meshes[i]``."""
     fig, (ax, bx) = plt.subplots(2, 1, figsize=(8, 7.2), sharex=True, gridspec_kw={"height_ratios": [1.3, 1]})
-    for label, folder, color in curves:
-        s = surfaces(folder)
+    for (label, folder, color), mesh in zip(curves, meshes or [None] * len(curves), strict=True):
+        s = surfaces(folder, mesh)
         for side, ls in (("upper", "-"), ("lower", "--")):
             t = s[side]
             ax.plot(t[:, 0], -t[:, 2], color=color, ls=ls, lw=1.3, label=f"{label}, {side}")
             bx.plot(t[:, 0], t[:, 3], color=color, ls=ls, lw=1.1)
     ax.axhline(0.0, color="0.6", lw=0.5)
     ax.set_ylabel("-Cp")
-    ax.set_title(TITLE + ": surface pressure and skin friction", fontsize=10)
+    ax.set_title(title + ": surface pressure and skin friction", fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=2)
     bx.axhline(0.0, color="0.3", lw=0.7)
@@ -141,12 +154,48 @@ def history_plot(run: Path, path: Path, feasibility: float = 1e-4) -> None:
     plt.close(fig)
 
 
+def solve_label(label: str, folder: Path) -> str:
+    """``label`` with the CD (counts) and CL of the last row of the solve's ``history.csv``."""
+    path = folder / "history.csv"
+    if not path.is_file():
+        raise EvaluationError(f"{path}: no such file (a folder of an SU2 solve holds its history.csv)")
+    h = read_history(path)
+    if not h.get("CD") or not h.get("CL"):
+        raise EvaluationError(f"{path}: no CD and CL columns with a row (SU2's HISTORY_OUTPUT must hold AERO_COEFF)")
+    return f"{label}: CD {1e4 * h['CD'][-1]:.1f}, CL {h['CL'][-1]:.3f}"
+
+
+def solves_plot(solves: list[list[str]], path: Path) -> None:
+    """The -Cp and Cf_x picture of ``solves`` ([label, folder, mesh] each), the first in black."""
+    for _, folder, mesh in solves:
+        for f in (Path(folder) / "surface_flow.csv", Path(mesh)):
+            if not f.is_file():
+                raise EvaluationError(f"{f}: no such file")
+    curves = [(solve_label(label, Path(folder)), Path(folder), "k" if i == 0 else f"C{2 + i}")
+              for i, (label, folder, _) in enumerate(solves)]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cp_cf_plot(curves, path, [Path(mesh) for _, _, mesh in solves], title=CASE)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.case2_plots", description=__doc__.split("\n")[0])
-    ap.add_argument("--run", type=Path, required=True, help="the run's folder (history.csv, evals/)")
+    ap.add_argument("--run", type=Path, help="the run's folder (history.csv, evals/)")
     ap.add_argument("--out", type=Path, required=True, help="folder for the PNGs")
     ap.add_argument("--evaluation", type=int, help="the design drawn (default: the run's best by ffd's rule)")
+    ap.add_argument("--solve", nargs=3, action="append", metavar=("LABEL", "FOLDER", "MESH"),
+                    help="draw only -Cp and Cf_x of these SU2 solves (repeat: the first is the reference)")
+    ap.add_argument("--name", default="adodg_case2_cp_cf.png", help="the picture's file name with --solve")
     args = ap.parse_args(argv)
+    if args.solve:
+        try:
+            solves_plot(args.solve, args.out / args.name)
+        except EvaluationError as e:
+            print(f"error: {e}", file=sys.stderr)
+            return 2
+        print(args.out / args.name)
+        return 0
+    if args.run is None:
+        ap.error("--run is required (or --solve)")
     try:
         row = pick_row(args.run, 1e-4, args.evaluation)
         base = pick_row(args.run, 1e-4, 1)
