@@ -64,11 +64,16 @@ def richardson(f1: float, f2: float, f3: float, ratio: float = 2.0) -> Richardso
     """Richardson extrapolation of ``f1`` (coarsest), ``f2``, ``f3`` (finest) to zero spacing.
 
     Raises ValueError when the three do not converge monotonically (the differences change sign or
-    the finest two are equal): no order can be observed then.
+    the finest two are equal) or do not converge at all (the finer difference is not smaller than the
+    coarser: an observed order <= 0, whose "limit" lies away from the values): no order can be
+    observed then.
     """
     d12, d23 = f1 - f2, f2 - f3
     if d23 == 0 or d12 * d23 <= 0:
         raise ValueError(f"not monotone: {f1!r}, {f2!r}, {f3!r} (the order cannot be observed)")
+    if abs(d23) >= abs(d12) * (1.0 - 1e-9):        # an order <= 0, to round-off
+        raise ValueError(f"not converging: {f1!r}, {f2!r}, {f3!r} (the differences {d12:.3g}, {d23:.3g} "
+                         "do not shrink with the spacing)")
     p = math.log(d12 / d23) / math.log(ratio)
     value = f3 - d23 / (ratio**p - 1.0)
     gci = 1.25 * abs(d23 / f3) / (ratio**p - 1.0)
@@ -165,7 +170,12 @@ def main(argv: list[str] | None = None) -> int:
         solves.append(s)
         print(f"{level}: CD {s.cd:.6f} in {s.iterations} iterations, {s.wall:.0f} s wall, {s.cpu:.0f} s CPU",
               file=sys.stderr)
-    rich = richardson(*(s.cd for s in solves[-3:])) if len(solves) >= 3 else None
+    rich = None
+    if len(solves) >= 3:
+        try:
+            rich = richardson(*(s.cd for s in solves[-3:]))
+        except ValueError as err:
+            print(f"no extrapolation: {err}")
     print(table(solves, rich))
     if rich is not None:
         print(f"\nobserved order {rich.order:.3f}; CD at zero spacing {rich.value:.6f}; "

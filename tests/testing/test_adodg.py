@@ -86,6 +86,14 @@ def test_richardson_refuses_oscillating_values():
         richardson(0.045, 0.046, 0.046)
 
 
+@settings(max_examples=30, deadline=None)
+@given(f0=st.floats(0.01, 0.1), d=st.floats(-1e-3, 1e-3).filter(lambda v: abs(v) > 1e-7), g=st.floats(1.0, 4.0))
+def test_richardson_refuses_differences_that_do_not_shrink(f0, d, g):
+    f = [f0, f0 - d, f0 - d - g * d]            # coarsest first; the finer difference g >= 1 times the coarser
+    with pytest.raises(ValueError, match="not converging"):
+        richardson(*f)
+
+
 @pytest.mark.parametrize("seed", range(5))
 def test_add_material_margins_on_manufactured_designs(small, seed):
     rng = np.random.default_rng(seed)
