@@ -6,6 +6,11 @@ the mesh the flow ran on, against the ellipse of the same lift.
 
     python -m benchmarks.adodg.case3_report RUN_FOLDER --mesh MESH.su2 [--cd0 CD0] [--strips 24 | 0] [--json]
     python -m benchmarks.adodg.case3_report BASE_FOLDER BEST_FOLDER --plot spanload.png   # loads vs ellipse
+    python -m benchmarks.adodg.case3_report RUN_FOLDER --mesh MESH.su2 --regions 0 0.02 0.3 0.9 1
+
+``--regions X0 X1 ...`` adds the pressure drag (CD units) of the wing by chordwise region between
+those x edges and of the tip cap apart (:func:`benchmarks.adodg.spanload.drag_by_region`): where a
+zero-lift drag, which the exact Euler flow does not have, comes from.
 
 ``RUN_FOLDER`` holds ``surface_flow.csv`` and ``history.csv`` (CL, CD; ``history_direct.csv`` in a
 ``DIRECT`` folder of SU2's ``shape_optimization.py``); the mesh default is the folder's
@@ -26,6 +31,7 @@ import matplotlib
 import numpy as np
 
 from benchmarks.adodg.spanload import (
+    drag_by_region,
     ellipse_difference,
     fourier_coefficients,
     load_efficiency,
@@ -73,7 +79,8 @@ def config_alpha(folder: Path) -> float | None:
     return None
 
 
-def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, alpha: float) -> dict:
+def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, alpha: float,
+           regions: list[float] | None = None) -> dict:
     mesh = read_mesh(mesh_path)
     tris = mesh.markers["wing"][0].data
     cp = read_surface_cp(folder / "surface_flow.csv", len(mesh.points))
@@ -100,6 +107,10 @@ def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, a
     if cd0 is not None:
         out["CD0"] = cd0
         out["e_drag"] = span_efficiency(cl, cd, cd0, ASPECT_RATIO)
+    if regions:
+        parts, cap = drag_by_region(mesh.points, tris, cp, alpha_deg=alpha, x_edges=np.asarray(regions), span=SEMISPAN)
+        out["regions"] = {"x_edges": list(regions), "cd": (parts / S_HALF).tolist(), "cap": cap / S_HALF,
+                          "total": float(parts.sum() + cap) / S_HALF}
     return out
 
 
@@ -134,8 +145,13 @@ def main(argv: list[str] | None = None) -> int:
                     help="equal strips over the semispan; 0: the strips between the wall's own spanwise "
                          "stations (a wall meshed in spanwise rows, as the hybrid family's)")
     ap.add_argument("--alpha", type=float, default=None)
+    ap.add_argument("--regions", type=float, nargs="+", metavar="X",
+                    help="chordwise edges: the wing's pressure drag between them and the tip cap's apart")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
+    if a.regions is not None and (len(a.regions) < 2 or np.any(np.diff(a.regions) <= 0)):
+        print(f"ffd: error: --regions {a.regions}: give two or more increasing x edges", file=sys.stderr)
+        return 2
     reports = []
     for folder in a.folder:
         mesh = a.mesh or next(iter(sorted(folder.glob("*.su2"))), None)
@@ -146,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
         if alpha is None:
             print(f"ffd: error: {folder}: no flow.cfg with AOA; give --alpha", file=sys.stderr)
             return 2
-        reports.append(report(folder, mesh, cd0=a.cd0, n_strips=a.strips, alpha=alpha))
+        reports.append(report(folder, mesh, cd0=a.cd0, n_strips=a.strips, alpha=alpha, regions=a.regions))
     if a.plot is not None:
         plot(reports, a.plot)
     if a.json:
@@ -161,6 +177,11 @@ def show(r: dict) -> None:
     e_drag = f", e (CD - CD0) {r['e_drag']:.4f}" if "e_drag" in r else ""
     print(f"CL {r['CL']:.6f} (strips {r['CL_strips']:.6f}), CD {r['CD']:.6f}; load - ellipse: RMS {r['rms_pct']:.2f} %,"
           f" max {r['max_pct']:.2f} % of the root load; e (load, Trefftz) {r['e_load']:.4f}{e_drag}")
+    if "regions" in r:
+        g = r["regions"]
+        x = g["x_edges"]
+        parts = "  ".join(f"x {x[i]:g}-{x[i + 1]:g} {v:+.6f}" for i, v in enumerate(g["cd"]))
+        print(f"pressure drag by region: {parts}  cap {g['cap']:+.6f}  (sum {g['total']:+.6f})")
     for eta, c, e in zip(r["eta"], r["ccl"], r["ellipse"], strict=True):
         print(f"  eta {eta:.3f}  c*cl {c:.5f}  ellipse {e:.5f}")
 

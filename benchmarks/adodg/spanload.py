@@ -108,6 +108,34 @@ def strip_loads(points: np.ndarray, tris: np.ndarray, cp: np.ndarray, *, n_strip
     return SpanLoad(edges=edges, ccl=per / np.diff(edges), cl_total=float(lift.sum()))
 
 
+def drag_by_region(points: np.ndarray, tris: np.ndarray, cp: np.ndarray, *, alpha_deg: float,
+                   x_edges: np.ndarray, span: float, span_axis: int = 1) -> tuple[np.ndarray, float]:
+    """Pressure drag (force / q_inf, length^2 units; divide by the reference area for CD) of the wall's
+    triangles by chordwise region, the tip cap apart: where a drag that should vanish (an Euler wing at
+    zero lift) comes from.
+
+    Parameters as :func:`triangle_forces`; ``alpha_deg`` sets the drag direction ``(cos a, 0, sin a)``;
+    ``x_edges`` (R + 1,) increasing chordwise edges (a centroid before the first or after the last is
+    counted in the first or last region); ``span``: a triangle whose centroid lies beyond it is the tip
+    cap's.
+
+    Returns
+    -------
+    regions : (R,) float64
+        The drag of the wing's triangles (centroid within ``span``) in each chordwise region.
+    cap : float
+        The drag of the cap's triangles. ``regions.sum() + cap`` is the wall's pressure drag.
+    """
+    force, centroid = triangle_forces(points, tris, cp)
+    a = np.radians(alpha_deg)
+    drag = force[:, 0] * np.cos(a) + force[:, 2] * np.sin(a)
+    cap = centroid[:, span_axis] > span
+    edges = np.asarray(x_edges, dtype=float)
+    n = len(edges) - 1
+    idx = np.clip(np.searchsorted(edges, centroid[:, 0], side="right") - 1, 0, n - 1)
+    return np.bincount(idx[~cap], weights=drag[~cap], minlength=n), float(drag[cap].sum())
+
+
 def wall_stations(points: np.ndarray, tris: np.ndarray, span: float, *, span_axis: int = 1,
                   most: int = 400) -> np.ndarray | None:
     """The distinct span coordinates (K,) of the wall's nodes from 0 to ``span``, when the wall is

@@ -7,9 +7,11 @@ import numpy as np
 import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from scipy.spatial import ConvexHull
 
 from benchmarks.adodg.spanload import (
     SpanLoad,
+    drag_by_region,
     ellipse_difference,
     ellipse_strips,
     fourier_coefficients,
@@ -157,3 +159,41 @@ def test_wall_stations_take_rows_moved_with_round_off_as_one_row_each(seed, n_sp
     a = strip_loads(points, tris, cp, n_strips=0, alpha_deg=2.0, edges=exact)
     b = strip_loads(moved, tris, cp, n_strips=0, alpha_deg=2.0, edges=edges)
     assert np.allclose(a.ccl, b.ccl, rtol=1e-6)
+
+
+def closed_polyhedron(rng, n: int = 200) -> tuple[np.ndarray, np.ndarray, float]:
+    """Random points on an ellipsoid, their convex hull's triangles oriented into the body (the mesh's
+    convention), and the hull's volume."""
+    u = rng.normal(size=(n, 3))
+    pts = u / np.linalg.norm(u, axis=1)[:, None] * rng.uniform(0.2, 1.5, 3) + rng.uniform(-1, 1, 3)
+    hull = ConvexHull(pts)
+    tris = hull.simplices.copy()
+    c = pts.mean(axis=0)
+    p = pts[tris]
+    n_out = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", n_out, p.mean(axis=1) - c) > 0        # outward: flip to inward
+    tris[flip] = tris[flip][:, ::-1]
+    return pts, tris, float(hull.volume)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), alpha=st.floats(-10.0, 10.0), b=st.floats(-2, 2), c=st.floats(-2, 2))
+def test_drag_by_region_of_a_linear_pressure_on_a_closed_body_is_its_gradient_times_the_volume(seed, alpha, b, c):
+    rng = np.random.default_rng(seed)
+    pts, tris, volume = closed_polyhedron(rng)
+    cp = 0.3 + b * pts[:, 0] + c * pts[:, 2]                     # linear: each triangle's mean is exact
+    x = np.sort(rng.uniform(pts[:, 0].min(), pts[:, 0].max(), 3))
+    span = float(rng.uniform(pts[:, 1].min(), pts[:, 1].max()))
+    parts, cap = drag_by_region(pts, tris, cp, alpha_deg=alpha, x_edges=x, span=span)
+    a = np.radians(alpha)
+    # closed surface, normals inward: sum of cp n dA = -grad(cp) V (the divergence theorem)
+    assert parts.sum() + cap == pytest.approx(-(b * np.cos(a) + c * np.sin(a)) * volume, abs=1e-10)
+    # each triangle in exactly one place: the cap by its centroid's span, the rest by its centroid's x
+    p = pts[tris]
+    cen = p.mean(axis=1)
+    f = cp[tris].mean(axis=1)[:, None] * 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    d = f[:, 0] * np.cos(a) + f[:, 2] * np.sin(a)
+    on_cap = cen[:, 1] > span
+    assert cap == pytest.approx(d[on_cap].sum(), abs=1e-12)
+    last = ~on_cap & (cen[:, 0] >= x[1])                  # the last region takes every centroid beyond x[1]
+    assert len(parts) == 2 and parts[1] == pytest.approx(d[last].sum(), abs=1e-12)
