@@ -42,6 +42,9 @@ from benchmarks.adodg.spanload import (
 from ffdcli.io.formats import read_mesh
 
 SEMISPAN, S_HALF, ASPECT_RATIO = 3.0, 3.0, 6.0
+#: Odd sine terms of the load's fit for ``e_load`` (n = 1, 3, ..., 11). ``e_load`` of a load that does
+#: not vanish at the tip (the cap's lift in the last strip) falls as terms are added (docs/adodg.md).
+TERMS = 6
 
 
 def read_surface_cp(path: Path, n_points: int) -> np.ndarray:
@@ -80,7 +83,7 @@ def config_alpha(folder: Path) -> float | None:
 
 
 def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, alpha: float,
-           regions: list[float] | None = None) -> dict:
+           regions: list[float] | None = None, terms: int = TERMS) -> dict:
     mesh = read_mesh(mesh_path)
     tris = mesh.markers["wing"][0].data
     cp = read_surface_cp(folder / "surface_flow.csv", len(mesh.points))
@@ -97,7 +100,7 @@ def report(folder: Path, mesh_path: Path, *, cd0: float | None, n_strips: int, a
         edges = edges[(edges <= SEMISPAN * (1.0 - 1.0 / 24.0)) | (edges == SEMISPAN)]
     load = strip_loads(mesh.points, tris, cp, n_strips=n_strips, alpha_deg=alpha, span=SEMISPAN, edges=edges)
     diff = ellipse_difference(load, SEMISPAN)
-    coef = fourier_coefficients(load, SEMISPAN)
+    coef = fourier_coefficients(load, SEMISPAN, n_terms=terms)
     hist = last_history(history_file(folder))
     cl, cd = hist["CL"], hist["CD"]
     out = {"folder": str(folder), "mesh": str(mesh_path), "alpha": alpha, "CL": cl, "CD": cd,
@@ -145,10 +148,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="equal strips over the semispan; 0: the strips between the wall's own spanwise "
                          "stations (a wall meshed in spanwise rows, as the hybrid family's)")
     ap.add_argument("--alpha", type=float, default=None)
+    ap.add_argument("--terms", type=int, default=TERMS,
+                    help=f"odd sine terms fitted to the load for e_load (default {TERMS}: n = 1, 3, ..., 11)")
     ap.add_argument("--regions", type=float, nargs="+", metavar="X",
                     help="chordwise edges: the wing's pressure drag between them and the tip cap's apart")
     ap.add_argument("--json", action="store_true")
     a = ap.parse_args(argv)
+    if a.terms < 1:
+        print(f"ffd: error: --terms {a.terms}: give 1 or more", file=sys.stderr)
+        return 2
     if a.regions is not None and (len(a.regions) < 2 or np.any(np.diff(a.regions) <= 0)):
         print(f"ffd: error: --regions {a.regions}: give two or more increasing x edges", file=sys.stderr)
         return 2
@@ -162,7 +170,8 @@ def main(argv: list[str] | None = None) -> int:
         if alpha is None:
             print(f"ffd: error: {folder}: no flow.cfg with AOA; give --alpha", file=sys.stderr)
             return 2
-        reports.append(report(folder, mesh, cd0=a.cd0, n_strips=a.strips, alpha=alpha, regions=a.regions))
+        reports.append(report(folder, mesh, cd0=a.cd0, n_strips=a.strips, alpha=alpha, regions=a.regions,
+                              terms=a.terms))
     if a.plot is not None:
         plot(reports, a.plot)
     if a.json:
