@@ -158,15 +158,39 @@ def summary(traces: list[Trace], baseline: float | None = None) -> str:
     return "\n".join(lines)
 
 
+def y_limits(traces: list[Trace], baseline: float | None = None, pad: float = 0.08) -> tuple[float, float]:
+    """The drag range the picture shows: the feasible designs' and the baseline's, widened to every
+    design within that range's own width of it, padded by ``pad``; a design further out (a flow that did
+    not converge, say) is drawn at the edge."""
+    vals = [t.objective[t.feasible & np.isfinite(t.objective)] for t in traces]
+    vals.append(np.array([] if baseline is None else [baseline]))
+    v = np.concatenate(vals)
+    every = np.concatenate([t.objective[np.isfinite(t.objective)] for t in traces])
+    if not len(v):
+        v = every
+    lo, hi = float(v.min()), float(v.max())
+    span = hi - lo if hi > lo else max(abs(hi), 1e-12)
+    near = every[(every >= lo - span) & (every <= hi + span)]
+    lo, hi = min(lo, float(near.min(initial=lo))), max(hi, float(near.max(initial=hi)))
+    return lo - pad * (hi - lo), hi + pad * (hi - lo)
+
+
 def plot(traces: list[Trace], path: Path, title: str, baseline: float | None = None, scale: float = 1.0,
          unit: str = "CD") -> None:
-    """Every design (filled when feasible) and the best feasible so far (steps) against the solves."""
+    """Every design (filled when feasible) and the best feasible so far (steps) against the solves; a
+    design outside :func:`y_limits` is drawn at the edge as a triangle pointing to where it lies."""
     fig, ax = plt.subplots(figsize=(8, 4.8))
+    lo, hi = (scale * v for v in y_limits(traces, baseline))
+    outside = 0
     for i, t in enumerate(traces):
         c = f"C{i}"
         y = scale * t.objective
-        ax.plot(t.solves[t.feasible], y[t.feasible], "o", color=c, ms=5)
-        ax.plot(t.solves[~t.feasible], y[~t.feasible], "o", mfc="none", mec=c, ms=5)
+        inside = (y >= lo) & (y <= hi)
+        ax.plot(t.solves[t.feasible & inside], y[t.feasible & inside], "o", color=c, ms=5)
+        ax.plot(t.solves[~t.feasible & inside], y[~t.feasible & inside], "o", mfc="none", mec=c, ms=5)
+        for mask, edge, marker in ((y < lo, lo, "v"), (y > hi, hi, "^")):
+            ax.plot(t.solves[mask], np.full(int(mask.sum()), edge), marker, mfc="none", mec=c, ms=7, clip_on=False)
+            outside += int(mask.sum())
         b = best_so_far(t)
         ok = np.isfinite(b)
         xs = np.append(t.solves[ok], t.total)
@@ -174,8 +198,11 @@ def plot(traces: list[Trace], path: Path, title: str, baseline: float | None = N
                 color=c, lw=1.6, label=f"{t.label} ({t.total} solves)")
     ax.plot([], [], "o", color="0.3", ms=5, label="a feasible design (line: the best so far)")
     ax.plot([], [], "o", mfc="none", mec="0.3", ms=5, label="an infeasible design")
+    if outside:
+        ax.plot([], [], "v", mfc="none", mec="0.3", ms=7, label=f"{outside} design(s) off the scale (infeasible)")
     if baseline is not None:
         ax.axhline(scale * baseline, color="0.5", lw=0.8, ls="--", label="baseline")
+    ax.set_ylim(lo, hi)
     ax.set_xlabel("flow + adjoint solves")
     ax.set_ylabel(unit)
     ax.set_title(title, fontsize=10)

@@ -130,3 +130,14 @@ def test_only_runs_of_the_two_tools_are_paired():
     assert "ffd 32 reaches SU2's best (1.5): after 3 solves" in lines
     assert "SU2 reaches ffd 16's best (1): not reached in 4 solves" in lines
     assert len(lines) == 3 + 4
+
+
+def test_the_picture_s_range_is_the_feasible_designs_and_the_baseline_not_an_outlier():
+    ffd = race.trace_of("ffd", [1, 1, 1], [2, 2, 2], [7.8e-3, 7.7e-3, 7.66e-3], [False, True, True])
+    su2 = race.trace_of("SU2", [1, 1, 1], [2, 2, 1], [7.8e-3, 7.76e-3, 1.7e-3], [False, True, False], tool="SU2")
+    lo, hi = race.y_limits([ffd, su2], baseline=7.8e-3)
+    assert lo < 7.66e-3 and hi > 7.8e-3 and lo > 1.7e-3          # the stalled flow's 0.0017 is off the scale
+    assert hi - lo == pytest.approx((7.8e-3 - 7.66e-3) * 1.16)
+    trial = race.trace_of("ffd", [1, 1], [2, 0], [7.8e-3, 7.9e-3], [True, False])   # a trial just above: shown
+    lo, hi = race.y_limits([trial], baseline=7.8e-3)
+    assert lo < 7.8e-3 < 7.9e-3 < hi
