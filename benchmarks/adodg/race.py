@@ -16,7 +16,9 @@ finished adjoint in ``DESIGNS/DSN_k/ADJOINT_*``, and SLSQP asks for a design's g
 on, so design k's adjoints follow its flow. Feasible: ffd's ``violation`` (every constraint, the
 geometric ones included) within the case's tolerance; SU2's designs by the case's own check
 (:mod:`benchmarks.adodg.su2_side` (the add-material rule at every wall node), ``su2_side_case2``
-(CL, CM, area), ``case3_su2_side`` (CL)), at the same tolerance (1e-6 chord for Case 1, 1e-4 else).
+(CL, CM, area), ``case3_su2_side`` (CL)), at the same tolerance (1e-6 chord for Case 1, 1e-4 else),
+and only when its flow reached the configuration's residual (SU2's scripts take a flow stopped at
+``ITER`` as a value; ffd counts it a failure).
 
 Printed: per run its solves, its best feasible drag and the solves at which it was reached; per pair of
 an ffd run and an SU2 run, the solves each needed to reach the other's best (``not reached in N`` when
@@ -36,6 +38,7 @@ import matplotlib
 import numpy as np
 
 from benchmarks.adodg import case3_su2_side, su2_side, su2_side_case2
+from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
@@ -56,7 +59,8 @@ class Trace:
 
     ``solves`` (k,): the flow + adjoint solves finished when design k's drag was known (its flow
     included); ``objective`` (k,) the drag; ``feasible`` (k,) bool; ``total`` every solve the run
-    finished (the last design's adjoints included); ``tool`` "ffd" or "SU2"."""
+    finished (the last design's adjoints included); ``tool`` "ffd" or "SU2"; ``unconverged`` how many
+    of its flows stopped short of the configuration's residual (counted infeasible)."""
 
     label: str
     solves: np.ndarray
@@ -64,15 +68,17 @@ class Trace:
     feasible: np.ndarray
     total: int
     tool: str = "ffd"
+    unconverged: int = 0
 
 
 def trace_of(label: str, flows: list[int], adjoints: list[int], objective: list[float], feasible: list[bool],
-             tool: str = "ffd") -> Trace:
+             tool: str = "ffd", unconverged: int = 0) -> Trace:
     """A :class:`Trace` from each design's flow and adjoint solves, drag and feasibility (in order)."""
     flows_a, adj_a = np.asarray(flows, dtype=np.int64), np.asarray(adjoints, dtype=np.int64)
     before = np.concatenate([[0], np.cumsum(flows_a + adj_a)[:-1]])
     return Trace(label=label, solves=before + flows_a, objective=np.asarray(objective, dtype=float),
-                 feasible=np.asarray(feasible, dtype=bool), total=int((flows_a + adj_a).sum()), tool=tool)
+                 feasible=np.asarray(feasible, dtype=bool), total=int((flows_a + adj_a).sum()), tool=tool,
+                 unconverged=unconverged)
 
 
 def ffd_trace(run: Path, tolerance: float, label: str = "ffd") -> Trace:
@@ -98,6 +104,22 @@ def su2_adjoints(folder: Path, n: int) -> list[int]:
                 if list(a.glob("of_grad*.csv"))) for k in range(n)]
 
 
+def su2_converged(folder: Path, n: int) -> list[bool]:
+    """Whether each of SU2's designs 1..n has a flow that reached the configuration's
+    ``CONV_RESIDUAL_MINVAL`` (the last ``rms[Rho]`` of ``DESIGNS/DSN_k/DIRECT/history_direct.csv``):
+    SU2's scripts take a flow stopped at ``ITER`` short of it as a value; ffd counts such a flow a failed
+    evaluation. Without the key or the file: True (nothing to judge by)."""
+    minval = config_value(read_config(Path(folder) / "config.cfg"), "CONV_RESIDUAL_MINVAL")
+    if not minval:
+        return [True] * n
+    out = []
+    for k in range(n):
+        path = Path(folder) / "DESIGNS" / f"DSN_{k + 1:03d}" / "DIRECT" / "history_direct.csv"
+        rho = read_history(path).get("rms[Rho]") if path.is_file() else None
+        out.append(not rho or rho[-1] <= float(minval) + 1e-9)
+    return out
+
+
 def su2_trace(case: int, folder: Path, label: str, baseline: Path | None = None) -> Trace:
     """The :class:`Trace` of SU2's ``shape_optimization.py`` run folder for ``case``, each design judged by
     the case's own report (``baseline``: the mesh of Case 1's rule)."""
@@ -115,8 +137,10 @@ def su2_trace(case: int, folder: Path, label: str, baseline: Path | None = None)
     else:
         rows = [{"CD": r["DRAG"], "CL": r["LIFT"]} for r in su2_side.project_rows(folder)]
         feasible = [abs(r["CL"] - case3_su2_side.CL_TARGET) <= case3_su2_side.CL_TOLERANCE for r in rows]
+    converged = su2_converged(folder, len(rows))
+    feasible = [f and c for f, c in zip(feasible, converged, strict=True)]
     return trace_of(label, [1] * len(rows), su2_adjoints(folder, len(rows)), [r["CD"] for r in rows], feasible,
-                    tool="SU2")
+                    tool="SU2", unconverged=converged.count(False))
 
 
 def best_so_far(t: Trace) -> np.ndarray:
@@ -146,7 +170,8 @@ def summary(traces: list[Trace], baseline: float | None = None) -> str:
     for t in traces:
         b = best(t)
         cut = "" if b is None or baseline is None else f" ({100 * (1 - b[0] / baseline):.1f} % below {baseline:.6g})"
-        lines.append(f"{t.label}: {len(t.objective)} designs, {t.total} solves; best feasible "
+        stalled = f" ({t.unconverged} flows not converged: counted infeasible)" if t.unconverged else ""
+        lines.append(f"{t.label}: {len(t.objective)} designs, {t.total} solves{stalled}; best feasible "
                      + ("none" if b is None else f"{b[0]:.6g} after {b[1]} solves{cut}"))
     for t in traces:
         for u in traces:

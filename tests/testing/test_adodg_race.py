@@ -28,11 +28,14 @@ def ffd_run(folder: Path, rows: list[tuple]) -> Path:
     return folder
 
 
-def su2_run(folder: Path, rows: list[dict], adjoints: list[int], area: float = 0.0778) -> Path:
+def su2_run(folder: Path, rows: list[dict], adjoints: list[int], area: float = 0.0778,
+            residuals: list[float] | None = None) -> Path:
     """An SU2 shape_optimization.py folder: history_project.csv rows, DESIGNS/DSN_k with ``adjoints[k]``
-    finished gradient files (and one unfinished adjoint folder on the last design)."""
+    finished gradient files (and one unfinished adjoint folder on the last design); with ``residuals``,
+    ``CONV_RESIDUAL_MINVAL= -8`` and each design's flow history ending at that rms[Rho]."""
     folder.mkdir(parents=True)
-    (folder / "config.cfg").write_text("MESH_FILENAME= mesh.su2\n")
+    conv = "CONV_RESIDUAL_MINVAL= -8\n" if residuals else ""
+    (folder / "config.cfg").write_text("MESH_FILENAME= mesh.su2\n" + conv)
     (folder / "baseline_geometry.json").write_text(json.dumps({"AIRFOIL_AREA": area}))
     head = list(rows[0])
     lines = [",".join(f'"{h}"' for h in head)] + [",".join(repr(float(r[h])) for h in head) for r in rows]
@@ -43,6 +46,10 @@ def su2_run(folder: Path, rows: list[dict], adjoints: list[int], area: float = 0
         for f in ("DRAG", "LIFT", "MOMENT_Z")[:n]:
             (dsn / f"ADJOINT_{f}").mkdir()
             (dsn / f"ADJOINT_{f}" / "of_grad.csv").write_text('"VARIABLE","GRADIENT"\n0, 1.0\n')
+        if residuals:
+            (dsn / "DIRECT").mkdir()
+            (dsn / "DIRECT" / "history_direct.csv").write_text(
+                f'"Inner_Iter","rms[Rho]","CD"\n0, -2.0, 0.1\n240, {residuals[k]!r}, 0.02\n')
     (folder / "DESIGNS" / f"DSN_{len(adjoints):03d}" / "ADJOINT_EXTRA").mkdir()      # running: no gradient yet
     return folder
 
@@ -141,3 +148,15 @@ def test_the_picture_s_range_is_the_feasible_designs_and_the_baseline_not_an_out
     trial = race.trace_of("ffd", [1, 1], [2, 0], [7.8e-3, 7.9e-3], [True, False])   # a trial just above: shown
     lo, hi = race.y_limits([trial], baseline=7.8e-3)
     assert lo < 7.8e-3 < 7.9e-3 < hi
+
+
+def test_an_su2_flow_stopped_short_of_its_residual_is_no_result(tmp_path):
+    rows = [{"DRAG": 0.0194, "LIFT": 0.805, "MOMENT_Z": 0.096, "AIRFOIL_AREA": 0.0778},
+            {"DRAG": 0.0130, "LIFT": 0.82405, "MOMENT_Z": 0.0919, "AIRFOIL_AREA": 0.0778},
+            {"DRAG": 0.0100, "LIFT": 0.8240, "MOMENT_Z": 0.0900, "AIRFOIL_AREA": 0.0778}]     # stalled at -4.9
+    run = su2_run(tmp_path / "su2", rows, [3, 3, 0], residuals=[-8.01, -8.0000000001, -4.92])
+    assert race.su2_converged(run, 3) == [True, True, False]
+    t = race.su2_trace(2, run, "SU2")
+    np.testing.assert_array_equal(t.feasible, [False, True, False])
+    assert t.unconverged == 1 and race.best(t) == (0.0130, 5)
+    assert "SU2: 3 designs, 9 solves (1 flows not converged: counted infeasible)" in race.summary([t])
