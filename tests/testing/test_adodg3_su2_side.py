@@ -160,6 +160,18 @@ def test_write_configs_takes_the_hybrid_familys_flow_settings_when_asked(tmp_pat
     assert config_value(cfg, "MESH_FILENAME") == "mesh_ffd.su2"
 
 
+@pytest.mark.parametrize("stiffness", ["INVERSE_VOLUME", "WALL_DISTANCE"])
+def test_the_stiffness_model_goes_to_both_configs_and_box_json(tmp_path, stiffness):
+    write_mesh(tiny_mesh(naca_wing(1.0, 3.0, 0.0, 0.0)), tmp_path / "w.su2")
+    info = write_configs(tmp_path / "w.su2", tmp_path / "run", CONFIG, stiffness)
+    for name in ("config.cfg", "box.cfg"):
+        assert config_value(read_config(tmp_path / "run" / name), "DEFORM_STIFFNESS_TYPE") == stiffness
+    assert info["stiffness"] == stiffness
+    with pytest.raises(ValueError, match="stiffness 'SOFT'"):
+        write_configs(tmp_path / "w.su2", tmp_path / "run2", CONFIG, "SOFT")
+    assert not (tmp_path / "run2").exists()                       # refused before anything is written
+
+
 def test_write_configs_refuses_a_mesh_without_the_wing(tmp_path):
     m = tiny_mesh(naca_wing(1.0, 3.0, 0.0, 0.0))
     m = Mesh(points=m.points, dim=3, cells=m.cells, markers={"body": m.markers["wing"]})
