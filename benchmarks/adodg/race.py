@@ -38,7 +38,6 @@ import matplotlib
 import numpy as np
 
 from benchmarks.adodg import case3_su2_side, su2_side, su2_side_case2
-from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
@@ -104,22 +103,6 @@ def su2_adjoints(folder: Path, n: int) -> list[int]:
                 if list(a.glob("of_grad*.csv"))) for k in range(n)]
 
 
-def su2_converged(folder: Path, n: int) -> list[bool]:
-    """Whether each of SU2's designs 1..n has a flow that reached the configuration's
-    ``CONV_RESIDUAL_MINVAL`` (the last ``rms[Rho]`` of ``DESIGNS/DSN_k/DIRECT/history_direct.csv``):
-    SU2's scripts take a flow stopped at ``ITER`` short of it as a value; ffd counts such a flow a failed
-    evaluation. Without the key or the file: True (nothing to judge by)."""
-    minval = config_value(read_config(Path(folder) / "config.cfg"), "CONV_RESIDUAL_MINVAL")
-    if not minval:
-        return [True] * n
-    out = []
-    for k in range(n):
-        path = Path(folder) / "DESIGNS" / f"DSN_{k + 1:03d}" / "DIRECT" / "history_direct.csv"
-        rho = read_history(path).get("rms[Rho]") if path.is_file() else None
-        out.append(not rho or rho[-1] <= float(minval) + 1e-9)
-    return out
-
-
 def su2_trace(case: int, folder: Path, label: str, baseline: Path | None = None) -> Trace:
     """The :class:`Trace` of SU2's ``shape_optimization.py`` run folder for ``case``, each design judged by
     the case's own report (``baseline``: the mesh of Case 1's rule)."""
@@ -137,7 +120,7 @@ def su2_trace(case: int, folder: Path, label: str, baseline: Path | None = None)
     else:
         rows = [{"CD": r["DRAG"], "CL": r["LIFT"]} for r in su2_side.project_rows(folder)]
         feasible = [abs(r["CL"] - case3_su2_side.CL_TARGET) <= case3_su2_side.CL_TOLERANCE for r in rows]
-    converged = su2_converged(folder, len(rows))
+    converged = su2_side.flow_converged(folder, len(rows))
     feasible = [f and c for f, c in zip(feasible, converged, strict=True)]
     return trace_of(label, [1] * len(rows), su2_adjoints(folder, len(rows)), [r["CD"] for r in rows], feasible,
                     tool="SU2", unconverged=converged.count(False))

@@ -50,7 +50,7 @@ import numpy as np
 from benchmarks.adodg.surface import add_material, wall_nodes
 from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.base import find_program
-from ffdcli.optimize.solvers.su2 import read_config, with_keys
+from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history, with_keys
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "adodg" / "case1.cfg"
@@ -229,6 +229,22 @@ def project_rows(folder: Path) -> list[dict[str, float]]:
     return [{h: float(v) for h, v in zip(head, r)} for r in rows[1:] if r]
 
 
+def flow_converged(folder: Path, n: int) -> list[bool]:
+    """Whether each of SU2's designs 1..n has a flow that reached the configuration's
+    ``CONV_RESIDUAL_MINVAL`` (the last ``rms[Rho]`` of ``DESIGNS/DSN_k/DIRECT/history_direct.csv``):
+    SU2's scripts take a flow stopped at ``ITER`` short of it as a value; ffd counts such a flow a failed
+    evaluation. Without the key or the file: True (nothing to judge by)."""
+    minval = config_value(read_config(Path(folder) / "config.cfg"), "CONV_RESIDUAL_MINVAL")
+    if not minval:
+        return [True] * n
+    out = []
+    for k in range(n):
+        path = Path(folder) / "DESIGNS" / f"DSN_{k + 1:03d}" / "DIRECT" / "history_direct.csv"
+        rho = read_history(path).get("rms[Rho]") if path.is_file() else None
+        out.append(not rho or rho[-1] <= float(minval) + 1e-9)
+    return out
+
+
 def design_mesh(dsn: Path) -> Path | None:
     """The mesh a design's flow ran on: ``DIRECT/``'s mesh (the deformed one), else the design folder's."""
     for sub in (dsn / "DIRECT", dsn):
@@ -253,6 +269,7 @@ def report(folder: Path, baseline: Path) -> dict:
     flows = len(table)
     for dsn in designs(folder):        # finished only: a flow's row in history_project.csv, an adjoint's gradient
         adjoints += sum(1 for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+    converged = flow_converged(folder, len(table))
     for k, row in enumerate(table):
         dsn = folder / "DESIGNS" / f"DSN_{k + 1:03d}"
         mesh = design_mesh(dsn)
@@ -264,11 +281,11 @@ def report(folder: Path, baseline: Path) -> dict:
         su2_ok = (not constrained) or (tc >= geo["AIRFOIL_THICKNESS"] - TOLERANCE
                                        and area >= geo["AIRFOIL_AREA"] - TOLERANCE)
         rows.append({"design": dsn.name, "CD": row["DRAG"], "CL": row["LIFT"], "thickness": tc, "area": area,
-                     "su2_constraints_met": bool(su2_ok), "rule": margin,
+                     "converged": converged[k], "su2_constraints_met": bool(su2_ok), "rule": margin,
                      "rule_met": margin is not None and min(margin["upper"], margin["lower"]) >= -TOLERANCE})
 
     def best(key: str):
-        ok = [r for r in rows if r[key]]
+        ok = [r for r in rows if r[key] and r["converged"]]
         return min(ok, key=lambda r: r["CD"]) if ok else None
 
     state, wall = run_state(folder)
@@ -287,9 +304,10 @@ def summary(rep: dict) -> str:
     for r in rep["designs"]:
         m = r["rule"]
         rule = "-" if m is None else f"{min(m['upper'], m['lower']):+.2e}"
+        stalled = "" if r.get("converged", True) else "  FLOW NOT CONVERGED (no result)"
         lines.append(f"  {r['design']}: CD {r['CD']:.6f}  t {r['thickness']:.6f}  area {r['area']:.7f}  "
                      f"SU2 constraints {'met' if r['su2_constraints_met'] else 'NOT met'}  "
-                     f"rule margin {rule} ({'met' if r['rule_met'] else 'VIOLATED'})")
+                     f"rule margin {rule} ({'met' if r['rule_met'] else 'VIOLATED'}){stalled}")
     b0 = rep["baseline_CD"]
     for key, what in (("best_su2", "by SU2's own constraints"), ("best_rule", "meeting the add-material rule")):
         r = rep[key]

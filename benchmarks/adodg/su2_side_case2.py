@@ -51,6 +51,7 @@ from benchmarks.adodg.su2_side import (
     designs,
     dispatch,
     ffd_definition,
+    flow_converged,
     geometry,
     project_rows,
     run_program,
@@ -141,8 +142,10 @@ def report(folder: Path) -> dict:
     area0 = json.loads((folder / "baseline_geometry.json").read_text())["AIRFOIL_AREA"]
     table = project_rows(folder)
     adjoints = sum(1 for dsn in designs(folder) for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+    converged = flow_converged(folder, len(table))
     rows = [{"design": f"DSN_{k + 1:03d}", "CD": r["DRAG"], "CL": r["LIFT"], "CMz": r["MOMENT_Z"],
-             "area": r.get("AIRFOIL_AREA", float("nan")), "feasible": feasible(r, area0)} for k, r in enumerate(table)]
+             "area": r.get("AIRFOIL_AREA", float("nan")), "converged": converged[k],
+             "feasible": converged[k] and feasible(r, area0)} for k, r in enumerate(table)]
     ok = [r for r in rows if r["feasible"]]
     state, wall = run_state(folder)
     return {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
@@ -157,7 +160,8 @@ def summary(rep: dict) -> str:
              f"{rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves, {rep['wall']:.0f} s wall"]
     for r in rep["designs"]:
         lines.append(f"  {r['design']}: CD {r['CD']:.6f}  CL {r['CL']:.5f}  CMz {r['CMz']:+.5f}  area {r['area']:.7f}  "
-                     f"{'feasible' if r['feasible'] else 'infeasible'}")
+                     f"{'feasible' if r['feasible'] else 'infeasible'}"
+                     f"{'' if r.get('converged', True) else ' (FLOW NOT CONVERGED: no result)'}")
     b0, best = rep["baseline_CD"], rep["best"]
     lines.append("best feasible: " + ("none" if best is None else
                  f"{best['design']} CD {best['CD']:.6f} ({100 * (1 - best['CD'] / b0):.1f} % below {b0:.6f})"))

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from benchmarks.adodg import race
+from benchmarks.adodg import race, su2_side, su2_side_case2
 
 HEAD = ["evaluation", "iteration", "objective", "LIFT", "violation", "flow_solves", "adjoint_solves", "folder",
         "failed"]
@@ -155,8 +155,12 @@ def test_an_su2_flow_stopped_short_of_its_residual_is_no_result(tmp_path):
             {"DRAG": 0.0130, "LIFT": 0.82405, "MOMENT_Z": 0.0919, "AIRFOIL_AREA": 0.0778},
             {"DRAG": 0.0100, "LIFT": 0.8240, "MOMENT_Z": 0.0900, "AIRFOIL_AREA": 0.0778}]     # stalled at -4.9
     run = su2_run(tmp_path / "su2", rows, [3, 3, 0], residuals=[-8.01, -8.0000000001, -4.92])
-    assert race.su2_converged(run, 3) == [True, True, False]
+    assert su2_side.flow_converged(run, 3) == [True, True, False]
     t = race.su2_trace(2, run, "SU2")
     np.testing.assert_array_equal(t.feasible, [False, True, False])
     assert t.unconverged == 1 and race.best(t) == (0.0130, 5)
     assert "SU2: 3 designs, 9 solves (1 flows not converged: counted infeasible)" in race.summary([t])
+    rep = su2_side_case2.report(run)                       # the case's own report says the same
+    assert [r["converged"] for r in rep["designs"]] == [True, True, False]
+    assert rep["best"]["design"] == "DSN_002"               # DSN_003's lower drag is no result
+    assert "DSN_003" in su2_side_case2.summary(rep) and "FLOW NOT CONVERGED" in su2_side_case2.summary(rep)
