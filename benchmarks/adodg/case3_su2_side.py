@@ -54,7 +54,16 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.adodg.case3_report import report as load_report
-from benchmarks.adodg.su2_side import design_mesh, designs, dispatch, project_rows, run_program, side_parser, su2_bin
+from benchmarks.adodg.su2_side import (
+    design_mesh,
+    designs,
+    dispatch,
+    flow_converged,
+    project_rows,
+    run_program,
+    side_parser,
+    su2_bin,
+)
 from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.su2 import config_value, read_config, with_keys
 
@@ -262,14 +271,17 @@ def report(folder: Path, cd0: float | None = None, n_strips: int = STRIPS) -> di
     info = json.loads((folder / "box.json").read_text())
     alpha = info["alpha"]
     rows = []
-    for k, row in enumerate(project_rows(folder)):
+    table = project_rows(folder)
+    converged = flow_converged(folder, len(table))
+    for k, row in enumerate(table):
         dsn = folder / "DESIGNS" / f"DSN_{k + 1:03d}"
         values = design_values(dsn)
         twist = None if values is None else value_to_angle(values)
         rows.append({"design": dsn.name, "CD": row["DRAG"], "CL": row["LIFT"],
                      "twist_deg": None if twist is None else twist.tolist(),
                      "twist_rel_root_deg": None if twist is None else (twist - twist[0]).tolist(),
-                     "feasible": abs(row["LIFT"] - CL_TARGET) <= CL_TOLERANCE})
+                     "converged": converged[k],
+                     "feasible": converged[k] and abs(row["LIFT"] - CL_TARGET) <= CL_TOLERANCE})
     ok = [r for r in rows if r["feasible"]]
     best = min(ok, key=lambda r: r["CD"]) if ok else None
     flows, adjoints = solves(folder)

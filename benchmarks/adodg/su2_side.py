@@ -233,8 +233,9 @@ def flow_converged(folder: Path, n: int) -> list[bool]:
     """Whether each of SU2's designs 1..n has a flow that reached the configuration's
     ``CONV_RESIDUAL_MINVAL`` (the last ``rms[Rho]`` of ``DESIGNS/DSN_k/DIRECT/history_direct.csv``):
     SU2's scripts take a flow stopped at ``ITER`` short of it as a value; ffd counts such a flow a failed
-    evaluation. Without the key or the file: True (nothing to judge by)."""
-    minval = config_value(read_config(Path(folder) / "config.cfg"), "CONV_RESIDUAL_MINVAL")
+    evaluation. Without ``config.cfg``, its key or a design's history: True (nothing to judge by)."""
+    cfg = Path(folder) / "config.cfg"
+    minval = config_value(read_config(cfg), "CONV_RESIDUAL_MINVAL") if cfg.is_file() else None
     if not minval:
         return [True] * n
     out = []
