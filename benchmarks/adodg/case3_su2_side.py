@@ -58,6 +58,7 @@ from benchmarks.adodg.su2_side import (
     design_mesh,
     designs,
     dispatch,
+    finished_adjoints,
     flow_converged,
     project_rows,
     run_program,
@@ -240,7 +241,7 @@ def gradient_per_degree(dsn: Path, function: str, values: list[float] | None) ->
 def solves(folder: Path) -> tuple[int, int]:
     """(flow, adjoint) solves SU2 finished: a row of ``history_project.csv`` per flow, a gradient file
     (``of_grad*.csv``) per adjoint folder ``ADJOINT_<FUNCTION>`` of each design."""
-    adjoints = sum(1 for dsn in designs(folder) for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+    adjoints = sum(finished_adjoints(dsn) for dsn in designs(folder))
     return len(project_rows(folder)), adjoints
 
 

@@ -98,9 +98,8 @@ def ffd_trace(run: Path, tolerance: float, label: str = "ffd") -> Trace:
 
 
 def su2_adjoints(folder: Path, n: int) -> list[int]:
-    """The finished adjoints (gradient files) of SU2's designs 1..n."""
-    return [sum(1 for a in (Path(folder) / "DESIGNS" / f"DSN_{k + 1:03d}").glob("ADJOINT_*")
-                if list(a.glob("of_grad*.csv"))) for k in range(n)]
+    """The finished adjoints of SU2's designs 1..n (:func:`benchmarks.adodg.su2_side.finished_adjoints`)."""
+    return [su2_side.finished_adjoints(Path(folder) / "DESIGNS" / f"DSN_{k + 1:03d}") for k in range(n)]
 
 
 def su2_trace(case: int, folder: Path, label: str, baseline: Path | None = None) -> Trace:

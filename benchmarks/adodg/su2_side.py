@@ -50,7 +50,7 @@ import numpy as np
 from benchmarks.adodg.surface import add_material, wall_nodes
 from ffdcli.io.formats import read_mesh
 from ffdcli.optimize.solvers.base import find_program
-from ffdcli.optimize.solvers.su2 import config_value, read_config, read_history, with_keys
+from ffdcli.optimize.solvers.su2 import cauchy_only, config_value, read_config, read_history, with_keys
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = ROOT / "configs" / "adodg" / "case1.cfg"
@@ -229,14 +229,21 @@ def project_rows(folder: Path) -> list[dict[str, float]]:
     return [{h: float(v) for h, v in zip(head, r)} for r in rows[1:] if r]
 
 
+def finished_adjoints(dsn: Path) -> int:
+    """The adjoints SU2 finished for a design folder ``DSN_k``: its ``ADJOINT_<FUNCTION>`` folders holding
+    a gradient file (``of_grad*.csv``, written by SU2_DOT after the adjoint converged)."""
+    return sum(1 for a in Path(dsn).glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+
+
 def flow_converged(folder: Path, n: int) -> list[bool]:
     """Whether each of SU2's designs 1..n has a flow that reached the configuration's
     ``CONV_RESIDUAL_MINVAL`` (the last ``rms[Rho]`` of ``DESIGNS/DSN_k/DIRECT/history_direct.csv``):
     SU2's scripts take a flow stopped at ``ITER`` short of it as a value; ffd counts such a flow a failed
     evaluation. Without ``config.cfg``, its key or a design's history: True (nothing to judge by)."""
     cfg = Path(folder) / "config.cfg"
-    minval = config_value(read_config(cfg), "CONV_RESIDUAL_MINVAL") if cfg.is_file() else None
-    if not minval:
+    lines = read_config(cfg) if cfg.is_file() else []
+    minval = config_value(lines, "CONV_RESIDUAL_MINVAL")
+    if not minval or cauchy_only(lines):             # a coefficient's Cauchy criterion: no residual to judge
         return [True] * n
     out = []
     for k in range(n):
@@ -269,7 +276,7 @@ def report(folder: Path, baseline: Path) -> dict:
     table = project_rows(folder)
     flows = len(table)
     for dsn in designs(folder):        # finished only: a flow's row in history_project.csv, an adjoint's gradient
-        adjoints += sum(1 for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+        adjoints += finished_adjoints(dsn)
     converged = flow_converged(folder, len(table))
     for k, row in enumerate(table):
         dsn = folder / "DESIGNS" / f"DSN_{k + 1:03d}"

@@ -51,6 +51,7 @@ from benchmarks.adodg.su2_side import (
     designs,
     dispatch,
     ffd_definition,
+    finished_adjoints,
     flow_converged,
     geometry,
     project_rows,
@@ -141,7 +142,7 @@ def report(folder: Path) -> dict:
     folder = Path(folder)
     area0 = json.loads((folder / "baseline_geometry.json").read_text())["AIRFOIL_AREA"]
     table = project_rows(folder)
-    adjoints = sum(1 for dsn in designs(folder) for a in dsn.glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
+    adjoints = sum(finished_adjoints(dsn) for dsn in designs(folder))
     converged = flow_converged(folder, len(table))
     rows = [{"design": f"DSN_{k + 1:03d}", "CD": r["DRAG"], "CL": r["LIFT"], "CMz": r["MOMENT_Z"],
              "area": r.get("AIRFOIL_AREA", float("nan")), "converged": converged[k],

@@ -164,3 +164,13 @@ def test_an_su2_flow_stopped_short_of_its_residual_is_no_result(tmp_path):
     assert [r["converged"] for r in rep["designs"]] == [True, True, False]
     assert rep["best"]["design"] == "DSN_002"               # DSN_003's lower drag is no result
     assert "DSN_003" in su2_side_case2.summary(rep) and "FLOW NOT CONVERGED" in su2_side_case2.summary(rep)
+
+
+def test_a_config_converged_on_a_coefficient_is_not_judged_by_the_residual(tmp_path):
+    rows = [{"DRAG": 0.0194, "LIFT": 0.805, "MOMENT_Z": 0.096, "AIRFOIL_AREA": 0.0778}]
+    run = su2_run(tmp_path / "su2", rows, [3], residuals=[-4.9])
+    assert su2_side.flow_converged(run, 1) == [False]
+    cfg = run / "config.cfg"
+    cfg.write_text(cfg.read_text() + "CONV_FIELD= DRAG\n")                # a Cauchy criterion on CD
+    assert su2_side.flow_converged(run, 1) == [True]
+    assert su2_side.finished_adjoints(run / "DESIGNS" / "DSN_001") == 3
