@@ -1,0 +1,157 @@
+"""A run's record kept in the repository: the small files that carry its figures and let it go on.
+
+An optimisation run here outlives a sitting and its folder lives under ``out/`` (not in git), so a
+machine that starts afresh loses it. ``keep`` copies what the case's reports, the race and ``--resume``
+read into ``benchmarks/adodg/records/<name>/`` (committed as the run goes); ``restore`` puts it back
+into a run folder so that the reports read it and the run continues.
+
+* **ffd** (``ffd optimize`` folder: ``history.csv`` and ``evals/NNNN/result.json``): ``history.csv``,
+  ``best.yaml``, each evaluation's ``result.json`` (its variables, functions, gradients, solves and
+  seconds: ``--resume`` reuses every one whose inputs hash matches, so only the unfinished ones are
+  solved again) and its flow's ``history.csv``.
+* **SU2** (``shape_optimization.py`` folder: ``config.cfg`` and ``DESIGNS/``): the configuration,
+  ``box.json``, ``baseline_geometry.json``, ``run.json``, ``history_project.csv``, ``optimizer.log``,
+  ``project.pkl`` (SU2's own restart, ``-r``), each design's ``config_DSN.cfg`` and ``design.pkl``,
+  its flow's ``history_direct.csv`` (whether the flow converged) and its adjoints' gradient files
+  (``of_grad*.csv``). SU2's restart copies the files its state names (meshes, solutions) from each
+  design folder before it answers from its cache, so ``restore`` writes an empty file for each one
+  recorded in ``record.json`` but not kept: those are never read for a design whose functions and
+  gradients are known (a new design's flow starts from ``RESTART_SOL= NO`` and its own deformed mesh).
+
+Files larger than :data:`MAX_BYTES` are left out (and listed in ``record.json``), so no mesh or solution
+enters git by a pattern's accident. ::
+
+    python -m benchmarks.adodg.record keep out/adodg3h/case3 case3_h0_ffd
+    python -m benchmarks.adodg.record restore case3_h0_ffd out/adodg3h/case3
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+RECORDS = Path(__file__).resolve().parent / "records"
+MAX_BYTES = 2_000_000
+
+FFD_FILES = ("history.csv", "best.yaml", "evals/*/result.json", "evals/*/history.csv")
+SU2_FILES = ("config.cfg", "box.json", "baseline_geometry.json", "run.json", "history_project.csv",
+             "optimizer.log", "project.pkl", "DESIGNS/DSN_*/config_DSN.cfg", "DESIGNS/DSN_*/design.pkl",
+             "DESIGNS/DSN_*/DIRECT/history_direct.csv", "DESIGNS/DSN_*/ADJOINT_*/of_grad*.csv")
+
+
+class RecordError(Exception):
+    """A folder that is not a run, or a record that does not exist (the message names it)."""
+
+
+@dataclass(frozen=True)
+class Kept:
+    """What ``keep`` did: the files copied (relative paths), those left out as too large, the bytes."""
+
+    kind: str
+    files: tuple[str, ...]
+    too_large: tuple[str, ...]
+    bytes: int
+
+
+def kind_of(run: Path) -> str:
+    """``"ffd"`` for an ``ffd optimize`` folder, ``"su2"`` for a ``shape_optimization.py`` one."""
+    run = Path(run)
+    if (run / "evals").is_dir() or (run / "history.csv").is_file():
+        return "ffd"
+    if (run / "config.cfg").is_file() and ((run / "DESIGNS").is_dir() or (run / "project.pkl").is_file()):
+        return "su2"
+    raise RecordError(f"{run}: neither an `ffd optimize` run folder (history.csv, evals/) nor an SU2 "
+                      "shape_optimization.py one (config.cfg, DESIGNS/)")
+
+
+def selected(run: Path, patterns: tuple[str, ...]) -> list[Path]:
+    """The files of ``run`` matching ``patterns`` (relative paths, sorted, each once)."""
+    found = {p.relative_to(run) for pat in patterns for p in run.glob(pat) if p.is_file()}
+    return sorted(found)
+
+
+def keep(run: Path, record: Path) -> Kept:
+    """Copy the record files of ``run`` into ``record`` (created; files already there are replaced) and
+    write ``record.json``: the kind, the files kept, those too large, and for SU2 every other file of
+    the design folders (the names ``restore`` writes empty)."""
+    run, record = Path(run), Path(record)
+    kind = kind_of(run)
+    files = selected(run, FFD_FILES if kind == "ffd" else SU2_FILES)
+    kept, large, total = [], [], 0
+    for rel in files:
+        size = (run / rel).stat().st_size
+        if size > MAX_BYTES:
+            large.append(str(rel))
+            continue
+        (record / rel).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(run / rel, record / rel)
+        kept.append(str(rel))
+        total += size
+    placeholders = []
+    if kind == "su2":
+        names = set(kept)
+        placeholders = sorted(str(p.relative_to(run)) for p in (run / "DESIGNS").rglob("*")
+                              if p.is_file() and str(p.relative_to(run)) not in names)
+    meta = {"kind": kind, "source": str(run), "files": kept, "too_large": large, "placeholders": placeholders}
+    (record / "record.json").write_text(json.dumps(meta, indent=1) + "\n")
+    return Kept(kind=kind, files=tuple(kept), too_large=tuple(large), bytes=total)
+
+
+def restore(record: Path, run: Path) -> int:
+    """Copy a record back into ``run`` (created); files the run already has are left as they are. For
+    SU2, the design files the record did not keep are written empty (SU2's restart copies them, reads
+    none). Returns the files written."""
+    record, run = Path(record), Path(run)
+    meta_path = record / "record.json"
+    if not meta_path.is_file():
+        raise RecordError(f"{meta_path}: no such file (a folder written by `record keep`)")
+    meta = json.loads(meta_path.read_text())
+    written = 0
+    for rel in meta["files"]:
+        if not (record / rel).is_file():
+            raise RecordError(f"{record / rel}: listed in record.json but missing")
+        if not (run / rel).exists():
+            (run / rel).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(record / rel, run / rel)
+            written += 1
+    for rel in meta.get("placeholders", []):
+        if not (run / rel).exists():
+            (run / rel).parent.mkdir(parents=True, exist_ok=True)
+            (run / rel).touch()
+            written += 1
+    return written
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.record", description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="command", required=True)
+    k = sub.add_parser("keep", help="copy a run's record files into benchmarks/adodg/records/NAME")
+    k.add_argument("run", type=Path)
+    k.add_argument("name")
+    r = sub.add_parser("restore", help="put a record back into a run folder (then --resume, or the reports)")
+    r.add_argument("name")
+    r.add_argument("run", type=Path)
+    args = ap.parse_args(argv)
+    try:
+        if args.command == "keep":
+            if not Path(args.run).is_dir():
+                raise RecordError(f"{args.run}: no such folder")
+            out = keep(args.run, RECORDS / args.name)
+            print(f"{RECORDS / args.name}: {out.kind} run, {len(out.files)} files, {out.bytes / 1e6:.2f} MB"
+                  + (f"; left out as larger than {MAX_BYTES:,} bytes: {', '.join(out.too_large)}"
+                     if out.too_large else ""))
+        else:
+            n = restore(RECORDS / args.name, args.run)
+            print(f"{args.run}: {n} files written from {RECORDS / args.name}")
+    except RecordError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

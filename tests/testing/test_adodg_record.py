@@ -1,0 +1,83 @@
+"""benchmarks/adodg/record.py: a run's small files kept in the repository and put back."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from benchmarks.adodg import record
+
+
+def _ffd_run(root):
+    (root / "evals" / "0001").mkdir(parents=True)
+    (root / "evals" / "0002").mkdir(parents=True)
+    (root / "history.csv").write_text("evaluation,objective\n1,0.5\n2,0.4\n")
+    (root / "best.yaml").write_text("changes: []\n")
+    for k in ("0001", "0002"):
+        (root / "evals" / k / "result.json").write_text(json.dumps({"index": int(k)}))
+        (root / "evals" / k / "history.csv").write_text("rms[Rho]\n-10.1\n")
+        (root / "evals" / k / "mesh.su2").write_text("NDIME= 3\n" * 10)     # not a record file
+    return root
+
+
+def _su2_run(root):
+    dsn = root / "DESIGNS" / "DSN_001"
+    (dsn / "DIRECT").mkdir(parents=True)
+    (dsn / "ADJOINT_DRAG").mkdir()
+    (root / "config.cfg").write_text("CONV_RESIDUAL_MINVAL= -10\n")
+    (root / "project.pkl").write_bytes(b"\x80\x04pickle")
+    (root / "history_project.csv").write_text('"DRAG","LIFT"\n0.0077,0.375\n')
+    (root / "mesh_ffd.su2").write_text("big mesh\n")                      # project mesh: not a record file
+    (dsn / "config_DSN.cfg").write_text("DV_VALUE= 0\n")
+    (dsn / "design.pkl").write_bytes(b"\x80\x04design")
+    (dsn / "DIRECT" / "history_direct.csv").write_text('"rms[Rho]"\n-10.2\n')
+    (dsn / "DIRECT" / "restart_flow.dat").write_text("solution\n" * 100)  # a placeholder on restore
+    (dsn / "ADJOINT_DRAG" / "of_grad.csv").write_text('"VARIABLE","GRADIENT"\n0,1e-3\n')
+    return root
+
+
+def test_ffd_run_kept_and_restored_byte_for_byte(tmp_path):
+    run = _ffd_run(tmp_path / "run")
+    out = record.keep(run, tmp_path / "rec")
+    assert out.kind == "ffd"
+    assert set(out.files) == {"history.csv", "best.yaml", "evals/0001/result.json", "evals/0002/result.json",
+                              "evals/0001/history.csv", "evals/0002/history.csv"}
+    back = tmp_path / "back"
+    assert record.restore(tmp_path / "rec", back) == 6
+    for rel in out.files:
+        assert (back / rel).read_bytes() == (run / rel).read_bytes()
+    assert not (back / "evals" / "0001" / "mesh.su2").exists()
+    assert record.restore(tmp_path / "rec", back) == 0          # nothing the run has is replaced
+
+
+def test_su2_run_restored_with_placeholders(tmp_path):
+    run = _su2_run(tmp_path / "run")
+    out = record.keep(run, tmp_path / "rec")
+    assert out.kind == "su2"
+    assert "project.pkl" in out.files and "DESIGNS/DSN_001/ADJOINT_DRAG/of_grad.csv" in out.files
+    assert "mesh_ffd.su2" not in out.files
+    meta = json.loads((tmp_path / "rec" / "record.json").read_text())
+    assert meta["placeholders"] == ["DESIGNS/DSN_001/DIRECT/restart_flow.dat"]
+    back = tmp_path / "back"
+    record.restore(tmp_path / "rec", back)
+    assert (back / "DESIGNS/DSN_001/DIRECT/restart_flow.dat").stat().st_size == 0
+    assert (back / "project.pkl").read_bytes() == b"\x80\x04pickle"
+
+
+def test_too_large_left_out_and_said(tmp_path, monkeypatch):
+    run = _ffd_run(tmp_path / "run")
+    monkeypatch.setattr(record, "MAX_BYTES", 20)
+    (run / "history.csv").write_text("x" * 21)
+    out = record.keep(run, tmp_path / "rec")
+    assert "history.csv" in out.too_large and "history.csv" not in out.files
+    assert json.loads((tmp_path / "rec" / "record.json").read_text())["too_large"] == ["history.csv"]
+
+
+def test_errors_exit_2_and_name_the_folder(tmp_path, capsys):
+    (tmp_path / "empty").mkdir()
+    assert record.main(["keep", str(tmp_path / "empty"), "x"]) == 2
+    assert "empty" in capsys.readouterr().err
+    assert record.main(["keep", str(tmp_path / "missing"), "x"]) == 2
+    with pytest.raises(record.RecordError, match="record.json"):
+        record.restore(tmp_path / "nothing", tmp_path / "run")
