@@ -272,7 +272,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{folder}: CL {rep['CL']:.6f}  CD {rep['CD']:.7f}  alpha {rep['alpha']:g}  U_inf {rep['u_inf']:.6f}")
         for p in rep["planes"]:
             print(f"  plane {p['distance']:5.2f} chords behind: energy CDi {p['CDi']:.7f} "
-                  f"(crossflow {p['crossflow']:.7f}, axial {p['axial']:.2e}) e {p['e']:.4f} | circulation CL {p['CL_wake']:.5f} e {p['e_wake']:.4f}"
+                  f"(crossflow {p['crossflow']:.7f}, axial {p['axial']:.2e}) e {p['e']:.4f}"
+                  f" | circulation CL {p['CL_wake']:.5f} e {p['e_wake']:.4f}"
                   f" | outside the mesh {100 * p['outside']:.1f} %")
     return 0
 
