@@ -79,6 +79,18 @@ class OptimizationProblem:
             ev = self._adjoints(ev, want)
         return ev
 
+    def mesh_of(self, ev: Evaluation) -> Path:
+        """The deformed mesh of ``ev``, made again by the same chain when its folder no longer has it
+        (an evaluation resumed from its ``result.json`` alone)."""
+        path = ev.folder / self.mesh_name
+        if not path.is_file():
+            path.parent.mkdir(parents=True, exist_ok=True)
+            again, _ = self._geometry(ev)
+            if again.failed is not None:
+                raise InputError(f"evaluation {ev.index}'s mesh could not be made again: {again.failed}",
+                                 path=ev.folder)
+        return path
+
     # -- the stages ------------------------------------------------------------------------------
     def _geometry(self, ev: Evaluation) -> tuple[Evaluation, float]:
         """Deform at the evaluation's values, gate, write the mesh: (evaluation, seconds); failed on refusal.
@@ -101,6 +113,13 @@ class OptimizationProblem:
     def _flow(self, values: np.ndarray) -> Evaluation:
         ev = self.store.new(values, self.iteration)
         self.counts["evaluations"] += 1
+        ev = self._solve_flow(ev)
+        self.report(ev, "flow")
+        return ev
+
+    def _solve_flow(self, ev: Evaluation) -> Evaluation:
+        """Deform, gate, write the mesh and solve the flow of ``ev`` in its folder; its functions (or its
+        failure), seconds and solves added to what it had; saved."""
         ev, t_ffd = self._geometry(ev)
         t_solver, ran = 0.0, False
         if ev.failed is None:
@@ -119,15 +138,21 @@ class OptimizationProblem:
                 t_solver = time.perf_counter() - t0          # a failed run's time counts too
                 ev = ev.with_(failed=e.reason, log=None if e.log is None else str(e.log))
             self.counts["flow"] += 1
-        ev = ev.with_(seconds={"solver": t_solver, "ffd": t_ffd}, solves={"flow": int(ran), "adjoint": 0})
+        ev = ev.with_(seconds={"solver": ev.seconds["solver"] + t_solver, "ffd": ev.seconds["ffd"] + t_ffd},
+                      solves={**ev.solves, "flow": ev.solves["flow"] + int(ran)})
         self.seconds["solver"] += t_solver
         self.seconds["ffd"] += t_ffd
-        ev = self.store.save(ev)
-        self.report(ev, "flow")
-        return ev
+        return self.store.save(ev)
 
     def _adjoints(self, ev: Evaluation, functions: list[str]) -> Evaluation:
-        """Run the adjoint of each of ``functions`` still missing and chain each to dJ/dv (n_vars,)."""
+        """Run the adjoint of each of ``functions`` still missing and chain each to dJ/dv (n_vars,). An
+        evaluation whose folder lost its mesh or its flow solution (resumed from its ``result.json``
+        alone) has them made again first: the mesh by the same chain, the flow by one more solve."""
+        if not ((ev.folder / self.mesh_name).is_file() and self.solver.has_flow(ev.folder)):
+            ev = self._solve_flow(ev)
+            self.report(ev, "flow")
+            if ev.failed is not None:
+                return ev
         grads = dict(ev.gradients)
         t_solver = t_ffd = 0.0
         mesh_path = ev.folder / self.mesh_name

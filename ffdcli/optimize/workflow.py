@@ -185,7 +185,7 @@ def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSetti
            "constraints_satisfied": bool(feasible), "best": None, "best_mesh": None,
            "history": str(folder / "history.csv"), "folder": str(folder)}
     if best is not None:
-        mesh_src = best.folder / problem.mesh_name
+        mesh_src = problem.mesh_of(best)
         mesh_dst = folder / ("best" + Path(design.mesh).suffix)
         with written_as(mesh_dst, "the best mesh", kept(folder)), atomic_path(mesh_dst) as tmp:
             shutil.copyfile(mesh_src, tmp)

@@ -140,6 +140,55 @@ def test_resume_reuses_every_finished_evaluation(tmp_path, method):
     assert c["reused"] == a["evaluations"]
 
 
+class _Forgetful(AnalyticSolver):
+    """The analytic stand-in with a flow "solution" that a cleaned folder has lost."""
+
+    lost: set = set()
+
+    def has_flow(self, folder):
+        return Path(folder).name not in self.lost
+
+
+@pytest.mark.parametrize("files_lost", [False, True])
+def test_resume_of_an_evaluation_stopped_before_its_adjoints(tmp_path, files_lost):
+    """A run stopped between a design's flow and its adjoints, resumed: the adjoints run; when the
+    folder also lost its mesh and flow solution (a record restored elsewhere), one more flow first."""
+    path = write_case(tmp_path, iterations=3, method="SQP")
+    run_optimize(path, solver=solver_for(path))
+    folder = tmp_path / "opt" / "evals"
+    withgrad = [p for p in sorted(folder.glob("*/result.json")) if json.loads(p.read_text())["gradients"]]
+    last = withgrad[-1]
+    data = json.loads(last.read_text())
+    data["gradients"], data["solves"]["adjoint"] = {}, 0
+    last.write_text(json.dumps(data))
+    if files_lost:
+        (last.parent / "mesh.su2").unlink()
+    again = _Forgetful(tmp_path / "analytic.yaml")
+    again.lost = {last.parent.name} if files_lost else set()
+    run_optimize(path, resume=True, solver=again)
+    assert again.adjoints == 2                        # DRAG's and LIFT's, of that design only
+    assert again.flows == (1 if files_lost else 0)
+    redone = json.loads(last.read_text())
+    assert set(redone["gradients"]) == {"DRAG", "LIFT"}
+    assert redone["solves"] == {"flow": 2 if files_lost else 1, "adjoint": 2}
+    assert (last.parent / "mesh.su2").is_file()
+    assert redone["functions"] == pytest.approx(data["functions"], rel=1e-12)
+
+
+def test_best_mesh_made_again_when_the_folders_lost_their_meshes(tmp_path):
+    path = write_case(tmp_path, iterations=3, method="SQP")
+    run_optimize(path, solver=solver_for(path))
+    best = tmp_path / "opt" / "best.su2"
+    before = best.read_bytes()
+    best.unlink()
+    for mesh in (tmp_path / "opt" / "evals").glob("*/mesh.su2"):
+        mesh.unlink()
+    again = solver_for(path)
+    run_optimize(path, resume=True, solver=again)
+    assert again.flows == 0 and again.adjoints == 0
+    assert best.read_bytes() == before
+
+
 def test_folder_of_another_run_needs_resume(tmp_path):
     path = write_case(tmp_path, iterations=1)
     run_optimize(path, solver=solver_for(path))

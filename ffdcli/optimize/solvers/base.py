@@ -125,6 +125,12 @@ class Solver(ABC):
         """The solver's inputs as text (its configuration): part of the key of a cached evaluation."""
         return ""
 
+    def has_flow(self, folder: Path) -> bool:
+        """Whether ``folder`` still holds what :meth:`adjoint` reads of its flow (a solution file): an
+        evaluation resumed from its ``result.json`` alone (its files cleaned away, or the run's record
+        restored on another machine) has its functions but not always its solution. True by default."""
+        return True
+
     def outputs(self) -> tuple[str, ...] | None:
         """The names of the functions this solver reports (its table of outputs), which
         ``optimize.objective`` and ``optimize.functions`` are checked against when the design file is

@@ -360,6 +360,10 @@ class SU2(Solver):
             raise SolverFailure("SU2_CFD wrote no restart_flow.dat", log)
         return FlowResult(functions=functions, seconds=seconds, log=log)
 
+    def has_flow(self, folder: Path) -> bool:
+        """The flow's ``restart_flow.dat`` is there (each adjoint starts from it)."""
+        return (Path(folder) / "restart_flow.dat").is_file()
+
     def adjoint(self, folder: Path, mesh: Path, function: str, start: Path | None = None) -> Sensitivity:
         sfx = ADJOINT_SUFFIX.get(function, function.lower())
         # the flow's solution, in place by a rename: adjoints of one design may run at once
