@@ -17,6 +17,9 @@ into a run folder so that the reports read it and the run continues.
   design folder before it answers from its cache, so ``restore`` writes an empty file for each one
   recorded in ``record.json`` but not kept: those are never read for a design whose functions and
   gradients are known (a new design's flow starts from ``RESTART_SOL= NO`` and its own deformed mesh).
+  A design cut short (its flow, or an adjoint it had begun, unfinished) would read them, so
+  ``restore`` takes it out of ``project.pkl`` with its folder: SU2 makes it again from its start
+  (its deformation, flow and adjoints), as ffd's ``--resume`` solves such an evaluation's flow again.
 
 Files larger than :data:`MAX_BYTES` are left out (and listed in ``record.json``), so no mesh or solution
 enters git by a pattern's accident. ::
@@ -30,9 +33,12 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from benchmarks.adodg.su2_side import su2_env
 
 RECORDS = Path(__file__).resolve().parent / "records"
 MAX_BYTES = 2_000_000
@@ -101,10 +107,47 @@ def keep(run: Path, record: Path) -> Kept:
     return Kept(kind=kind, files=tuple(kept), too_large=tuple(large), bytes=total)
 
 
-def restore(record: Path, run: Path) -> int:
+#: Run by SU2's own Python (its package, ``SU2_RUN`` set) in the run folder: drops the last design of
+#: ``project.pkl`` when it was cut short (no functions yet, or an ``ADJOINT_<F>`` folder whose gradient
+#: SU2's state does not hold) and removes its folder; prints the folder dropped.
+DROP_UNFINISHED = """
+import os, shutil, SU2
+p = SU2.io.load_data("project.pkl")
+if p.designs:
+    d = p.designs[-1]
+    names = os.listdir(d.folder) if os.path.isdir(d.folder) else []
+    begun = [a[len("ADJOINT_"):] for a in names if a.startswith("ADJOINT_")]
+    if not d.state.FUNCTIONS or any(f not in d.state.GRADIENTS for f in begun):
+        p.designs.pop()
+        SU2.io.save_data("project.pkl", p)
+        shutil.rmtree(d.folder, ignore_errors=True)
+        print(d.folder)
+"""
+
+
+def drop_unfinished(run: Path) -> str | None:
+    """Take a cut-short last design out of an SU2 run's ``project.pkl`` (see :data:`DROP_UNFINISHED`);
+    the folder dropped, or None."""
+    out = subprocess.run([sys.executable, "-c", DROP_UNFINISHED], cwd=run, env=su2_env(), capture_output=True,
+                         text=True)
+    if out.returncode != 0:
+        raise RecordError(f"{Path(run) / 'project.pkl'}: SU2's scripts could not read it: "
+                          f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
+    return out.stdout.strip() or None
+
+
+@dataclass(frozen=True)
+class Restored:
+    """What ``restore`` did: the files written, and the SU2 design folder dropped as cut short (or None)."""
+
+    written: int
+    dropped: str | None = None
+
+
+def restore(record: Path, run: Path, drop: bool = True) -> Restored:
     """Copy a record back into ``run`` (created); files the run already has are left as they are. For
     SU2, the design files the record did not keep are written empty (SU2's restart copies them, reads
-    none). Returns the files written."""
+    none), and with ``drop`` a design cut short is taken out (:func:`drop_unfinished`)."""
     record, run = Path(record), Path(run)
     meta_path = record / "record.json"
     if not meta_path.is_file():
@@ -123,7 +166,10 @@ def restore(record: Path, run: Path) -> int:
             (run / rel).parent.mkdir(parents=True, exist_ok=True)
             (run / rel).touch()
             written += 1
-    return written
+    dropped = None
+    if drop and meta["kind"] == "su2" and (run / "project.pkl").is_file():
+        dropped = drop_unfinished(run)
+    return Restored(written=written, dropped=dropped)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -145,8 +191,9 @@ def main(argv: list[str] | None = None) -> int:
                   + (f"; left out as larger than {MAX_BYTES:,} bytes: {', '.join(out.too_large)}"
                      if out.too_large else ""))
         else:
-            n = restore(RECORDS / args.name, args.run)
-            print(f"{args.run}: {n} files written from {RECORDS / args.name}")
+            out = restore(RECORDS / args.name, args.run)
+            print(f"{args.run}: {out.written} files written from {RECORDS / args.name}"
+                  + (f"; {out.dropped} was cut short: SU2 makes it again from its start" if out.dropped else ""))
     except RecordError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
 from benchmarks.adodg import record
+from benchmarks.adodg.su2_side import su2_bin, su2_env
 
 
 def _ffd_run(root):
@@ -44,11 +47,11 @@ def test_ffd_run_kept_and_restored_byte_for_byte(tmp_path):
     assert set(out.files) == {"history.csv", "best.yaml", "evals/0001/result.json", "evals/0002/result.json",
                               "evals/0001/history.csv", "evals/0002/history.csv"}
     back = tmp_path / "back"
-    assert record.restore(tmp_path / "rec", back) == 6
+    assert record.restore(tmp_path / "rec", back).written == 6
     for rel in out.files:
         assert (back / rel).read_bytes() == (run / rel).read_bytes()
     assert not (back / "evals" / "0001" / "mesh.su2").exists()
-    assert record.restore(tmp_path / "rec", back) == 0          # nothing the run has is replaced
+    assert record.restore(tmp_path / "rec", back).written == 0   # nothing the run has is replaced
 
 
 def test_su2_run_restored_with_placeholders(tmp_path):
@@ -60,8 +63,10 @@ def test_su2_run_restored_with_placeholders(tmp_path):
     meta = json.loads((tmp_path / "rec" / "record.json").read_text())
     assert meta["placeholders"] == ["DESIGNS/DSN_001/DIRECT/restart_flow.dat"]
     back = tmp_path / "back"
-    record.restore(tmp_path / "rec", back)
+    record.restore(tmp_path / "rec", back, drop=False)            # not SU2's pickle: nothing to drop
     assert (back / "DESIGNS/DSN_001/DIRECT/restart_flow.dat").stat().st_size == 0
+    with pytest.raises(record.RecordError, match="project.pkl"):
+        record.restore(tmp_path / "rec", tmp_path / "again")
     assert (back / "project.pkl").read_bytes() == b"\x80\x04pickle"
 
 
@@ -81,3 +86,39 @@ def test_errors_exit_2_and_name_the_folder(tmp_path, capsys):
     assert record.main(["keep", str(tmp_path / "missing"), "x"]) == 2
     with pytest.raises(record.RecordError, match="record.json"):
         record.restore(tmp_path / "nothing", tmp_path / "run")
+
+
+def _su2_missing() -> str | None:
+    try:
+        su2_bin()
+    except RuntimeError as e:
+        return str(e)
+    return None
+
+
+CUT_LAST = """
+import os, SU2
+p = SU2.io.load_data("project.pkl")
+d = p.designs[-1]
+d.state.GRADIENTS.pop("LIFT", None)
+os.makedirs(os.path.join(d.folder, "ADJOINT_LIFT"), exist_ok=True)
+SU2.io.save_data("project.pkl", p)
+print(len(p.designs))
+"""
+
+
+@pytest.mark.skipif(_su2_missing() is not None, reason=str(_su2_missing()))
+def test_su2_design_cut_short_is_dropped_on_restore(tmp_path):
+    """On a real record of SU2's run (Case 3, H0): a last design whose LIFT adjoint had begun but not
+    finished is taken out of project.pkl with its folder; a finished one is kept."""
+    rec = record.RECORDS / "case3_h0_su2_wall_distance"
+    run = tmp_path / "run"
+    record.restore(rec, run)
+    n = len(list((run / "DESIGNS").glob("DSN_*")))
+    assert record.drop_unfinished(run) is None                    # already finished: nothing to drop
+    out = subprocess.run([sys.executable, "-c", CUT_LAST], cwd=run, env=su2_env(), capture_output=True, text=True,
+                         check=True)
+    assert int(out.stdout) == n
+    dropped = record.drop_unfinished(run)
+    assert dropped == f"DESIGNS/DSN_{n:03d}"
+    assert not (run / dropped).exists() and len(list((run / "DESIGNS").glob("DSN_*"))) == n - 1
