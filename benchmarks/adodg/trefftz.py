@@ -27,14 +27,18 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
+import matplotlib
 import numpy as np
 from scipy.interpolate import LinearNDInterpolator
 from scipy.spatial import Delaunay
 
 from benchmarks.adodg.case3_report import config_alpha, history_file, last_history
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
 MAGIC = 535532          # SU2's binary restart files begin with this int32
 NAME_BYTES = 33         # each field name: a NUL-padded char[33]
@@ -163,7 +167,8 @@ class PlaneDrag:
     """What one plane says: the distance behind the root's trailing edge; from the crossflow energy,
     CDi and its two terms (crossflow, axial, both divided by U^2 S); from the plane's circulation, the
     lift it carries (``cl_wake``, 2 int Gamma dy / (U S)) and the span efficiency of that load as a flat
-    sheet (``e_wake``); the share of the plane's samples outside the mesh."""
+    sheet (``e_wake``); the share of the plane's samples outside the mesh; the stations ``y`` (ny,) and
+    the wake's load there, ``load`` (ny,) = c cl = 2 Gamma / U (Kutta-Joukowski)."""
 
     distance: float
     cdi: float
@@ -172,6 +177,8 @@ class PlaneDrag:
     cl_wake: float
     e_wake: float
     outside: float
+    y: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    load: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 class Solution:
@@ -213,7 +220,8 @@ class Solution:
         gamma = circulation(y, z, v, w)
         return PlaneDrag(distance=distance, cdi=(cross - axial) / scale, crossflow=cross / scale,
                          axial=axial / scale, cl_wake=2.0 * float(np.trapezoid(gamma, y)) / (self.u_inf * area),
-                         e_wake=sheet_efficiency(y, gamma), outside=float(np.isnan(u).mean()))
+                         e_wake=sheet_efficiency(y, gamma), outside=float(np.isnan(u).mean()), y=y,
+                         load=2.0 * gamma / self.u_inf)
 
 
 def span_efficiency(cl: float, cdi: float, aspect: float = ASPECT) -> float:
@@ -252,29 +260,62 @@ def analyse(folder: Path, distances: list[float], h: float = 0.01, extent: float
     return {"folder": str(folder), "CL": cl, "CD": hist.get("CD", hist.get("DRAG")), "alpha": alpha, "mach": mach,
             "u_inf": sol.u_inf, "planes": [{"distance": r.distance, "CDi": r.cdi, "crossflow": r.crossflow,
                                             "axial": r.axial, "outside": r.outside, "e": span_efficiency(cl, r.cdi),
-                                            "CL_wake": r.cl_wake, "e_wake": r.e_wake} for r in rows]}
+                                            "CL_wake": r.cl_wake, "e_wake": r.e_wake, "y": r.y, "load": r.load}
+                                           for r in rows]}
+
+
+def plot(reports: list[dict], labels: list[str], path: Path) -> None:
+    """The wake's load c cl(y) of each report at its first plane, each beside the ellipse of its lift."""
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    ys = np.linspace(0.0, SPAN, 200)
+    for rep, label, color in zip(reports, labels, ("C0", "C3", "C2", "C1"), strict=False):
+        p = rep["planes"][0]
+        keep = p["y"] <= 1.2 * SPAN
+        ax.plot(p["y"][keep], p["load"][keep], color=color,
+                label=f"{label}: CL from the wake {p['CL_wake']:.4f}, e {p['e_wake']:.4f}")
+        c0 = 4.0 * p["CL_wake"] * AREA / (math.pi * SPAN)
+        ax.plot(ys, c0 * np.sqrt(1.0 - (ys / SPAN) ** 2), "--", color=color, lw=0.9, label=f"{label}: its ellipse")
+    d = reports[0]["planes"][0]["distance"]
+    ax.set_xlabel("span station y (chords; the tip at 3)")
+    ax.set_ylabel("c cl = 2 Gamma / U")
+    ax.set_title(f"The load the wake carries, {d:g} chord behind the trailing edge (Trefftz plane)")
+    ax.set_xlim(0, 1.2 * SPAN)
+    ax.set_ylim(bottom=-0.02)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.trefftz", description=__doc__.split("\n\n")[0])
     ap.add_argument("folder", type=Path, nargs="+", help="a folder with SU2's restart_flow.dat, flow config, history")
-    ap.add_argument("--distances", type=float, nargs="+", default=[0.25, 0.5, 1.0, 2.0],
-                    help="planes behind the root's trailing edge, chords (default 0.25 0.5 1 2)")
+    ap.add_argument("--distances", type=float, nargs="+", default=[0.02, 0.05, 0.1, 0.25, 1.0],
+                    help="planes behind the root's trailing edge, chords (default 0.02 0.05 0.1 0.25 1)")
     ap.add_argument("--h", type=float, default=0.01, help="the plane's spacing over the wake, chords")
     ap.add_argument("--extent", type=float, default=30.0, help="the plane's half size, chords")
+    ap.add_argument("--plot", type=Path, help="draw each folder's wake load at the first distance here (PNG)")
+    ap.add_argument("--label", action="append", default=[], help="a folder's name in the picture (repeat)")
     args = ap.parse_args(argv)
+    reports = []
     for folder in args.folder:
         try:
             rep = analyse(folder, args.distances, h=args.h, extent=args.extent)
         except TrefftzError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return 2
+        reports.append(rep)
         print(f"{folder}: CL {rep['CL']:.6f}  CD {rep['CD']:.7f}  alpha {rep['alpha']:g}  U_inf {rep['u_inf']:.6f}")
         for p in rep["planes"]:
             print(f"  plane {p['distance']:5.2f} chords behind: energy CDi {p['CDi']:.7f} "
                   f"(crossflow {p['crossflow']:.7f}, axial {p['axial']:.2e}) e {p['e']:.4f}"
                   f" | circulation CL {p['CL_wake']:.5f} e {p['e_wake']:.4f}"
                   f" | outside the mesh {100 * p['outside']:.1f} %")
+    if args.plot:
+        labels = args.label + [Path(f).name for f in args.folder[len(args.label):]]
+        plot(reports, labels, args.plot)
+        print(f"wrote {args.plot}")
     return 0
 
 

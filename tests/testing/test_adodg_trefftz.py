@@ -115,3 +115,11 @@ def test_read_restart_round_trip_and_refusal(tmp_path):
 def test_command_exit_2_on_a_folder_without_solution(tmp_path, capsys):
     assert T.main([str(tmp_path)]) == 2
     assert "restart_flow.dat" in capsys.readouterr().err
+
+
+def test_plot_draws_each_load_beside_its_ellipse(tmp_path):
+    y = np.linspace(0, 3.6, 50)
+    load = 0.5 * np.sqrt(np.clip(1 - (y / 3) ** 2, 0, None))
+    rep = {"planes": [{"distance": 0.05, "y": y, "load": load, "CL_wake": 0.375, "e_wake": 0.98}]}
+    T.plot([rep, rep], ["a", "b"], tmp_path / "w.png")
+    assert (tmp_path / "w.png").stat().st_size > 10_000
