@@ -80,6 +80,18 @@ def selected(run: Path, patterns: tuple[str, ...]) -> list[Path]:
     return sorted(found)
 
 
+def steady_copy(src: Path, dst: Path, tries: int = 5) -> None:
+    """Copy ``src`` to ``dst`` again until ``src`` did not change while it was copied (a running run
+    rewrites ``project.pkl`` and ``history.csv`` after each design)."""
+    for _ in range(tries):
+        before = src.stat()
+        shutil.copyfile(src, dst)
+        after = src.stat()
+        if (before.st_mtime_ns, before.st_size) == (after.st_mtime_ns, after.st_size):
+            return
+    raise RecordError(f"{src}: kept changing while it was copied ({tries} tries); keep again later")
+
+
 def keep(run: Path, record: Path) -> Kept:
     """Copy the record files of ``run`` into ``record`` (created; files already there are replaced) and
     write ``record.json``: the kind, the files kept, those too large, and for SU2 every other file of
@@ -94,7 +106,7 @@ def keep(run: Path, record: Path) -> Kept:
             large.append(str(rel))
             continue
         (record / rel).parent.mkdir(parents=True, exist_ok=True)
-        shutil.copyfile(run / rel, record / rel)
+        steady_copy(run / rel, record / rel)
         kept.append(str(rel))
         total += size
     placeholders = []

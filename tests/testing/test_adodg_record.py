@@ -122,3 +122,20 @@ def test_su2_design_cut_short_is_dropped_on_restore(tmp_path):
     dropped = record.drop_unfinished(run)
     assert dropped == f"DESIGNS/DSN_{n:03d}"
     assert not (run / dropped).exists() and len(list((run / "DESIGNS").glob("DSN_*"))) == n - 1
+
+
+def test_a_file_changing_while_copied_is_copied_again(tmp_path, monkeypatch):
+    src, dst = tmp_path / "a", tmp_path / "b"
+    src.write_text("one")
+    calls = []
+    real = record.shutil.copyfile
+
+    def copy_then_touch(a, b):
+        real(a, b)
+        calls.append(1)
+        if len(calls) == 1:                        # the run rewrites the file during the first copy
+            src.write_text("two, longer")
+
+    monkeypatch.setattr(record.shutil, "copyfile", copy_then_touch)
+    record.steady_copy(src, dst)
+    assert len(calls) == 2 and dst.read_text() == "two, longer"
