@@ -317,6 +317,7 @@ NAME = st.one_of(st.sampled_from(["c1", "c0", "c0_twist", "k0", "k0_volume", "wi
 @given(comps=st.lists(st.tuples(NAME, st.lists(st.sampled_from(KINDS), min_size=0, max_size=5)), min_size=1,
                       max_size=4, unique_by=lambda c: c[0]), single=st.booleans())
 def test_openmdao_names_are_unique_and_reversible(comps, single):
+    pytest.importorskip("openmdao")                 # ffdcli.openmdao imports it (the [openmdao] extra)
     from ffdcli.openmdao import constraint_output, input_name, input_parts
 
     comps = comps[:1] if single else comps
