@@ -21,7 +21,8 @@ into a run folder so that the reports read it and the run continues.
   ``restore`` takes it out of ``project.pkl`` with its folder: SU2 makes it again from its start
   (its deformation, flow and adjoints), as ffd's ``--resume`` solves such an evaluation's flow again.
 
-Files larger than :data:`MAX_BYTES` are left out (and listed in ``record.json``), so no mesh or solution
+Files over :data:`PACK_ABOVE` bytes are kept gzipped (``NAME.gz``; ``restore`` unpacks them), and a
+file still over :data:`MAX_BYTES` is left out (and listed in ``record.json``), so no mesh or solution
 enters git by a pattern's accident. ::
 
     python -m benchmarks.adodg.record keep out/adodg3h/case3 case3_h0_ffd
@@ -31,6 +32,7 @@ enters git by a pattern's accident. ::
 from __future__ import annotations
 
 import argparse
+import gzip
 import json
 import shutil
 import subprocess
@@ -41,7 +43,8 @@ from pathlib import Path
 from benchmarks.adodg.su2_side import su2_env
 
 RECORDS = Path(__file__).resolve().parent / "records"
-MAX_BYTES = 2_000_000
+MAX_BYTES = 2_000_000       # no file of a record is larger (after packing)
+PACK_ABOVE = 200_000        # files larger than this are kept gzipped (flow histories, SU2's project.pkl)
 
 FFD_FILES = ("history.csv", "best.yaml", "evals/*/result.json", "evals/*/history.csv")
 SU2_FILES = ("config.cfg", "box.json", "baseline_geometry.json", "run.json", "history_project.csv",
@@ -80,12 +83,17 @@ def selected(run: Path, patterns: tuple[str, ...]) -> list[Path]:
     return sorted(found)
 
 
-def steady_copy(src: Path, dst: Path, tries: int = 5) -> None:
-    """Copy ``src`` to ``dst`` again until ``src`` did not change while it was copied (a running run
-    rewrites ``project.pkl`` and ``history.csv`` after each design)."""
+def steady_copy(src: Path, dst: Path, tries: int = 5, packed: bool = False) -> None:
+    """Copy ``src`` to ``dst`` (gzip-compressed when ``packed``, with no time stamp, so the same bytes
+    give the same file) again until ``src`` did not change while it was copied (a running run rewrites
+    ``project.pkl`` and ``history.csv`` after each design)."""
     for _ in range(tries):
         before = src.stat()
-        shutil.copyfile(src, dst)
+        if packed:
+            with open(src, "rb") as fin, open(dst, "wb") as raw, gzip.GzipFile(fileobj=raw, mode="wb", mtime=0) as fout:
+                shutil.copyfileobj(fin, fout)
+        else:
+            shutil.copyfile(src, dst)
         after = src.stat()
         if (before.st_mtime_ns, before.st_size) == (after.st_mtime_ns, after.st_size):
             return
@@ -93,29 +101,41 @@ def steady_copy(src: Path, dst: Path, tries: int = 5) -> None:
 
 
 def keep(run: Path, record: Path) -> Kept:
-    """Copy the record files of ``run`` into ``record`` (created; files already there are replaced) and
-    write ``record.json``: the kind, the files kept, those too large, and for SU2 every other file of
-    the design folders (the names ``restore`` writes empty)."""
+    """Write the record of ``run`` into ``record`` afresh (built beside it, then put in its place, so a
+    record never mixes two keeps): the record files, each over :data:`PACK_ABOVE` bytes gzipped
+    (``NAME.gz``), and ``record.json``: the kind, the files kept, those packed, those too large even
+    packed, and for SU2 every other file of the design folders (the names ``restore`` writes empty)."""
     run, record = Path(run), Path(record)
     kind = kind_of(run)
     files = selected(run, FFD_FILES if kind == "ffd" else SU2_FILES)
-    kept, large, total = [], [], 0
+    fresh = record.with_name(record.name + ".new")
+    shutil.rmtree(fresh, ignore_errors=True)
+    kept, packed, large, total = [], [], [], 0
     for rel in files:
-        size = (run / rel).stat().st_size
+        pack = (run / rel).stat().st_size > PACK_ABOVE
+        dst = fresh / (str(rel) + ".gz" if pack else rel)
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        steady_copy(run / rel, dst, packed=pack)
+        size = dst.stat().st_size
         if size > MAX_BYTES:
+            dst.unlink()
             large.append(str(rel))
             continue
-        (record / rel).parent.mkdir(parents=True, exist_ok=True)
-        steady_copy(run / rel, record / rel)
         kept.append(str(rel))
+        if pack:
+            packed.append(str(rel))
         total += size
     placeholders = []
     if kind == "su2":
         names = set(kept)
         placeholders = sorted(str(p.relative_to(run)) for p in (run / "DESIGNS").rglob("*")
                               if p.is_file() and str(p.relative_to(run)) not in names)
-    meta = {"kind": kind, "source": str(run), "files": kept, "too_large": large, "placeholders": placeholders}
-    (record / "record.json").write_text(json.dumps(meta, indent=1) + "\n")
+    meta = {"kind": kind, "source": str(run), "files": kept, "packed": packed, "too_large": large,
+            "placeholders": placeholders}
+    fresh.mkdir(parents=True, exist_ok=True)
+    (fresh / "record.json").write_text(json.dumps(meta, indent=1) + "\n")
+    shutil.rmtree(record, ignore_errors=True)
+    fresh.rename(record)
     return Kept(kind=kind, files=tuple(kept), too_large=tuple(large), bytes=total)
 
 
@@ -166,12 +186,18 @@ def restore(record: Path, run: Path, drop: bool = True) -> Restored:
         raise RecordError(f"{meta_path}: no such file (a folder written by `record keep`)")
     meta = json.loads(meta_path.read_text())
     written = 0
+    packed = set(meta.get("packed", []))
     for rel in meta["files"]:
-        if not (record / rel).is_file():
-            raise RecordError(f"{record / rel}: listed in record.json but missing")
+        src = record / (rel + ".gz" if rel in packed else rel)
+        if not src.is_file():
+            raise RecordError(f"{src}: listed in record.json but missing")
         if not (run / rel).exists():
             (run / rel).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copyfile(record / rel, run / rel)
+            if rel in packed:
+                with gzip.open(src, "rb") as fin, open(run / rel, "wb") as fout:
+                    shutil.copyfileobj(fin, fout)
+            else:
+                shutil.copyfile(src, run / rel)
             written += 1
     for rel in meta.get("placeholders", []):
         if not (run / rel).exists():

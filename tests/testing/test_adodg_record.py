@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 
@@ -139,3 +140,21 @@ def test_a_file_changing_while_copied_is_copied_again(tmp_path, monkeypatch):
     monkeypatch.setattr(record.shutil, "copyfile", copy_then_touch)
     record.steady_copy(src, dst)
     assert len(calls) == 2 and dst.read_text() == "two, longer"
+
+
+def test_large_files_packed_and_unpacked_and_a_keep_replaces_the_record(tmp_path, monkeypatch):
+    run = _ffd_run(tmp_path / "run")
+    monkeypatch.setattr(record, "PACK_ABOVE", 100)
+    big = "evaluation,objective\n" + "".join(f"{k},0.5\n" for k in range(500))
+    (run / "history.csv").write_text(big)
+    record.keep(run, tmp_path / "rec")
+    assert (tmp_path / "rec" / "history.csv.gz").is_file() and not (tmp_path / "rec" / "history.csv").exists()
+    first = (tmp_path / "rec" / "history.csv.gz").read_bytes()
+    record.keep(run, tmp_path / "rec")                              # the same bytes give the same file
+    assert (tmp_path / "rec" / "history.csv.gz").read_bytes() == first
+    record.restore(tmp_path / "rec", tmp_path / "back")
+    assert (tmp_path / "back" / "history.csv").read_text() == big
+    shutil.rmtree(run / "evals" / "0002")                           # the run lost an evaluation: so does the record
+    record.keep(run, tmp_path / "rec")
+    assert not (tmp_path / "rec" / "evals" / "0002").exists()
+    assert not (tmp_path / "rec.new").exists()
