@@ -11,7 +11,8 @@ into a run folder so that the reports read it and the run continues.
   solved again) and its flow's ``history.csv``.
 * **SU2** (``shape_optimization.py`` folder: ``config.cfg`` and ``DESIGNS/``): the configuration,
   ``box.json``, ``baseline_geometry.json``, ``run.json``, ``history_project.csv``, ``optimizer.log``,
-  ``project.pkl`` (SU2's own restart, ``-r``), each design's ``config_DSN.cfg`` and ``design.pkl``,
+  ``project.pkl`` (SU2's own restart, ``-r``; each design's convergence histories in it cut to their
+  last row, :data:`SLIM_PROJECT`, the only row SU2's restart reads), each design's ``config_DSN.cfg``,
   its flow's ``history_direct.csv`` (whether the flow converged) and its adjoints' gradient files
   (``of_grad*.csv``). SU2's restart copies the files its state names (meshes, solutions) from each
   design folder before it answers from its cache, so ``restore`` writes an empty file for each one
@@ -48,7 +49,7 @@ PACK_ABOVE = 200_000        # files larger than this are kept gzipped (flow hist
 
 FFD_FILES = ("history.csv", "best.yaml", "evals/*/result.json", "evals/*/history.csv")
 SU2_FILES = ("config.cfg", "box.json", "baseline_geometry.json", "run.json", "history_project.csv",
-             "optimizer.log", "project.pkl", "DESIGNS/DSN_*/config_DSN.cfg", "DESIGNS/DSN_*/design.pkl",
+             "optimizer.log", "project.pkl", "DESIGNS/DSN_*/config_DSN.cfg",
              "DESIGNS/DSN_*/DIRECT/history_direct.csv", "DESIGNS/DSN_*/ADJOINT_*/of_grad*.csv")
 
 
@@ -112,10 +113,16 @@ def keep(run: Path, record: Path) -> Kept:
     shutil.rmtree(fresh, ignore_errors=True)
     kept, packed, large, total = [], [], [], 0
     for rel in files:
-        pack = (run / rel).stat().st_size > PACK_ABOVE
+        src = run / rel
+        if kind == "su2" and str(rel) == "project.pkl":
+            src = fresh / "slim" / "project.pkl"
+            src.parent.mkdir(parents=True, exist_ok=True)
+            steady_copy(run / rel, src)
+            slim_project(src.parent)
+        pack = src.stat().st_size > PACK_ABOVE
         dst = fresh / (str(rel) + ".gz" if pack else rel)
         dst.parent.mkdir(parents=True, exist_ok=True)
-        steady_copy(run / rel, dst, packed=pack)
+        steady_copy(src, dst, packed=pack)
         size = dst.stat().st_size
         if size > MAX_BYTES:
             dst.unlink()
@@ -129,14 +136,38 @@ def keep(run: Path, record: Path) -> Kept:
     if kind == "su2":
         names = set(kept)
         placeholders = sorted(str(p.relative_to(run)) for p in (run / "DESIGNS").rglob("*")
-                              if p.is_file() and str(p.relative_to(run)) not in names)
+                              if p.is_file() and p.suffix != ".pkl" and str(p.relative_to(run)) not in names)
     meta = {"kind": kind, "source": str(run), "files": kept, "packed": packed, "too_large": large,
             "placeholders": placeholders}
     fresh.mkdir(parents=True, exist_ok=True)
+    shutil.rmtree(fresh / "slim", ignore_errors=True)
     (fresh / "record.json").write_text(json.dumps(meta, indent=1) + "\n")
     shutil.rmtree(record, ignore_errors=True)
     fresh.rename(record)
     return Kept(kind=kind, files=tuple(kept), too_large=tuple(large), bytes=total)
+
+
+#: Run by SU2's own Python in a folder holding a copy of ``project.pkl``: each design's convergence
+#: histories (``state.HISTORY``, every iteration of its flow and adjoints, most of the file's size)
+#: cut to their last row, which is all SU2's ``Project.compile_results`` reads of them.
+SLIM_PROJECT = """
+import SU2
+p = SU2.io.load_data("project.pkl")
+for d in p.designs:
+    for kind in d.state.HISTORY:
+        for key in d.state.HISTORY[kind]:
+            d.state.HISTORY[kind][key] = d.state.HISTORY[kind][key][-1:]
+SU2.io.save_data("project.pkl", p)
+"""
+
+
+def slim_project(folder: Path) -> None:
+    """:data:`SLIM_PROJECT` on ``folder/project.pkl`` (SU2's scripts needed)."""
+    out = subprocess.run([sys.executable, "-c", SLIM_PROJECT], cwd=folder, env=su2_env(), capture_output=True,
+                         text=True)
+    if out.returncode != 0:
+        raise RecordError(f"{Path(folder) / 'project.pkl'}: SU2's scripts could not read it: "
+                          f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
 
 
 #: Run by SU2's own Python (its package, ``SU2_RUN`` set) in the run folder: drops the last design of

@@ -55,7 +55,8 @@ def test_ffd_run_kept_and_restored_byte_for_byte(tmp_path):
     assert record.restore(tmp_path / "rec", back).written == 0   # nothing the run has is replaced
 
 
-def test_su2_run_restored_with_placeholders(tmp_path):
+def test_su2_run_restored_with_placeholders(tmp_path, monkeypatch):
+    monkeypatch.setattr(record, "slim_project", lambda folder: None)     # not SU2's pickle: nothing to slim
     run = _su2_run(tmp_path / "run")
     out = record.keep(run, tmp_path / "rec")
     assert out.kind == "su2"
