@@ -84,10 +84,11 @@ def selected(run: Path, patterns: tuple[str, ...]) -> list[Path]:
     return sorted(found)
 
 
-def steady_copy(src: Path, dst: Path, tries: int = 5, packed: bool = False) -> None:
+def steady_copy(src: Path, dst: Path, tries: int = 5, packed: bool = False) -> bool:
     """Copy ``src`` to ``dst`` (gzip-compressed when ``packed``, with no time stamp, so the same bytes
     give the same file) again until ``src`` did not change while it was copied (a running run rewrites
-    ``project.pkl`` and ``history.csv`` after each design)."""
+    ``project.pkl`` and ``history.csv`` after each design). False when it changed at every try (a
+    running solve's history): ``dst`` is then removed."""
     for _ in range(tries):
         before = src.stat()
         if packed:
@@ -97,8 +98,9 @@ def steady_copy(src: Path, dst: Path, tries: int = 5, packed: bool = False) -> N
             shutil.copyfile(src, dst)
         after = src.stat()
         if (before.st_mtime_ns, before.st_size) == (after.st_mtime_ns, after.st_size):
-            return
-    raise RecordError(f"{src}: kept changing while it was copied ({tries} tries); keep again later")
+            return True
+    dst.unlink(missing_ok=True)
+    return False
 
 
 def keep(run: Path, record: Path) -> Kept:
@@ -111,18 +113,21 @@ def keep(run: Path, record: Path) -> Kept:
     files = selected(run, FFD_FILES if kind == "ffd" else SU2_FILES)
     fresh = record.with_name(record.name + ".new")
     shutil.rmtree(fresh, ignore_errors=True)
-    kept, packed, large, total = [], [], [], 0
+    kept, packed, large, changing, total = [], [], [], [], 0
     for rel in files:
         src = run / rel
         if kind == "su2" and str(rel) == "project.pkl":
             src = fresh / "slim" / "project.pkl"
             src.parent.mkdir(parents=True, exist_ok=True)
-            steady_copy(run / rel, src)
+            if not steady_copy(run / rel, src):
+                raise RecordError(f"{run / rel}: kept changing while it was copied; keep again later")
             slim_project(src.parent)
         pack = src.stat().st_size > PACK_ABOVE
         dst = fresh / (str(rel) + ".gz" if pack else rel)
         dst.parent.mkdir(parents=True, exist_ok=True)
-        steady_copy(src, dst, packed=pack)
+        if not steady_copy(src, dst, packed=pack):
+            changing.append(str(rel))                   # a solve still writing it: its design is unfinished
+            continue
         size = dst.stat().st_size
         if size > MAX_BYTES:
             dst.unlink()
@@ -138,7 +143,7 @@ def keep(run: Path, record: Path) -> Kept:
         placeholders = sorted(str(p.relative_to(run)) for p in (run / "DESIGNS").rglob("*")
                               if p.is_file() and p.suffix != ".pkl" and str(p.relative_to(run)) not in names)
     meta = {"kind": kind, "source": str(run), "files": kept, "packed": packed, "too_large": large,
-            "placeholders": placeholders}
+            "changing": changing, "placeholders": placeholders}
     fresh.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(fresh / "slim", ignore_errors=True)
     (fresh / "record.json").write_text(json.dumps(meta, indent=1) + "\n")

@@ -139,8 +139,15 @@ def test_a_file_changing_while_copied_is_copied_again(tmp_path, monkeypatch):
             src.write_text("two, longer")
 
     monkeypatch.setattr(record.shutil, "copyfile", copy_then_touch)
-    record.steady_copy(src, dst)
+    assert record.steady_copy(src, dst)
     assert len(calls) == 2 and dst.read_text() == "two, longer"
+
+    def always_touch(a, b):
+        real(a, b)
+        src.write_text(src.read_text() + "x")       # a solve still writing its history
+
+    monkeypatch.setattr(record.shutil, "copyfile", always_touch)
+    assert not record.steady_copy(src, dst) and not dst.exists()
 
 
 def test_large_files_packed_and_unpacked_and_a_keep_replaces_the_record(tmp_path, monkeypatch):
