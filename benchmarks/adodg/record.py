@@ -175,12 +175,18 @@ def slim_project(folder: Path) -> None:
                           f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
 
 
-#: Run by SU2's own Python (its package, ``SU2_RUN`` set) in the run folder: drops the last design of
-#: ``project.pkl`` when it was cut short (no functions yet, or an ``ADJOINT_<F>`` folder whose gradient
-#: SU2's state does not hold) and removes its folder; prints the folder dropped.
+#: Run by SU2's own Python (its package, ``SU2_RUN`` set) in the run folder: removes the design folders
+#: ``project.pkl`` does not know (begun after its last save), and drops its last design when that was
+#: cut short (no functions yet, or an ``ADJOINT_<F>`` folder whose gradient SU2's state does not hold)
+#: with its folder; prints each folder removed.
 DROP_UNFINISHED = """
-import os, shutil, SU2
+import glob, os, shutil, SU2
 p = SU2.io.load_data("project.pkl")
+known = {os.path.normpath(d.folder) for d in p.designs}
+for folder in sorted(glob.glob(os.path.join("DESIGNS", "DSN_*"))):
+    if os.path.normpath(folder) not in known:
+        shutil.rmtree(folder)
+        print(folder)
 if p.designs:
     d = p.designs[-1]
     names = os.listdir(d.folder) if os.path.isdir(d.folder) else []
@@ -195,7 +201,7 @@ if p.designs:
 
 def drop_unfinished(run: Path) -> str | None:
     """Take a cut-short last design out of an SU2 run's ``project.pkl`` (see :data:`DROP_UNFINISHED`);
-    the folder dropped, or None."""
+    the folders removed (one per line), or None."""
     out = subprocess.run([sys.executable, "-c", DROP_UNFINISHED], cwd=run, env=su2_env(), capture_output=True,
                          text=True)
     if out.returncode != 0:

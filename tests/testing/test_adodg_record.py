@@ -166,3 +166,15 @@ def test_large_files_packed_and_unpacked_and_a_keep_replaces_the_record(tmp_path
     record.keep(run, tmp_path / "rec")
     assert not (tmp_path / "rec" / "evals" / "0002").exists()
     assert not (tmp_path / "rec.new").exists()
+
+
+@pytest.mark.skipif(_su2_missing() is not None, reason=str(_su2_missing()))
+def test_su2_design_folder_unknown_to_the_project_is_removed(tmp_path):
+    run = tmp_path / "run"
+    record.restore(record.RECORDS / "case3_h0_su2_wall_distance", run)
+    n = len(list((run / "DESIGNS").glob("DSN_*")))
+    extra = run / "DESIGNS" / f"DSN_{n + 1:03d}"
+    (extra / "DIRECT").mkdir(parents=True)
+    (extra / "config_DSN.cfg").write_text("begun after project.pkl was saved\n")
+    assert record.drop_unfinished(run) == f"DESIGNS/DSN_{n + 1:03d}"
+    assert not extra.exists()
