@@ -56,7 +56,7 @@ $(VENV)/.stamp-warm: $(VENV)/.stamp-core $(shell find ffdcli -name '*.py' 2>/dev
 
 warmup: $(VENV)/.stamp-warm
 
-venv: $(VENV)/.stamp-test
+venv: $(VENV)/.stamp-test $(VENV)/.stamp-warm
 
 demo: $(VENV)/.stamp-viz $(VENV)/.stamp-warm
 	$(BIN)/python -m ffdcli.app.demo --out $(OUT)
