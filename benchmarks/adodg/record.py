@@ -28,6 +28,7 @@ enters git by a pattern's accident. ::
 
     python -m benchmarks.adodg.record keep out/adodg3h/case3 case3_h0_ffd
     python -m benchmarks.adodg.record restore case3_h0_ffd out/adodg3h/case3
+    python -m benchmarks.adodg.record status        # a line on each record
 """
 
 from __future__ import annotations
@@ -252,6 +253,25 @@ def restore(record: Path, run: Path, drop: bool = True) -> Restored:
     return Restored(written=written, dropped=dropped)
 
 
+def status(record: Path) -> str:
+    """One line on a record: its kind and source, designs, flow and adjoint solves, finished or not."""
+    record = Path(record)
+    meta = json.loads((record / "record.json").read_text())
+    files = meta["files"]
+    if meta["kind"] == "ffd":
+        results = [json.loads((record / f).read_text()) for f in files if f.endswith("result.json")]
+        flows = sum(r["solves"]["flow"] for r in results)
+        adjoints = sum(r["solves"]["adjoint"] for r in results)
+        designs, done = f"{len(results)} evaluations", "best.yaml" in files
+    else:
+        flows = sum(1 for f in files if f.endswith("DIRECT/history_direct.csv"))
+        adjoints = sum(1 for f in files if "/ADJOINT_" in f and Path(f).name.startswith("of_grad"))
+        dsn = {f.split("/")[1] for f in files if f.startswith("DESIGNS/")}
+        designs, done = f"{len(dsn)} designs", "run.json" in files
+    return (f"{record.name}: {meta['kind']} run of {meta['source']}, {designs}, {flows} flow + {adjoints} "
+            f"adjoint solves, {'finished' if done else 'not finished (restore, then --resume)'}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.adodg.record", description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="command", required=True)
@@ -261,9 +281,13 @@ def main(argv: list[str] | None = None) -> int:
     r = sub.add_parser("restore", help="put a record back into a run folder (then --resume, or the reports)")
     r.add_argument("name")
     r.add_argument("run", type=Path)
+    sub.add_parser("status", help="a line on each record: designs, solves, finished or not")
     args = ap.parse_args(argv)
     try:
-        if args.command == "keep":
+        if args.command == "status":
+            for rec in sorted(p.parent for p in RECORDS.glob("*/record.json")):
+                print(status(rec))
+        elif args.command == "keep":
             if not Path(args.run).is_dir():
                 raise RecordError(f"{args.run}: no such folder")
             out = keep(args.run, RECORDS / args.name)

@@ -178,3 +178,14 @@ def test_su2_design_folder_unknown_to_the_project_is_removed(tmp_path):
     (extra / "config_DSN.cfg").write_text("begun after project.pkl was saved\n")
     assert record.drop_unfinished(run) == f"DESIGNS/DSN_{n + 1:03d}"
     assert not extra.exists()
+
+
+def test_status_counts_designs_and_solves(tmp_path, monkeypatch):
+    monkeypatch.setattr(record, "slim_project", lambda folder: None)
+    run = _ffd_run(tmp_path / "ffd")
+    for k in ("0001", "0002"):
+        (run / "evals" / k / "result.json").write_text(json.dumps({"solves": {"flow": 1, "adjoint": 2}}))
+    record.keep(run, tmp_path / "rec_ffd")
+    assert "2 evaluations, 2 flow + 4 adjoint solves, finished" in record.status(tmp_path / "rec_ffd")
+    record.keep(_su2_run(tmp_path / "su2"), tmp_path / "rec_su2")
+    assert "1 designs, 1 flow + 1 adjoint solves, not finished" in record.status(tmp_path / "rec_su2")
