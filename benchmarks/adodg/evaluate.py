@@ -150,12 +150,14 @@ NAME_BYTES = 33
 def read_restart(path: Path) -> tuple[list[str], np.ndarray]:
     """(field names, (points, fields) values) of an SU2 binary restart file."""
     raw = Path(path).read_bytes()
-    head = np.frombuffer(raw[:20], dtype=np.int32)
+    head = np.frombuffer(raw[:20], dtype=np.int32) if len(raw) >= 20 else np.zeros(1, dtype=np.int32)
     if head[0] != RESTART_MAGIC:
-        raise ValueError(f"{path}: not an SU2 binary restart (magic {head[0]})")
+        raise ValueError(f"{path}: not an SU2 binary restart file (no {RESTART_MAGIC} at its start)")
     nf, npt = int(head[1]), int(head[2])
     names = [raw[20 + NAME_BYTES * k:20 + NAME_BYTES * (k + 1)].split(b"\0")[0].decode() for k in range(nf)]
     off = 20 + NAME_BYTES * nf
+    if len(raw) < off + 8 * nf * npt:
+        raise ValueError(f"{path}: {npt} points x {nf} fields announced, the file is shorter")
     return names, np.frombuffer(raw[off:off + 8 * nf * npt], dtype=np.float64).reshape(npt, nf).copy()
 
 

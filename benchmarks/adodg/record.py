@@ -114,6 +114,18 @@ def keep(run: Path, record: Path) -> Kept:
     files = selected(run, FFD_FILES if kind == "ffd" else SU2_FILES)
     fresh = record.with_name(record.name + ".new")
     shutil.rmtree(fresh, ignore_errors=True)
+    try:
+        out = _build(run, fresh, kind, files)
+    except BaseException:
+        shutil.rmtree(fresh, ignore_errors=True)          # nothing half-written is left beside the record
+        raise
+    shutil.rmtree(record, ignore_errors=True)
+    fresh.rename(record)
+    return out
+
+
+def _build(run: Path, fresh: Path, kind: str, files: list[Path]) -> Kept:
+    """The record of ``run`` written into ``fresh`` (see :func:`keep`)."""
     kept, packed, large, changing, total = [], [], [], [], 0
     for rel in files:
         src = run / rel
@@ -148,8 +160,6 @@ def keep(run: Path, record: Path) -> Kept:
     fresh.mkdir(parents=True, exist_ok=True)
     shutil.rmtree(fresh / "slim", ignore_errors=True)
     (fresh / "record.json").write_text(json.dumps(meta, indent=1) + "\n")
-    shutil.rmtree(record, ignore_errors=True)
-    fresh.rename(record)
     return Kept(kind=kind, files=tuple(kept), too_large=tuple(large), bytes=total)
 
 
@@ -167,10 +177,18 @@ SU2.io.save_data("project.pkl", p)
 """
 
 
+def _su2_python(code: str, folder: Path) -> subprocess.CompletedProcess:
+    """Run ``code`` with SU2's Python package in ``folder``; RecordError when SU2 is not found."""
+    try:
+        env = su2_env()
+    except RuntimeError as exc:
+        raise RecordError(f"{exc} (its scripts read project.pkl)") from None
+    return subprocess.run([sys.executable, "-c", code], cwd=folder, env=env, capture_output=True, text=True)
+
+
 def slim_project(folder: Path) -> None:
     """:data:`SLIM_PROJECT` on ``folder/project.pkl`` (SU2's scripts needed)."""
-    out = subprocess.run([sys.executable, "-c", SLIM_PROJECT], cwd=folder, env=su2_env(), capture_output=True,
-                         text=True)
+    out = _su2_python(SLIM_PROJECT, folder)
     if out.returncode != 0:
         raise RecordError(f"{Path(folder) / 'project.pkl'}: SU2's scripts could not read it: "
                           f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
@@ -203,8 +221,7 @@ if p.designs:
 def drop_unfinished(run: Path) -> str | None:
     """Take a cut-short last design out of an SU2 run's ``project.pkl`` (see :data:`DROP_UNFINISHED`);
     the folders removed (one per line), or None."""
-    out = subprocess.run([sys.executable, "-c", DROP_UNFINISHED], cwd=run, env=su2_env(), capture_output=True,
-                         text=True)
+    out = _su2_python(DROP_UNFINISHED, run)
     if out.returncode != 0:
         raise RecordError(f"{Path(run) / 'project.pkl'}: SU2's scripts could not read it: "
                           f"{out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")

@@ -35,13 +35,13 @@ import numpy as np
 from scipy.interpolate import LinearNDInterpolator
 from scipy.spatial import Delaunay
 
+from benchmarks.adodg import evaluate
 from benchmarks.adodg.case3_report import config_alpha, history_file, last_history
+from ffdcli.optimize.solvers.su2 import config_value, read_config
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend is chosen)
 
-MAGIC = 535532          # SU2's binary restart files begin with this int32
-NAME_BYTES = 33         # each field name: a NUL-padded char[33]
 SPAN = 3.0              # the half wing's span (chord 1)
 AREA = 3.0              # its reference area
 ASPECT = 6.0            # the full wing's aspect ratio
@@ -52,21 +52,13 @@ class TrefftzError(Exception):
 
 
 def read_restart(path: Path) -> dict[str, np.ndarray]:
-    """The fields of an SU2 binary restart file (``restart_flow.dat``): {name: (n_points,) float64}.
-
-    Layout (SU2 7-8): int32 [535532, n_fields, n_points, 0, 0], n_fields names of 33 bytes, then
-    n_points x n_fields float64 by point."""
-    raw = Path(path).read_bytes()
-    head = np.frombuffer(raw[:20], dtype=np.int32) if len(raw) >= 20 else np.zeros(0, dtype=np.int32)
-    if len(head) < 3 or head[0] != MAGIC:
-        raise TrefftzError(f"{path}: not an SU2 binary restart file (no {MAGIC} at its start)")
-    n_fields, n_points = int(head[1]), int(head[2])
-    names = [raw[20 + NAME_BYTES * i: 20 + NAME_BYTES * (i + 1)].split(b"\0")[0].decode() for i in range(n_fields)]
-    start = 20 + NAME_BYTES * n_fields
-    if len(raw) < start + 8 * n_points * n_fields:
-        raise TrefftzError(f"{path}: {n_points} points x {n_fields} fields announced, the file is shorter")
-    data = np.frombuffer(raw[start:start + 8 * n_points * n_fields], dtype=np.float64).reshape(n_points, n_fields)
-    return {name: data[:, i].copy() for i, name in enumerate(names)}
+    """The fields of an SU2 binary restart file (``restart_flow.dat``): {name: (n_points,) float64}
+    (:func:`benchmarks.adodg.evaluate.read_restart` reads the layout)."""
+    try:
+        names, values = evaluate.read_restart(path)
+    except ValueError as exc:
+        raise TrefftzError(str(exc)) from None
+    return {name: values[:, i] for i, name in enumerate(names)}
 
 
 def wind_axes(alpha_deg: float) -> np.ndarray:
@@ -230,13 +222,12 @@ def span_efficiency(cl: float, cdi: float, aspect: float = ASPECT) -> float:
 
 
 def config_mach(folder: Path) -> float | None:
-    """``MACH_NUMBER`` of the folder's flow configuration (``flow.cfg`` or ``config_CFD.cfg``)."""
+    """``MACH_NUMBER`` of the folder's flow configuration (``flow.cfg``, ``config_CFD.cfg`` or ``config_DSN.cfg``)."""
     for name in ("flow.cfg", "config_CFD.cfg", "config_DSN.cfg"):
         cfg = Path(folder) / name
         if cfg.is_file():
-            for line in cfg.read_text().splitlines():
-                if line.split("=")[0].strip() == "MACH_NUMBER":
-                    return float(line.split("=")[1].split("%")[0])
+            value = config_value(read_config(cfg), "MACH_NUMBER")
+            return None if value is None else float(value)
     return None
 
 
@@ -251,6 +242,8 @@ def analyse(folder: Path, distances: list[float], h: float = 0.01, extent: float
     alpha, mach = config_alpha(folder), config_mach(folder)
     if alpha is None or mach is None:
         raise TrefftzError(f"{folder}: no AOA or MACH_NUMBER in its flow configuration")
+    if not history_file(folder).is_file():
+        raise TrefftzError(f"{history_file(folder)}: no such file (the flow's history, for its CL and CD)")
     hist = last_history(history_file(folder))
     cl = hist.get("CL", hist.get("LIFT"))
     sol = Solution(np.column_stack([fields["x"], fields["y"], fields["z"]]),

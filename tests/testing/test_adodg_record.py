@@ -189,3 +189,15 @@ def test_status_counts_designs_and_solves(tmp_path, monkeypatch):
     assert "2 evaluations, 2 flow + 4 adjoint solves, finished" in record.status(tmp_path / "rec_ffd")
     record.keep(_su2_run(tmp_path / "su2"), tmp_path / "rec_su2")
     assert "1 designs, 1 flow + 1 adjoint solves, not finished" in record.status(tmp_path / "rec_su2")
+
+
+def test_a_keep_that_fails_leaves_nothing_half_written(tmp_path, monkeypatch):
+    run = _su2_run(tmp_path / "run")
+
+    def no_su2(folder):
+        raise record.RecordError("SU2 not found")
+
+    monkeypatch.setattr(record, "slim_project", no_su2)
+    with pytest.raises(record.RecordError, match="SU2 not found"):
+        record.keep(run, tmp_path / "rec")
+    assert not (tmp_path / "rec").exists() and not (tmp_path / "rec.new").exists()

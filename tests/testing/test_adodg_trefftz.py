@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from benchmarks.adodg import trefftz as T
+from benchmarks.adodg.evaluate import write_restart
 
 
 def plate_flow(y, z, s, V):
@@ -98,9 +99,8 @@ def test_wind_axes_orthonormal_and_lift_up():
 def test_read_restart_round_trip_and_refusal(tmp_path):
     names = ["x", "y", "z", "Velocity_x"]
     data = np.arange(12.0).reshape(3, 4)
-    raw = np.array([T.MAGIC, 4, 3, 0, 0], dtype=np.int32).tobytes()
-    raw += b"".join(n.encode().ljust(T.NAME_BYTES, b"\0") for n in names) + data.tobytes()
-    (tmp_path / "r.dat").write_bytes(raw)
+    write_restart(tmp_path / "r.dat", names, data)
+    raw = (tmp_path / "r.dat").read_bytes()
     out = T.read_restart(tmp_path / "r.dat")
     assert list(out) == names
     np.testing.assert_array_equal(out["Velocity_x"], data[:, 3])
@@ -123,3 +123,10 @@ def test_plot_draws_each_load_beside_its_ellipse(tmp_path):
     rep = {"planes": [{"distance": 0.05, "y": y, "load": load, "CL_wake": 0.375, "e_wake": 0.98}]}
     T.plot([rep, rep], ["a", "b"], tmp_path / "w.png")
     assert (tmp_path / "w.png").stat().st_size > 10_000
+
+
+def test_command_exit_2_on_a_folder_without_history(tmp_path, capsys):
+    write_restart(tmp_path / "restart_flow.dat", ["x", "y", "z"], np.zeros((4, 3)))
+    (tmp_path / "flow.cfg").write_text("AOA= 4.22\nMACH_NUMBER= 0.5\n")
+    assert T.main([str(tmp_path)]) == 2
+    assert "history" in capsys.readouterr().err
