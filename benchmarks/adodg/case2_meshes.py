@@ -74,7 +74,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=Path("out/adodg"))
     ap.add_argument("--airfoil", type=Path, default=AIRFOIL)
-    ap.add_argument("--levels", nargs="*", default=list(LEVELS))
+    ap.add_argument("--levels", nargs="*", default=list(LEVELS), choices=list(LEVELS),
+                    help="the C-meshes to generate besides SU2's mesh (none: --levels with no name)")
     args = ap.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     copy = args.out / "rae2822_su2.su2"
