@@ -74,6 +74,8 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
              f"  best: none (no evaluation succeeded; the runs and their logs are in {summary['folder']})"),
             f"  seconds: solver {summary['seconds']['solver']:.1f}, ffd {summary['seconds']['ffd']:.2f}, "
             f"wall {summary['seconds']['wall']:.1f}"]
+    if summary.get("optimality"):
+        text.insert(-1, held_by(summary["optimality"]))
     if not exit_code:
         console.result(summary, "\n".join(text))
         return
@@ -87,6 +89,29 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
     err.exit_code = exit_code
     err.report = summary
     raise err
+
+
+def held_by(optimality: dict) -> str:
+    """The summary's line on the best design's first-order optimality: the residual, and what holds the
+    design with its price (the objective's change per unit of the bound); a geometric constraint's
+    items grouped, with their largest price."""
+    parts, groups, objective = [], {}, optimality["objective"]
+    for a in optimality["active"]:
+        price = a["d_objective_d_bound"]
+        if price == 0.0:
+            continue
+        op = {"equal": "=", "lower": ">=", "upper": "<="}[a["side"]]
+        text = f"{a['name']} {op} {a['bound']:.6g} (d{objective}/dbound {price:.3g})"
+        groups.setdefault(a["name"].split("[")[0] if a["kind"] == "geometric" else a["name"], []).append((text, price))
+    for group, items in groups.items():
+        top = max((price for _, price in items), key=abs)
+        parts.append(items[0][0] if len(items) == 1 else
+                     f"{group}: {len(items)} items (largest d{objective}/dbound {top:.3g})")
+    for b in optimality["at_bounds"]:
+        parts.append(f"{b['variable']} at its {b['side']} bound {b['bound']:.6g} "
+                     f"(d{objective}/dbound {b['d_objective_d_bound']:.3g})")
+    return (f"  first-order optimality: residual {optimality['residual']:.2g} (0 at a KKT point); held by "
+            + (", ".join(parts) if parts else "nothing (no active constraint opposes the gradient)"))
 
 
 def _number(x) -> str:

@@ -45,7 +45,7 @@ import numpy as np
 import scipy.optimize as so
 
 from ffdcli.design.optimize import OptimizeSettings
-from ffdcli.optimize import sqp
+from ffdcli.optimize import kkt, sqp
 from ffdcli.optimize.problem import OptimizationProblem
 from ffdcli.optimize.store import Evaluation
 
@@ -245,6 +245,39 @@ class Driver:
                 value = ev.functions[s.name] if s.kind == "function" else geo[s.index]
                 rows.append(s.scale * s.sign * (value - s.bound))
         return np.array(rows)
+
+    def optimality(self, ev: Evaluation) -> dict | None:
+        """First-order optimality at ``ev`` (:func:`ffdcli.optimize.kkt.first_order` on the scaled problem
+        the optimiser saw), from what the evaluation holds (no solve: a screened constraint's latest
+        gradient, as the optimiser's): ``{"objective", "residual", "active": [...], "at_bounds": [...]}``, each entry
+        with ``d_objective_d_bound``, the objective's change per unit of that bound (its price: loosen the
+        bound by delta and the optimum's objective falls by about ``|price| * delta``). None when ``ev``
+        has no gradient of the objective."""
+        name = self.settings.objective
+        if ev is None or ev.failed is not None or name not in ev.gradients or any(
+                s.kind == "function" and s.name not in ev.gradients and s.name not in self.latest for s in self.sides):
+            return None
+        chosen, r = self.chosen, self.r
+        geo, J = (self.problem.geometric(ev.values) if any(s.kind == "geometric" for s in self.sides)
+                  else (None, None))
+        c = np.array([s.scale * s.sign * ((ev.functions[s.name] if s.kind == "function" else geo[s.index]) - s.bound)
+                      for s in self.sides])
+        A = np.array([s.scale * s.sign * r * (self.gradient(ev, s.name) if s.kind == "function" else J[s.index])[chosen]
+                      for s in self.sides]).reshape(len(self.sides), chosen.size)
+        lower, upper = (np.array(b, dtype=float) for b in zip(*self.bounds, strict=True))
+        first = kkt.first_order(self.f_scale * r * ev.gradients[name][chosen], c, A,
+                                np.array([s.equality for s in self.sides], dtype=bool),
+                                (ev.values[chosen] - self.v0[chosen]) / r, lower, upper, tol=kkt.ACTIVE)
+        names = self.problem.model.names
+        active = [{"name": s.name, "kind": s.kind, "bound": s.bound, "equality": s.equality,
+                   "side": "equal" if s.equality else ("lower" if s.sign > 0 else "upper"),
+                   "d_objective_d_bound": float(s.sign * first.multipliers[i] * s.scale / self.f_scale)}
+                  for i, s in enumerate(self.sides) if first.active[i]]
+        at_bounds = [{"variable": names[v], "side": side, "bound": float(self.v0[v] + r[k] * b[k]),
+                      "d_objective_d_bound": float(sign * z[k] / (r[k] * self.f_scale))}
+                     for side, sign, z, b in (("lower", 1.0, first.lower, lower), ("upper", -1.0, first.upper, upper))
+                     for k, v in enumerate(chosen) if z[k] > 0.0]
+        return {"objective": name, "residual": first.residual, "active": active, "at_bounds": at_bounds}
 
     def accepted(self, *args) -> None:
         """scipy's callback: SLSQP calls it once an iteration's full step is evaluated (its line search

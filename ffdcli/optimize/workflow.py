@@ -195,6 +195,13 @@ def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSetti
         with written_as(folder / "best.yaml", "the best design", kept(folder)):
             write_best(folder / "best.yaml", data, note)
         out.update(best=str(folder / "best.yaml"), best_mesh=str(mesh_dst), best_evaluation=best.index)
+        # first-order optimality where the gradients are: the best design if it has them (an accepted
+        # iterate), else the best of those that do (a trial's flow has no adjoints)
+        graded = [e for e in evaluations if e.failed is None and settings.objective in e.gradients]
+        at = best if any(e.index == best.index for e in graded) else \
+            best_evaluation(graded, worst, settings.objective, settings.feasibility)[0]
+        optimality = driver.optimality(at) if at is not None else None
+        out["optimality"] = None if optimality is None else {"evaluation": at.index, **optimality}
     return out
 
 
