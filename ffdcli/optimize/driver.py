@@ -248,21 +248,30 @@ class Driver:
 
     def optimality(self, ev: Evaluation) -> dict | None:
         """First-order optimality at ``ev`` (:func:`ffdcli.optimize.kkt.first_order` on the scaled problem
-        the optimiser saw), from what the evaluation holds (no solve: a screened constraint's latest
-        gradient, as the optimiser's): ``{"objective", "residual", "active": [...], "at_bounds": [...]}``, each entry
-        with ``d_objective_d_bound``, the objective's change per unit of that bound (its price: loosen the
-        bound by delta and the optimum's objective falls by about ``|price| * delta``). None when ``ev``
-        has no gradient of the objective."""
+        the optimiser saw), from what the evaluations hold (no solve: a screened constraint's gradient is the
+        one of the latest evaluation up to ``ev`` that has it, as the optimiser's linearisation used):
+        ``{"objective", "residual", "active": [...], "at_bounds": [...]}``, each entry with
+        ``d_objective_d_bound``, the objective's change per unit of that bound (its price: loosen the bound
+        by delta and the optimum's objective falls by about ``|price| * delta``). None when ``ev`` has no
+        gradient of the objective, or a constraint function has none yet."""
         name = self.settings.objective
-        if ev is None or ev.failed is not None or name not in ev.gradients or any(
-                s.kind == "function" and s.name not in ev.gradients and s.name not in self.latest for s in self.sides):
+        if ev is None or ev.failed is not None or name not in ev.gradients:
             return None
+        earlier = sorted((e for e in self.problem.store.all() if e.index <= ev.index and e.failed is None),
+                         key=lambda e: e.index)
+        grads = {}
+        for s in self.sides:
+            if s.kind == "function" and s.name not in grads:
+                found = next((e.gradients[s.name] for e in reversed(earlier) if s.name in e.gradients), None)
+                if found is None:
+                    return None
+                grads[s.name] = found
         chosen, r = self.chosen, self.r
         geo, J = (self.problem.geometric(ev.values) if any(s.kind == "geometric" for s in self.sides)
                   else (None, None))
         c = np.array([s.scale * s.sign * ((ev.functions[s.name] if s.kind == "function" else geo[s.index]) - s.bound)
                       for s in self.sides])
-        A = np.array([s.scale * s.sign * r * (self.gradient(ev, s.name) if s.kind == "function" else J[s.index])[chosen]
+        A = np.array([s.scale * s.sign * r * (grads[s.name] if s.kind == "function" else J[s.index])[chosen]
                       for s in self.sides]).reshape(len(self.sides), chosen.size)
         lower, upper = (np.array(b, dtype=float) for b in zip(*self.bounds, strict=True))
         first = kkt.first_order(self.f_scale * r * ev.gradients[name][chosen], c, A,
