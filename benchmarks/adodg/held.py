@@ -103,9 +103,9 @@ def main(argv: list[str] | None = None) -> int:
     prefix, station, side = item_stations(model)
     prices = active_prices(summary, prefix)
     opt = summary["optimality"]
-    print(f"{args.summary}: evaluation {opt['evaluation']}, {opt['objective']} "
-          f"{summary['objective']['best']:.6g}; first-order residual {opt['residual']:.3g} "
-          f"({len(prices)} of {station.size} {prefix}.add_material items active)")
+    print(f"{args.summary}: at evaluation {opt['evaluation']} (the best design with gradients; the best "
+          f"design's {opt['objective']} {summary['objective']['best']:.6g}): first-order residual "
+          f"{opt['residual']:.3g}, {len(prices)} of {station.size} {prefix}.add_material items active")
     print(f"{'side':<6} {'x / chord':<11} {'active':>7} {'priced':>7} {'d' + opt['objective'] + '/d(margin)':>18}")
     for b in bands(station, side, prices):
         if b.active:

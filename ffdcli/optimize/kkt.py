@@ -28,6 +28,11 @@ import scipy.optimize as so
 #: with ``s`` about 1 / |bound|, a geometric one in its units for bounds below 1) or a scaled variable
 #: (a fraction of its bound range) within 1e-4 of its bound.
 ACTIVE = 1e-4
+#: The ridge on the multipliers, relative to the largest active gradient's norm: the least multipliers
+#: among nearly equally good fits (items whose gradients are nearly opposite, such as the upper and lower
+#: items beside a sharp trailing edge, otherwise share large multipliers of small net). Its bias: about
+#: RIDGE**2 relative on the residual and the multipliers (1e-6: a report's precision).
+RIDGE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -99,7 +104,14 @@ def first_order(g: np.ndarray, c: np.ndarray, A: np.ndarray, equality: np.ndarra
         return FirstOrder(0.0, lam, z_lo, z_up, active)
     if M.shape[1] == 0:
         return FirstOrder(1.0, lam, z_lo, z_up, active)
-    y = so.lsq_linear(M, g, bounds=(lo, np.full(lo.size, np.inf)), method="bvls", tol=1e-14).x
+    # a small ridge picks the least multipliers among (nearly) equally good fits: items whose gradients are
+    # (nearly) opposite would otherwise share large multipliers with a small net, and their prices would
+    # mean nothing (measured: 1,180 dCD/chord on each side beside Case 1's trailing edge without it, 3.1
+    # and 2.5 with it, the residual and every other price the same to three digits)
+    ridge = RIDGE * float(np.linalg.norm(M, axis=0).max())
+    K = np.vstack([M, ridge * np.eye(M.shape[1])])
+    y = so.lsq_linear(K, np.concatenate([g, np.zeros(M.shape[1])]), bounds=(lo, np.full(lo.size, np.inf)),
+                      method="bvls", tol=1e-14).x
     residual = float(np.linalg.norm(M @ y - g)) / scale
     lam[rows] = y[:rows.size]
     z_lo[il] = y[rows.size:rows.size + il.size]

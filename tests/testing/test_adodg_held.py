@@ -73,7 +73,7 @@ def test_the_command_reads_a_summary(design, tmp_path, capsys):
     assert active_prices(summary, "k0") == {3: 0.5}
     assert main([str(design), str(path)]) == 0
     out = capsys.readouterr().out
-    assert "first-order residual 0.01 (1 of" in out and "also: k1.le_te[0]" in out
+    assert "first-order residual 0.01, 1 of" in out and "also: k1.le_te[0]" in out
     bad = tmp_path / "bad.json"
     bad.write_text("not json")
     assert main([str(design), str(bad)]) == 2
