@@ -26,6 +26,7 @@ import numpy as np
 
 from ffdcli.api import DesignModel
 from ffdcli.constraints.add_material import AddMaterial
+from ffdcli.errors import FfdError
 
 #: An item is priced when its price is above this fraction of the largest (least squares leaves round-off).
 PRICED = 1e-9
@@ -53,7 +54,7 @@ def item_stations(model: DesignModel) -> tuple[str, np.ndarray, np.ndarray]:
     in the items' order (the nodes, then the points between them)."""
     found = [(i, c) for i, c in enumerate(model.constraints or []) if isinstance(c, AddMaterial)]
     if not found:
-        raise SystemExit("held: the design has no add_material constraint")
+        raise ValueError("the design has no add_material constraint")
     i, c = found[0]
     pos = c.X0 if c.extra is None else np.vstack([c.X0, c.extra.points0])
     side = c.side if c.extra is None else np.concatenate([c.side, c.extra_side])
@@ -82,8 +83,8 @@ def active_prices(summary: dict, prefix: str) -> dict[int, float]:
     summary."""
     opt = summary.get("optimality")
     if not opt:
-        raise SystemExit("held: the summary has no 'optimality' (a run of an ffd without it, or no design "
-                         "with gradients): make it again with --resume")
+        raise ValueError("the summary has no 'optimality' (a run of an ffd without it, or no design with "
+                         "gradients): make it again with --resume")
     return {int(a["name"].split("[")[1].rstrip("]")): float(a["d_objective_d_bound"])
             for a in opt["active"] if a["name"].startswith(prefix + ".")}
 
@@ -99,9 +100,12 @@ def main(argv: list[str] | None = None) -> int:
     except (OSError, ValueError, IndexError) as e:
         print(f"held: cannot read the summary {args.summary}: {e}", file=sys.stderr)
         return 2
-    model = DesignModel.from_file(args.design)
-    prefix, station, side = item_stations(model)
-    prices = active_prices(summary, prefix)
+    try:
+        prefix, station, side = item_stations(DesignModel.from_file(args.design))
+        prices = active_prices(summary, prefix)
+    except (FfdError, ValueError) as e:
+        print(f"held: {args.design}, {args.summary}: {e}", file=sys.stderr)
+        return 2
     opt = summary["optimality"]
     print(f"{args.summary}: at evaluation {opt['evaluation']} (the best design with gradients; the best "
           f"design's {opt['objective']} {summary['objective']['best']:.6g}): first-order residual "

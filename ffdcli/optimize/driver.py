@@ -235,16 +235,18 @@ class Driver:
         if not sides:
             return np.zeros((0, len(self.chosen))) if jac else np.zeros(0)
         ev = self._response(x, jac and any(s.kind == "function" for s in sides))
+        return self._scaled(ev, sides, jac, lambda name: self.gradient(ev, name))
+
+    def _scaled(self, ev: Evaluation, sides: list[Side], jac: bool, gradient) -> np.ndarray:
+        """The scaled constraints ``sides`` at ``ev``: values (k,), or with ``jac`` their Jacobian (k, n_chosen)
+        in the scaled variables (a function's gradient from ``gradient(name)``, a geometric one exact)."""
         geo, J = self.problem.geometric(ev.values) if any(s.kind == "geometric" for s in sides) else (None, None)
-        rows = []
-        for s in sides:
-            if jac:
-                g = self.gradient(ev, s.name) if s.kind == "function" else J[s.index]
-                rows.append(s.scale * s.sign * self.r * g[self.chosen])
-            else:
-                value = ev.functions[s.name] if s.kind == "function" else geo[s.index]
-                rows.append(s.scale * s.sign * (value - s.bound))
-        return np.array(rows)
+        if jac:
+            rows = [s.scale * s.sign * self.r * (gradient(s.name) if s.kind == "function" else J[s.index])[self.chosen]
+                    for s in sides]
+            return np.array(rows).reshape(len(sides), self.chosen.size)
+        return np.array([s.scale * s.sign * ((ev.functions[s.name] if s.kind == "function" else geo[s.index]) - s.bound)
+                         for s in sides])
 
     def optimality(self, ev: Evaluation) -> dict | None:
         """First-order optimality at ``ev`` (:func:`ffdcli.optimize.kkt.first_order` on the scaled problem
@@ -267,12 +269,8 @@ class Driver:
                     return None
                 grads[s.name] = found
         chosen, r = self.chosen, self.r
-        geo, J = (self.problem.geometric(ev.values) if any(s.kind == "geometric" for s in self.sides)
-                  else (None, None))
-        c = np.array([s.scale * s.sign * ((ev.functions[s.name] if s.kind == "function" else geo[s.index]) - s.bound)
-                      for s in self.sides])
-        A = np.array([s.scale * s.sign * r * (grads[s.name] if s.kind == "function" else J[s.index])[chosen]
-                      for s in self.sides]).reshape(len(self.sides), chosen.size)
+        c = self._scaled(ev, self.sides, False, grads.get)
+        A = self._scaled(ev, self.sides, True, grads.get)
         lower, upper = (np.array(b, dtype=float) for b in zip(*self.bounds, strict=True))
         first = kkt.first_order(self.f_scale * r * ev.gradients[name][chosen], c, A,
                                 np.array([s.equality for s in self.sides], dtype=bool),

@@ -77,3 +77,16 @@ def test_the_command_reads_a_summary(design, tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text("not json")
     assert main([str(design), str(bad)]) == 2
+
+
+def test_a_summary_without_optimality_or_a_design_without_the_rule_exits_2(design, tmp_path, capsys):
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps({"objective": {"best": 0.03}}) + "\n")
+    assert main([str(design), str(path)]) == 2
+    assert "no 'optimality'" in capsys.readouterr().err
+    plain = yaml.safe_load(design.read_text())
+    plain["constraints"] = [{"le_te": {}}]
+    other = tmp_path / "plain.yaml"
+    other.write_text(yaml.safe_dump(plain, sort_keys=False))
+    assert main([str(other), str(path)]) == 2
+    assert "no add_material constraint" in capsys.readouterr().err
