@@ -41,7 +41,8 @@ def ffd_row(label: str, run: Path, summary: Path | None, evaluation: Path | None
     flows = sum(int(r["flow_solves"]) for r in rows)
     adjoints = sum(int(r["adjoint_solves"]) for r in rows)
     solver = sum(float(r["solver_seconds"]) for r in rows)
-    ffd = sum(float(r["ffd_seconds"]) for r in rows)
+    # ffd's geometry chain and its optimiser's own work (a history without optimizer_seconds: 0)
+    ffd = sum(float(r["ffd_seconds"]) + float(r.get("optimizer_seconds") or 0.0) for r in rows)
     wall, state, n_vars = "-", f"running ({len(rows)} evaluations)", None
     text = summary.read_text().strip() if summary is not None and summary.is_file() else ""
     s = json.loads(text) if text else {}      # the --json summary is written when the run ends
@@ -51,7 +52,7 @@ def ffd_row(label: str, run: Path, summary: Path | None, evaluation: Path | None
         wall = f"{s['seconds']['wall']:.0f}"
         state = f"{s['status']}: {s['iterations']} iterations"
         flows, adjoints = s["flow_solves"], s["adjoint_solves"]
-        solver, ffd = s["seconds"]["solver"], s["seconds"]["ffd"]
+        solver, ffd = s["seconds"]["solver"], s["seconds"]["ffd"] + s["seconds"].get("optimizer", 0.0)
         n_vars = len(s.get("variables") or []) or None
     cd = float(best["objective"])
     cells = [label, str(n_vars or "-"), f"{cd:.6f}", f"{100 * (1 - cd / BASELINE_CD['L2']):.1f} %",

@@ -73,7 +73,7 @@ def optimize_cmd(design_file, names, overrides, resume, check, step, console):
             (f"  best: {summary['best']}  (mesh {summary['best_mesh']})" if summary["best"] else
              f"  best: none (no evaluation succeeded; the runs and their logs are in {summary['folder']})"),
             f"  seconds: solver {summary['seconds']['solver']:.1f}, ffd {summary['seconds']['ffd']:.2f}, "
-            f"wall {summary['seconds']['wall']:.1f}"]
+            f"optimizer {summary['seconds'].get('optimizer', 0.0):.2f}, wall {summary['seconds']['wall']:.1f}"]
     if summary.get("optimality"):
         text.insert(-1, held_by(summary["optimality"]))
     if not exit_code:

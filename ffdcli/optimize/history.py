@@ -4,7 +4,9 @@
 ``history.csv`` columns (SPEC "Optimisation"): ``evaluation, iteration, norm`` (of the optimised
 variables' values), ``objective``, each function the solver reported for the run, each geometric
 constraint, ``violation`` (worst, in the constraints' own units), ``step`` (the distance in scaled
-variables from the previous evaluation), ``solver_seconds``, ``ffd_seconds``, ``flow_solves``,
+variables from the previous evaluation), ``solver_seconds``, ``ffd_seconds`` (the geometry chain: deform,
+gate, write, chain rule), ``optimizer_seconds`` (the optimiser's work before it asked for the design: its
+QP, the geometric constraints' values and Jacobian), ``flow_solves``,
 ``adjoint_solves``, ``folder``, ``failed`` (the reason, with the log's path).
 """
 
@@ -35,6 +37,7 @@ def history_rows(evaluations: list[Evaluation], *, objective: str, functions: li
                     for i, c in enumerate(constraint_names)})
         row.update({"violation": worst, "step": 0.0 if prev is None else float(np.linalg.norm(x - prev)),
                     "solver_seconds": round(ev.seconds["solver"], 3), "ffd_seconds": round(ev.seconds["ffd"], 3),
+                    "optimizer_seconds": round(ev.seconds.get("optimizer", 0.0), 3),
                     "flow_solves": ev.solves["flow"], "adjoint_solves": ev.solves["adjoint"],
                     "folder": os.path.relpath(ev.folder, folder),
                     "failed": "" if ev.failed is None else ev.failed + (f" (log: {ev.log})" if ev.log else "")})

@@ -59,7 +59,8 @@ class OptimizationProblem:
         self.concurrent = max(1, int(concurrent))
         self.iteration = 0
         self.counts = {"flow": 0, "adjoint": 0, "evaluations": 0, "reused": 0}
-        self.seconds = {"solver": 0.0, "ffd": 0.0}
+        self.seconds = {"solver": 0.0, "ffd": 0.0, "optimizer": 0.0}
+        self._returned: float | None = None   # when evaluate last returned: the optimiser works until the next call
         self.mesh_name = "mesh" + Path(model.design.mesh).suffix
         self._seen: set[str] = set()        # keys of the evaluations this process has handed out
 
@@ -67,16 +68,22 @@ class OptimizationProblem:
     def evaluate(self, values: np.ndarray, gradient: bool = False, functions: list[str] | None = None) -> Evaluation:
         """The evaluation of the design vector ``values`` (n_vars,), with gradients when ``gradient``: of
         every function of the run, or of ``functions`` only."""
+        # the optimiser's time since the last evaluation (its QP, its constraints' values and Jacobian):
+        # charged to the evaluation it asked for when that one is solved now
+        gap = 0.0 if self._returned is None else time.perf_counter() - self._returned
+        self.seconds["optimizer"] += gap
         values = np.asarray(values, dtype=float)
         ev = self.store.find(values)
         if ev is None:
-            ev = self._flow(values)
+            ev = self._flow(values, gap)
         elif ev.key not in self._seen:
             self.counts["reused"] += 1          # finished by an earlier run (--resume)
         self._seen.add(ev.key)
         want = self.functions if functions is None else [f for f in self.functions if f in functions]
         if gradient and ev.failed is None and set(want) - set(ev.gradients):
-            ev = self._adjoints(ev, want)
+            ev = self._adjoints(ev.with_(seconds={**ev.seconds,
+                                                  "optimizer": ev.seconds.get("optimizer", 0.0) + gap}), want)
+        self._returned = time.perf_counter()
         return ev
 
     def mesh_of(self, ev: Evaluation) -> Path:
@@ -110,8 +117,9 @@ class OptimizationProblem:
         cons = at.constraint_values() if model.constraints else np.zeros(0)
         return ev.with_(constraints=np.asarray(cons, dtype=float)), time.perf_counter() - t0
 
-    def _flow(self, values: np.ndarray) -> Evaluation:
+    def _flow(self, values: np.ndarray, optimizer_seconds: float = 0.0) -> Evaluation:
         ev = self.store.new(values, self.iteration)
+        ev = ev.with_(seconds={**ev.seconds, "optimizer": optimizer_seconds})
         self.counts["evaluations"] += 1
         ev = self._solve_flow(ev)
         self.report(ev, "flow")
@@ -138,7 +146,8 @@ class OptimizationProblem:
                 t_solver = time.perf_counter() - t0          # a failed run's time counts too
                 ev = ev.with_(failed=e.reason, log=None if e.log is None else str(e.log))
             self.counts["flow"] += 1
-        ev = ev.with_(seconds={"solver": ev.seconds["solver"] + t_solver, "ffd": ev.seconds["ffd"] + t_ffd},
+        ev = ev.with_(seconds={**ev.seconds, "solver": ev.seconds["solver"] + t_solver,
+                               "ffd": ev.seconds["ffd"] + t_ffd},
                       solves={**ev.solves, "flow": ev.solves["flow"] + int(ran)})
         self.seconds["solver"] += t_solver
         self.seconds["ffd"] += t_ffd
@@ -174,7 +183,7 @@ class OptimizationProblem:
             grads[name] = self.chain(ev.values, sens)
             t_ffd += time.perf_counter() - t0
             ev = ev.with_(solves={**ev.solves, "adjoint": ev.solves["adjoint"] + 1}, gradients=dict(grads),
-                          seconds={"solver": ev.seconds["solver"] + sens.seconds,
+                          seconds={**ev.seconds, "solver": ev.seconds["solver"] + sens.seconds,
                                    "ffd": ev.seconds["ffd"] + time.perf_counter() - t0})
             ev = self.store.save(ev)             # each finished adjoint kept (Ctrl-C loses none)
         self.seconds["solver"] += t_solver
@@ -251,7 +260,5 @@ class OptimizationProblem:
         if not model.constraints:
             return np.zeros(0), np.zeros((0, model.n_vars))
         at = model.evaluate(values)
-        t0 = time.perf_counter()
-        out = np.asarray(at.constraint_values(), float), np.asarray(at.constraint_jacobian(), float)
-        self.seconds["ffd"] += time.perf_counter() - t0
-        return out
+        # asked for by the optimiser between evaluations: its time is the optimiser's (see evaluate)
+        return np.asarray(at.constraint_values(), float), np.asarray(at.constraint_jacobian(), float)

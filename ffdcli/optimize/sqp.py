@@ -135,14 +135,39 @@ def least_distance(G: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def _qp(p: Point, B: np.ndarray, equality: np.ndarray, dlo: np.ndarray, dhi: np.ndarray, mu: float,
         cap: float | None = None):
     """The elastic QP for one ``mu``, the slacks' sum at most ``cap`` when given: (d (n,), slacks
-    (m + ne,), multipliers of the m rows)."""
+    (m + ne,), multipliers of the m rows).
+
+    Slacks are given at first only to the equalities and to the rows violated at ``p`` (``c < 0``); a row
+    without one holds as ``c + A d >= 0``, which ``d = 0`` meets, so the QP stays feasible. That is the
+    elastic QP's own solution as long as no such row's multiplier exceeds what its slack would cost
+    (``mu``, plus the cap's multiplier): then the slack would stay zero. A row whose multiplier does
+    is given its slack and the QP solved again. The answer is the one-slack-per-row QP's (unique:
+    strictly convex), at the cost of a QP with as many slacks as the step uses: with thousands of
+    geometric rows (a rule at every surface node) one slack per row made each QP a least-squares
+    problem thousands of columns wide.
+    """
+    soft = np.asarray(equality, dtype=bool) | (p.c < 0.0)
+    while True:
+        d, t, lam, kappa = _qp_slacks(p, B, equality, soft, dlo, dhi, mu, cap)
+        cost = mu + kappa
+        if not np.any(~soft & (lam > cost * (1.0 + 1e-9))):
+            return d, t, lam
+        soft = soft | (lam > 0.5 * cost)     # with the rows near it: a slack that stays zero changes nothing
+
+
+def _qp_slacks(p: Point, B: np.ndarray, equality: np.ndarray, soft: np.ndarray, dlo: np.ndarray,
+               dhi: np.ndarray, mu: float, cap: float | None):
+    """The QP of :func:`_qp` with slacks on the rows ``soft`` (m,) only (``soft`` all true: one per row):
+    (d (n,), slacks (m + ne,) zero on the other rows, multipliers (m,), the cap's multiplier)."""
     n, m = p.x.size, p.c.size
     eq = np.flatnonzero(equality)
     ne = eq.size
-    nt = m + ne                              # one slack per constraint, a second (t-) per equality
+    rows = np.flatnonzero(soft)
+    ns = rows.size
+    nt = ns + ne                             # a slack per soft row, a second (t-) per equality
     S = np.zeros((m, nt))
-    S[np.arange(m), np.arange(m)] = 1.0
-    S[eq, m + np.arange(ne)] = -1.0
+    S[rows, np.arange(ns)] = 1.0
+    S[eq, ns + np.arange(ne)] = -1.0
     M = np.hstack([p.A if m else np.zeros((0, n)), S])
     # the rows G z >= h: constraints (equalities both ways), step bounds, slacks >= 0
     Iz = np.eye(n + nt)
@@ -165,7 +190,10 @@ def _qp(p: Point, B: np.ndarray, equality: np.ndarray, dlo: np.ndarray, dhi: np.
     z = np.linalg.solve(L.T, x - Li_q)
     lam = u[:m].copy()
     lam[eq] -= u[m:m + ne]
-    return np.clip(z[:n], dlo, dhi), z[n:], lam
+    t = np.zeros(m + ne)
+    t[rows] = z[n:n + ns]
+    t[m:] = z[n + ns:]
+    return np.clip(z[:n], dlo, dhi), t, lam, (float(u[-1]) if cap is not None else 0.0)
 
 
 def least_violation(p: Point, equality: np.ndarray, dlo: np.ndarray, dhi: np.ndarray) -> float:

@@ -5,7 +5,10 @@ with ``result.json`` written whole or not at all after each stage (the flow, the
 that Ctrl-C or SIGTERM loses nothing that finished. An evaluation is found again by its key: a hash
 of the full design vector (its float64 bytes) and of the run's inputs (the mesh's content, the
 solver's configuration, the design file without the optimiser's own run settings): the same design
-of the same problem, never another's.
+of the same problem, never another's. A design within :data:`SAME_DESIGN` of a finished evaluation's
+(each variable, in its own units) is that evaluation: a resumed run replays its optimiser's steps,
+whose last digits may differ from the first run's (another version's arithmetic), and a design moved
+by 1e-9 of a chord or a degree is not one a solver can tell from it.
 """
 
 from __future__ import annotations
@@ -20,6 +23,10 @@ import numpy as np
 from ffdcli.errors import InputError
 from ffdcli.io.atomic import atomic_write, written_as
 
+#: Largest difference of any variable (in its own units) between a design and a finished evaluation's
+#: for the evaluation to answer for it.
+SAME_DESIGN = 1e-9
+
 
 @dataclass(frozen=True, eq=False)
 class Evaluation:
@@ -28,7 +35,8 @@ class Evaluation:
     values : (n_vars,) the full design vector; functions : {name: value} from the solver (empty when
     failed); gradients : {name: (n_vars,) dJ/dv} (empty until the adjoints ran); constraints : (C,)
     the geometric constraints; failed : the reason, None when it worked; log : the failing run's log;
-    seconds : {"solver", "ffd"}; solves : {"flow", "adjoint"} run for it."""
+    seconds : {"solver", "ffd", "optimizer"} (the optimiser's time before it asked for this design; absent
+    in a result written before it was counted); solves : {"flow", "adjoint"} run for it."""
 
     index: int
     key: str
@@ -39,7 +47,7 @@ class Evaluation:
     constraints: np.ndarray = field(default_factory=lambda: np.zeros(0))
     failed: str | None = None
     log: str | None = None
-    seconds: dict = field(default_factory=lambda: {"solver": 0.0, "ffd": 0.0})
+    seconds: dict = field(default_factory=lambda: {"solver": 0.0, "ffd": 0.0, "optimizer": 0.0})
     solves: dict = field(default_factory=lambda: {"flow": 0, "adjoint": 0})
     iteration: int = 0
 
@@ -125,7 +133,17 @@ class EvaluationStore:
         return h.hexdigest()[:24]
 
     def find(self, values: np.ndarray) -> Evaluation | None:
-        return self.by_key.get(self.key(values))
+        """The evaluation of ``values`` (n_vars,): its own, else the nearest within :data:`SAME_DESIGN`."""
+        ev = self.by_key.get(self.key(values))
+        if ev is not None or not self.by_key:
+            return ev
+        values = np.asarray(values, dtype=float)
+        near = [e for e in self.by_key.values() if e.values.shape == values.shape]
+        if not near:
+            return None
+        gap = np.abs(np.stack([e.values for e in near]) - values).max(axis=1)
+        i = int(np.argmin(gap))
+        return near[i] if gap[i] <= SAME_DESIGN else None
 
     def new(self, values: np.ndarray, iteration: int) -> Evaluation:
         """A fresh evaluation with its own (empty) folder."""

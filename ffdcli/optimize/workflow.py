@@ -156,7 +156,7 @@ def check_function_names(settings: OptimizeSettings, solver: Solver, design, sol
 
 def _seconds(problem: OptimizationProblem, t_start: float) -> dict:
     return {"solver": round(problem.seconds["solver"], 3), "ffd": round(problem.seconds["ffd"], 3),
-            "wall": round(time.perf_counter() - t_start, 3)}
+            "optimizer": round(problem.seconds["optimizer"], 3), "wall": round(time.perf_counter() - t_start, 3)}
 
 
 def finish(problem: OptimizationProblem, driver: Driver, settings: OptimizeSettings, design, folder: Path) -> dict:

@@ -188,3 +188,49 @@ def test_filter_and_bfgs():
     for _ in range(30):
         B = bfgs_update(B, rng.normal(size=3), rng.normal(size=3))         # even with s.y < 0
         assert np.all(np.linalg.eigvalsh(B) > 0)
+
+
+def _rule_qp(mu_scale: float, seed: int):
+    """A QP shaped like a rule at every surface node: 2 x 120 rows of B-spline weights on 2 x 8 moves,
+    some rows on their bound, two violated; ``mu`` at ``mu_scale`` times 1 (small: many slacks used)."""
+    from scipy.interpolate import BSpline
+    rng = np.random.default_rng(seed)
+    nc, k = 8, 3
+    knots = np.r_[[0.0] * k, np.linspace(0.0, 1.0, nc - k + 1), [1.0] * k]
+    W = BSpline.design_matrix(np.linspace(0.0, 1.0, 120), knots, k).toarray()
+    A = np.zeros((240, 2 * nc))
+    A[:120, :nc], A[120:, nc:] = W, W
+    x = rng.uniform(0.0, 0.02, 2 * nc)
+    c = np.maximum(A @ x - 0.004, 0.0)
+    c[:2] = -1e-3
+    p = Point(x=x, f=1.0, c=c, g=rng.normal(size=2 * nc), A=A)
+    B = np.eye(2 * nc) + 0.1 * np.ones((2 * nc, 2 * nc))
+    return p, B, np.zeros(240, bool), np.full(2 * nc, -0.01), np.full(2 * nc, 0.01), mu_scale
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("mu_scale,cap", [(1.0, None), (0.03, None), (1.0, 2e-4)])
+def test_slacks_where_the_step_needs_them_give_the_one_slack_per_row_qp(seed, mu_scale, cap):
+    """The QP with slacks on the violated rows only (added where a multiplier exceeds a slack's cost) is
+    the elastic QP with one slack per row: the same step, slacks and multipliers."""
+    p, B, eq, dlo, dhi, mu = _rule_qp(mu_scale, seed)
+    d, t, lam = sqp._qp(p, B, eq, dlo, dhi, mu, cap)
+    d_ref, t_ref, lam_ref, _ = sqp._qp_slacks(p, B, eq, np.ones(p.c.size, bool), dlo, dhi, mu, cap)
+    np.testing.assert_allclose(d, d_ref, atol=1e-9)
+    np.testing.assert_allclose(t, t_ref, atol=1e-9)
+    np.testing.assert_allclose(lam, lam_ref, atol=1e-7 * max(1.0, np.abs(lam_ref).max()))
+    if mu_scale < 1.0:
+        assert np.count_nonzero(t > 1e-12) > 2          # slacks beyond the two violated rows were needed
+
+
+def test_an_equality_keeps_both_slacks_and_its_signed_multiplier():
+    p, B, eq, dlo, dhi, mu = _rule_qp(1.0, 4)
+    eq = eq.copy()
+    eq[5] = True
+    c = p.c.copy()
+    c[5] = 0.01                                       # an equality off its value
+    p = Point(x=p.x, f=p.f, c=c, g=p.g, A=p.A)
+    d, t, lam = sqp._qp(p, B, eq, dlo, dhi, mu)
+    d_ref, t_ref, lam_ref, _ = sqp._qp_slacks(p, B, eq, np.ones(p.c.size, bool), dlo, dhi, mu, None)
+    np.testing.assert_allclose(d, d_ref, atol=1e-9)
+    np.testing.assert_allclose(lam, lam_ref, atol=1e-7)
