@@ -136,6 +136,7 @@ class Driver:
         self.f_scale = 1.0
         self.latest: dict[str, np.ndarray] = {}      # the latest adjoint gradient of each function
         self.refuse_failed = settings.method == "SQP"   # a failed design: refused (SQP) or penalised
+        self.verdicts: dict[int, str] = {}           # method SQP: each trial's verdict, by evaluation index
 
     # -- the variables -------------------------------------------------------------------------
     def values_of(self, x: np.ndarray) -> np.ndarray:
@@ -286,6 +287,12 @@ class Driver:
                      for k, v in enumerate(chosen) if z[k] > 0.0]
         return {"objective": name, "residual": first.residual, "active": active, "at_bounds": at_bounds}
 
+    def judged(self, x: np.ndarray, verdict: str) -> None:
+        """``method: SQP``'s verdict on the trial at ``x`` (scaled), kept for ``history.csv``'s ``trial``."""
+        ev = self.problem.store.find(self.values_of(x))
+        if ev is not None:
+            self.verdicts[ev.index] = verdict
+
     def accepted(self, *args) -> None:
         """scipy's callback: SLSQP calls it once an iteration's full step is evaluated (its line search
         follows), trust-constr after each iteration, SQP after each accepted step (the next trial is
@@ -310,7 +317,8 @@ class Driver:
         bounds = self.bounds
         tol, iterations = self.settings.tolerance, self.settings.iterations
         if method == "SQP":
-            options = {"radius": self.settings.move_limit, "maxiter": iterations, "tol": tol}
+            options = {"radius": self.settings.move_limit, "maxiter": iterations, "tol": tol,
+                       "on_trial": self.judged}
         elif method == "trust-constr":
             cons = [so.NonlinearConstraint(c["fun"], 0.0, np.inf if c["type"] == "ineq" else 0.0, jac=c["jac"])
                     for c in cons]

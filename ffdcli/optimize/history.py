@@ -7,7 +7,9 @@ constraint, ``violation`` (worst, in the constraints' own units), ``step`` (the 
 variables from the previous evaluation), ``solver_seconds``, ``ffd_seconds`` (the geometry chain: deform,
 gate, write, chain rule), ``optimizer_seconds`` (the optimiser's work before it asked for the design: its
 QP, the geometric constraints' values and Jacobian), ``flow_solves``,
-``adjoint_solves``, ``folder``, ``failed`` (the reason, with the log's path).
+``adjoint_solves``, ``folder``, ``failed`` (the reason, with the log's path), ``trial`` (``method: SQP``:
+the verdict on the design as a trial step, accepted or rejected with the ratio of the achieved to the
+predicted decrease, :func:`ffdcli.optimize.sqp.verdict`; empty for the baseline and other methods).
 """
 
 from __future__ import annotations
@@ -25,8 +27,9 @@ from ffdcli.viz.plot import load_pyplot
 
 
 def history_rows(evaluations: list[Evaluation], *, objective: str, functions: list[str], constraint_names: list[str],
-                 violations: list[float], chosen: np.ndarray, r: np.ndarray, folder: Path) -> list[dict]:
-    """One dict per evaluation, the columns of ``history.csv``."""
+                 violations: list[float], chosen: np.ndarray, r: np.ndarray, folder: Path,
+                 verdicts: dict[int, str] | None = None) -> list[dict]:
+    """One dict per evaluation, the columns of ``history.csv`` (``verdicts``: the trial column, by index)."""
     rows, prev = [], None
     for ev, worst in zip(evaluations, violations, strict=True):
         x = ev.values[chosen] / r
@@ -40,7 +43,8 @@ def history_rows(evaluations: list[Evaluation], *, objective: str, functions: li
                     "optimizer_seconds": round(ev.seconds.get("optimizer", 0.0), 3),
                     "flow_solves": ev.solves["flow"], "adjoint_solves": ev.solves["adjoint"],
                     "folder": os.path.relpath(ev.folder, folder),
-                    "failed": "" if ev.failed is None else ev.failed + (f" (log: {ev.log})" if ev.log else "")})
+                    "failed": "" if ev.failed is None else ev.failed + (f" (log: {ev.log})" if ev.log else ""),
+                    "trial": (verdicts or {}).get(ev.index, "")})
         rows.append(row)
         prev = x
     return rows

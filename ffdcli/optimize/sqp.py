@@ -299,7 +299,8 @@ class Filter:
 
 def minimize_sqp(evaluate: Callable[[np.ndarray, bool], Point | None], x0: np.ndarray, lower: np.ndarray,
                  upper: np.ndarray, equality: np.ndarray, *, radius: float, iterations: int,
-                 tolerance: float, callback: Callable[[Point], None] | None = None) -> Result:
+                 tolerance: float, callback: Callable[[Point], None] | None = None,
+                 on_trial: Callable[[np.ndarray, str], None] | None = None) -> Result:
     """Minimise with move limits (see the module docstring).
 
     Parameters
@@ -322,6 +323,8 @@ def minimize_sqp(evaluate: Callable[[np.ndarray, bool], Point | None], x0: np.nd
         whose linearised constraints the step meets; also the smallest move limit.
     callback : callable, optional
         Called with each accepted point.
+    on_trial : callable, optional
+        Called with each trial's ``x`` and the verdict in words (:func:`verdict`), once it is judged.
     """
     equality = np.asarray(equality, dtype=bool)
     p = evaluate(np.asarray(x0, dtype=float), True)
@@ -354,6 +357,8 @@ def minimize_sqp(evaluate: Callable[[np.ndarray, bool], Point | None], x0: np.nd
                     ratio = (p.f - q.f) / pred_f
                 else:
                     ratio = (h_p - h_q) / (h_p - h_lin) if h_p > h_lin else (1.0 if h_q <= h_p else -np.inf)
+        if on_trial is not None:
+            on_trial(p.x + step.d, verdict(q is not None, ratio, f_type, pred_f if f_type else h_p - h_lin))
         if ratio >= ETA:
             q = evaluate(q.x, True)
         else:
@@ -379,9 +384,22 @@ def minimize_sqp(evaluate: Callable[[np.ndarray, bool], Point | None], x0: np.nd
     return Result(p, "iterations", f"{iterations} iterations reached", done, trials)
 
 
+def verdict(evaluated: bool, ratio: float, f_type: bool, predicted: float) -> str:
+    """A trial's verdict in words: ``failed``, ``refused by the filter``, or ``accepted`` / ``rejected``
+    with the ratio of the achieved to the ``predicted`` decrease (of the objective for an objective step,
+    of the violation for a feasibility step) beside :data:`ETA`."""
+    if not evaluated:
+        return "failed: the move limit shrinks to a quarter of the step"
+    if ratio == -np.inf:
+        return "refused by the filter: dominated, or above the violation cap"
+    what = "objective" if f_type else "violation"
+    word = "accepted" if ratio >= ETA else "rejected"
+    return f"{word}: {ratio:.3g} of the predicted {what} decrease {predicted:.3g} (accepted from {ETA})"
+
+
 def method(fun: Callable, x0: np.ndarray, args=(), jac: Callable | None = None, bounds=None, constraints=(),
            callback: Callable | None = None, *, radius: float = 0.1, maxiter: int = 100, tol: float = 1e-6,
-           **unused) -> so.OptimizeResult:
+           on_trial: Callable | None = None, **unused) -> so.OptimizeResult:
     """:func:`minimize_sqp` behind scipy's face: ``scipy.optimize.minimize(fun, x0, jac=jac,
     method=sqp.method, bounds=bounds, constraints=constraints, callback=callback,
     options={"radius": r, "maxiter": n, "tol": t})``, so a driver has one call path for every method.
@@ -399,8 +417,8 @@ def method(fun: Callable, x0: np.ndarray, args=(), jac: Callable | None = None, 
         inequalities come before equalities in :class:`Point`'s ``c``, each in the order given.
     callback : callable, optional
         ``callback(x)`` after each accepted step.
-    radius, maxiter, tol
-        :func:`minimize_sqp`'s first move limit, iterations and tolerance.
+    radius, maxiter, tol, on_trial
+        :func:`minimize_sqp`'s first move limit, iterations, tolerance and trial verdicts.
 
     Returns
     -------
@@ -447,7 +465,8 @@ def method(fun: Callable, x0: np.ndarray, args=(), jac: Callable | None = None, 
         return first.pop() if first else evaluate(x, gradient)
 
     res = minimize_sqp(replay, x0, lower, upper, equality, radius=radius, iterations=maxiter, tolerance=tol,
-                       callback=None if callback is None else (lambda q: callback(q.x.copy())))
+                       callback=None if callback is None else (lambda q: callback(q.x.copy())),
+                       on_trial=on_trial)
     p = res.point
     return so.OptimizeResult(x=None if p is None else p.x, fun=None if p is None else p.f, outcome=res.status,
                              message=res.message, success=res.status == "converged", nit=res.iterations,

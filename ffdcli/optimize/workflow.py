@@ -219,7 +219,7 @@ def history_table(problem: OptimizationProblem, driver: Driver, settings: Optimi
     worst = {ev.index: violation(ev, driver.sides) for ev in evaluations}
     rows = history_rows(evaluations, objective=settings.objective, functions=settings.function_names,
                         constraint_names=names, violations=[worst[e.index] for e in evaluations],
-                        chosen=driver.chosen, r=driver.r, folder=folder)
+                        chosen=driver.chosen, r=driver.r, folder=folder, verdicts=driver.verdicts)
     return rows, worst
 
 

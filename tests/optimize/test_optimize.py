@@ -350,6 +350,11 @@ def test_sqp_with_move_limits_converges_feasible_with_adjoints_only_at_accepted_
     model = DesignModel.from_file(path)
     r = model.upper - model.lower
     assert np.max(np.abs(np.subtract(first, base)) / np.where(np.isfinite(r), r, 1.0)) <= 0.1 + 1e-12
+    # each trial's verdict: accepted where the adjoints were run, rejected (with its ratio) elsewhere
+    assert rows[0]["trial"] == ""
+    for row in rows[1:]:
+        word = "accepted" if int(row["adjoint_solves"]) else "rejected"
+        assert row["trial"].startswith(word) and "of the predicted" in row["trial"], row["trial"]
 
 
 def test_sqp_steps_back_from_a_failed_design(tmp_path):
@@ -358,6 +363,7 @@ def test_sqp_steps_back_from_a_failed_design(tmp_path):
     rows = history(tmp_path / "opt" / "history.csv")
     failed = [r for r in rows if r["failed"]]
     assert len(failed) == 1 and "failure injected" in failed[0]["failed"]
+    assert failed[0]["trial"].startswith("failed")
     assert out["constraints_satisfied"] and out["status"] == "converged"
     evs = [json.loads((tmp_path / "opt" / r["folder"] / "result.json").read_text()) for r in rows]
     k = rows.index(failed[0])

@@ -7,7 +7,17 @@ import pytest
 import scipy.optimize as so
 
 from ffdcli.optimize import sqp
-from ffdcli.optimize.sqp import Filter, Point, bfgs_update, least_distance, minimize_sqp, solve_qp, violation
+from ffdcli.optimize.sqp import (
+    ETA,
+    Filter,
+    Point,
+    bfgs_update,
+    least_distance,
+    minimize_sqp,
+    solve_qp,
+    verdict,
+    violation,
+)
 
 
 def problem(f, g, c, A):
@@ -234,3 +244,22 @@ def test_an_equality_keeps_both_slacks_and_its_signed_multiplier():
     d_ref, t_ref, lam_ref, _ = sqp._qp_slacks(p, B, eq, np.ones(p.c.size, bool), dlo, dhi, mu, None)
     np.testing.assert_allclose(d, d_ref, atol=1e-9)
     np.testing.assert_allclose(lam, lam_ref, atol=1e-7)
+
+
+def test_every_trial_gets_a_verdict_and_the_accepted_ones_are_the_iterates():
+    evaluate, _ = hs071()
+    seen, verdicts = [], []
+    r = minimize_sqp(evaluate, np.array([1.0, 5, 5, 1]), np.ones(4), np.full(4, 5.0), np.array([False, True]),
+                     radius=0.3, iterations=6, tolerance=1e-9, callback=seen.append,
+                     on_trial=lambda x, v: verdicts.append((x.copy(), v)))
+    assert len(verdicts) == r.trials
+    accepted = [x for x, v in verdicts if v.startswith("accepted")]
+    assert len(accepted) == r.iterations and all(np.array_equal(a, p.x) for a, p in zip(accepted, seen))
+
+
+def test_verdict_words():
+    assert verdict(False, -np.inf, True, 1.0).startswith("failed")
+    assert verdict(True, -np.inf, True, 1.0).startswith("refused by the filter")
+    assert verdict(True, 0.5 * ETA, True, 2e-3) == (f"rejected: {0.5 * ETA:.3g} of the predicted objective "
+                                                    f"decrease 0.002 (accepted from {ETA})")
+    assert verdict(True, 1.0, False, 0.5).startswith("accepted: 1 of the predicted violation decrease 0.5")
