@@ -58,7 +58,7 @@ from ffdcli.testing.naca import polygon_area
 #: the spline reproduces exactly (see :func:`interpolation_bound`)
 SHAPE_FLOOR = 1e-10
 MATCH = 1e-10              # two walls share a node within this distance (chords)
-#: the run mesh's baseline CD at CL 0.824 (SU2's fixed-CL mode on rae2822_su2, docs/adodg.md Case 2)
+#: the run mesh's baseline CD at CL 0.824 (SU2's fixed-CL mode on rae2822_su2, docs/adodg-case2.md)
 RUN_BASELINE_CL_CD = {"rae2822_su2": 0.020935}
 
 

@@ -1,4 +1,4 @@
-"""The pictures of ADODG Case 2 (docs/adodg.md), drawn from an ``ffd optimize`` run's folder.
+"""The pictures of ADODG Case 2 (docs/adodg-case2.md), drawn from an ``ffd optimize`` run's folder.
 
 * ``adodg_case2_cp_cf.png``: -Cp and the skin friction's chordwise component Cf_x (below zero aft of
   the leading edge: the flow reversed; ahead of the stagnation point it runs forward) on the upper and

@@ -6,7 +6,7 @@ One solve is one folder: ``flow.cfg`` (``configs/adodg/case2.cfg``'s numerics, t
 the exit code). Two conditions:
 
 * ``alpha``: alpha 2.79 deg, converged when rms[Rho] reaches ``CONV_RESIDUAL_MINVAL`` (-8 cold; -9 when
-  warm-started: a warm-started flow needs one order more for the same CD, docs/adodg.md Case 2);
+  warm-started: a warm-started flow needs one order more for the same CD, docs/adodg-case2.md);
 * ``cl``: SU2's fixed-CL mode at CL 0.824, converged when rms[Rho] reaches its target **and** |CL - 0.824|
   is below half of ``CONV_CAUCHY_EPS`` (SU2's own fixed-CL test, ``CEulerSolver::FixedCL_Convergence``).
   SU2's default ``CONV_CAUCHY_EPS`` (1e-10) is never met, so the mode iterates until ``ITER``: here it is
@@ -14,7 +14,7 @@ the exit code). Two conditions:
   RMS_DENSITY`` SU2 uses it for nothing else.
 
 The result of a folder (:func:`read_solve`): CD, CL, CM(c/4) nose-up positive (SU2's CMz negated, see
-docs/adodg.md "the sign"), the angle of attack (fixed CL: SU2's last "Previous AOA" plus "Changed AoA
+docs/adodg-case2.md "the sign"), the angle of attack (fixed CL: SU2's last "Previous AOA" plus "Changed AoA
 by", else the ``AOA`` of SU2's ``flow.meta``), iterations, the final rms[Rho], converged or not with the
 criterion, wall and CPU seconds.
 """
@@ -44,7 +44,7 @@ def solve_config(mesh: Path, mode: str, *, restart: Path | None = None, iteratio
     """case2.cfg for ``mesh`` (absolute path) at ``mode`` ('alpha' or 'cl'), capped at ``iterations``,
     warm-started from ``restart`` (an SU2 restart on a mesh of the same nodes) and then one order tighter;
     ``multigrid`` levels instead of case2.cfg's 3 when given (the converged solution does not depend on
-    them: on a C-mesh whose cut carried the wall's first cell SU2 diverged with 2 or 3, docs/adodg.md Case 2);
+    them: on a C-mesh whose cut carried the wall's first cell SU2 diverged with 2 or 3, docs/adodg-case2.md);
     ``cfl``, when given, a fixed CFL instead of case2.cfg's adapted one (on ``rae2822_s1`` SU2's adaptation
     cut the CFL from 50 to 1 where a warm-started flow stalled near rms[Rho] -8.4, and the flow diverged)."""
     if mode not in ("alpha", "cl"):

@@ -3,7 +3,7 @@
 Why: on the isotropic tetrahedra of :mod:`benchmarks.adodg.case3_meshes` the leading-edge radius
 (1.1019 t^2 = 0.0159 chord for the NACA 0012) spans about one edge, the stagnation pressure is not
 reached and the zero-lift drag is negative and larger than the induced drag the case is about
-(docs/adodg.md, Case 3). Resolving the leading edge with isotropic cells everywhere is unaffordable
+(docs/adodg-case3.md). Resolving the leading edge with isotropic cells everywhere is unaffordable
 here; this family puts the small cells only where they are needed, chordwise:
 
 - **Wing surface** (NumPy, exact NACA 0012 with the sharp-trailing-edge polynomial): the same chordwise

@@ -1,6 +1,6 @@
 """The half-wing Euler meshes of ADODG Case 3: rectangular NACA 0012 wing, rounded tip, symmetry plane.
 
-The wing (docs/adodg.md, Case 3): chord 1, semispan 3, NACA 0012 with the sharp-trailing-edge thickness
+The wing (docs/adodg-case3.md): chord 1, semispan 3, NACA 0012 with the sharp-trailing-edge thickness
 polynomial (x^4 coefficient -0.1036, :func:`ffdcli.testing.naca.naca4`), untwisted; chord along x,
 thickness along z (SU2's lift axis in 3D), span along +y from the root plane y = 0, which is the symmetry
 plane. The tip cap is the tip section's upper half revolved by 180 degrees about the chord line, outboard

@@ -1,4 +1,4 @@
-"""The picture of an ADODG Case 3 run (docs/adodg.md), drawn from an ``ffd optimize`` run's folder.
+"""The picture of an ADODG Case 3 run (docs/adodg-case3.md), drawn from an ``ffd optimize`` run's folder.
 
 ``adodg_case3_run.png`` (or ``--name``), three panels:
 

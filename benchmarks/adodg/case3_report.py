@@ -43,7 +43,7 @@ from ffdcli.io.formats import read_mesh
 
 SEMISPAN, S_HALF, ASPECT_RATIO = 3.0, 3.0, 6.0
 #: Odd sine terms of the load's fit for ``e_load`` (n = 1, 3, ..., 11). ``e_load`` of a load that does
-#: not vanish at the tip (the cap's lift in the last strip) falls as terms are added (docs/adodg.md).
+#: not vanish at the tip (the cap's lift in the last strip) falls as terms are added (docs/adodg-case3.md).
 TERMS = 6
 
 

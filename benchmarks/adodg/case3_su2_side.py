@@ -19,7 +19,7 @@ other's field, as ffd's adjoints converge to ``RMS_ADJ_DENSITY``), and:
   plane; the segment here is the trailing-edge line (x = the wing's largest x, z = the trailing edge's z),
   so each plane turns about its trailing-edge point, ffd's axis. The root plane (j = 0) is free, as ffd's
   root twist: with alpha fixed, the root's twist about the trailing-edge line plays the angle of attack
-  (docs/adodg.md, Case 3).
+  (docs/adodg-case3.md).
 * **The angle.** SU2's twist angle is ``atan(value / REF_LENGTH)`` (REF_LENGTH 1 here): a value is the
   tangent of the angle, not degrees. ffd's bounds of +-8 deg are ``OPT_BOUND_UPPER/LOWER= +-tan(8 deg)``.
 * ``OPT_CONSTRAINT= ( LIFT = 0.375 ) * 1.0`` (an equality; factor 1 because SU2's scripts scale a
@@ -136,7 +136,7 @@ def value_to_angle(value, ref_length: float = 1.0):
 #: SU2_DEF's stiffness models offered to ``setup --stiffness``. The tutorial's ``INVERSE_VOLUME`` is the
 #: default (the L0-L2 runs use it); on the hybrid H0, whose far tetrahedra are large and soft, its
 #: elasticity stops at the 800-iteration cap and moves the symmetry plane by chords for a wall move of
-#: 0.02 chord, while ``WALL_DISTANCE`` converges in about 100 iterations (docs/adodg.md, Case 3).
+#: 0.02 chord, while ``WALL_DISTANCE`` converges in about 100 iterations (docs/adodg-case3.md).
 STIFFNESS = ("INVERSE_VOLUME", "WALL_DISTANCE", "CONSTANT_STIFFNESS")
 
 

@@ -15,7 +15,7 @@ construction. Then:
 * the add-material rule at every wall node of the finer mesh (:mod:`benchmarks.adodg.surface`);
 * SU2_CFD (``configs/adodg/case1.cfg``, the mesh changed, under ``nice -n 5``; warm-started from the
   level's baseline solution when ``--baseline-run`` holds one) gives CD, printed beside the run's CD
-  and the reduction from each level's baseline (docs/adodg.md).
+  and the reduction from each level's baseline (docs/adodg-case1.md).
 
     python -m benchmarks.adodg.evaluate --design configs/adodg/case1_v8.yaml --run out/adodg/case1_v8 \\
         --mesh out/adodg/adodg_L3.su2 --work out/adodg/eval/case1_v8 --baseline-run out/adodg/eval/baseline_L3
@@ -52,7 +52,7 @@ from ffdcli.optimize.best import value_path
 from ffdcli.optimize.solvers.base import find_program
 from ffdcli.optimize.solvers.su2 import read_config, read_history, with_keys
 
-BASELINE_CD = {"L0": 0.039897, "L1": 0.044669, "L2": 0.046262, "L3": 0.046695}   # docs/adodg.md
+BASELINE_CD = {"L0": 0.039897, "L1": 0.044669, "L2": 0.046262, "L3": 0.046695}   # docs/adodg-case1.md
 TOLERANCE = 1e-6          # the case's constraint tolerance, chords
 MATCH = 1e-10             # two wall nodes of two levels are the same point within this (chords)
 

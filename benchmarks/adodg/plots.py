@@ -1,4 +1,4 @@
-"""The pictures of ADODG Case 1 (docs/adodg.md), drawn from the run folders.
+"""The pictures of ADODG Case 1 (docs/adodg-case1.md), drawn from the run folders.
 
 * ``adodg_case1_sections.png``: each run's best section over the baseline at true scale, and the
   thickness-wise move of each surface from the baseline (exaggerated: material added is above zero

@@ -1,4 +1,4 @@
-"""The results table of ADODG Case 1 (docs/adodg.md) from the run folders, finished or still running.
+"""The results table of ADODG Case 1 (docs/adodg-case1.md) from the run folders, finished or still running.
 
 One row per run: ffd's (``ffd optimize`` folders: ``history.csv``; the ``--json`` summary for the wall
 time when given) and SU2's (``benchmarks.adodg.su2_side`` folders), with the CD reached on the

@@ -231,7 +231,7 @@ class OptimizationProblem:
         equations: on ADODG Case 2 (transonic RANS) the five trials of evaluations 17 to 25 were each
         started from the previous rejected trial's flow (4e-5 to 1e-3 chord away) and settled at CL
         0.757, while each accepted design, a shorter step from the last accepted one and started from its
-        flow, gave 0.824 (docs/adodg.md)."""
+        flow, gave 0.824 (docs/adodg-case2.md)."""
         if not self.warm_start:
             return None
         done = [e for e in self.store.all() if e.failed is None and e.functions

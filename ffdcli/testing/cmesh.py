@@ -24,7 +24,7 @@ chord high and up to 12 chords long at the outflow) SU2 8.1's RANS flow (SA, JST
 CFL 50) on ``rae2822_s1`` (ADODG Case 2) diverged at iteration 185 from an odd-even oscillation of the
 density on the cut 0.1 to 0.5 chord behind the trailing edge (with 2 or 3 multigrid levels; 0 or 1
 did not diverge but did not converge either); with the default growth the same solve converges to
-rms[Rho] -8 (docs/adodg.md, Case 2). On a coarse mesh (97 points around, 25 along each side of the cut,
+rms[Rho] -8 (docs/adodg-case2.md). On a coarse mesh (97 points around, 25 along each side of the cut,
 49 out, first cell 1e-5 chord) with the cut at the wall's first cell the flow stalled near rms[Rho]
 -7.5 and diverged after 250-420 iterations; not run again with the growing cut.
 """

@@ -11,7 +11,7 @@ cores the check then costs a flow, about one and a half adjoints and two warm fl
 
 SU2's mesh, not a coarse C-mesh of ``ffdcli.testing.cmesh``: on those (97 x 49 points, first cell
 1e-5 chord) SU2's flow stalls near rms[Rho] -7.5 and then diverges after 250-420 iterations, at the
-case's M 0.734 and at M 0.6 alike (docs/adodg.md, Case 2). Skipped, with the reason, when SU2 or the
+case's M 0.734 and at M 0.6 alike (docs/adodg-case2.md). Skipped, with the reason, when SU2 or the
 shared mesh is absent (SU2_RUN, PATH or ../shared/su2/bin; ../shared/data/su2)."""
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ def test_case2_rans_adjoints_of_every_function_against_finite_differences(tmp_pa
     # the solver's functions; measured 0.44 % (DRAG), 4.7 % (LIFT), 0.93 % (MOMENT_Z). CL is strongly
     # nonlinear in this variable at this step (one-sided differences 0.035 and 0.626 about a central
     # 0.330; with the flows at -10 the central difference is 0.341, at a 3e-3 step 0.280, the adjoint
-    # 0.315), so LIFT is held to 10 % (docs/adodg.md, Case 2, the CI check)
+    # 0.315), so LIFT is held to 10 % (docs/adodg-case2.md, the CI check)
     for name, tol in (("DRAG", 0.05), ("LIFT", 0.10), ("MOMENT_Z", 0.05)):
         row = rows[name]
         assert abs(row["finite_difference"]) > 1e-3, row               # a step that moves the function

@@ -126,7 +126,7 @@ def test_the_wake_cuts_cells_grow_downstream_as_asked(growth, first, n_wake):
 
 def test_the_default_c_mesh_grows_its_wake_cut():
     """The default: 1e-3 of the distance behind the trailing edge, not the wall's first cell carried down
-    the cut (on which SU2's multigrid diverged, docs/adodg.md Case 2)."""
+    the cut (on which SU2's multigrid diverged, docs/adodg-case2.md)."""
     grid, *_ = c_grid(naca4("2412", 121), 97, 25, 49, 1e-6, 100.0)
     x = grid[0, 0, 0] - grid[25, 0, 0]
     assert x > 50 and np.isclose(abs(grid[0, 1, 1] - grid[0, 0, 1]), 1e-6 + 1e-3 * x, rtol=2e-3)
