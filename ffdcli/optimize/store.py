@@ -108,6 +108,7 @@ class EvaluationStore:
         self.root = self.folder / "evals"
         self.inputs = inputs
         self.by_key: dict[str, Evaluation] = {}
+        self.other_inputs = 0                           # finished evaluations of other inputs: not reused
         self.next_index = 1
         existing = sorted(self.root.glob("*/result.json")) if self.root.is_dir() else []
         if existing and not resume:
@@ -119,6 +120,7 @@ class EvaluationStore:
             except (OSError, ValueError):
                 continue                                    # a result never finished: run again
             if data.get("inputs") != inputs:
+                self.other_inputs += 1
                 continue
             ev = Evaluation.from_json(data, path.parent)
             self.by_key[ev.key] = ev

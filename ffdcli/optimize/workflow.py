@@ -76,6 +76,10 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
     store = EvaluationStore(folder, inputs_hash(design.mesh, solver.state(), design.data, model.names), resume=resume)
     if store.reused:
         report(f"resuming: {store.reused} finished evaluations in {folder}")
+    if resume and store.other_inputs:
+        warn(f"{store.other_inputs} finished evaluations in {folder} were made with other inputs and are not "
+             "reused: the mesh's bytes, the solver's configuration (its comments included) or the design file "
+             "(but for optimize's run settings and the bounds) changed since; this run solves its designs anew")
     driver: Driver | None = None
 
     def on_evaluation(ev, stage: str) -> None:

@@ -144,6 +144,20 @@ def test_resume_reuses_every_finished_evaluation(tmp_path, method):
     assert c["reused"] == a["evaluations"]
 
 
+def test_resume_says_when_the_folder_holds_evaluations_of_other_inputs(tmp_path):
+    """A solver configuration changed since (here a comment) makes every evaluation another problem's: the
+    resumed run says how many it does not reuse instead of silently solving them all again."""
+    path = write_case(tmp_path, iterations=2)
+    a = run_optimize(path, solver=solver_for(path))
+    config = tmp_path / "analytic.yaml"
+    config.write_text(config.read_text() + "noise: 0.0\n")
+    warnings = []
+    again = solver_for(path)
+    b = run_optimize(path, resume=True, solver=again, warn=warnings.append)
+    assert b["reused"] == 0 and again.flows == b["evaluations"]
+    assert any(f"{a['evaluations']} finished evaluations" in w and "other inputs" in w for w in warnings), warnings
+
+
 class _Forgetful(AnalyticSolver):
     """The analytic stand-in with a flow "solution" that a cleaned folder has lost."""
 
