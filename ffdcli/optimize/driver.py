@@ -292,6 +292,8 @@ class Driver:
         ev = self.problem.store.find(self.values_of(x))
         if ev is not None:
             self.verdicts[ev.index] = verdict
+            if ev.index in self.problem.solved:          # said as it happens; a replayed trial is not
+                self.problem.report(ev, "trial")
 
     def accepted(self, *args) -> None:
         """scipy's callback: SLSQP calls it once an iteration's full step is evaluated (its line search

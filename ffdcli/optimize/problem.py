@@ -38,7 +38,8 @@ class OptimizationProblem:
     functions : list of str
         The solver's functions that the run needs (objective first); each gets an adjoint.
     report : callable, optional
-        Called with each evaluation once it is finished (a flow, or its adjoints): the progress line.
+        Called with each evaluation and its stage once it is finished (``flow``, ``adjoint``; the driver
+        adds ``trial`` when ``method: SQP`` has judged a design this process solved): the progress line.
     warm_start : bool
         Offer the solver the nearest finished evaluation's folder to start from.
     concurrent : int
@@ -63,6 +64,7 @@ class OptimizationProblem:
         self._returned: float | None = None   # when evaluate last returned: the optimiser works until the next call
         self.mesh_name = "mesh" + Path(model.design.mesh).suffix
         self._seen: set[str] = set()        # keys of the evaluations this process has handed out
+        self.solved: set[int] = set()       # indices of the evaluations whose flow this process solved
 
     # -- the public entry ---------------------------------------------------------------------
     def evaluate(self, values: np.ndarray, gradient: bool = False, functions: list[str] | None = None) -> Evaluation:
@@ -121,6 +123,7 @@ class OptimizationProblem:
         ev = self.store.new(values, self.iteration)
         ev = ev.with_(seconds={**ev.seconds, "optimizer": optimizer_seconds})
         self.counts["evaluations"] += 1
+        self.solved.add(ev.index)
         ev = self._solve_flow(ev)
         self.report(ev, "flow")
         return ev

@@ -83,7 +83,10 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
     driver: Driver | None = None
 
     def on_evaluation(ev, stage: str) -> None:
-        report(progress_line(ev, stage, settings, folder))
+        if stage == "trial":
+            report(f"eval {ev.index:3d} it {ev.iteration:2d}  trial {driver.verdicts[ev.index]}")
+        else:
+            report(progress_line(ev, stage, settings, folder))
         if driver is not None:              # history.csv as the run goes (a long run can be watched)
             with written_as(folder / "history.csv", "the history", kept(folder)):
                 write_history(folder / "history.csv", history_table(problem, driver, settings, folder)[0])

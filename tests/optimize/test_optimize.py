@@ -373,7 +373,15 @@ def test_sqp_with_move_limits_converges_feasible_with_adjoints_only_at_accepted_
 
 def test_sqp_steps_back_from_a_failed_design(tmp_path):
     path = write_case(tmp_path, method="SQP", analytic={"fail_calls": [3]}, iterations=40)
-    out = run_optimize(path, solver=solver_for(path))
+    lines = []
+    out = run_optimize(path, solver=solver_for(path), report=lines.append)
+    # each trial's verdict is said as it happens, after its flow's line
+    trials = [ln for ln in lines if " trial " in ln]
+    assert len(trials) == out["evaluations"] - 1
+    assert any(" trial failed" in ln for ln in trials) and any(" trial accepted" in ln for ln in trials)
+    replayed = []
+    run_optimize(path, resume=True, solver=solver_for(path), report=replayed.append)
+    assert not any(" trial " in ln for ln in replayed)             # a replay does not say them again
     rows = history(tmp_path / "opt" / "history.csv")
     failed = [r for r in rows if r["failed"]]
     assert len(failed) == 1 and "failure injected" in failed[0]["failed"]
