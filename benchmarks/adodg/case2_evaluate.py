@@ -50,7 +50,7 @@ from scipy.spatial import cKDTree
 
 from benchmarks.adodg.case2_meshes import wall_loop
 from benchmarks.adodg.case2_solve import SolveError, reuse_or_solve
-from benchmarks.adodg.evaluate import design_data, export_lattice, ffd, load_yaml, write_yaml
+from benchmarks.adodg.evaluate import design_data, export_lattice, ffd, load_yaml, run_mesh_of, write_yaml
 from ffdcli.io.formats import read_mesh
 from ffdcli.testing.naca import polygon_area
 
@@ -96,9 +96,8 @@ def pick_row(run: Path, feasibility: float, evaluation: int | None = None) -> di
         row = (min(ok, key=lambda r: (float(r["objective"]), int(r["evaluation"]))) if ok else
                min(rows, key=lambda r: (float(r["violation"]), float(r["objective"]))))
     folder = Path(run) / row["folder"]
-    for name in ("result.json", "mesh.su2"):
-        if not (folder / name).is_file():
-            raise EvaluationError(f"{folder}: no {name}; the evaluation's files are needed")
+    if not (folder / "result.json").is_file():
+        raise EvaluationError(f"{folder}: no result.json; the evaluation's files are needed")
     values = [float(v) for v in json.loads((folder / "result.json").read_text())["values"]]
     return {**row, "values": values, "feasible": float(row["violation"]) <= feasibility}
 
@@ -257,7 +256,8 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, evaluation: int
                                              output=own))), "--cache-dir", cache)
     run_marker = data.get("surface", "airfoil")
     ids_run, base_run = wall(run_mesh, run_marker)
-    des_run = read_mesh(run / row["folder"] / "mesh.su2").points[ids_run, :2]
+    run_best, out["run_mesh_rebuilt"] = run_mesh_of(design, run, row["folder"], row["values"], names, folder)
+    des_run = read_mesh(run_best).points[ids_run, :2]
     out["lattice_error"] = float(np.abs(read_mesh(own).points[ids_run, :2] - des_run).max())
 
     # the finer mesh with the same lattice

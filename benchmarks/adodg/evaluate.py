@@ -130,6 +130,29 @@ def export_lattice(design: Path, run_mesh: Path, work: Path) -> Path:
     return xyz
 
 
+def run_mesh_of(design: Path, run: Path, folder: str, values: list[float], names: list[str],
+                work: Path) -> tuple[Path, bool]:
+    """The mesh the run wrote for the evaluation in ``run/folder`` and whether it had to be rebuilt.
+
+    A run restored from its record (``benchmarks.adodg.record``) has each evaluation's ``result.json``
+    but not its mesh (meshes are not kept in git). The mesh is then made again as the run made it: the
+    design file on the run's mesh with its automatic lattice and the evaluation's ``values``, written
+    to ``work/run_mesh_<folder name>.su2``; the evaluation reports ``run_mesh_rebuilt``, and its
+    ``lattice_error`` then compares the lattice file with the automatic lattice of the same run."""
+    kept = Path(run) / folder / "mesh.su2"
+    if kept.is_file():
+        return kept, False
+    data = load_yaml(design)
+    run_mesh = (Path(design).parent / data["mesh"]).resolve()
+    out = Path(work) / f"run_mesh_{Path(folder).name}.su2"
+    if not out.is_file():
+        ffd("deform", str(write_yaml(Path(work) / f"design_run_mesh_{Path(folder).name}.yaml",
+                                     design_data(design, run_mesh, values=values, names=names, box_file=None,
+                                                 output=out))),
+            "--cache-dir", str(Path(work) / "cache"))
+    return out, True
+
+
 def wall_xy(mesh_path: Path, marker: str = "airfoil") -> np.ndarray:
     """(n, 2) wall node coordinates of ``marker``, in node-id order."""
     mesh = read_mesh(mesh_path)
@@ -263,7 +286,7 @@ def evaluate(design: Path, run: Path, mesh: Path, work: Path, *, baseline_run: P
     ffd("deform", str(write_yaml(work / f"design_{out['run_level']}.yaml",
                                  design_data(design, run_mesh, values=best["values"], names=names, box_file=xyz,
                                              output=own))), "--cache-dir", str(work / "cache"))
-    run_best = run / best["folder"] / "mesh.su2"
+    run_best, out["run_mesh_rebuilt"] = run_mesh_of(design, run, best["folder"], best["values"], names, work)
     out["lattice_error"] = float(np.abs(wall_xy(own) - wall_xy(run_best)).max())
 
     # the finer level with the same lattice

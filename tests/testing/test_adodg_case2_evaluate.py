@@ -30,7 +30,7 @@ from benchmarks.adodg.case2_evaluate import (
 from benchmarks.adodg.case2_meshes import wall_section
 from benchmarks.adodg.case2_solve import CAUCHY_EPS, read_solve, run_solve, solve_config
 from benchmarks.adodg.evaluate import design_data, ffd, write_yaml
-from ffdcli.io.formats import write_mesh
+from ffdcli.io.formats import read_mesh, write_mesh
 from ffdcli.optimize.solvers.base import find_program
 from ffdcli.optimize.solvers.su2 import config_value, read_config
 from ffdcli.testing.cmesh import cmesh
@@ -139,6 +139,30 @@ def test_the_shape_check_sees_a_wrong_design_on_the_finer_mesh(evaluated, tmp_pa
     ids_f, base_f = wall(fine, "airfoil")
     got = shape_check(base_r, des_r, base_f, wall(wrong, "AIRFOIL")[1])
     assert not got["shape_ok"] and got["shape_error"] > 1e-3
+
+
+def test_a_run_restored_without_its_meshes_is_evaluated_the_same(evaluated, tmp_path):
+    """A record keeps each evaluation's result.json but not its mesh: the evaluation's mesh is made again
+    from its values with the run's automatic lattice, and every figure is the one from the kept mesh."""
+    src = evaluated["run"]
+    run = tmp_path / "opt"
+    run.mkdir()
+    (run / "history.csv").write_text((src / "history.csv").read_text())
+    for k in ("0001", "0002", "0003"):                          # what `record restore` writes
+        (run / "evals" / k).mkdir(parents=True)
+        (run / "evals" / k / "result.json").write_text((src / "evals" / k / "result.json").read_text())
+    out = evaluate(evaluated["design"], run, evaluated["meshes"][1], tmp_path / "work", evaluation=2,
+                   run_solve=False)
+    kept = evaluated["out"]
+    assert out["run_mesh_rebuilt"] and not kept["run_mesh_rebuilt"]
+    rebuilt = tmp_path / "work" / "e0002" / "run_mesh_0002.su2"
+    assert rebuilt.is_file() and not (run / "evals" / "0002" / "mesh.su2").exists()   # the run folder untouched
+    ids = wall(evaluated["meshes"][0], "airfoil")[0]
+    assert np.abs(read_mesh(rebuilt).points[ids] - read_mesh(src / "evals" / "0002" / "mesh.su2").points[ids]).max() \
+        <= 1e-14
+    assert out["lattice_error"] <= 1e-12
+    for key in ("shape_error", "area_ratio", "area_ratio_run_mesh", "common_error"):
+        assert out[key] == pytest.approx(kept[key], abs=1e-14), key
 
 
 @pytest.mark.parametrize("seed", range(4))
