@@ -115,6 +115,24 @@ def test_optimum_on_the_finer_level_is_the_same_shape_and_keeps_the_rule(tmp_pat
     assert m.margin < -1e-4
 
 
+def test_a_run_restored_without_its_meshes_is_evaluated_the_same(tmp_path, levels):
+    """A record keeps each evaluation's result.json, not its mesh: the best evaluation's mesh is made
+    again from its values with the run's automatic lattice, and the figures are those of the kept mesh."""
+    l0, l1 = levels
+    design = design_file(tmp_path, l0)
+    thick = symmetric(np.array([0.004, 0.008, 0.006, 0.002]))
+    run = fake_run(tmp_path, design, l0, [([0.0] * 10, 0.04, 0.0), (thick, 0.03, 0.0)], best=2)
+    kept = evaluate(design, run, l1, tmp_path / "kept", run_solve=False)
+    (run / "evals" / "0002" / "mesh.su2").rename(tmp_path / "moved_away.su2")
+    again = evaluate(design, run, l1, tmp_path / "again", run_solve=False)
+    assert again["run_mesh_rebuilt"] and not kept["run_mesh_rebuilt"]
+    assert not (run / "evals" / "0002" / "mesh.su2").exists()          # the run's folder is not written
+    assert np.array_equal(wall_xy(tmp_path / "again" / "run_mesh_0002.su2"), wall_xy(tmp_path / "moved_away.su2"))
+    for key in ("lattice_error", "shape_error", "common_nodes"):
+        assert again[key] == kept[key], key
+    assert again["rule"] == kept["rule"] and again["rule_run_level"] == kept["rule_run_level"]
+
+
 def test_prolonged_restart_keeps_the_shared_nodes_and_stays_within_the_coarse_values(tmp_path, levels):
     """The finer solve's warm start: SU2's binary restart layout read and written back byte for byte,
     every node the two levels share gets its coarse value exactly, the others a convex average."""
