@@ -101,9 +101,11 @@ class EvaluationStore:
     """The evaluations of a run folder: ``find`` by design vector, ``new`` folder, ``save`` a result.
 
     ``resume``: the finished evaluations of an earlier run with the same inputs are read back; without
-    it, a folder that already holds evaluations is refused (InputError), never silently mixed."""
+    it, a folder that already holds evaluations is refused (InputError), never silently mixed. ``accept``:
+    other hashes of the same inputs (an earlier version's, :meth:`Solver.legacy_states`) whose evaluations
+    are reused too; they are found by their values (:meth:`find`), their keys being the earlier hash's."""
 
-    def __init__(self, folder: Path, inputs: str, *, resume: bool):
+    def __init__(self, folder: Path, inputs: str, *, resume: bool, accept: tuple[str, ...] = ()):
         self.folder = Path(folder)
         self.root = self.folder / "evals"
         self.inputs = inputs
@@ -119,7 +121,7 @@ class EvaluationStore:
                 data = json.loads(path.read_text())
             except (OSError, ValueError):
                 continue                                    # a result never finished: run again
-            if data.get("inputs") != inputs:
+            if data.get("inputs") != inputs and data.get("inputs") not in accept:
                 self.other_inputs += 1
                 continue
             ev = Evaluation.from_json(data, path.parent)

@@ -73,12 +73,14 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
         warn(w)
     model = DesignModel(load_run(design, progress=progress))
     chosen = select_variables(model.names, settings.variables, error=design.error)
-    store = EvaluationStore(folder, inputs_hash(design.mesh, solver.state(), design.data, model.names), resume=resume)
+    store = EvaluationStore(folder, inputs_hash(design.mesh, solver.state(), design.data, model.names), resume=resume,
+                            accept=tuple(inputs_hash(design.mesh, s, design.data, model.names)
+                                         for s in solver.legacy_states()))
     if store.reused:
         report(f"resuming: {store.reused} finished evaluations in {folder}")
     if resume and store.other_inputs:
         warn(f"{store.other_inputs} finished evaluations in {folder} were made with other inputs and are not "
-             "reused: the mesh's bytes, the solver's configuration (its comments included) or the design file "
+             "reused: the mesh's bytes, the solver's configuration (a setting, not a comment) or the design file "
              "(but for optimize's run settings and the bounds) changed since; this run solves its designs anew")
     driver: Driver | None = None
 

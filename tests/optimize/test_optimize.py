@@ -158,6 +158,39 @@ def test_resume_says_when_the_folder_holds_evaluations_of_other_inputs(tmp_path)
     assert any(f"{a['evaluations']} finished evaluations" in w and "other inputs" in w for w in warnings), warnings
 
 
+class _NewStateForm(AnalyticSolver):
+    """The analytic stand-in whose ``state`` changed form in a new version, the old form kept as legacy."""
+
+    def state(self):
+        return "form 2\n" + super().state()
+
+    def legacy_states(self):
+        return (super().state(),)
+
+
+def test_resume_reuses_the_evaluations_keyed_by_an_earlier_version_s_state(tmp_path):
+    """A run made when ``state`` had another form (SU2's, before comments were left out) is found all the
+    same by a resumed run: nothing solved again, no warning; without the legacy form it would not be."""
+    path = write_case(tmp_path, iterations=2)
+    a = run_optimize(path, solver=solver_for(path))
+    warnings = []
+    again = _NewStateForm(tmp_path / "analytic.yaml")
+    b = run_optimize(path, resume=True, solver=again, warn=warnings.append)
+    assert again.flows == 0 and again.adjoints == 0 and b["reused"] == a["evaluations"]
+    assert b["objective"] == a["objective"] and not any("other inputs" in w for w in warnings)
+
+    class Forgot(_NewStateForm):                 # the same new form with no legacy: every evaluation another's
+        def legacy_states(self):
+            return ()
+
+    (tmp_path / "c").mkdir()
+    path_c = write_case(tmp_path / "c", iterations=2)
+    run_optimize(path_c, solver=solver_for(path_c))
+    forgot = Forgot(tmp_path / "c" / "analytic.yaml")
+    c = run_optimize(path_c, resume=True, solver=forgot, warn=warnings.append)
+    assert c["reused"] == 0 and forgot.flows == c["evaluations"]
+
+
 class _Forgetful(AnalyticSolver):
     """The analytic stand-in with a flow "solution" that a cleaned folder has lost."""
 

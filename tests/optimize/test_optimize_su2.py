@@ -58,6 +58,27 @@ def test_two_iterations_with_su2(tmp_path):
     assert (tmp_path / "opt" / "best.yaml").is_file() and (tmp_path / "opt" / "best.su2").is_file()
 
 
+def test_su2_state_leaves_comments_out_and_keeps_the_old_form_as_legacy(tmp_path):
+    """Two configurations that differ in comments and blank lines only are the same inputs; a setting
+    changed is not; the legacy state is the old text with every line (so old runs are still found)."""
+    from ffdcli.optimize.solvers.su2 import SU2, settings_lines
+    base = ["% Euler on the NACA 0012", "SOLVER= EULER", "", "MACH_NUMBER= 0.85 % transonic", "CFL_NUMBER= 10"]
+    commented = ["% a new comment", "SOLVER= EULER   ", "% another", "MACH_NUMBER= 0.85", "", "CFL_NUMBER= 10 % kept"]
+    changed = ["SOLVER= EULER", "MACH_NUMBER= 0.86", "CFL_NUMBER= 10"]
+    assert settings_lines(base) == ["SOLVER= EULER", "MACH_NUMBER= 0.85", "CFL_NUMBER= 10"]
+
+    def solver(lines, name):
+        (tmp_path / name).write_text("\n".join(lines) + "\n")
+        s = SU2(tmp_path / name)
+        s.lines = read_config(tmp_path / name)
+        return s
+
+    a, b, c = solver(base, "a.cfg"), solver(commented, "b.cfg"), solver(changed, "c.cfg")
+    assert a.state() == b.state() != c.state()
+    assert a.legacy_states() != b.legacy_states()                # the old form counted comments
+    assert a.legacy_states()[0].splitlines()[:len(base)] == base  # ... every line as written
+
+
 def test_with_keys_changes_only_the_named_keys():
     lines = ["% comment", "SOLVER= EULER", "MESH_FILENAME= a.su2 % the mesh", "OUTPUT_FILES= (RESTART)",
              "MESH_FILENAME= b.su2"]

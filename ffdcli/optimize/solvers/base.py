@@ -125,6 +125,11 @@ class Solver(ABC):
         """The solver's inputs as text (its configuration): part of the key of a cached evaluation."""
         return ""
 
+    def legacy_states(self) -> tuple[str, ...]:
+        """Earlier versions' forms of :meth:`state` for the same inputs: a resumed run still reuses the
+        evaluations they keyed (the runs in a folder outlive a version). None by default."""
+        return ()
+
     def has_flow(self, folder: Path) -> bool:
         """Whether ``folder`` still holds what :meth:`adjoint` reads of its flow (a solution file): an
         evaluation resumed from its ``result.json`` alone (its files cleaned away, or the run's record

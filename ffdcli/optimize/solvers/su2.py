@@ -97,6 +97,13 @@ def read_config(path: Path) -> list[str]:
         raise InputError(f"cannot read the SU2 configuration: {e.strerror}", path=path) from None
 
 
+def settings_lines(lines: list[str]) -> list[str]:
+    """The lines of an SU2 configuration that set something: each without its ``%`` comment and outer
+    blanks, the empty ones dropped (SU2 reads nothing else)."""
+    out = (line.split("%", 1)[0].strip() for line in lines)
+    return [line for line in out if line]
+
+
 def config_value(lines: list[str], key: str) -> str | None:
     """The value of ``key`` in SU2 configuration ``lines`` (the last one written), None if absent."""
     value = None
@@ -236,7 +243,16 @@ class SU2(Solver):
                           programs={k: str(v) for k, v in self.programs.items()}, warnings=tuple(warnings))
 
     def state(self) -> str:
-        return ("\n".join(self.lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
+        """The configuration's settings (its comments and blank lines left out: editing a comment does not
+        make every finished evaluation another problem's), the adjoint, the launcher."""
+        return self._state(settings_lines(self.lines))
+
+    def legacy_states(self) -> tuple[str, ...]:
+        """The form before comments were left out (ffd 2026-12-07 and earlier): every line as written."""
+        return (self._state(self.lines),)
+
+    def _state(self, lines: list[str]) -> str:
+        return ("\n".join(lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
                 + ("" if self.adjoint_residual is None else f"\nadjoint_residual={self.adjoint_residual!r}"))
 
     def outputs(self) -> tuple[str, ...]:
