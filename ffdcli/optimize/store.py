@@ -103,7 +103,8 @@ class EvaluationStore:
     ``resume``: the finished evaluations of an earlier run with the same inputs are read back; without
     it, a folder that already holds evaluations is refused (InputError), never silently mixed. ``accept``:
     other hashes of the same inputs (an earlier version's, :meth:`Solver.legacy_states`) whose evaluations
-    are reused too; they are found by their values (:meth:`find`), their keys being the earlier hash's."""
+    are reused too, and their ``result.json`` rewritten with this hash and key (whole, as :meth:`save`
+    writes), so that the run no longer depends on the earlier form (``migrated`` counts them)."""
 
     def __init__(self, folder: Path, inputs: str, *, resume: bool, accept: tuple[str, ...] = ()):
         self.folder = Path(folder)
@@ -111,6 +112,7 @@ class EvaluationStore:
         self.inputs = inputs
         self.by_key: dict[str, Evaluation] = {}
         self.other_inputs = 0                           # finished evaluations of other inputs: not reused
+        self.migrated = 0                               # ... of an accepted earlier hash: rewritten with this one
         self.next_index = 1
         existing = sorted(self.root.glob("*/result.json")) if self.root.is_dir() else []
         if existing and not resume:
@@ -125,6 +127,9 @@ class EvaluationStore:
                 self.other_inputs += 1
                 continue
             ev = Evaluation.from_json(data, path.parent)
+            if data["inputs"] != inputs:                # an earlier version's hash: moved to this one's
+                ev = self.save(ev.with_(key=self.key(ev.values)))
+                self.migrated += 1
             self.by_key[ev.key] = ev
         if self.root.is_dir():
             numbers = [int(p.name) for p in self.root.iterdir() if p.name.isdigit()]

@@ -78,6 +78,9 @@ def run_optimize(design_path, overrides=(), *, resume: bool = False, check: list
                                          for s in solver.legacy_states()))
     if store.reused:
         report(f"resuming: {store.reused} finished evaluations in {folder}")
+    if store.migrated:
+        report(f"resuming: {store.migrated} of them were keyed by an earlier version's form of the inputs; "
+               "their result.json now carry this version's")
     if resume and store.other_inputs:
         warn(f"{store.other_inputs} finished evaluations in {folder} were made with other inputs and are not "
              "reused: the mesh's bytes, the solver's configuration (a setting, not a comment) or the design file "

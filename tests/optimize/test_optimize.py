@@ -179,10 +179,14 @@ def test_resume_reuses_the_evaluations_keyed_by_an_earlier_version_s_state(tmp_p
     assert again.flows == 0 and again.adjoints == 0 and b["reused"] == a["evaluations"]
     assert b["objective"] == a["objective"] and not any("other inputs" in w for w in warnings)
 
-    class Forgot(_NewStateForm):                 # the same new form with no legacy: every evaluation another's
+    class Forgot(_NewStateForm):                 # the same new form with no legacy
         def legacy_states(self):
             return ()
 
+    # the resumed run moved its evaluations to the new form: a version without the legacy finds them
+    forgot = Forgot(tmp_path / "analytic.yaml")
+    assert run_optimize(path, resume=True, solver=forgot)["reused"] == a["evaluations"] and forgot.flows == 0
+    # a run never resumed under the new form is another problem's for it
     (tmp_path / "c").mkdir()
     path_c = write_case(tmp_path / "c", iterations=2)
     run_optimize(path_c, solver=solver_for(path_c))
