@@ -97,6 +97,13 @@ def read_config(path: Path) -> list[str]:
         raise InputError(f"cannot read the SU2 configuration: {e.strerror}", path=path) from None
 
 
+def state_text(lines: list[str], adjoint: str, launch: tuple[str, ...], adjoint_residual: float | None) -> str:
+    """The text an SU2 run's inputs hash takes (:meth:`SU2.state`): the configuration ``lines``, the adjoint,
+    the launcher and the adjoint's residual when it was set."""
+    return ("\n".join(lines) + f"\nadjoint={adjoint}\nlaunch={' '.join(launch)}"
+            + ("" if adjoint_residual is None else f"\nadjoint_residual={adjoint_residual!r}"))
+
+
 def settings_lines(lines: list[str]) -> list[str]:
     """The lines of an SU2 configuration that set something: each without its ``%`` comment and outer
     blanks, the empty ones dropped (SU2 reads nothing else)."""
@@ -245,15 +252,11 @@ class SU2(Solver):
     def state(self) -> str:
         """The configuration's settings (its comments and blank lines left out: editing a comment does not
         make every finished evaluation another problem's), the adjoint, the launcher."""
-        return self._state(settings_lines(self.lines))
+        return state_text(settings_lines(self.lines), self.adjoint_kind, self.launch, self.adjoint_residual)
 
     def legacy_states(self) -> tuple[str, ...]:
         """The form before comments were left out (ffd 2026-12-07 and earlier): every line as written."""
-        return (self._state(self.lines),)
-
-    def _state(self, lines: list[str]) -> str:
-        return ("\n".join(lines) + f"\nadjoint={self.adjoint_kind}\nlaunch={' '.join(self.launch)}"
-                + ("" if self.adjoint_residual is None else f"\nadjoint_residual={self.adjoint_residual!r}"))
+        return (state_text(self.lines, self.adjoint_kind, self.launch, self.adjoint_residual),)
 
     def outputs(self) -> tuple[str, ...]:
         """SU2's functions that ffd reads from its history (:data:`HISTORY_COLUMNS`: SU2's objective names)."""
