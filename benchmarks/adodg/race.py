@@ -121,8 +121,10 @@ def su2_trace(case: int, folder: Path, label: str, baseline: Path | None = None)
         feasible = [abs(r["CL"] - case3_su2_side.CL_TARGET) <= case3_su2_side.CL_TOLERANCE for r in rows]
     converged = su2_side.flow_converged(folder, len(rows))
     feasible = [f and c for f, c in zip(feasible, converged, strict=True)]
-    return trace_of(label, [1] * len(rows), su2_adjoints(folder, len(rows)), [r["CD"] for r in rows], feasible,
-                    tool="SU2", unconverged=converged.count(False))
+    keep = [not r for r in su2_side.repeats(folder, len(rows))]      # a design SU2's restart made again: not counted
+    pick = lambda xs: [x for x, k in zip(xs, keep, strict=True) if k]   # noqa: E731
+    return trace_of(label, [1] * sum(keep), pick(su2_adjoints(folder, len(rows))), pick([r["CD"] for r in rows]),
+                    pick(feasible), tool="SU2", unconverged=pick(converged).count(False))
 
 
 def best_so_far(t: Trace) -> np.ndarray:

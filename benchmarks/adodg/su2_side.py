@@ -235,6 +235,30 @@ def finished_adjoints(dsn: Path) -> int:
     return sum(1 for a in Path(dsn).glob("ADJOINT_*") if list(a.glob("of_grad*.csv")))
 
 
+#: Two of SU2's designs whose variables differ by no more than this (each, in its units) are one design.
+SAME_DESIGN = 1e-12
+
+
+def repeats(folder: Path, n: int) -> list[bool]:
+    """Whether each of SU2's designs 1..n repeats an earlier one (every ``DV_VALUE_NEW`` within
+    :data:`SAME_DESIGN`). SU2's restart (``-r project.pkl``) replays SLSQP, whose designs can come back
+    different in the last bit; its project reuses a design only at distance 0.0, so it makes such a
+    design again with its flow and adjoints. A run not stopped would not have: the reports do not count
+    those solves against SU2 (they say how many there were)."""
+    seen: list[np.ndarray] = []
+    out = []
+    for k in range(n):
+        cfg = Path(folder) / "DESIGNS" / f"DSN_{k + 1:03d}" / "config_DSN.cfg"
+        raw = config_value(read_config(cfg), "DV_VALUE_NEW") if cfg.is_file() else None
+        if raw is None:
+            out.append(False)
+            continue
+        x = np.array([float(v) for v in raw.replace(";", ",").split(",") if v.strip()])
+        out.append(any(len(y) == len(x) and np.abs(y - x).max() <= SAME_DESIGN for y in seen))
+        seen.append(x)
+    return out
+
+
 def flow_converged(folder: Path, n: int) -> list[bool]:
     """Whether each of SU2's designs 1..n has a flow that reached the configuration's
     ``CONV_RESIDUAL_MINVAL`` (the last ``rms[Rho]`` of ``DESIGNS/DSN_k/DIRECT/history_direct.csv``):
@@ -275,8 +299,12 @@ def report(folder: Path, baseline: Path) -> dict:
     rows = []
     table = project_rows(folder)
     flows = len(table)
-    for dsn in designs(folder):        # finished only: a flow's row in history_project.csv, an adjoint's gradient
-        adjoints += finished_adjoints(dsn)
+    again = repeats(folder, len(table))
+    # finished only: a flow's row in history_project.csv, an adjoint's gradient
+    for k, dsn in enumerate(designs(folder)):
+        if not (k < len(again) and again[k]):
+            adjoints += finished_adjoints(dsn)
+    flows -= sum(again)
     converged = flow_converged(folder, len(table))
     for k, row in enumerate(table):
         dsn = folder / "DESIGNS" / f"DSN_{k + 1:03d}"
@@ -290,7 +318,8 @@ def report(folder: Path, baseline: Path) -> dict:
                                        and area >= geo["AIRFOIL_AREA"] - TOLERANCE)
         rows.append({"design": dsn.name, "CD": row["DRAG"], "CL": row["LIFT"], "thickness": tc, "area": area,
                      "converged": converged[k], "su2_constraints_met": bool(su2_ok), "rule": margin,
-                     "rule_met": margin is not None and min(margin["upper"], margin["lower"]) >= -TOLERANCE})
+                     "rule_met": margin is not None and min(margin["upper"], margin["lower"]) >= -TOLERANCE,
+                     "repeat": again[k]})
 
     def best(key: str):
         ok = [r for r in rows if r[key] and r["converged"]]
@@ -299,16 +328,24 @@ def report(folder: Path, baseline: Path) -> dict:
     state, wall = run_state(folder)
     b0 = rows[0]["CD"] if rows else None
     out = {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
-           "flow_solves": flows, "adjoint_solves": adjoints, "designs": rows, "wall": wall, "baseline_CD": b0,
-           "best_su2": best("su2_constraints_met"), "best_rule": best("rule_met"),
+           "flow_solves": flows, "adjoint_solves": adjoints, "repeated_designs": sum(again), "designs": rows,
+           "wall": wall, "baseline_CD": b0, "best_su2": best("su2_constraints_met"), "best_rule": best("rule_met"),
            "baseline_geometry": {"AIRFOIL_THICKNESS": geo["AIRFOIL_THICKNESS"], "AIRFOIL_AREA": geo["AIRFOIL_AREA"]}}
     return out
+
+
+def repeated_line(rep: dict) -> str:
+    """The words a report adds when SU2's restart made designs again (:func:`repeats`), else nothing."""
+    n = rep.get("repeated_designs", 0)
+    return (f" (not counting {n} design{'s' if n != 1 else ''} SU2's restart made again, equal to earlier ones "
+            "to the last bits, with their solves)") if n else ""
 
 
 def summary(rep: dict) -> str:
     """Plain-text lines of a report."""
     lines = [f"{rep['folder']}: {'finished (exit ' + str(rep['rc']) + ')' if rep['finished'] else 'RUNNING'}, "
-             f"{rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves, {rep['wall']:.0f} s wall"]
+             f"{rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves, {rep['wall']:.0f} s wall"
+             + repeated_line(rep)]
     for r in rep["designs"]:
         m = r["rule"]
         rule = "-" if m is None else f"{min(m['upper'], m['lower']):+.2e}"

@@ -55,6 +55,8 @@ from benchmarks.adodg.su2_side import (
     flow_converged,
     geometry,
     project_rows,
+    repeated_line,
+    repeats,
     run_program,
     run_state,
     side_parser,
@@ -142,15 +144,18 @@ def report(folder: Path) -> dict:
     folder = Path(folder)
     area0 = json.loads((folder / "baseline_geometry.json").read_text())["AIRFOIL_AREA"]
     table = project_rows(folder)
-    adjoints = sum(finished_adjoints(dsn) for dsn in designs(folder))
+    again = repeats(folder, len(table))
+    adjoints = sum(finished_adjoints(dsn) for k, dsn in enumerate(designs(folder))
+                   if not (k < len(again) and again[k]))
     converged = flow_converged(folder, len(table))
     rows = [{"design": f"DSN_{k + 1:03d}", "CD": r["DRAG"], "CL": r["LIFT"], "CMz": r["MOMENT_Z"],
              "area": r.get("AIRFOIL_AREA", float("nan")), "converged": converged[k],
-             "feasible": converged[k] and feasible(r, area0)} for k, r in enumerate(table)]
+             "feasible": converged[k] and feasible(r, area0), "repeat": again[k]} for k, r in enumerate(table)]
     ok = [r for r in rows if r["feasible"]]
     state, wall = run_state(folder)
     return {"folder": str(folder), "finished": state is not None, "rc": None if state is None else state["rc"],
-            "flow_solves": len(table), "adjoint_solves": adjoints, "designs": rows, "wall": wall,
+            "flow_solves": len(table) - sum(again), "adjoint_solves": adjoints, "repeated_designs": sum(again),
+            "designs": rows, "wall": wall,
             "baseline_CD": rows[0]["CD"] if rows else None, "baseline_area": area0,
             "best": min(ok, key=lambda r: r["CD"]) if ok else None}
 
@@ -158,10 +163,12 @@ def report(folder: Path) -> dict:
 def summary(rep: dict) -> str:
     """Plain-text lines of a report."""
     lines = [f"{rep['folder']}: {'finished (exit ' + str(rep['rc']) + ')' if rep['finished'] else 'RUNNING'}, "
-             f"{rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves, {rep['wall']:.0f} s wall"]
+             f"{rep['flow_solves']} flow + {rep['adjoint_solves']} adjoint solves, {rep['wall']:.0f} s wall"
+             + repeated_line(rep)]
     for r in rep["designs"]:
         lines.append(f"  {r['design']}: CD {r['CD']:.6f}  CL {r['CL']:.5f}  CMz {r['CMz']:+.5f}  area {r['area']:.7f}  "
                      f"{'feasible' if r['feasible'] else 'infeasible'}"
+                     f"{'  (a repeat: not counted)' if r.get('repeat') else ''}"
                      f"{'' if r.get('converged', True) else ' (FLOW NOT CONVERGED: no result)'}")
     b0, best = rep["baseline_CD"], rep["best"]
     lines.append("best feasible: " + ("none" if best is None else

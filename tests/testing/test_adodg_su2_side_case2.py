@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 import yaml
 
+from benchmarks.adodg import race, su2_side
 from benchmarks.adodg.su2_side import su2_bin, su2_env
 from benchmarks.adodg.su2_side_case2 import (
     BOUND,
@@ -29,6 +30,7 @@ from benchmarks.adodg.su2_side_case2 import (
     feasible,
     report,
     setup,
+    summary,
 )
 from ffdcli.api import DesignModel
 from ffdcli.io.formats import read_mesh
@@ -148,6 +150,36 @@ def test_report_counts_solves_and_picks_the_best_feasible(tmp_path):
     assert (rep["flow_solves"], rep["adjoint_solves"]) == (4, 6) and not rep["finished"]
     assert [r["feasible"] for r in rep["designs"]] == [False, True, False, True]
     assert rep["best"]["design"] == "DSN_002" and rep["baseline_CD"] == 0.0194
+
+
+def test_a_design_su2s_restart_made_again_is_not_counted(tmp_path):
+    """SU2's restart replays SLSQP, whose designs can come back different in the last bit; SU2 makes them
+    again. Such a design (and its solves) is marked and not counted; one that differs more is a design."""
+    (tmp_path / "config.cfg").write_text("% x\n")
+    (tmp_path / "baseline_geometry.json").write_text(json.dumps({"AIRFOIL_AREA": 0.0777}))
+    x2 = [0.00013409235885957207, -2.6532190493191143e-05, 5.8e-05]
+    designs = [[0.0, 0.0, 0.0], x2, [0.0007, -0.0008, 0.0016],
+               [0.00013409235885957207, -2.653219049319115e-05, 5.8e-05],    # x2 but for the last bit
+               [0.00013409235885957207, -2.6532190493191143e-05, 5.8e-05 + 1e-9]]
+    rows = [(0.0194, 0.805, 0.096, 0.0777), (0.0191, 0.805, 0.0955, 0.0777), (0.0177, 0.805, 0.0927, 0.0777),
+            (0.0191, 0.805, 0.0955, 0.0777), (0.0190, 0.805, 0.0955, 0.0777)]
+    with open(tmp_path / "history_project.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(['"DRAG"', '"LIFT"', '"MOMENT_Z"', '"AIRFOIL_AREA"'])
+        w.writerows(rows)
+    for k, x in enumerate(designs):
+        dsn = tmp_path / "DESIGNS" / f"DSN_{k + 1:03d}"
+        for a in range(3):
+            (dsn / f"ADJOINT_{a}").mkdir(parents=True)
+            (dsn / f"ADJOINT_{a}" / "of_grad.csv").write_text("x\n")
+        (dsn / "config_DSN.cfg").write_text("DV_VALUE_NEW= " + ", ".join(repr(v) for v in x) + "\n")
+    assert su2_side.repeats(tmp_path, 5) == [False, False, False, True, False]
+    rep = report(tmp_path)
+    assert (rep["flow_solves"], rep["adjoint_solves"], rep["repeated_designs"]) == (4, 12, 1)
+    assert [r["repeat"] for r in rep["designs"]] == [False, False, False, True, False]
+    assert "not counting 1 design SU2's restart made again" in summary(rep)
+    trace = race.su2_trace(2, tmp_path, "SU2")
+    assert trace.total == 4 * (1 + 3) and len(trace.objective) == 4 and 0.0191 in trace.objective
 
 
 def bezier(u: np.ndarray, i: int, n: int) -> np.ndarray:
